@@ -1,0 +1,55 @@
+"""Machine parameters the NC kernel needs: axes, limits and the number-format rules.
+
+These are plain data. Loading them from the cell's YAML configuration (with key-naming
+error messages) lives in cnc.config; tests build them directly.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from enum import Enum
+
+
+class DecimalStyle(Enum):
+    """How a value written without a decimal point is read (003_dimensions.md)."""
+
+    CALCULATOR = "calculator"  # X10 = 10 mm
+    LEAST_INCREMENT = "least_increment"  # Fanuc: X10 = 10 x 0.001 mm = 0.010 mm
+
+
+@dataclass(frozen=True, slots=True)
+class AxisParams:
+    name: str
+    min_mm: float  # soft limits, machine coordinates
+    max_mm: float
+    max_velocity: float  # mm/min (rapid)
+    max_accel: float  # mm/s^2
+    max_jerk: float  # mm/s^3
+    home_mm: float = 0.0  # G28 reference point, machine coordinates
+
+
+@dataclass(frozen=True, slots=True)
+class MachineParams:
+    kind: str = "mill"  # "mill" (X Y Z) or "lathe" (X Z)
+    axes: tuple[AxisParams, ...] = field(
+        default_factory=lambda: (
+            AxisParams("X", -500.0, 0.0, 30000.0, 3000.0, 50000.0),
+            AxisParams("Y", -400.0, 0.0, 30000.0, 3000.0, 50000.0),
+            AxisParams("Z", -400.0, 0.0, 24000.0, 2500.0, 40000.0),
+        )
+    )
+    decimal_style: DecimalStyle = DecimalStyle.CALCULATOR
+    least_increment_mm: float = 0.001
+    least_increment_inch: float = 0.0001
+    lathe_diameter_mode: bool = True  # lathe X words are diameters
+    max_feed: float = 15000.0  # mm/min, cap for programmed F
+    default_path_tolerance: float = 0.01  # mm, G64 without P
+    lookahead: int = 200  # blocks
+    ipo_cycle_s: float = 0.002
+    second_reference_mm: tuple[float, ...] | None = None  # G30 point; None = home
+
+    def axis(self, name: str) -> AxisParams:
+        for a in self.axes:
+            if a.name == name:
+                return a
+        raise KeyError(name)

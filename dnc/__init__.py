@@ -1,0 +1,1 @@
+"""DNC host: program library, transfer to machines and the FMS job queue."""

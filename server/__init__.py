@@ -1,0 +1,1 @@
+"""Cell composition: configuration, clock, supervisor, monitoring model and the command line."""

@@ -1,0 +1,1 @@
+"""The cell's FastAPI application: REST, live events, MTConnect and the dashboard."""
