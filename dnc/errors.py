@@ -1,0 +1,36 @@
+"""The DNC host's refusals. Each carries a stable `kind` the REST layer maps to a problem type."""
+
+from __future__ import annotations
+
+
+class DncError(Exception):
+    """A request the host refuses. `kind` is stable (used as the problem+json type suffix)."""
+
+    kind = "dnc-error"
+
+    def __init__(self, message: str, **detail: object) -> None:
+        super().__init__(message)
+        self.message = message
+        self.detail = detail
+
+
+class InvalidUpload(DncError):
+    kind = "invalid-upload"
+
+
+class NotFound(DncError):
+    kind = "not-found"
+
+
+class Conflict(DncError):
+    kind = "conflict"
+
+
+class WorkflowError(DncError):
+    """A release-workflow step the revision's status or check results forbid."""
+
+    kind = "workflow"
+
+
+class DatabaseUnavailable(DncError):
+    kind = "database-unavailable"

@@ -1,0 +1,713 @@
+"""The program library: programs, revisions and their release workflow, search, import.
+
+A service that knows nothing of HTTP. Every change is one transaction that also writes its
+audit entry and its outbox event, so a change is never visible without its history, and the
+event stream never announces a change that was rolled back.
+
+Release workflow: draft -> released -> obsolete. Only a draft whose NC check passed can be
+released, and releasing needs an approval comment. Releasing a revision obsoletes the
+program's previously released one (a program has at most one released revision), so a
+dispatch by program number is never ambiguous.
+"""
+
+from __future__ import annotations
+
+import base64
+import json
+from collections.abc import Callable, Iterable, Sequence
+from dataclasses import dataclass, field
+from datetime import UTC, datetime
+from pathlib import Path
+from typing import Any
+
+from sqlalchemy import and_, exists, func, or_, select
+from sqlalchemy.exc import IntegrityError
+from sqlalchemy.orm import Session, sessionmaker
+
+from dnc import models as m
+from dnc.db import transaction
+from dnc.diff import unified_diff
+from dnc.errors import Conflict, InvalidUpload, NotFound, WorkflowError
+from dnc.tape import (
+    check_size,
+    count_lines,
+    decode_program,
+    normalise_text,
+    read_header,
+    sha256_of,
+)
+
+DRAFT, RELEASED, OBSOLETE = "draft", "released", "obsolete"
+IMPORT_SUFFIXES = {".nc", ".ngc", ".tap", ".txt", ".iso", ".cnc"}
+DEFAULT_UPLOAD_LIMIT = 16 * 1024 * 1024
+
+Checker = Callable[[str, str], list[dict[str, Any]]]
+"""(text, machine_kind) -> list of {"line", "col", "message"}; empty when the program is valid."""
+
+
+@dataclass(frozen=True, slots=True)
+class ProgramInfo:
+    id: int
+    number: int
+    name: str
+    machine_kind: str
+    description: str
+    tags: tuple[str, ...]
+    created_at: datetime
+    released_revision_id: int | None
+    latest_revision_id: int | None
+
+
+@dataclass(frozen=True, slots=True)
+class RevisionInfo:
+    id: int
+    program_id: int
+    seq: int
+    sha256: str
+    size: int
+    lines: int
+    author: str
+    comment: str
+    source: str
+    status: str
+    created_at: datetime
+    status_changed_at: datetime | None
+    approved_by: str | None
+    approval_comment: str | None
+    check_ok: bool
+    check_errors: list[dict[str, Any]] = field(default_factory=list)
+
+
+@dataclass(frozen=True, slots=True)
+class Page:
+    items: list
+    next_cursor: str | None
+
+
+def _utcnow() -> datetime:
+    return datetime.now(UTC)
+
+
+class Library:
+    def __init__(
+        self,
+        sessions: sessionmaker[Session],
+        *,
+        checker: Checker | None = None,
+        upload_limit: int = DEFAULT_UPLOAD_LIMIT,
+        now: Callable[[], datetime] = _utcnow,
+    ) -> None:
+        self._sessions = sessions
+        self._checker = checker
+        self.upload_limit = upload_limit
+        self._now = now
+
+    # ----------------------------------------------------------------- programs and revisions
+
+    def create_program(
+        self,
+        *,
+        number: int,
+        name: str,
+        text: str | bytes,
+        machine_kind: str = "mill",
+        description: str = "",
+        tags: Iterable[str] = (),
+        author: str = "unknown",
+        comment: str = "",
+        source: str = "upload",
+    ) -> tuple[ProgramInfo, RevisionInfo]:
+        """A new program with its first revision (a draft)."""
+        if not 1 <= number <= 99999:
+            raise InvalidUpload(f"program number must be 1..99999 (O number), got {number}")
+        if not name.strip():
+            raise InvalidUpload("program name must not be empty")
+        text = self._decode(text, name)
+        check = self._check(text, machine_kind)
+        with transaction(self._sessions) as s:
+            taken = s.scalar(
+                select(m.Program.id).where(
+                    m.Program.number == number, m.Program.machine_kind == machine_kind
+                )
+            )
+            if taken is not None:
+                raise Conflict(
+                    f"program O{number:04d} already exists for {machine_kind} machines "
+                    f"(id {taken}); add a revision to it instead",
+                    program_id=taken,
+                )
+            prog = m.Program(
+                number=number,
+                name=name.strip(),
+                machine_kind=machine_kind,
+                description=description,
+                created_at=self._now(),
+            )
+            s.add(prog)
+            try:
+                s.flush()
+            except IntegrityError as exc:  # a concurrent writer took the number first
+                raise Conflict(f"program O{number:04d} already exists") from exc
+            for tag in sorted({t.strip() for t in tags if t.strip()}):
+                s.add(m.ProgramTag(program_id=prog.id, tag=tag))
+            rev = self._add_revision(s, prog, text, check, author, comment, source)
+            self._record(s, author, "program.create", "program", prog.id, number=number, name=name)
+            return self._program_info(s, prog), _revision_info(rev)
+
+    def add_revision(
+        self,
+        program_id: int,
+        text: str | bytes,
+        *,
+        author: str = "unknown",
+        comment: str = "",
+        source: str = "upload",
+    ) -> RevisionInfo:
+        with transaction(self._sessions) as s:
+            prog = self._get_program(s, program_id)
+            kind, name = prog.machine_kind, prog.name
+        text = self._decode(text, name)
+        check = self._check(text, kind)
+        with transaction(self._sessions) as s:
+            prog = self._get_program(s, program_id)
+            rev = self._add_revision(s, prog, text, check, author, comment, source)
+            return _revision_info(rev)
+
+    def receive_from_machine(self, machine: str, text: str | bytes) -> RevisionInfo:
+        """A program punched from a machine lands as a candidate (draft) revision.
+
+        It never overwrites anything: if no program with its O number exists for the
+        machine's kind, a new program is created to hold it.
+        """
+        with transaction(self._sessions) as s:
+            mach = s.scalar(select(m.Machine).where(m.Machine.name == machine))
+            if mach is None:
+                raise NotFound(f"unknown machine {machine!r}")
+            kind = mach.kind
+        text = self._decode(text, f"upload from {machine}")
+        header = read_header(text)
+        if header.number is None:
+            raise InvalidUpload(f"program from {machine} has no O number in its first block")
+        source = f"machine:{machine}"
+        with transaction(self._sessions) as s:
+            prog_id = s.scalar(
+                select(m.Program.id).where(
+                    m.Program.number == header.number, m.Program.machine_kind == kind
+                )
+            )
+        if prog_id is None:
+            _, rev = self.create_program(
+                number=header.number,
+                name=header.title or f"O{header.number:04d} from {machine}",
+                text=text,
+                machine_kind=kind,
+                author=source,
+                comment=f"received from {machine}",
+                source=source,
+            )
+            return rev
+        return self.add_revision(
+            prog_id, text, author=source, comment=f"received from {machine}", source=source
+        )
+
+    def release(self, revision_id: int, *, approver: str, comment: str) -> RevisionInfo:
+        if not comment.strip():
+            raise WorkflowError("releasing a revision needs an approval comment")
+        with transaction(self._sessions) as s:
+            rev = self._get_revision(s, revision_id, lock=True)
+            if rev.status != DRAFT:
+                raise WorkflowError(
+                    f"revision {revision_id} is {rev.status}; only a draft can be released"
+                )
+            if not rev.check_ok:
+                first = rev.check_errors[0] if rev.check_errors else {}
+                raise WorkflowError(
+                    f"revision {revision_id} failed the NC check ({len(rev.check_errors)} "
+                    f"error(s), first: line {first.get('line')}: {first.get('message')}); "
+                    "it cannot be released",
+                    errors=rev.check_errors,
+                )
+            now = self._now()
+            previous = s.scalars(
+                select(m.Revision).where(
+                    m.Revision.program_id == rev.program_id, m.Revision.status == RELEASED
+                )
+            ).all()
+            for old in previous:
+                old.status, old.status_changed_at = OBSOLETE, now
+                old.approved_by, old.approval_comment = approver, f"superseded by rev {rev.seq}"
+                self._record(s, approver, "revision.obsolete", "revision", old.id, seq=old.seq)
+            rev.status, rev.status_changed_at = RELEASED, now
+            rev.approved_by, rev.approval_comment = approver, comment.strip()
+            self._record(s, approver, "revision.release", "revision", rev.id, comment=comment)
+            return _revision_info(rev)
+
+    def obsolete(self, revision_id: int, *, approver: str, comment: str) -> RevisionInfo:
+        if not comment.strip():
+            raise WorkflowError("making a revision obsolete needs an approval comment")
+        with transaction(self._sessions) as s:
+            rev = self._get_revision(s, revision_id, lock=True)
+            if rev.status == OBSOLETE:
+                raise WorkflowError(f"revision {revision_id} is already obsolete")
+            rev.status, rev.status_changed_at = OBSOLETE, self._now()
+            rev.approved_by, rev.approval_comment = approver, comment.strip()
+            self._record(s, approver, "revision.obsolete", "revision", rev.id, comment=comment)
+            return _revision_info(rev)
+
+    # ------------------------------------------------------------------------------- reading
+
+    def get_program(self, program_id: int) -> ProgramInfo:
+        with transaction(self._sessions) as s:
+            return self._program_info(s, self._get_program(s, program_id))
+
+    def get_revision(self, revision_id: int) -> RevisionInfo:
+        with transaction(self._sessions) as s:
+            return _revision_info(self._get_revision(s, revision_id))
+
+    def revisions(self, program_id: int) -> list[RevisionInfo]:
+        with transaction(self._sessions) as s:
+            self._get_program(s, program_id)
+            rows = s.scalars(
+                select(m.Revision)
+                .where(m.Revision.program_id == program_id)
+                .order_by(m.Revision.seq)
+            )
+            return [_revision_info(r) for r in rows]
+
+    def revision_text(self, revision_id: int) -> str:
+        with transaction(self._sessions) as s:
+            rev = self._get_revision(s, revision_id)
+            return s.get(m.Content, rev.sha256).text
+
+    def released_revision(self, number: int, machine_kind: str) -> RevisionInfo:
+        """The revision a machine gets when it requests program `number` (remote request)."""
+        with transaction(self._sessions) as s:
+            rev = s.scalar(
+                select(m.Revision)
+                .join(m.Program, m.Program.id == m.Revision.program_id)
+                .where(
+                    m.Program.number == number,
+                    m.Program.machine_kind == machine_kind,
+                    m.Revision.status == RELEASED,
+                )
+            )
+            if rev is None:
+                raise NotFound(f"no released revision of O{number:04d} for {machine_kind}")
+            return _revision_info(rev)
+
+    def diff(
+        self,
+        a_id: int,
+        b_id: int,
+        *,
+        ignore_numbers: bool = False,
+        ignore_whitespace: bool = False,
+        ignore_comments: bool = False,
+    ) -> str:
+        a, b = self.get_revision(a_id), self.get_revision(b_id)
+        return unified_diff(
+            self.revision_text(a_id),
+            self.revision_text(b_id),
+            a_name=f"revision {a_id} (rev {a.seq})",
+            b_name=f"revision {b_id} (rev {b.seq})",
+            ignore_numbers=ignore_numbers,
+            ignore_whitespace=ignore_whitespace,
+            ignore_comments=ignore_comments,
+        )
+
+    def search(
+        self,
+        *,
+        query: str | None = None,
+        number: int | None = None,
+        tag: str | None = None,
+        text: str | None = None,
+        machine_kind: str | None = None,
+        limit: int = 50,
+        cursor: str | None = None,
+    ) -> Page:
+        """Programs by name/number (`query`), exact number, tag, or text in any revision.
+
+        Cursor pagination over program id: stable under concurrent inserts.
+        """
+        limit = max(1, min(limit, 500))
+        stmt = select(m.Program).order_by(m.Program.id).limit(limit + 1)
+        if cursor:
+            stmt = stmt.where(m.Program.id > _decode_cursor(cursor))
+        if machine_kind:
+            stmt = stmt.where(m.Program.machine_kind == machine_kind)
+        if number is not None:
+            stmt = stmt.where(m.Program.number == number)
+        if query:
+            like = f"%{_escape_like(query.lower())}%"
+            conds = [func.lower(m.Program.name).like(like, escape="\\")]
+            digits = query.upper().removeprefix("O")
+            if digits.isdigit():
+                conds.append(m.Program.number == int(digits))
+            stmt = stmt.where(or_(*conds))
+        if tag:
+            stmt = stmt.where(
+                exists().where(
+                    and_(m.ProgramTag.program_id == m.Program.id, m.ProgramTag.tag == tag)
+                )
+            )
+        if text:
+            like = f"%{_escape_like(text)}%"
+            stmt = stmt.where(
+                exists().where(
+                    and_(
+                        m.Revision.program_id == m.Program.id,
+                        m.Content.sha256 == m.Revision.sha256,
+                        m.Content.text.like(like, escape="\\"),
+                    )
+                )
+            )
+        with transaction(self._sessions) as s:
+            rows = list(s.scalars(stmt))
+            more = len(rows) > limit
+            rows = rows[:limit]
+            items = [self._program_info(s, p) for p in rows]
+        return Page(items, _encode_cursor(rows[-1].id) if more else None)
+
+    def audit(self, *, entity: str | None = None, entity_id: int | None = None) -> list[dict]:
+        stmt = select(m.AuditEntry).order_by(m.AuditEntry.id)
+        if entity:
+            stmt = stmt.where(m.AuditEntry.entity == entity)
+        if entity_id is not None:
+            stmt = stmt.where(m.AuditEntry.entity_id == entity_id)
+        with transaction(self._sessions) as s:
+            return [
+                dict(
+                    at=a.at,
+                    actor=a.actor,
+                    action=a.action,
+                    entity=a.entity,
+                    entity_id=a.entity_id,
+                    detail=a.detail,
+                )
+                for a in s.scalars(stmt)
+            ]
+
+    # -------------------------------------------------------------------------------- import
+
+    def import_path(
+        self,
+        path: Path,
+        *,
+        machine_kind: str = "mill",
+        author: str = "import",
+        tags: Sequence[str] = (),
+    ) -> list[tuple[Path, RevisionInfo | Exception]]:
+        """Import one file or every program file under a directory.
+
+        A file whose O number already exists becomes a new revision of that program; each
+        file's outcome is reported separately, so one bad file does not stop the rest.
+        """
+        files = (
+            sorted(p for p in path.rglob("*") if p.suffix.lower() in IMPORT_SUFFIXES)
+            if path.is_dir()
+            else [path]
+        )
+        results: list[tuple[Path, RevisionInfo | Exception]] = []
+        for file in files:
+            try:
+                results.append((file, self._import_file(file, machine_kind, author, tags)))
+            except (InvalidUpload, Conflict, OSError) as exc:
+                results.append((file, exc))
+        return results
+
+    def _import_file(
+        self, file: Path, machine_kind: str, author: str, tags: Sequence[str]
+    ) -> RevisionInfo:
+        if file.suffix.lower() not in IMPORT_SUFFIXES:
+            raise InvalidUpload(
+                f"{file}: not a program file (expected one of {sorted(IMPORT_SUFFIXES)})"
+            )
+        check_size(file.stat().st_size, limit=self.upload_limit, name=str(file))
+        text = decode_program(file.read_bytes(), limit=self.upload_limit, name=str(file))
+        header = read_header(text)
+        if header.number is None:
+            raise InvalidUpload(f"{file}: no O number in the first block; cannot file it")
+        with transaction(self._sessions) as s:
+            prog_id = s.scalar(
+                select(m.Program.id).where(
+                    m.Program.number == header.number, m.Program.machine_kind == machine_kind
+                )
+            )
+        comment = f"imported from {file.name}"
+        if prog_id is not None:
+            return self.add_revision(prog_id, text, author=author, comment=comment, source="import")
+        _, rev = self.create_program(
+            number=header.number,
+            name=header.title or file.stem,
+            text=text,
+            machine_kind=machine_kind,
+            tags=tags,
+            author=author,
+            comment=comment,
+            source="import",
+        )
+        return rev
+
+    # ------------------------------------------------------------------------------ machines
+
+    def register_machine(
+        self,
+        name: str,
+        kind: str,
+        *,
+        dnc_address: str = "",
+        modbus_address: str = "",
+        status_address: str = "",
+        memory_bytes: int = 0,
+        actor: str = "system",
+    ) -> dict:
+        """Create or update a machine's registry entry (idempotent by name)."""
+        with transaction(self._sessions) as s:
+            mach = s.scalar(select(m.Machine).where(m.Machine.name == name))
+            if mach is None:
+                mach = m.Machine(name=name, created_at=self._now())
+                s.add(mach)
+            mach.kind, mach.memory_bytes = kind, memory_bytes
+            mach.dnc_address, mach.modbus_address = dnc_address, modbus_address
+            mach.status_address = status_address
+            s.flush()
+            self._record(s, actor, "machine.register", "machine", mach.id, name=name, kind=kind)
+            return _machine_dict(mach)
+
+    def machines(self) -> list[dict]:
+        with transaction(self._sessions) as s:
+            return [_machine_dict(x) for x in s.scalars(select(m.Machine).order_by(m.Machine.name))]
+
+    def machine(self, name: str) -> dict:
+        with transaction(self._sessions) as s:
+            mach = s.scalar(select(m.Machine).where(m.Machine.name == name))
+            if mach is None:
+                raise NotFound(f"unknown machine {name!r}")
+            return _machine_dict(mach)
+
+    # ----------------------------------------------------------------- tools, fixtures, stock
+
+    def add_resource(
+        self, kind: str, code: str, *, description: str = "", data: dict | None = None
+    ) -> int:
+        if kind not in ("tool", "fixture", "material"):
+            raise InvalidUpload(f"resource kind must be tool, fixture or material, got {kind!r}")
+        with transaction(self._sessions) as s:
+            res = s.scalar(
+                select(m.Resource).where(m.Resource.kind == kind, m.Resource.code == code)
+            )
+            if res is None:
+                res = m.Resource(kind=kind, code=code)
+                s.add(res)
+            res.description, res.data = description, data or {}
+            s.flush()
+            self._record(s, "system", "resource.upsert", "resource", res.id, kind=kind, code=code)
+            return res.id
+
+    def link_resource(self, program_id: int, resource_id: int, *, actor: str = "system") -> None:
+        with transaction(self._sessions) as s:
+            self._get_program(s, program_id)
+            if s.get(m.Resource, resource_id) is None:
+                raise NotFound(f"no resource with id {resource_id}")
+            if s.get(m.ProgramResource, (program_id, resource_id)) is None:
+                s.add(m.ProgramResource(program_id=program_id, resource_id=resource_id))
+                self._record(
+                    s, actor, "program.link", "program", program_id, resource_id=resource_id
+                )
+
+    def resources(self, program_id: int) -> list[dict]:
+        with transaction(self._sessions) as s:
+            self._get_program(s, program_id)
+            rows = s.scalars(
+                select(m.Resource)
+                .join(m.ProgramResource, m.ProgramResource.resource_id == m.Resource.id)
+                .where(m.ProgramResource.program_id == program_id)
+                .order_by(m.Resource.kind, m.Resource.code)
+            )
+            return [
+                dict(id=r.id, kind=r.kind, code=r.code, description=r.description, data=r.data)
+                for r in rows
+            ]
+
+    # ------------------------------------------------------------------------------ internals
+
+    def _decode(self, text: str | bytes, name: str) -> str:
+        if isinstance(text, bytes):
+            return decode_program(text, limit=self.upload_limit, name=name)
+        check_size(len(text.encode("utf-8", "surrogatepass")), limit=self.upload_limit, name=name)
+        return normalise_text(text, name=name)
+
+    def _check(self, text: str, machine_kind: str) -> list[dict[str, Any]]:
+        if self._checker is None:
+            return []
+        return self._checker(text, machine_kind)
+
+    def _add_revision(
+        self,
+        s: Session,
+        prog: m.Program,
+        text: str,
+        check: list[dict[str, Any]],
+        author: str,
+        comment: str,
+        source: str,
+    ) -> m.Revision:
+        digest = sha256_of(text)
+        if s.get(m.Content, digest) is None:
+            s.add(m.Content(sha256=digest, size=len(text.encode("utf-8")), text=text))
+        seq = (
+            s.scalar(select(func.max(m.Revision.seq)).where(m.Revision.program_id == prog.id)) or 0
+        ) + 1
+        rev = m.Revision(
+            program_id=prog.id,
+            seq=seq,
+            sha256=digest,
+            size=len(text.encode("utf-8")),
+            lines=count_lines(text),
+            author=author,
+            comment=comment,
+            source=source,
+            status=DRAFT,
+            created_at=self._now(),
+            check_ok=not check,
+            check_errors=check,
+        )
+        s.add(rev)
+        try:
+            s.flush()
+        except IntegrityError as exc:  # a concurrent revision took the same seq
+            raise Conflict(f"program {prog.id} was changed concurrently; retry the upload") from exc
+        self._record(
+            s,
+            author,
+            "revision.create",
+            "revision",
+            rev.id,
+            program_id=prog.id,
+            seq=seq,
+            sha256=digest,
+            source=source,
+            check_ok=rev.check_ok,
+        )
+        return rev
+
+    def _record(
+        self, s: Session, actor: str, action: str, entity: str, entity_id: int | None, **detail
+    ) -> None:
+        """Audit entry and outbox event, in the caller's transaction."""
+        now = self._now()
+        detail = json.loads(json.dumps(detail, default=str))
+        s.add(
+            m.AuditEntry(
+                at=now,
+                actor=actor,
+                action=action,
+                entity=entity,
+                entity_id=entity_id,
+                detail=detail,
+            )
+        )
+        s.add(
+            m.OutboxEvent(
+                at=now,
+                topic=f"fmscell/{entity}/{action.split('.')[-1]}",
+                payload={"action": action, "entity": entity, "id": entity_id, **detail},
+            )
+        )
+
+    def _get_program(self, s: Session, program_id: int) -> m.Program:
+        prog = s.get(m.Program, program_id)
+        if prog is None:
+            raise NotFound(f"no program with id {program_id}")
+        return prog
+
+    def _get_revision(self, s: Session, revision_id: int, *, lock: bool = False) -> m.Revision:
+        stmt = select(m.Revision).where(m.Revision.id == revision_id)
+        if lock:
+            stmt = stmt.with_for_update()
+        rev = s.scalar(stmt)
+        if rev is None:
+            raise NotFound(f"no revision with id {revision_id}")
+        return rev
+
+    def _program_info(self, s: Session, prog: m.Program) -> ProgramInfo:
+        tags = tuple(
+            s.scalars(
+                select(m.ProgramTag.tag)
+                .where(m.ProgramTag.program_id == prog.id)
+                .order_by(m.ProgramTag.tag)
+            )
+        )
+        released = s.scalar(
+            select(m.Revision.id).where(
+                m.Revision.program_id == prog.id, m.Revision.status == RELEASED
+            )
+        )
+        latest = s.scalar(
+            select(m.Revision.id)
+            .where(m.Revision.program_id == prog.id)
+            .order_by(m.Revision.seq.desc())
+            .limit(1)
+        )
+        return ProgramInfo(
+            prog.id,
+            prog.number,
+            prog.name,
+            prog.machine_kind,
+            prog.description,
+            tags,
+            prog.created_at,
+            released,
+            latest,
+        )
+
+
+def _revision_info(r: m.Revision) -> RevisionInfo:
+    return RevisionInfo(
+        r.id,
+        r.program_id,
+        r.seq,
+        r.sha256,
+        r.size,
+        r.lines,
+        r.author,
+        r.comment,
+        r.source,
+        r.status,
+        r.created_at,
+        r.status_changed_at,
+        r.approved_by,
+        r.approval_comment,
+        r.check_ok,
+        list(r.check_errors or []),
+    )
+
+
+def _machine_dict(x: m.Machine) -> dict:
+    return dict(
+        name=x.name,
+        kind=x.kind,
+        dnc_address=x.dnc_address,
+        modbus_address=x.modbus_address,
+        status_address=x.status_address,
+        memory_bytes=x.memory_bytes,
+    )
+
+
+def _escape_like(s: str) -> str:
+    return s.replace("\\", "\\\\").replace("%", "\\%").replace("_", "\\_")
+
+
+def _encode_cursor(last_id: int) -> str:
+    return base64.urlsafe_b64encode(f"p{last_id}".encode()).decode().rstrip("=")
+
+
+def _decode_cursor(cursor: str) -> int:
+    try:
+        raw = base64.urlsafe_b64decode(cursor + "=" * (-len(cursor) % 4)).decode()
+        if not raw.startswith("p"):
+            raise ValueError
+        return int(raw[1:])
+    except (ValueError, UnicodeDecodeError):
+        raise InvalidUpload(f"invalid cursor {cursor!r}") from None
