@@ -1,0 +1,12 @@
+"""Cutter radius compensation G40/G41/G42 in the active plane (see docs/cutter_comp.md)."""
+
+from cnc.cutter_comp.compensator import CutterCompensation, Segment
+from cnc.cutter_comp.geometry import CONTINUITY_TOL_REL, LEN_TOL_REL, SHALLOW_ANGLE
+
+__all__ = [
+    "CONTINUITY_TOL_REL",
+    "LEN_TOL_REL",
+    "SHALLOW_ANGLE",
+    "CutterCompensation",
+    "Segment",
+]
