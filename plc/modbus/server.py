@@ -1,0 +1,418 @@
+"""The PLC's Modbus TCP face: an asyncio server over the strict MBAP framer and PDU core.
+
+It needs only a way to read the newest scan snapshot and the write queue: it never touches the
+live image and never imports the runtime. Each request reads exactly one snapshot; each write
+request becomes one batch on the queue, applied whole at the start of the next scan.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import logging
+import threading
+from collections import deque
+from collections.abc import Callable
+from dataclasses import dataclass
+
+from plc.image import ImageSize, Snapshot, WriteQueue
+from plc.modbus.allowlist import AllowList
+from plc.modbus.frame import FrameViolation, MbapDecoder, encode
+from plc.modbus.map import ModbusMap
+from plc.modbus.pdu import (
+    GATEWAY_TARGET_FAILED,
+    SERVER_DEVICE_FAILURE,
+    DeviceIdentity,
+    PduHandler,
+    PduSizeError,
+)
+
+log = logging.getLogger("plc.modbus")
+audit = logging.getLogger("plc.modbus.write")
+
+#: Frames a connection may have waiting behind an unanswered write in ack-after-scan mode.
+_MAX_BACKLOG = 32
+
+
+@dataclass
+class FaceStats:
+    """Counters for diagnostics (exposed to status pages; not reset while running)."""
+
+    connections_open: int = 0
+    connections_total: int = 0
+    connections_refused: int = 0
+    requests: int = 0
+    exceptions: int = 0
+    write_batches: int = 0
+    protocol_errors: int = 0
+    frame_timeouts: int = 0
+    idle_timeouts: int = 0
+    internal_errors: int = 0
+
+
+class ModbusFace:
+    """Modbus TCP server on a PLC's process image.
+
+    `get_snapshot` returns the newest published scan snapshot; `writes` receives one batch
+    per write request. `writable` (an AllowList or its string form) lists what clients may
+    write; everything else is read-only. Port 0 binds an ephemeral port (see `bound_port`).
+
+    Timeouts: a connection holding part of a frame for `frame_timeout` seconds, or silent
+    for `idle_timeout` seconds (None: never), is closed. At most `max_connections` clients
+    are served at once; further ones are accepted and closed at once.
+
+    Unit id: with `unit_id=None` (default) every unit id is served and echoed, as a Modbus/TCP
+    end device does. With `unit_id=N` only N and 0xFF are served; others get exception 0x0B.
+
+    Write responses are sent when the batch is queued (`ack_after_scan=False`), or once a scan
+    that certainly applied it has published (`ack_after_scan=True`, at most two scans later;
+    exception 04 if that takes longer than `ack_timeout`, the batch then stays queued).
+    """
+
+    def __init__(
+        self,
+        get_snapshot: Callable[[], Snapshot],
+        writes: WriteQueue,
+        size: ImageSize | None = None,
+        *,
+        host: str = "127.0.0.1",
+        port: int = 5020,
+        writable: AllowList | str | None = None,
+        mb_map: ModbusMap | None = None,
+        unit_id: int | None = None,
+        max_connections: int = 16,
+        frame_timeout: float = 5.0,
+        idle_timeout: float | None = 120.0,
+        ack_after_scan: bool = False,
+        ack_timeout: float = 1.0,
+        identity: DeviceIdentity | None = None,
+    ) -> None:
+        if mb_map is None:
+            mb_map = ModbusMap(size)
+        elif size is not None and size != mb_map.size:
+            raise ValueError("ModbusFace: size and mb_map.size disagree")
+        if not isinstance(writable, AllowList):
+            writable = AllowList.parse(writable)
+        if unit_id is not None and not 0 <= unit_id <= 255:
+            raise ValueError(f"ModbusFace: unit_id {unit_id} outside 0..255")
+        if max_connections < 1:
+            raise ValueError("ModbusFace: max_connections must be >= 1")
+        if frame_timeout <= 0 or (idle_timeout is not None and idle_timeout <= 0):
+            raise ValueError("ModbusFace: timeouts must be > 0")
+        self.get_snapshot = get_snapshot
+        self.writes = writes
+        self.map = mb_map
+        self.writable = writable
+        self.handler = PduHandler(mb_map, writable.resolve(mb_map), identity)
+        self.host = host
+        self.port = port
+        self.unit_id = unit_id
+        self.max_connections = max_connections
+        self.frame_timeout = frame_timeout
+        self.idle_timeout = idle_timeout
+        self.ack_after_scan = ack_after_scan
+        self.ack_timeout = ack_timeout
+        self.stats = FaceStats()
+        self._server: asyncio.Server | None = None
+        self._sweeper: asyncio.Task | None = None
+        self._connections: set[_Connection] = set()
+        self._loop: asyncio.AbstractEventLoop | None = None
+        self._thread: threading.Thread | None = None
+
+    @property
+    def bound_port(self) -> int:
+        """The TCP port actually bound (differs from `port` when port was 0)."""
+        if self._server is None or not self._server.sockets:
+            raise RuntimeError("ModbusFace is not started")
+        return self._server.sockets[0].getsockname()[1]
+
+    # -- asyncio ----------------------------------------------------------------------
+
+    async def start(self) -> None:
+        """Bind and serve on the running event loop."""
+        if self._server is not None:
+            raise RuntimeError("ModbusFace already started")
+        self._loop = loop = asyncio.get_running_loop()
+        self._server = await loop.create_server(
+            lambda: _Connection(self), self.host, self.port, reuse_address=True
+        )
+        self._sweeper = loop.create_task(self._sweep())
+        log.info(
+            "Modbus TCP face on %s:%d (writable: %s)", self.host, self.bound_port, self.writable
+        )
+
+    async def stop(self) -> None:
+        """Stop listening and close every client connection."""
+        server, self._server = self._server, None
+        if server is None:
+            return
+        server.close()
+        if self._sweeper is not None:
+            self._sweeper.cancel()
+            with contextlib.suppress(asyncio.CancelledError):
+                await self._sweeper
+            self._sweeper = None
+        for conn in list(self._connections):
+            conn.close()
+        await server.wait_closed()
+
+    async def __aenter__(self) -> ModbusFace:
+        await self.start()
+        return self
+
+    async def __aexit__(self, *exc: object) -> None:
+        await self.stop()
+
+    # -- thread-hosted, for synchronous callers ---------------------------------------
+
+    def start_in_thread(self) -> ModbusFace:
+        """Serve from a daemon thread with its own event loop; returns once bound."""
+        if self._thread is not None:
+            raise RuntimeError("ModbusFace already started in a thread")
+        ready = threading.Event()
+        failure: list[BaseException] = []
+        loop = asyncio.new_event_loop()
+
+        def run() -> None:
+            asyncio.set_event_loop(loop)
+            try:
+                loop.run_until_complete(self.start())
+            except BaseException as e:  # noqa: BLE001 - handed to the caller below
+                failure.append(e)
+                ready.set()
+                loop.close()
+                return
+            ready.set()
+            loop.run_forever()
+            loop.run_until_complete(loop.shutdown_asyncgens())
+            loop.close()
+
+        self._thread = threading.Thread(target=run, name="modbus-face", daemon=True)
+        self._thread.start()
+        ready.wait()
+        if failure:
+            self._thread.join()
+            self._thread = None
+            raise failure[0]
+        return self
+
+    def stop_thread(self, timeout: float = 5.0) -> None:
+        """Stop a face started with `start_in_thread` and join its thread."""
+        thread, self._thread = self._thread, None
+        if thread is None:
+            return
+        loop = self._loop
+        assert loop is not None
+        asyncio.run_coroutine_threadsafe(self.stop(), loop).result(timeout)
+        loop.call_soon_threadsafe(loop.stop)
+        thread.join(timeout)
+
+    def __enter__(self) -> ModbusFace:
+        return self.start_in_thread()
+
+    def __exit__(self, *exc: object) -> None:
+        self.stop_thread()
+
+    # -- internals ----------------------------------------------------------------------
+
+    async def _sweep(self) -> None:
+        """Close connections stuck on a partial frame or idle too long."""
+        limits = [self.frame_timeout] + ([self.idle_timeout] if self.idle_timeout else [])
+        tick = max(0.005, min(limits) / 4)
+        loop = asyncio.get_running_loop()
+        while True:
+            await asyncio.sleep(tick)
+            now = loop.time()
+            for conn in list(self._connections):
+                if conn.partial_since is not None and now - conn.partial_since > self.frame_timeout:
+                    self.stats.frame_timeouts += 1
+                    log.info("%s: partial frame for %.3g s, closing", conn.peer, self.frame_timeout)
+                    conn.close()
+                elif self.idle_timeout and now - conn.last_rx > self.idle_timeout:
+                    self.stats.idle_timeouts += 1
+                    log.info("%s: idle for %.3g s, closing", conn.peer, self.idle_timeout)
+                    conn.close()
+
+
+class _Connection(asyncio.Protocol):
+    """One client. Frames are answered in arrival order."""
+
+    def __init__(self, face: ModbusFace) -> None:
+        self.face = face
+        self.stats = face.stats
+        self.handler = face.handler
+        self.get_snapshot = face.get_snapshot
+        self.writes = face.writes
+        self.unit_id = face.unit_id
+        self.decoder = MbapDecoder()
+        self.transport: asyncio.Transport | None = None
+        self.peer = "?"
+        self.last_rx = 0.0
+        self.partial_since: float | None = None
+        self.closed = False
+        self._backlog: deque = deque()
+        self._waiting = False  # ack-after-scan: a write response is outstanding
+        self._write_paused = False
+        self._loop = asyncio.get_running_loop()
+
+    # -- asyncio.Protocol -------------------------------------------------------------
+
+    def connection_made(self, transport: asyncio.BaseTransport) -> None:
+        self.transport = transport  # type: ignore[assignment]
+        peer = transport.get_extra_info("peername")
+        self.peer = f"{peer[0]}:{peer[1]}" if peer else "?"
+        self.last_rx = self._loop.time()
+        face = self.face
+        if len(face._connections) >= face.max_connections:
+            self.stats.connections_refused += 1
+            log.warning("%s: refused, %d connections open", self.peer, len(face._connections))
+            self.closed = True
+            transport.close()
+            return
+        face._connections.add(self)
+        self.stats.connections_open += 1
+        self.stats.connections_total += 1
+
+    def connection_lost(self, exc: Exception | None) -> None:
+        if self in self.face._connections:
+            self.face._connections.discard(self)
+            self.stats.connections_open -= 1
+        self.closed = True
+        self._backlog.clear()
+
+    def pause_writing(self) -> None:
+        # The client does not read its answers: stop reading its requests (bounded memory).
+        self._write_paused = True
+        self._update_reading()
+
+    def resume_writing(self) -> None:
+        self._write_paused = False
+        self._update_reading()
+
+    def data_received(self, data: bytes) -> None:
+        if self.closed:
+            return
+        now = self._loop.time()
+        self.last_rx = now
+        try:
+            frames = self.decoder.feed(data)
+        except FrameViolation as e:
+            self._violation(str(e))
+            return
+        if self.decoder.pending:
+            if self.partial_since is None:
+                self.partial_since = now
+        else:
+            self.partial_since = None
+        if not frames:
+            return
+        if self._waiting:
+            self._backlog.extend(frames)
+            self._update_reading()
+            return
+        self._serve(frames)
+
+    # -- serving ------------------------------------------------------------------------
+
+    def _serve(self, frames) -> None:
+        out = []
+        ack_after_scan = self.face.ack_after_scan
+        frames = deque(frames)
+        while frames:
+            tid, unit, pdu = frames.popleft()
+            try:
+                response, batch = self._answer(unit, pdu)
+            except PduSizeError as e:
+                if out:
+                    self.transport.write(b"".join(out))
+                self._violation(str(e))
+                return
+            if batch is not None and ack_after_scan:
+                if out:
+                    self.transport.write(b"".join(out))
+                self._backlog.extend(frames)
+                self._waiting = True
+                self._update_reading()
+                self._loop.create_task(self._answer_after_scan(tid, unit, pdu))
+                return
+            out.append(encode(tid, unit, response))
+        if out:
+            self.transport.write(out[0] if len(out) == 1 else b"".join(out))
+
+    def _answer(self, unit: int, pdu: bytes):
+        stats = self.stats
+        stats.requests += 1
+        if self.unit_id is not None and unit != self.unit_id and unit != 0xFF:
+            stats.exceptions += 1
+            return bytes((pdu[0] | 0x80, GATEWAY_TARGET_FAILED)), None
+        try:
+            response, batch = self.handler.handle(pdu, self.get_snapshot())
+        except PduSizeError:
+            raise
+        except Exception:  # a bug must cost one answer, never the server
+            stats.internal_errors += 1
+            log.exception("%s: internal error on PDU %s", self.peer, pdu.hex())
+            response, batch = bytes((pdu[0] | 0x80, SERVER_DEVICE_FAILURE)), None
+        if response[0] & 0x80:
+            stats.exceptions += 1
+        elif batch is not None:
+            self.writes.put(batch)
+            stats.write_batches += 1
+            if audit.isEnabledFor(logging.INFO):
+                audit.info(
+                    "%s unit %d fc %d: %s",
+                    self.peer,
+                    unit,
+                    pdu[0],
+                    "; ".join(f"%{w.area}[{w.index}]={list(w.values)}" for w in batch),
+                )
+        return response, batch
+
+    async def _answer_after_scan(self, tid: int, unit: int, pdu: bytes) -> None:
+        """Wait until a scan that certainly applied the batch has published, then answer.
+
+        The scan that published snapshot M (read after the put) may be followed by scan M+1
+        that drained the queue just before the put; scan M+2 drains after it. So M+2 is the
+        first snapshot sure to include the batch.
+        """
+        get = self.get_snapshot
+        target = get().scan + 2
+        deadline = self._loop.time() + self.face.ack_timeout
+        while (snap := get()).scan < target:
+            if self._loop.time() > deadline or self.closed:
+                response = bytes((pdu[0] | 0x80, SERVER_DEVICE_FAILURE))
+                self.stats.exceptions += 1
+                break
+            await asyncio.sleep(0.0005)
+        else:
+            # FC23's read part must show the image after the write: re-read this snapshot.
+            response = self.handler.handle(pdu, snap)[0] if pdu[0] == 0x17 else pdu[:5]
+            if pdu[0] in (0x05, 0x06):
+                response = pdu
+        if self.closed:
+            return
+        self.transport.write(encode(tid, unit, response))
+        self._waiting = False
+        backlog = list(self._backlog)
+        self._backlog.clear()
+        self._update_reading()
+        if backlog:
+            self._serve(backlog)
+
+    def _update_reading(self) -> None:
+        if self.closed or self.transport is None:
+            return
+        if self._write_paused or len(self._backlog) > _MAX_BACKLOG:
+            self.transport.pause_reading()
+        else:
+            self.transport.resume_reading()
+
+    def _violation(self, reason: str) -> None:
+        self.stats.protocol_errors += 1
+        log.warning("%s: %s; closing the connection", self.peer, reason)
+        self.close()
+
+    def close(self) -> None:
+        if not self.closed and self.transport is not None:
+            self.closed = True
+            self.transport.close()
