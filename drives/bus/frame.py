@@ -1,0 +1,126 @@
+"""Bit-exact classic CAN frame lengths (ISO 11898-1), bit stuffing included.
+
+The stuffed length depends on the identifier and the payload, so it is computed on the real
+bit stream SOF..CRC with the real CRC-15 rather than from the worst-case formula; the formula
+is kept for load planning, where the payload is not known yet.
+"""
+
+from __future__ import annotations
+
+from functools import lru_cache
+
+CRC15_POLY = 0x4599
+# CRC delimiter 1 + ACK slot 1 + ACK delimiter 1 + EOF 7 + intermission 3: never stuffed.
+TRAILER_BITS = 13
+
+
+def crc15(bits: list[int]) -> int:
+    """CAN CRC-15 (polynomial 0x4599, initial 0) over a list of 0/1 bits."""
+    crc = 0
+    for bit in bits:
+        crc_next = bit ^ ((crc >> 14) & 1)
+        crc = (crc << 1) & 0x7FFF
+        if crc_next:
+            crc ^= CRC15_POLY
+    return crc
+
+
+def _bits(value: int, width: int) -> list[int]:
+    return [(value >> (width - 1 - i)) & 1 for i in range(width)]
+
+
+def unstuffed_bits(
+    can_id: int,
+    data: bytes,
+    *,
+    extended: bool = False,
+    remote: bool = False,
+    dlc: int | None = None,
+) -> list[int]:
+    """The bit stream SOF..CRC (the stuffed part of the frame) before stuffing."""
+    if dlc is None:
+        dlc = len(data)
+    if not 0 <= dlc <= 15:
+        raise ValueError(f"DLC {dlc} outside 0..15")
+    if remote:
+        data = b""
+    elif len(data) > 8:
+        raise ValueError(f"classic CAN data field of {len(data)} bytes (max 8)")
+    bits = [0]  # SOF is dominant
+    if extended:
+        if not 0 <= can_id < 1 << 29:
+            raise ValueError(f"29-bit identifier 0x{can_id:X} out of range")
+        bits += _bits(can_id >> 18, 11)  # base identifier
+        bits += [1, 1]  # SRR, IDE (both recessive)
+        bits += _bits(can_id & 0x3FFFF, 18)  # identifier extension
+        bits += [1 if remote else 0, 0, 0]  # RTR, r1, r0
+    else:
+        if not 0 <= can_id < 1 << 11:
+            raise ValueError(f"11-bit identifier 0x{can_id:X} out of range")
+        bits += _bits(can_id, 11)
+        bits += [1 if remote else 0, 0, 0]  # RTR, IDE, r0
+    bits += _bits(dlc, 4)
+    for byte in data:
+        bits += _bits(byte, 8)
+    bits += _bits(crc15(bits), 15)
+    return bits
+
+
+def stuff_bit_count(bits: list[int]) -> int:
+    """Stuff bits the transmitter inserts: one after every 5 equal bits, counting stuff bits."""
+    count = 0
+    run_bit = -1
+    run = 0
+    for bit in bits:
+        if bit == run_bit:
+            run += 1
+        else:
+            run_bit, run = bit, 1
+        if run == 5:
+            count += 1
+            # The stuff bit is the complement and starts a new run of length 1.
+            run_bit, run = 1 - bit, 1
+    return count
+
+
+def stuffed_bitstream(bits: list[int]) -> list[int]:
+    """The bits as they appear on the wire (for hand-checking test vectors)."""
+    out: list[int] = []
+    run_bit = -1
+    run = 0
+    for bit in bits:
+        out.append(bit)
+        if bit == run_bit:
+            run += 1
+        else:
+            run_bit, run = bit, 1
+        if run == 5:
+            out.append(1 - bit)
+            run_bit, run = 1 - bit, 1
+    return out
+
+
+@lru_cache(maxsize=8192)
+def frame_bits(
+    can_id: int, data: bytes, extended: bool = False, remote: bool = False, dlc: int | None = None
+) -> int:
+    """Total bits on the wire of a data or remote frame, stuff bits and intermission included."""
+    bits = unstuffed_bits(can_id, data, extended=extended, remote=remote, dlc=dlc)
+    return len(bits) + stuff_bit_count(bits) + TRAILER_BITS
+
+
+def nominal_bits(data_len: int, *, extended: bool = False) -> int:
+    """Frame length without any stuff bit: 47 + 8s (11-bit) or 67 + 8s (29-bit)."""
+    return (67 if extended else 47) + 8 * data_len
+
+
+def worst_case_bits(data_len: int, *, extended: bool = False) -> int:
+    """Upper bound with maximal stuffing (Davis et al. 2007): nominal + floor((g + 8s - 1) / 4).
+
+    g is the stuffable overhead: 34 bits for 11-bit identifiers, 54 for 29-bit identifiers.
+    """
+    g = 54 if extended else 34
+    return nominal_bits(data_len, extended=extended) + (g + 8 * data_len - 1) // 4
+
+
+ERROR_FRAME_BITS = 6 + 8 + 3  # error flag, error delimiter, intermission (superposition ignored)
