@@ -254,7 +254,7 @@ class CutterCompensation:
         if g.dist(ne, ns) <= tol:
             x = xb = ne  # tangent junction: offsets meet, nothing to insert
         elif self._side * turn > 0.0:  # inside corner: trim both to their intersection
-            hit = g.intersect_offsets(a, b, corner)
+            hit = self._line_line_meet(a, b, -1.0) or g.intersect_offsets(a, b, corner)
             if hit is None:
                 raise self._gouge(
                     bseg,
@@ -263,8 +263,7 @@ class CutterCompensation:
                 )
             x = xb = hit
         elif a.kind == "line" and b.kind == "line" and g.turn_angle(t_in, t_out) <= g.SHALLOW_ANGLE:
-            hit = g.intersect_offsets(a, b, corner)
-            x = xb = hit if hit is not None else ne
+            x = xb = self._line_line_meet(a, b, 1.0) or ne
         else:  # outside corner: roll around the programmed corner with the tool radius
             x, xb = ne, ns
             inserts.append(self._corner_arc(ne, ns, corner, bseg))
@@ -274,6 +273,21 @@ class CutterCompensation:
         b.ps, b.ts = xb, b.param(xb, near_end=False)
         self._tool = xb
         return out
+
+    def _line_line_meet(self, a: g.OffsetElement, b: g.OffsetElement, way: float) -> Point | None:
+        """Where two offset lines meet, walked from A's perpendicular end along A.
+
+        The distance is r*tan(turn/2) = r*|sin|/(1+cos): exact to rounding even for the
+        nearly parallel lines of shallow corners, unlike a general 2x2 solve. `way` is -1
+        to trim (inside corner), +1 to extend (shallow outside corner).
+        """
+        if a.kind != "line" or b.kind != "line":
+            return None
+        c, d = g.cross(a.d, b.d), g.dot(a.d, b.d)
+        if 1.0 + d <= 1e-12:
+            return None
+        k = way * self._r * abs(c) / (1.0 + d)
+        return (a.off_end[0] + a.d[0] * k, a.off_end[1] + a.d[1] * k)
 
     def _corner_after_sync(
         self, a: g.OffsetElement, b: g.OffsetElement, bseg: Segment
