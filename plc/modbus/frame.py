@@ -28,7 +28,15 @@ Frame = tuple[int, int, bytes]
 
 
 class FrameViolation(Exception):
-    """The byte stream broke an MBAP rule; the connection must be closed."""
+    """The byte stream broke an MBAP rule; the connection must be closed.
+
+    `frames` holds the well-formed frames that preceded the bad header in the same data:
+    they are answered before the close.
+    """
+
+    def __init__(self, reason: str, frames: list[Frame] | None = None) -> None:
+        super().__init__(reason)
+        self.frames = frames or []
 
 
 class MbapDecoder:
@@ -53,9 +61,9 @@ class MbapDecoder:
         while size - off >= MBAP_SIZE:
             tid, pid, length, unit = _unpack_header(buf, off)
             if pid != 0:
-                raise FrameViolation(f"MBAP protocol id {pid} (must be 0 for Modbus)")
+                raise FrameViolation(f"MBAP protocol id {pid} (must be 0 for Modbus)", frames)
             if not 2 <= length <= MAX_PDU + 1:
-                raise FrameViolation(f"MBAP length {length} outside 2..254")
+                raise FrameViolation(f"MBAP length {length} outside 2..254", frames)
             end = off + 6 + length
             if end > size:
                 break
@@ -63,7 +71,11 @@ class MbapDecoder:
             off = end
         rest = buf[off:] if off else buf
         if rest:
-            _check_partial_header(rest)
+            try:
+                _check_partial_header(rest)
+            except FrameViolation as e:
+                e.frames = frames
+                raise
         self._buf = bytes(rest)
         return frames
 

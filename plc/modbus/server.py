@@ -297,6 +297,8 @@ class _Connection(asyncio.Protocol):
         try:
             frames = self.decoder.feed(data)
         except FrameViolation as e:
+            if e.frames and not self._waiting:
+                self._serve(e.frames)
             self._violation(str(e))
             return
         if self.decoder.pending:
