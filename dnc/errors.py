@@ -34,3 +34,9 @@ class WorkflowError(DncError):
 
 class DatabaseUnavailable(DncError):
     kind = "database-unavailable"
+
+
+class IdempotencyMismatch(DncError):
+    """The same Idempotency-Key was used before with a different request body."""
+
+    kind = "idempotency-key-reuse"

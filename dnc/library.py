@@ -13,7 +13,6 @@ dispatch by program number is never ambiguous.
 from __future__ import annotations
 
 import base64
-import json
 from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass, field
 from datetime import UTC, datetime
@@ -28,6 +27,7 @@ from dnc import models as m
 from dnc.db import transaction
 from dnc.diff import unified_diff
 from dnc.errors import Conflict, InvalidUpload, NotFound, WorkflowError
+from dnc.events import record
 from dnc.tape import (
     check_size,
     count_lines,
@@ -595,25 +595,14 @@ class Library:
     def _record(
         self, s: Session, actor: str, action: str, entity: str, entity_id: int | None, **detail
     ) -> None:
-        """Audit entry and outbox event, in the caller's transaction."""
-        now = self._now()
-        detail = json.loads(json.dumps(detail, default=str))
-        s.add(
-            m.AuditEntry(
-                at=now,
-                actor=actor,
-                action=action,
-                entity=entity,
-                entity_id=entity_id,
-                detail=detail,
-            )
-        )
-        s.add(
-            m.OutboxEvent(
-                at=now,
-                topic=f"fmscell/{entity}/{action.split('.')[-1]}",
-                payload={"action": action, "entity": entity, "id": entity_id, **detail},
-            )
+        record(
+            s,
+            now=self._now(),
+            actor=actor,
+            action=action,
+            entity=entity,
+            entity_id=entity_id,
+            **detail,
         )
 
     def _get_program(self, s: Session, program_id: int) -> m.Program:
