@@ -1,0 +1,54 @@
+"""Scan runtime: a pure scan core (`Runtime.scan(now_ms)`) and a realtime shell thread.
+
+Public API::
+
+    Runtime(program, config=RuntimeConfig(), *, image=None, io=None, retain_store=None,
+            writes=None, clock_ns=time.perf_counter_ns)
+        .scan(now_ms, late_ms=0.0) -> Snapshot      one scan in virtual time
+        .snapshot / .read(name) / .image / .writes (WriteQueue)
+        .run() / .stop() / .reset_fault() / .mode (Mode.RUN|STOP|FAULT)
+        .force(name, v) / .unforce(name) / .unforce_all() / .write_once(name, v)
+        .load_program(compiled)                     online change at the next scan
+        .alarms / .alarm_log / .raise_alarm() / .acknowledge(n)
+        .stats (ScanStats) / .status() / .save_retain() / .close()
+    RealtimeRunner(runtime, period_ms=None).start() / .stop()
+    SimulatedIO, Debounce, MemoryRetainStore, FileRetainStore
+"""
+
+from plc.runtime.alarms import (
+    ALARM_DIV_ZERO,
+    ALARM_PROGRAM_FAULT,
+    ALARM_RETAIN_STORE,
+    ALARM_TEXT,
+    ALARM_WATCHDOG,
+    ALARM_WRITE_REJECTED,
+    Alarm,
+)
+from plc.runtime.core import Mode, ProgramSwapError, Runtime, RuntimeConfig
+from plc.runtime.io import Debounce, IOProvider, SimulatedIO
+from plc.runtime.retain import FileRetainStore, MemoryRetainStore, RetainStore
+from plc.runtime.shell import RealtimeRunner
+from plc.runtime.stats import ScanStats, Summary
+
+__all__ = [
+    "ALARM_DIV_ZERO",
+    "ALARM_PROGRAM_FAULT",
+    "ALARM_RETAIN_STORE",
+    "ALARM_TEXT",
+    "ALARM_WATCHDOG",
+    "ALARM_WRITE_REJECTED",
+    "Alarm",
+    "Debounce",
+    "FileRetainStore",
+    "IOProvider",
+    "MemoryRetainStore",
+    "Mode",
+    "ProgramSwapError",
+    "RealtimeRunner",
+    "RetainStore",
+    "Runtime",
+    "RuntimeConfig",
+    "ScanStats",
+    "SimulatedIO",
+    "Summary",
+]
