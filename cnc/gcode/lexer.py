@@ -1,0 +1,248 @@
+"""Block lexer for the ISO 6983 / DIN 66025 / Fanuc word-address format.
+
+One call of `parse_line` turns one source line into one `Block` (or None for a blank or
+comment-only line). The hot path is two precompiled regular expressions over the line with
+comments removed and whitespace squeezed out; only a line that fails the fast match goes
+through the character scanner, whose job is to say *where* and *why* it is wrong.
+
+Columns are 1-based positions in the original line. Comments are blanked to spaces before
+scanning, so columns found later (for an error in the interpreter) still match the source.
+"""
+
+from __future__ import annotations
+
+import re
+
+from cnc.errors import NcError
+
+# A word is an address letter and a signed number; whitespace has no meaning inside a block
+# (DIN 66025 space/TAB formats), so the fast path squeezes it out first.
+_FAST_BLOCK = re.compile(r"(?:[A-Z][+-]?(?:\d+\.?\d*|\.\d+))*")
+_WORD = re.compile(r"([A-Z])([+-]?(?:\d+\.?\d*|\.\d+))")
+_SQUEEZE = str.maketrans("", "", " \t\r\n\v\f\x00\x7f")
+_MACRO_WORDS = ("GOTO", "WHILE", "IF", "THEN", "DO", "END", "EQ", "NE", "GT", "GE", "LT", "LE")
+
+# G numbers are kept as int(10 * value) so G50.1 and G51.1 stay exact and dict lookups fast.
+_G_CODE: dict[str, int] = {}
+for _n in range(100):
+    for _txt in {str(_n), f"{_n:02d}", f"{_n:03d}"}:
+        _G_CODE[_txt] = _n * 10
+        _G_CODE[_txt + "."] = _n * 10
+        _G_CODE[_txt + ".0"] = _n * 10
+        for _d in range(1, 10):
+            _G_CODE[f"{_txt}.{_d}"] = _n * 10 + _d
+
+
+class Block:
+    """One block (one line) of a part program after lexing.
+
+    `words` maps each address letter except G and M to its value; `g` holds the G codes as
+    int(10 x value) (G1 -> 10, G50.1 -> 501), `m` the M codes as ints, in source order.
+    `nopoint` is the set of letters written without a decimal point, filled only when the
+    machine reads such numbers in least-increment style (the interpreter scales them,
+    because the increment depends on G20/G21, which may be in the same block).
+    """
+
+    __slots__ = ("line", "text", "words", "g", "m", "nopoint", "delete", "program", "tape")
+
+    def __init__(self, line: int, text: str) -> None:
+        self.line = line
+        self.text = text
+        self.words: dict[str, float] = {}
+        self.g: list[int] = []
+        self.m: list[int] = []
+        self.nopoint: set[str] | None = None
+        self.delete = False
+        self.program: int | None = None  # O number when the block is a program header
+        self.tape = False  # a `%` tape start/end mark
+
+    def col(self, letter: str, nth: int = 1) -> int:
+        """1-based column of the `nth` occurrence of address `letter` (1 if not found)."""
+        return find_col(self.text, letter, nth)
+
+    def __repr__(self) -> str:
+        return f"Block(line={self.line}, g={self.g}, m={self.m}, words={self.words})"
+
+
+def blank_comments(text: str, line: int, file: str) -> str:
+    """Replace `( ... )` and `; ...` comments with spaces (columns keep their place)."""
+    out = []
+    i = 0
+    n = len(text)
+    while i < n:
+        c = text[i]
+        if c == "(":
+            j = text.find(")", i + 1)
+            if j < 0:
+                raise NcError("unterminated comment: '(' without ')'", line, i + 1, file)
+            out.append(" " * (j - i + 1))
+            i = j + 1
+            continue
+        if c == ";":
+            break
+        if c == ")":
+            raise NcError("')' without a matching '('", line, i + 1, file)
+        out.append(c)
+        i += 1
+    return "".join(out)
+
+
+def find_col(text: str, letter: str, nth: int = 1) -> int:
+    """Column of the nth address `letter` in `text`, skipping comments; 1 when absent."""
+    letter = letter.upper()
+    depth = False
+    seen = 0
+    for i, c in enumerate(text):
+        if depth:
+            if c == ")":
+                depth = False
+            continue
+        if c == "(":
+            depth = True
+            continue
+        if c == ";":
+            break
+        if c.upper() == letter:
+            seen += 1
+            if seen == nth:
+                return i + 1
+    return 1
+
+
+def _diagnose(text: str, line: int, file: str) -> NcError:
+    """Say where and why a line that failed the fast match is malformed."""
+    for i, c in enumerate(text):
+        if c == "#":
+            return NcError("unsupported: Fanuc Macro B (# variables)", line, i + 1, file)
+        if c in "[]":
+            return NcError("unsupported: Fanuc Macro B (bracket expressions)", line, i + 1, file)
+        if c == "=":
+            return NcError("unsupported: Fanuc Macro B (assignment '=')", line, i + 1, file)
+    i = 0
+    n = len(text)
+    upper = text.upper()
+    while i < n:
+        c = upper[i]
+        if c.isspace():
+            i += 1
+            continue
+        col = i + 1
+        if c == "/":
+            if i > 0 and upper[:i].rstrip()[-1:].isdigit():
+                return NcError("fractions not allowed (write a decimal number)", line, col, file)
+            return NcError("block delete '/' must start the block", line, col, file)
+        if c == "%":
+            return NcError("'%' (tape start/end) must stand alone in its block", line, col, file)
+        if "A" <= c <= "Z":
+            for kw in _MACRO_WORDS:
+                if upper.startswith(kw, i) and not _starts_number(upper, i + 1):
+                    return NcError(f"unsupported: Fanuc Macro B ({kw})", line, col, file)
+            j = i + 1
+            while j < n and upper[j] in " \t":
+                j += 1
+            if j < n and upper[j] in "+-":
+                j += 1
+                while j < n and upper[j] in " \t":
+                    j += 1
+            k = j
+            while k < n and (upper[k].isdigit() or upper[k] in ". \t"):
+                k += 1
+            num = upper[j:k].replace(" ", "").replace("\t", "")
+            if not num:
+                return NcError(f"address {c} without a value", line, col, file)
+            if num.count(".") > 1 or num == ".":
+                return NcError(f"malformed number '{num}' after address {c}", line, col, file)
+            i = k
+            continue
+        if c.isdigit() or c in ".+-":
+            return NcError("number without an address letter", line, col, file)
+        return NcError(f"unexpected character {text[i]!r}", line, col, file)
+    return NcError("malformed block", line, 1, file)
+
+
+def _g_code_slow(num: str) -> int | None:
+    """G numbers with unusual leading zeros (G0001); None when not a valid G number."""
+    if num[0] in "+-" or len(num) > 12:
+        return None
+    v = float(num) * 10.0
+    r = round(v)
+    return r if abs(v - r) < 1e-6 and r < 10000 else None
+
+
+def _starts_number(s: str, i: int) -> bool:
+    while i < len(s) and s[i] in " \t":
+        i += 1
+    return i < len(s) and (s[i].isdigit() or s[i] in "+-.")
+
+
+def parse_line(
+    text: str, line: int, file: str = "<program>", least_increment: bool = False
+) -> Block | None:
+    """Lex one source line into a Block; None for a blank or comment-only line.
+
+    Raises NcError (with line and column) for malformed words, unterminated comments,
+    unknown characters, fractions and Fanuc Macro B syntax.
+    """
+    if "(" in text or ";" in text or ")" in text:
+        text = blank_comments(text, line, file)
+    body = text.strip()
+    if not body:
+        return None
+    first = body[0]
+    blk = Block(line, text)
+    if first == "%":
+        if body.strip("% \t"):
+            raise NcError(
+                "'%' (tape start/end) must stand alone in its block",
+                line,
+                text.index("%") + 1,
+                file,
+            )
+        blk.tape = True
+        return blk
+    if first == "/":
+        blk.delete = True
+        body = body[1:]
+        if body[:1].isdigit():  # /1../9: optional block-skip switches, treated as '/'
+            body = body[1:]
+    squeezed = body.translate(_SQUEEZE).upper()
+    if squeezed[:1] in ("O", ":"):
+        m = re.match(r"[O:](\d+)", squeezed)
+        if not m:
+            raise NcError("program number O needs digits", line, find_col(text, squeezed[0]), file)
+        blk.program = int(m.group(1))
+        squeezed = squeezed[m.end() :]
+    if not _FAST_BLOCK.fullmatch(squeezed):
+        raise _diagnose(text, line, file)
+    words = blk.words
+    for letter, num in _WORD.findall(squeezed):
+        if letter == "G":
+            code = _G_CODE.get(num.lstrip("+"))
+            if code is None:
+                code = _g_code_slow(num)
+            if code is None:
+                raise NcError(f"unknown G code G{num}", line, find_col(text, "G"), file)
+            blk.g.append(code)
+        elif letter == "M":
+            if "." in num or num[0] in "+-":
+                raise NcError(f"malformed M code M{num}", line, find_col(text, "M"), file)
+            blk.m.append(int(num))
+        else:
+            if letter in words:
+                raise NcError(
+                    f"address {letter} appears twice in the block",
+                    line,
+                    find_col(text, letter, 2),
+                    file,
+                )
+            if letter == "O":
+                raise NcError(
+                    "program number O must start the block", line, find_col(text, "O"), file
+                )
+            words[letter] = float(num)
+            if least_increment and "." not in num:
+                if blk.nopoint is None:
+                    blk.nopoint = {letter}
+                else:
+                    blk.nopoint.add(letter)
+    return blk

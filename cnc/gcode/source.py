@@ -1,0 +1,140 @@
+"""Where program lines come from: the streamed main program and subprograms found by O number.
+
+The main program is consumed lazily, line by line. Subprograms (M98 P...) are looked up on
+demand, first among the O blocks of the main program's own text, then in the `programs`
+mapping the interpreter was given. Finding an O block never stores the program: an index
+keeps only (O number -> where its first line starts), one small entry per program, and is
+filled by scanning forward from where the previous search stopped:
+
+* a real file (an object with `.name` naming a file on disk, e.g. `open(path)`): a second,
+  independent binary handle scans for O lines and records byte offsets; the subprogram is
+  then read through its own handle seeked to that offset (O(1) memory per subprogram);
+* a list/tuple of lines or a str: the index records list positions;
+* any other iterable (a generator, a socket): in-file O blocks cannot be revisited without
+  buffering the stream, so M98 finds subprograms only in the `programs` mapping.
+"""
+
+from __future__ import annotations
+
+import os
+import re
+from collections.abc import Iterable, Iterator, Mapping, Sequence
+
+Lines = Iterator[tuple[int, str]]  # (1-based line number, text)
+
+_O_LINE_TEXT = re.compile(r"\s*(?:/\d?\s*)?[Oo:]\s*(\d+)")
+_O_LINE_BYTES = re.compile(rb"\s*(?:/\d?\s*)?[Oo:]\s*(\d+)")
+
+
+class _SequenceIndex:
+    def __init__(self, seq: Sequence[str]) -> None:
+        self.seq = seq
+        self.found: dict[int, int] = {}
+        self.scanned = 0
+
+    def find(self, number: int) -> Lines | None:
+        idx = self.found.get(number)
+        seq = self.seq
+        while idx is None and self.scanned < len(seq):
+            i = self.scanned
+            self.scanned += 1
+            m = _O_LINE_TEXT.match(seq[i])
+            if m:
+                self.found.setdefault(int(m.group(1)), i)
+                if int(m.group(1)) == number:
+                    idx = i
+        if idx is None:
+            return None
+        return ((i + 1, seq[i]) for i in range(idx, len(seq)))
+
+
+class _FileIndex:
+    """Byte-offset index of O lines in a file on disk, filled by a forward scan on demand."""
+
+    def __init__(self, path: str) -> None:
+        self.path = path
+        self.found: dict[int, tuple[int, int]] = {}  # O number -> (byte offset, line number)
+        self.offset = 0
+        self.lineno = 0
+        self.done = False
+
+    def find(self, number: int) -> Lines | None:
+        hit = self.found.get(number)
+        if hit is None and not self.done:
+            with open(self.path, "rb") as fh:
+                fh.seek(self.offset)
+                for raw in fh:
+                    self.lineno += 1
+                    m = _O_LINE_BYTES.match(raw)
+                    if m:
+                        num = int(m.group(1))
+                        self.found.setdefault(num, (self.offset, self.lineno))
+                    self.offset += len(raw)
+                    if m and num == number:
+                        hit = self.found[number]
+                        break
+                else:
+                    self.done = True
+        if hit is None:
+            return None
+        return _read_file_from(self.path, *hit)
+
+
+def _read_file_from(path: str, offset: int, lineno: int) -> Lines:
+    with open(path, "rb") as fh:
+        fh.seek(offset)
+        for raw in fh:
+            yield lineno, raw.decode("latin-1").rstrip("\r\n")
+            lineno += 1
+
+
+def _index_for(lines: object) -> _SequenceIndex | _FileIndex | None:
+    if isinstance(lines, str):
+        return _SequenceIndex(lines.splitlines())
+    if isinstance(lines, Sequence):
+        return _SequenceIndex(lines)  # type: ignore[arg-type]
+    name = getattr(lines, "name", None)
+    if isinstance(name, str) and os.path.isfile(name):
+        return _FileIndex(name)
+    return None
+
+
+def main_lines(lines: Iterable[str] | str) -> Lines:
+    """Number the main program's lines without reading ahead."""
+    if isinstance(lines, str):
+        lines = lines.splitlines()
+    yield from enumerate(lines, 1)
+
+
+class ProgramLibrary:
+    """Resolves program numbers for M98: in-file O blocks first, then the `programs` mapping."""
+
+    def __init__(self, programs: Mapping[int, str | Iterable[str]] | None) -> None:
+        self.programs = dict(programs or {})
+        self.in_file: _SequenceIndex | _FileIndex | None = None
+        self.main_file = "<program>"
+        self._mapped: dict[int, _SequenceIndex | _FileIndex] = {}
+
+    def attach(self, lines: object, file: str) -> None:
+        self.in_file = _index_for(lines)
+        self.main_file = file
+
+    def open(self, number: int) -> tuple[Lines, str] | None:
+        """(numbered lines starting at the program's O line or first line, file name)."""
+        if self.in_file is not None:
+            hit = self.in_file.find(number)
+            if hit is not None:
+                return hit, self.main_file
+        if number not in self.programs:
+            return None
+        idx = self._mapped.get(number)
+        if idx is None:
+            prog = self.programs[number]
+            idx = _index_for(prog)
+            if idx is None:  # a one-shot iterable: it is in memory already, keep it as a list
+                idx = _SequenceIndex(list(prog))
+            self._mapped[number] = idx
+        if isinstance(idx, _FileIndex):
+            return _read_file_from(idx.path, 0, 1), f"O{number}"
+        seq = idx.seq
+        return ((i + 1, seq[i]) for i in range(len(seq))), f"O{number}"

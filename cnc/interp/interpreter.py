@@ -1,0 +1,1596 @@
+"""The Fanuc-dialect interpreter: blocks in, canonical machine commands out.
+
+The interpreter is a pure core: it reads lines from an iterable, keeps the modal state and
+appends canonical commands (cnc.canon) in machine coordinates, mm, mm/min, s and rpm. It
+never reads a clock or does I/O other than reading the program (and, for in-file
+subprograms, re-reading its own source file; see cnc.gcode.source).
+
+Coordinates move through these stages (docs/gcode.md, "Coordinates"):
+    words (program units, abs/incr, polar, lathe diameter) -> program point (work, mm)
+    -> mirror/scale/rotation -> cutter compensation (in the plane)
+    -> + work offset (G54..G59, G10 L2 P0 common, G92) + tool offset -> machine point
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Iterable, Iterator, Mapping
+
+from cnc.canon import (
+    ArcFeed,
+    AuxFunction,
+    CanonCommand,
+    Coolant,
+    Dwell,
+    PathMode,
+    Plane,
+    Pose,
+    ProgramStop,
+    SetPathMode,
+    Spindle,
+    SpindleDirection,
+    StopKind,
+    StraightFeed,
+    StraightTraverse,
+    ToolChange,
+    ToolSelect,
+)
+from cnc.errors import NcError
+from cnc.gcode.lexer import Block, parse_line
+from cnc.gcode.source import Lines, ProgramLibrary, main_lines
+from cnc.interp.state import ModalState, ToolOffset
+from cnc.interp.transform import Transform
+from cnc.params import DecimalStyle, MachineParams
+
+INCH = 25.4
+ARC_TOLERANCE_MM = 0.01  # |start radius - end radius| allowed (000_nc_book TV-INT-3)
+MAX_SUB_NESTING = 10  # M98 nesting depth (Fanuc 0i: 10 levels)
+MAX_REPEAT = 9999  # L / K repeat counts
+MAX_PECKS = 10000  # per hole, so a tiny Q cannot flood the planner
+PECK_CLEARANCE_MM = 0.5  # G83: stop this far above the previous depth (Fanuc param 5115)
+PECK_RETRACT_MM = 0.5  # G73: retract after each peck (Fanuc param 5114)
+_EPS = 1e-9
+
+# Letters the interpreter understands, per machine kind (others: "unknown address").
+_MILL_WORDS = frozenset("XYZIJKRFSTNPQLHD")
+_LATHE_WORDS = frozenset("XZUWIKRFSTNPQLHD")
+_DIM_LETTERS = frozenset("XYZUVWIJKRQ")
+_AXIS_OF = {"X": 0, "Y": 1, "Z": 2}
+_AXIS_NAME = "XYZ"
+
+# Plane: (u, v, normal) axis indices and the centre words for u and v.
+_PLANES = {
+    170: (0, 1, 2, "I", "J", Plane.XY),
+    180: (2, 0, 1, "K", "I", Plane.ZX),
+    190: (1, 2, 0, "J", "K", Plane.YZ),
+}
+
+# Modal groups by G code (int(10 x G)); "nonmodal" codes act in their own block only.
+_GROUP = {
+    0: "motion", 10: "motion", 20: "motion", 30: "motion",
+    40: "nonmodal", 100: "nonmodal", 280: "nonmodal", 300: "nonmodal", 530: "nonmodal",
+    920: "nonmodal",
+    90: "exact_stop",
+    150: "polar", 160: "polar",
+    170: "plane", 180: "plane", 190: "plane",
+    200: "units", 210: "units",
+    400: "cutter_comp", 410: "cutter_comp", 420: "cutter_comp",
+    430: "length_comp", 440: "length_comp", 490: "length_comp",
+    500: "scaling", 510: "scaling",
+    501: "mirror", 511: "mirror",
+    540: "work_offset", 550: "work_offset", 560: "work_offset", 570: "work_offset",
+    580: "work_offset", 590: "work_offset",
+    610: "path_mode", 640: "path_mode",
+    680: "rotation", 690: "rotation",
+    730: "cycle", 740: "cycle", 760: "cycle", 800: "cycle", 810: "cycle", 820: "cycle",
+    830: "cycle", 840: "cycle", 850: "cycle", 860: "cycle", 870: "cycle", 880: "cycle",
+    890: "cycle",
+    900: "distance", 910: "distance",
+    901: "arc_distance", 911: "arc_distance",
+    940: "feed_mode", 950: "feed_mode",
+    960: "spindle_mode", 970: "spindle_mode",
+    980: "return_level", 990: "return_level",
+}  # fmt: skip
+# Fanuc lathe G-code system A: different meanings for several numbers.
+_LATHE_GROUP = {
+    k: v
+    for k, v in _GROUP.items()
+    if k not in (500, 510, 501, 511, 730, 740, 760, 800, 810, 820, 830, 840, 850, 860, 870,
+                 880, 890, 900, 910, 920, 940, 950, 980, 990, 150, 160, 680, 690)
+}  # fmt: skip
+_LATHE_GROUP.update({500: "nonmodal", 980: "feed_mode", 990: "feed_mode"})
+_UNSUPPORTED_G = {
+    650: "unsupported: Fanuc Macro B (G65 macro call)",
+    660: "unsupported: Fanuc Macro B (G66 modal macro call)",
+    670: "unsupported: Fanuc Macro B (G67 macro call cancel)",
+}
+_CYCLE_NAMES = {730, 740, 760, 810, 820, 830, 840, 850, 860, 870, 880, 890}
+_LATHE_UNSUPPORTED = {
+    **{c: "lathe canned cycle" for c in (700, 710, 720, 730, 740, 750, 760)},
+    900: "lathe turning cycle (G90, system A)",
+    920: "lathe threading cycle (G92, system A)",
+    940: "lathe facing cycle (G94, system A)",
+    320: "lathe threading (G32)",
+}
+_M_GROUP = {0: "stop", 1: "stop", 2: "stop", 30: "stop", 3: "spindle", 4: "spindle",
+            5: "spindle", 19: "spindle", 6: "tool", 7: "coolant", 8: "coolant", 9: "coolant",
+            98: "sub", 99: "sub"}  # fmt: skip
+
+
+def _fmt_g(code: int) -> str:
+    return f"G{code // 10}" if code % 10 == 0 else f"G{code // 10}.{code % 10}"
+
+
+class _Frame:
+    __slots__ = ("it", "file", "number", "repeats", "call_line", "header_seen", "body_started")
+
+    def __init__(self, it: Lines, file: str, number: int | None, repeats: int, call_line: int):
+        self.it = it
+        self.file = file
+        self.number = number
+        self.repeats = repeats
+        self.call_line = call_line
+        self.header_seen = False
+        self.body_started = False
+
+
+class Interpreter:
+    """Interprets Fanuc-dialect part programs into canonical machine commands.
+
+    `programs` maps program numbers to program text (str or lines) for M98 calls;
+    `tools` maps offset numbers to ToolOffset (H, D and lathe T offsets share the table);
+    `work_offsets` maps 1..6 (G54..G59) and 0 (common/EXT) to offsets in mm;
+    `block_delete` is the BLOCK DELETE switch (`/` blocks are skipped when True);
+    `start` is the machine position in mm (default: every axis at its reference point);
+    `max_blocks` bounds the number of executed blocks (None: unbounded) so a checker can
+    refuse programs whose subprogram repeats would run for ever.
+    """
+
+    def __init__(
+        self,
+        params: MachineParams,
+        *,
+        programs: Mapping[int, str | Iterable[str]] | None = None,
+        tools: Mapping[int, ToolOffset] | None = None,
+        block_delete: bool = False,
+        file: str = "<program>",
+        start: Pose | None = None,
+        work_offsets: Mapping[int, tuple[float, ...]] | None = None,
+        arc_tolerance: float = ARC_TOLERANCE_MM,
+        max_blocks: int | None = None,
+    ) -> None:
+        self.params = params
+        self.file = file
+        self.block_delete = block_delete
+        self.arc_tolerance = arc_tolerance
+        self.max_blocks = max_blocks
+        self._lathe = params.kind == "lathe"
+        self._diam = self._lathe and params.lathe_diameter_mode
+        self._li = params.decimal_style is DecimalStyle.LEAST_INCREMENT
+        self._words_ok = _LATHE_WORDS if self._lathe else _MILL_WORDS
+        self._fast_words = frozenset("XZUWIKRFN" if self._lathe else "XYZIJKRFN")
+        self._groups = _LATHE_GROUP if self._lathe else _GROUP
+        self._lib = ProgramLibrary(programs)
+        self._tools: dict[int, ToolOffset] = dict(tools or {})
+        self._limits: list[tuple[int, float, float, str]] = []
+        home = [0.0, 0.0, 0.0]
+        for ax in params.axes:
+            idx = _AXIS_OF.get(ax.name)
+            if idx is not None:
+                self._limits.append((idx, ax.min_mm, ax.max_mm, ax.name))
+                home[idx] = ax.home_mm
+        self._home = tuple(home)
+        self._axes_present = {ax.name for ax in params.axes}
+        self._second_ref = (
+            tuple(params.second_reference_mm[:3]) if params.second_reference_mm else self._home
+        )
+        self._mach: tuple[float, float, float] = (
+            (float(start[0]), float(start[1]), float(start[2])) if start else self._home
+        )
+        # work offsets: index 0 = common (EXT), 1..6 = G54..G59
+        self._wofs: list[list[float]] = [[0.0, 0.0, 0.0] for _ in range(7)]
+        for k, v in (work_offsets or {}).items():
+            if not 0 <= k <= 6:
+                raise NcError(f"work offset number {k} is not 0..6", 0, 0, file)
+            self._wofs[k] = [float(v[0]), float(v[1]), float(v[2])]
+        self._reset_modal()
+        self._off = self._compute_off()
+        self._pos = self._prog_from_machine()
+        self._out: list[CanonCommand] = []
+        self.errors: list[NcError] = []
+        self._frames: list[_Frame] = []
+        self._line = 0
+        self._nword: int | None = None
+        self._program: int | None = None
+        self._ended = False
+        self._executed = 0
+        self._moved = False
+
+    # --- modal state ------------------------------------------------------------------
+
+    def _reset_modal(self) -> None:
+        lathe = self._lathe
+        self._motion = 0
+        self._cycle = 800
+        self._plane = 180 if lathe else 170
+        self._pu, self._pv, self._pw, self._ci, self._cj, self._plane_enum = _PLANES[self._plane]
+        self._abs = True
+        self._arc_abs = False
+        self._per_rev = lathe  # lathe power-on G99 (feed per revolution)
+        self._inch = False
+        self._scale = 1.0
+        self._comp_code = 400
+        self._tlo_code = 490
+        self._tlo = (0.0, 0.0, 0.0)
+        self._h = 0
+        self._d = 0
+        self._wcs = 1
+        self._g92 = [0.0, 0.0, 0.0]
+        self._path = 640
+        self._retract = 980
+        self._polar = False
+        self._xf = Transform()
+        self._xf_on = False
+        self._f: float | None = None  # mm/min or mm/rev
+        self._s = 0.0  # rpm (G97) or surface speed m/min (G96)
+        self._css = False
+        self._max_rpm = getattr(self.params, "max_spindle_rpm", None)
+        self._spindle = SpindleDirection.STOP
+        self._mist = False
+        self._flood = False
+        self._tool = 0
+        self._tool_in = 0
+        self._cyc_r: float | None = None
+        self._cyc_z: float | None = None
+        self._cyc_q = 0.0
+        self._cyc_p = 0.0
+        self._cyc_init: float | None = None
+        self._comp = None
+        self._comp_uv = (0.0, 0.0)
+        self._comp_w = 0.0
+        self._polar_ra = (0.0, 0.0)
+
+    def _compute_off(self) -> tuple[float, float, float]:
+        w = self._wofs[self._wcs]
+        c = self._wofs[0]
+        g = self._g92
+        t = self._tlo
+        return (w[0] + c[0] + g[0] + t[0], w[1] + c[1] + g[1] + t[1], w[2] + c[2] + g[2] + t[2])
+
+    def _prog_from_machine(self) -> tuple[float, float, float]:
+        o = self._off
+        m = self._mach
+        t = (m[0] - o[0], m[1] - o[1], m[2] - o[2])
+        return self._xf.inverse(t) if self._xf_on else t
+
+    @property
+    def state(self) -> ModalState:
+        """A snapshot of the modal state (for status displays)."""
+        u = INCH if self._inch else 1.0
+        pos = [p / u for p in self._pos]
+        if self._diam:
+            pos[0] *= 2.0
+        g = {
+            "motion": _fmt_g(self._motion),
+            "cycle": _fmt_g(self._cycle),
+            "plane": _fmt_g(self._plane),
+            "distance": "G90" if self._abs else "G91",
+            "arc_distance": "G90.1" if self._arc_abs else "G91.1",
+            "feed_mode": ("G99" if self._per_rev else "G98")
+            if self._lathe
+            else ("G95" if self._per_rev else "G94"),
+            "units": "G20" if self._inch else "G21",
+            "cutter_comp": _fmt_g(self._comp_code),
+            "length_comp": _fmt_g(self._tlo_code),
+            "work_offset": _fmt_g(530 + 10 * self._wcs),
+            "path_mode": _fmt_g(self._path),
+            "return_level": _fmt_g(self._retract),
+            "spindle_mode": "G96" if self._css else "G97",
+            "polar": "G16" if self._polar else "G15",
+            "scaling": "G51" if self._xf.scale is not None else "G50",
+            "rotation": "G68" if self._xf.rot else "G69",
+            "mirror": "G51.1" if any(self._xf.mirror) else "G50.1",
+        }
+        fr = self._frames[-1] if self._frames else None
+        return ModalState(
+            file=fr.file if fr else self.file,
+            line=self._line,
+            block_number=self._nword,
+            program=self._program,
+            subprogram_depth=max(0, len(self._frames) - 1),
+            gcodes=g,
+            units="inch" if self._inch else "mm",
+            work_offset=g["work_offset"],
+            tool_selected=self._tool,
+            tool_in_spindle=self._tool_in,
+            length_offset=self._h,
+            radius_offset=self._d,
+            feed=None if self._f is None else self._f / u,
+            spindle_rpm=self._rpm_now() if self._css else self._s,
+            spindle=self._spindle.value,
+            surface_speed=self._s if self._css else None,
+            coolant_mist=self._mist,
+            coolant_flood=self._flood,
+            work_position=tuple(pos),
+            machine_position=tuple(self._mach),
+            ended=self._ended,
+        )
+
+    # --- running ----------------------------------------------------------------------
+
+    def run(self, lines: Iterable[str] | str) -> Iterator[CanonCommand]:
+        """Interpret `lines` lazily, yielding canonical commands as blocks are read.
+
+        Raises NcError at the offending block (unless running under `check`, which records
+        the error and carries on with the next block).
+        """
+        return self._run(lines, recover=False)
+
+    def _run(self, lines: Iterable[str] | str, recover: bool) -> Iterator[CanonCommand]:
+        self._lib.attach(lines, self.file)
+        self._ended = False
+        frames = self._frames
+        frames.clear()
+        frames.append(_Frame(main_lines(lines), self.file, None, 1, 0))
+        out = self._out
+        li = self._li
+        while frames and not self._ended:
+            fr = frames[-1]
+            file = fr.file
+            nframes = len(frames)
+            for lineno, text in fr.it:
+                try:
+                    blk = parse_line(text, lineno, file, li)
+                    if blk is not None:
+                        self._block(blk, fr)
+                except NcError as err:
+                    if not recover:
+                        raise
+                    out.clear()
+                    self._record(err, file)
+                if out:
+                    yield from out
+                    out.clear()
+                if self._ended or len(frames) != nframes or frames[-1] is not fr:
+                    break
+            else:
+                # the frame's lines ran out
+                if len(frames) == 1:
+                    frames.pop()
+                    break
+                err = NcError(
+                    f"subprogram O{fr.number} ends without M99",
+                    self._line,
+                    1,
+                    file,
+                )
+                if not recover:
+                    raise err
+                self._record(err, file)
+                frames.pop()
+        try:
+            self._flush_comp()
+        except NcError as err:
+            if not recover:
+                raise
+            self._record(err, self.file)
+        if out:
+            yield from out
+            out.clear()
+        self._ended = True
+
+    def _record(self, err: NcError, file: str) -> None:
+        if err.file == "<program>" and file != "<program>":
+            err.file = file
+        self.errors.append(err)
+        if len(self.errors) >= CHECK_MAX_ERRORS:
+            self._ended = True
+
+    def _err(self, msg: str, blk: Block, letter: str | None = None, nth: int = 1) -> NcError:
+        if letter:
+            col = blk.col(letter, nth)
+        else:
+            stripped = blk.text.lstrip()
+            col = len(blk.text) - len(stripped) + 1 if stripped else 1
+        fr = self._frames[-1] if self._frames else None
+        return NcError(msg, blk.line, col, fr.file if fr else self.file)
+
+    # --- one block --------------------------------------------------------------------
+
+    def _block(self, blk: Block, fr: _Frame) -> None:
+        main = len(self._frames) == 1
+        if blk.tape:
+            if main:
+                if fr.body_started:
+                    self._ended = True  # closing '%': end of tape
+                fr.body_started = True
+            elif fr.body_started:
+                raise self._err(f"subprogram O{fr.number} ends without M99", blk)
+            return
+        if blk.delete and self.block_delete:
+            return
+        if blk.program is not None:
+            if main:
+                if self._program is None and not self._moved:
+                    self._program = blk.program
+                else:
+                    self._ended = True  # the next program in the file: main program ends
+                    return
+            elif fr.header_seen or fr.body_started:
+                raise self._err(f"subprogram O{fr.number} ends without M99", blk)
+            fr.header_seen = True
+        fr.body_started = True
+        words = blk.words
+        if not (words or blk.g or blk.m):
+            return
+        self._line = line = blk.line
+        self._executed += 1
+        if self.max_blocks is not None and self._executed > self.max_blocks:
+            raise self._err(f"program executes more than {self.max_blocks} blocks", blk)
+        if not words.keys() <= self._words_ok:
+            for k in words:
+                if k not in self._words_ok:
+                    if k == "Y" and self._lathe:
+                        raise self._err("a lathe has no Y axis", blk, k)
+                    if k in "ABCEUVW" and not self._lathe:
+                        raise self._err(f"unknown address {k} (axis {k} is not configured)", blk, k)
+                    raise self._err(f"unknown address {k}", blk, k)
+        n = words.get("N")
+        if n is not None:
+            self._nword = int(n)
+
+        # --- classify G codes by modal group ---
+        groups = self._groups
+        gset: dict[str, int] = {}
+        exact = False
+        for i, code in enumerate(blk.g):
+            grp = groups.get(code)
+            if grp is None:
+                msg = _UNSUPPORTED_G.get(code)
+                if msg is None and self._lathe and code in _LATHE_UNSUPPORTED:
+                    msg = f"unsupported: {_LATHE_UNSUPPORTED[code]}"
+                raise self._err(msg or f"unsupported G code {_fmt_g(code)}", blk, "G", i + 1)
+            if grp == "exact_stop":
+                exact = True
+                continue
+            if (
+                grp in gset
+                or (grp == "cycle" and "motion" in gset)
+                or (grp == "motion" and "cycle" in gset)
+            ):
+                raise self._err(
+                    f"{_fmt_g(code)} and another G code of modal group '{grp}' in one block",
+                    blk,
+                    "G",
+                    i + 1,
+                )
+            gset[grp] = code
+        mset: dict[str, int] = {}
+        aux: list[int] = []
+        for i, code in enumerate(blk.m):
+            grp = _M_GROUP.get(code)
+            if grp is None:
+                aux.append(code)
+                continue
+            prev = mset.get(grp)
+            if prev is not None and not (grp == "coolant" and {prev, code} == {7, 8}):
+                raise self._err(
+                    f"M{code} and M{prev} of one M group '{grp}' in one block", blk, "M", i + 1
+                )
+            mset[grp] = code if grp != "coolant" or prev is None else 78
+
+        # fast path: an ordinary motion block without any modal change
+        if (
+            not gset
+            and not mset
+            and not aux
+            and self._cycle == 800
+            and words.keys() <= self._fast_words
+            and not self._xf_on
+            and self._comp is None
+        ):
+            if "F" in words:
+                self._set_feed(blk, words["F"])
+            self._motion_block(blk, words, exact, None)
+            return
+
+        # --- units first: they decide how every number in the block is read ---
+        u = gset.get("units")
+        if u is not None:
+            inch = u == 200
+            if inch != self._inch:
+                if self._moved:
+                    raise self._err(
+                        "G20/G21 unit change after motion (use one unit per program)",
+                        blk,
+                        "G",
+                        blk.g.index(u) + 1,
+                    )
+                self._inch = inch
+                self._scale = INCH if inch else 1.0
+        fm = gset.get("feed_mode")
+        if fm is not None:
+            self._per_rev = fm in (950, 990)
+        if "F" in words:
+            self._set_feed(blk, words["F"])
+        # --- spindle speed mode and S ---
+        sm = gset.get("spindle_mode")
+        spindle_changed = False
+        if sm is not None:
+            css = sm == 960
+            if css != self._css:
+                self._css = css
+                spindle_changed = True
+                if not css and "S" not in words:
+                    self._s = self._rpm_now_from(self._s, True)
+        if "S" in words and not ("nonmodal" in gset and gset["nonmodal"] in (920, 500)):
+            s = words["S"]
+            if s < 0:
+                raise self._err("S must not be negative", blk, "S")
+            self._s = s * (0.3048 if self._inch and self._css else 1.0)
+            spindle_changed = True
+        if "T" in words:
+            self._tool_word(blk, words["T"])
+        if mset.get("tool") == 6:
+            self._emit(ToolChange(line, self._tool))
+            self._tool_in = self._tool
+        sp = mset.get("spindle")
+        if sp is not None:
+            self._spindle = (
+                SpindleDirection.CW
+                if sp == 3
+                else SpindleDirection.CCW
+                if sp == 4
+                else SpindleDirection.STOP
+                if sp == 5
+                else SpindleDirection.ORIENT
+            )
+            self._emit_spindle(line)
+        elif spindle_changed and self._spindle in (SpindleDirection.CW, SpindleDirection.CCW):
+            self._emit_spindle(line)
+        cool = mset.get("coolant")
+        if cool is not None:
+            if cool == 9:
+                self._mist = self._flood = False
+            elif cool == 7:
+                self._mist = True
+            elif cool == 8:
+                self._flood = True
+            else:
+                self._mist = self._flood = True
+            self._emit(Coolant(line, self._mist, self._flood))
+        for code in aux:
+            self._emit(AuxFunction(line, code))
+        nonmodal = gset.get("nonmodal")
+        if nonmodal == 40:
+            self._dwell(blk, words)  # its X/P words are the time, not a target
+        # --- plane, compensation, offsets, modes ---
+        pl = gset.get("plane")
+        if pl is not None and pl != self._plane:
+            if self._comp is not None:
+                raise self._err("plane change while cutter compensation is active", blk, "G")
+            if self._xf.rot:
+                raise self._err("plane change while G68 rotation is active", blk, "G")
+            self._plane = pl
+            self._pu, self._pv, self._pw, self._ci, self._cj, self._plane_enum = _PLANES[pl]
+        d = gset.get("distance")
+        if d is not None:
+            self._abs = d == 900
+        ad = gset.get("arc_distance")
+        if ad is not None:
+            self._arc_abs = ad == 901
+        rl = gset.get("return_level")
+        if rl is not None:
+            self._retract = rl
+        if "D" in words and gset.get("cutter_comp") is None:
+            self._d = self._int_word(blk, "D")
+        cc = gset.get("cutter_comp")
+        if cc is not None:
+            self._cutter_comp(blk, cc)
+        lc = gset.get("length_comp")
+        if lc is not None:
+            self._length_comp(blk, lc)
+        elif "H" in words:
+            self._h = self._int_word(blk, "H")
+            if self._tlo_code != 490:
+                self._length_comp(blk, self._tlo_code)
+        wo = gset.get("work_offset")
+        if wo is not None and wo // 10 - 53 != self._wcs:
+            self._wcs = wo // 10 - 53
+            self._refresh_offsets(resync=True)
+        pm = gset.get("path_mode")
+        if pm is not None:
+            self._path = pm
+            if pm == 610:
+                self._emit(SetPathMode(line, PathMode.EXACT_STOP))
+            else:
+                tol = self.params.default_path_tolerance
+                if "P" in words:
+                    tol = self._dim(blk, "P")
+                    if tol < 0:
+                        raise self._err("G64 P tolerance must not be negative", blk, "P")
+                self._emit(SetPathMode(line, PathMode.CONTINUOUS, tol))
+        # --- transforms (their axis words are centres, not targets) ---
+        consumed = False
+        polar = gset.get("polar")
+        if polar is not None:
+            self._polar = polar == 160
+        mir = gset.get("mirror")
+        if mir is not None:
+            self._mirror(blk, mir)
+            consumed = True
+        sc = gset.get("scaling")
+        if sc is not None:
+            self._scaling(blk, sc)
+            consumed = True
+        rot = gset.get("rotation")
+        if rot is not None:
+            self._rotation(blk, rot)
+            consumed = True
+        # --- non-modal codes using axis words ---
+        if nonmodal is not None:
+            consumed = True
+            if nonmodal == 100:
+                self._g10(blk)
+            elif nonmodal in (280, 300):
+                self._reference_return(blk, nonmodal, exact)
+            elif nonmodal in (920, 500):
+                self._coordinate_set(blk)
+            elif nonmodal == 530:
+                self._g53(blk, gset.get("motion"), exact)
+        if consumed and ("motion" in gset or "cycle" in gset):
+            raise self._err("a motion G code cannot share a block with this G code", blk, "G")
+        # --- motion ---
+        mo = gset.get("motion")
+        if mo is not None:
+            self._motion = mo
+            if self._cycle != 800:
+                self._cycle = 800
+                self._cyc_init = None
+        cy = gset.get("cycle")
+        if not consumed:
+            if cy is not None or (self._cycle != 800 and mo is None):
+                self._cycle_block(blk, cy, exact)
+            else:
+                self._motion_block(blk, words, exact, mo)
+        # --- program flow ---
+        stop = mset.get("stop")
+        if stop is not None:
+            self._emit(ProgramStop(line, _STOPS[stop]))
+            if stop in (2, 30):
+                self._flush_comp()
+                self._ended = True
+        sub = mset.get("sub")
+        if sub == 98:
+            self._call(blk)
+        elif sub == 99:
+            self._return(blk)
+
+    # --- words --------------------------------------------------------------------------
+
+    def _set_feed(self, blk: Block, f: float) -> None:
+        f *= self._scale
+        if f < 0:
+            raise self._err("F must not be negative", blk, "F")
+        if not self._per_rev:
+            f = min(f, self.params.max_feed)
+        self._f = f
+
+    def _dim(self, blk: Block, letter: str) -> float:
+        """A length word in mm (decimal-point rule, then units)."""
+        v = blk.words[letter]
+        if blk.nopoint is not None and letter in blk.nopoint:
+            v *= self.params.least_increment_inch if self._inch else self.params.least_increment_mm
+        return v * self._scale
+
+    def _plain(self, blk: Block, letter: str, unit: float = 0.001) -> float:
+        """An angle/factor/time word: without a point in least-increment style, x unit."""
+        v = blk.words[letter]
+        if blk.nopoint is not None and letter in blk.nopoint:
+            v *= unit
+        return v
+
+    def _int_word(self, blk: Block, letter: str) -> int:
+        v = blk.words[letter]
+        if v != int(v) or v < 0:
+            raise self._err(f"{letter} needs a non-negative integer", blk, letter)
+        return int(v)
+
+    def _target(self, blk: Block, words: dict[str, float]) -> tuple[float, float, float]:
+        """The block's end point in program coordinates (mm, work system)."""
+        x, y, z = self._pos
+        sc = self._scale
+        np_ = blk.nopoint
+        if np_ is None and sc == 1.0 and not self._polar:
+            if self._abs:
+                if "X" in words:
+                    x = words["X"] * 0.5 if self._diam else words["X"]
+                if "Y" in words:
+                    y = words["Y"]
+                if "Z" in words:
+                    z = words["Z"]
+            else:
+                if "X" in words:
+                    x += words["X"] * 0.5 if self._diam else words["X"]
+                if "Y" in words:
+                    y += words["Y"]
+                if "Z" in words:
+                    z += words["Z"]
+            if self._lathe:
+                if "U" in words:
+                    x += words["U"] * 0.5 if self._diam else words["U"]
+                if "W" in words:
+                    z += words["W"]
+            return (x, y, z)
+        p = [x, y, z]
+        vals = {}
+        for letter in "XYZ":
+            if letter in words:
+                v = self._dim(blk, letter)
+                if letter == "X" and self._diam:
+                    v *= 0.5
+                vals[letter] = v
+        if self._polar:
+            return self._polar_target(blk, vals)
+        for letter, v in vals.items():
+            i = _AXIS_OF[letter]
+            p[i] = v if self._abs else p[i] + v
+        if self._lathe:
+            if "U" in words:
+                p[0] += self._dim(blk, "U") * (0.5 if self._diam else 1.0)
+            if "W" in words:
+                p[2] += self._dim(blk, "W")
+        return (p[0], p[1], p[2])
+
+    def _polar_target(self, blk: Block, vals: dict[str, float]) -> tuple[float, float, float]:
+        u, v, w = self._pu, self._pv, self._pw
+        p = list(self._pos)
+        names = _AXIS_NAME
+        if names[w] in vals:
+            p[w] = vals[names[w]] if self._abs else p[w] + vals[names[w]]
+        r_letter, a_letter = names[u], names[v]
+        if r_letter not in vals and a_letter not in vals:
+            return (p[0], p[1], p[2])
+        pr, pa = getattr(self, "_polar_ra", (0.0, 0.0))
+        r = vals.get(r_letter, pr)
+        if a_letter in blk.words:
+            a = self._plain(blk, a_letter)
+            a = a if self._abs else pa + a
+        else:
+            a = pa
+        self._polar_ra = (r, a)
+        pole = (0.0, 0.0) if self._abs else (p[u], p[v])
+        rad = math.radians(a)
+        p[u] = pole[0] + r * math.cos(rad)
+        p[v] = pole[1] + r * math.sin(rad)
+        return (p[0], p[1], p[2])
+
+    def _tool_word(self, blk: Block, t: float) -> None:
+        if t != int(t) or t < 0:
+            raise self._err("T needs a non-negative integer", blk, "T")
+        t = int(t)
+        line = blk.line
+        if self._lathe:
+            tool, ofs = (t // 100, t % 100) if t >= 100 else (t, t)
+            self._tool = tool
+            self._emit(ToolSelect(line, tool))
+            self._emit(ToolChange(line, tool))
+            self._tool_in = tool
+            if ofs == 0:
+                self._tlo = (0.0, 0.0, 0.0)
+            else:
+                off = self._tools.get(ofs)
+                if off is None:
+                    raise self._err(f"T{t}: no tool offset number {ofs}", blk, "T")
+                self._tlo = (off.x, 0.0, off.z)
+                self._d = ofs
+            self._refresh_offsets(resync=False)
+        else:
+            self._tool = t
+            self._emit(ToolSelect(line, t))
+
+    def _offset_entry(self, blk: Block, letter: str, number: int) -> ToolOffset:
+        if number == 0:
+            return ToolOffset()
+        off = self._tools.get(number)
+        if off is None:
+            raise self._err(f"{letter}{number}: no such tool offset", blk, letter)
+        return off
+
+    # --- emitting ---------------------------------------------------------------------
+
+    def _emit(self, cmd: CanonCommand) -> None:
+        """Append a non-motion command, keeping it in order behind held comp segments."""
+        comp = self._comp
+        if comp is not None and comp.active:
+            uv = self._comp_uv
+            seg = self._seg_cls("line", uv, uv, None, False, cmd.line, 1, ("cmd", cmd))
+            self._comp_out(comp.push(seg))
+        else:
+            self._out.append(cmd)
+
+    def _check(self, m: tuple[float, float, float], blk: Block | None, line: int) -> None:
+        for idx, lo, hi, name in self._limits:
+            v = m[idx]
+            if v < lo - 1e-9 or v > hi + 1e-9:
+                col = 1
+                if blk is not None:
+                    letters = {0: "XU", 1: "Y", 2: "ZW"}[idx]
+                    for letter in letters:
+                        if letter in blk.words:
+                            col = blk.col(letter)
+                            break
+                raise NcError(
+                    f"axis {name} move to {v:.4f} mm is beyond the soft limit "
+                    f"[{lo:g}, {hi:g}] mm (machine coordinates)",
+                    line,
+                    col,
+                    self._frames[-1].file if self._frames else self.file,
+                )
+
+    def _rpm_now(self) -> float:
+        return self._rpm_now_from(self._s, self._css)
+
+    def _rpm_now_from(self, s: float, css: bool) -> float:
+        if not css:
+            return s
+        x = abs(self._xf.apply(self._pos)[0] if self._xf_on else self._pos[0])
+        mx = self._max_rpm
+        if x < 1e-9:
+            return mx if mx is not None else 0.0
+        rpm = 1000.0 * s / (math.pi * 2.0 * x)
+        return min(rpm, mx) if mx is not None else rpm
+
+    def _emit_spindle(self, line: int) -> None:
+        if self._css:
+            self._emit(Spindle(line, self._spindle, self._rpm_now(), self._s, self._max_rpm))
+        else:
+            self._emit(Spindle(line, self._spindle, self._s))
+
+    def _feed(self, blk: Block) -> float:
+        f = self._f
+        if f is None:
+            raise self._err("feed move without F", blk)
+        if self._per_rev:
+            rpm = self._rpm_now()
+            if rpm <= 0.0:
+                raise self._err("feed per revolution (G95) with no spindle speed", blk)
+            f = min(f * rpm, self.params.max_feed)
+        if f <= 0.0:
+            raise self._err("feed move with F0", blk, "F" if "F" in blk.words else None)
+        return f
+
+    # --- motion -------------------------------------------------------------------------
+
+    def _motion_block(
+        self, blk: Block, words: dict[str, float], exact: bool, explicit: int | None
+    ) -> None:
+        has_axis = (
+            "X" in words
+            or "Y" in words
+            or "Z" in words
+            or (self._lathe and ("U" in words or "W" in words))
+        )
+        mo = self._motion
+        if mo >= 20:
+            if not has_axis and not (self._ci in words or self._cj in words or "R" in words):
+                if explicit is not None and explicit >= 20:
+                    raise self._err("arc without end point or centre", blk, "G")
+                return
+            self._arc(blk, words, mo == 20, exact)
+            return
+        if not has_axis:
+            return
+        target = self._target(blk, words)
+        if mo == 0:
+            self._line_to(target, None, blk, exact)
+        else:
+            self._line_to(target, self._feed(blk), blk, exact)
+
+    def _line_to(
+        self,
+        p: tuple[float, float, float],
+        feed: float | None,
+        blk: Block,
+        exact: bool,
+    ) -> None:
+        """Straight move to program point `p` (rapid when feed is None)."""
+        t = self._xf.apply(p) if self._xf_on else p
+        line = blk.line
+        if self._comp is not None and self._comp.active:
+            self._comp_line(t, feed, blk, exact)
+            self._pos = p
+            self._moved = True
+            return
+        o = self._off
+        m = (t[0] + o[0], t[1] + o[1], t[2] + o[2])
+        if self._lathe:
+            m = (m[0], 0.0, m[2])
+        for idx, lo, hi, _ in self._limits:
+            if not lo - 1e-9 <= m[idx] <= hi + 1e-9:
+                self._check(m, blk, line)
+        if feed is None:
+            self._out.append(StraightTraverse(line, m, exact))
+        else:
+            self._out.append(StraightFeed(line, m, feed, exact))
+        self._pos = p
+        self._mach = m
+        self._moved = True
+
+    def _arc(self, blk: Block, words: dict[str, float], cw: bool, exact: bool) -> None:
+        u, v, w = self._pu, self._pv, self._pw
+        s = self._pos
+        e = self._target(blk, words)
+        su, sv, eu, ev = s[u], s[v], e[u], e[v]
+        tol = self.arc_tolerance
+        full = abs(su - eu) < _EPS and abs(sv - ev) < _EPS
+        if "R" in words:
+            if self._ci in words or self._cj in words:
+                raise self._err("arc with both R and I/J/K", blk, "R")
+            r = self._dim(blk, "R")
+            if full:
+                raise self._err("R arc with start point equal to end point (full circle)", blk, "R")
+            du, dv = eu - su, ev - sv
+            chord = math.hypot(du, dv)
+            half = chord / 2.0
+            rr = abs(r)
+            if rr < half - tol:
+                raise self._err(
+                    f"arc radius R{rr:.4f} mm is smaller than half the chord {half:.4f} mm",
+                    blk,
+                    "R",
+                )
+            h = math.sqrt(max(rr * rr - half * half, 0.0))
+            side = 1.0 if not cw else -1.0  # centre left of the chord for a short CCW arc
+            if r < 0:
+                side = -side
+            cu = su + du / 2.0 - dv / chord * h * side
+            cv = sv + dv / 2.0 + du / chord * h * side
+        else:
+            ci, cj = self._ci, self._cj
+            if ci not in words and cj not in words:
+                raise self._err("arc needs R or a centre (I/J/K)", blk, "G")
+            oi = self._dim(blk, ci) if ci in words else 0.0
+            oj = self._dim(blk, cj) if cj in words else 0.0
+            if self._arc_abs:
+                cu = oi if ci in words else su
+                cv = oj if cj in words else sv
+            else:
+                cu, cv = su + oi, sv + oj
+            r1 = math.hypot(su - cu, sv - cv)
+            r2 = math.hypot(eu - cu, ev - cv)
+            if r1 < _EPS:
+                raise self._err("arc with zero radius (centre at the start point)", blk, ci)
+            if abs(r1 - r2) > tol:
+                raise self._err(
+                    f"arc start radius {r1:.4f} mm and end radius {r2:.4f} mm differ by "
+                    f"{abs(r1 - r2):.4f} mm (tolerance {tol:g} mm)",
+                    blk,
+                    ci if ci in words else cj,
+                )
+            if not full and r1 != r2:
+                # put the centre on the chord's perpendicular bisector: no spiral
+                mu, mv = (su + eu) / 2.0, (sv + ev) / 2.0
+                du, dv = eu - su, ev - sv
+                ch = math.hypot(du, dv)
+                nu, nv = -dv / ch, du / ch
+                off = (cu - mu) * nu + (cv - mv) * nv
+                cu, cv = mu + off * nu, mv + off * nv
+        turns = 0
+        if "P" in words:
+            p = words["P"]
+            if p != int(p) or p < 1:
+                raise self._err("arc P (number of turns) must be a positive integer", blk, "P")
+            turns = int(p) - 1
+        c = [0.0, 0.0, 0.0]
+        c[u], c[v], c[w] = cu, cv, s[w]
+        feed = self._feed(blk)
+        cw_out = cw
+        xf = self._xf
+        if self._xf_on:
+            if xf.plane_scale(u, v) is None:
+                raise self._err("arc under unequal in-plane scaling (G51 I/J/K)", blk, "G")
+            if xf.rot and xf.rot_uv != (u, v):
+                raise self._err("arc outside the G68 rotation plane", blk, "G")
+            st = xf.apply(s)
+            et = xf.apply(e)
+            ct = list(xf.apply(c))
+            ct[w] = st[w]
+            if xf.handedness(u, v) < 0:
+                cw_out = not cw
+        else:
+            st, et, ct = s, e, c
+        if self._comp is not None and self._comp.active:
+            self._comp_arc(st, et, ct, cw_out, feed, turns, blk, exact)
+            self._pos = e
+            self._moved = True
+            return
+        o = self._off
+        m = (et[0] + o[0], et[1] + o[1], et[2] + o[2])
+        mc = (ct[0] + o[0], ct[1] + o[1], ct[2] + o[2])
+        ms = (st[0] + o[0], st[1] + o[1], st[2] + o[2])
+        if self._lathe:
+            m = (m[0], 0.0, m[2])
+            mc = (mc[0], 0.0, mc[2])
+        self._check(m, blk, blk.line)
+        self._check_arc_extent(ms, m, mc, cw_out, turns, blk)
+        self._out.append(ArcFeed(blk.line, m, mc, self._plane_enum, cw_out, feed, turns, exact))
+        self._pos = e
+        self._mach = m
+        self._moved = True
+
+    def _check_arc_extent(self, ms, me, mc, cw: bool, turns: int, blk: Block) -> None:
+        u, v = self._pu, self._pv
+        r = math.hypot(ms[u] - mc[u], ms[v] - mc[v])
+        a0 = math.atan2(ms[v] - mc[v], ms[u] - mc[u])
+        a1 = math.atan2(me[v] - mc[v], me[u] - mc[u])
+        sweep = (a0 - a1) if cw else (a1 - a0)
+        sweep %= 2.0 * math.pi
+        if sweep < 1e-12 or turns > 0:
+            sweep = 2.0 * math.pi
+        for k in range(4):
+            th = k * math.pi / 2.0
+            d = ((a0 - th) if cw else (th - a0)) % (2.0 * math.pi)
+            if d <= sweep:
+                p = list(ms)
+                p[u] = mc[u] + r * math.cos(th)
+                p[v] = mc[v] + r * math.sin(th)
+                try:
+                    self._check((p[0], p[1], p[2]), None, blk.line)
+                except NcError as err:
+                    raise NcError(
+                        "arc extent: " + err.message, blk.line, blk.col("G"), err.file
+                    ) from None
+
+    def _dwell(self, blk: Block, words: dict[str, float]) -> None:
+        if "P" in words:
+            p = words["P"]
+            if p != int(p):
+                raise self._err("G4 P is in milliseconds (an integer)", blk, "P")
+            sec = p / 1000.0
+        elif "X" in words:
+            sec = self._plain(blk, "X")
+        elif "U" in words:
+            sec = self._plain(blk, "U")
+        else:
+            raise self._err("G4 dwell needs P (ms) or X (s)", blk, "G")
+        if sec < 0:
+            raise self._err("negative dwell time", blk, "P" if "P" in words else "X")
+        self._emit(Dwell(blk.line, sec))
+
+    # --- modes with axis words ---------------------------------------------------------
+
+    def _refresh_offsets(self, resync: bool) -> None:
+        self._off = self._compute_off()
+        if resync:
+            self._pos = self._prog_from_machine()
+
+    def _cutter_comp(self, blk: Block, code: int) -> None:
+        self._comp_code = code
+        if code == 400:
+            if self._comp is not None and self._comp.active:
+                self._comp.cancel()
+            return
+        if self._plane == 190:
+            raise self._err("cutter compensation in the G19 plane is not supported", blk, "G")
+        try:
+            from cnc.cutter_comp import CutterCompensation, Segment
+        except ImportError:
+            raise self._err(
+                "G41/G42 cutter radius compensation is not available (cnc.cutter_comp is missing)",
+                blk,
+                "G",
+            ) from None
+        if "D" in blk.words:
+            self._d = self._int_word(blk, "D")
+        radius = self._offset_entry(blk, "D", self._d).radius if self._d else 0.0
+        side = "left" if code == 410 else "right"
+        if self._xf_on and self._xf.handedness(self._pu, self._pv) < 0:
+            side = "right" if side == "left" else "left"
+        if self._comp is None:
+            self._comp = CutterCompensation(self._frames[-1].file if self._frames else self.file)
+            self._seg_cls = Segment
+        t = self._xf.apply(self._pos) if self._xf_on else self._pos
+        if not self._comp.active:
+            self._comp_uv = (t[self._pu], t[self._pv])
+            self._comp_w = t[self._pw]
+        self._comp.start(side, radius, line=blk.line, col=blk.col("G"))
+
+    def _comp_line(self, t, feed, blk: Block, exact: bool) -> None:
+        u, v, w = self._pu, self._pv, self._pw
+        uv = (t[u], t[v])
+        payload = ("move", blk.line, feed, self._comp_w, t[w], self._off, exact, None, 0)
+        seg = self._seg_cls("line", self._comp_uv, uv, None, False, blk.line, blk.col("G"), payload)
+        self._comp_uv = uv
+        self._comp_w = t[w]
+        self._comp_out(self._comp.push(seg))
+        if self._comp_code == 400 and not self._comp.active:
+            self._comp_out(self._comp.flush())
+
+    def _comp_arc(self, st, et, ct, cw, feed, turns, blk: Block, exact: bool) -> None:
+        u, v, w = self._pu, self._pv, self._pw
+        uv = (et[u], et[v])
+        payload = ("move", blk.line, feed, st[w], et[w], self._off, exact, cw, turns)
+        seg = self._seg_cls(
+            "arc", self._comp_uv, uv, (ct[u], ct[v]), not cw, blk.line, blk.col("G"), payload
+        )
+        self._comp_uv = uv
+        self._comp_w = et[w]
+        self._comp_out(self._comp.push(seg))
+
+    def _comp_out(self, segs) -> None:
+        u, v, w = self._pu, self._pv, self._pw
+        out = self._out
+        for seg in segs:
+            p = seg.payload
+            if p[0] == "cmd":
+                out.append(p[1])
+                continue
+            _, line, feed, w0, w1, off, exact, cw, turns = p
+            e = [0.0, 0.0, 0.0]
+            e[u], e[v], e[w] = seg.end[0], seg.end[1], w1
+            m = (e[0] + off[0], e[1] + off[1], e[2] + off[2])
+            if self._lathe:
+                m = (m[0], 0.0, m[2])
+            self._check(m, None, line)
+            if seg.kind == "arc":
+                c = [0.0, 0.0, 0.0]
+                c[u], c[v], c[w] = seg.center[0], seg.center[1], self._mach[w] - off[w]
+                mc = (c[0] + off[0], c[1] + off[1], c[2] + off[2])
+                if self._lathe:
+                    mc = (mc[0], 0.0, mc[2])
+                f = feed if feed is not None else self._f or 1.0
+                out.append(ArcFeed(line, m, mc, self._plane_enum, not seg.ccw, f, turns, exact))
+            elif feed is None:
+                out.append(StraightTraverse(line, m, exact))
+            else:
+                out.append(StraightFeed(line, m, feed, exact))
+            self._mach = m
+
+    def _flush_comp(self) -> None:
+        if self._comp is not None:
+            self._comp_out(self._comp.flush())
+
+    def _length_comp(self, blk: Block, code: int) -> None:
+        if "H" in blk.words:
+            self._h = self._int_word(blk, "H")
+        self._tlo_code = code
+        if code == 490:
+            self._tlo = (0.0, 0.0, 0.0)
+        else:
+            length = self._offset_entry(blk, "H", self._h).length
+            self._tlo = (0.0, 0.0, length if code == 430 else -length)
+        self._refresh_offsets(resync=False)
+
+    def _mirror(self, blk: Block, code: int) -> None:
+        xf = self._xf
+        named = [letter for letter in "XYZ" if letter in blk.words]
+        if code == 501:
+            for letter in named or "XYZ":
+                xf.mirror[_AXIS_OF[letter]] = False
+        else:
+            if not named:
+                raise self._err("G51.1 needs the mirror axis position (X/Y/Z)", blk, "G")
+            for letter in named:
+                i = _AXIS_OF[letter]
+                xf.mirror[i] = True
+                xf.mirror_c[i] = self._dim(blk, letter)
+        self._xf_changed()
+
+    def _scaling(self, blk: Block, code: int) -> None:
+        xf = self._xf
+        if code == 500:
+            xf.scale = None
+            self._xf_changed()
+            return
+        c = list(self._pos)
+        for letter in "XYZ":
+            if letter in blk.words:
+                c[_AXIS_OF[letter]] = self._dim(blk, letter)
+        words = blk.words
+        if "P" in words:
+            f = self._plain(blk, "P")
+            factors = [f, f, f]
+        else:
+            factors = [1.0, 1.0, 1.0]
+            for i, letter in enumerate("IJK"):
+                if letter in words:
+                    factors[i] = self._plain(blk, letter)
+        if any(f == 0.0 for f in factors):
+            raise self._err("scaling factor 0", blk, "P" if "P" in words else "I")
+        xf.scale = factors
+        xf.scale_c = c
+        self._xf_changed()
+
+    def _rotation(self, blk: Block, code: int) -> None:
+        xf = self._xf
+        if code == 690:
+            xf.rot = False
+            xf.cos, xf.sin = 1.0, 0.0
+            self._xf_changed()
+            return
+        u, v = self._pu, self._pv
+        names = _AXIS_NAME
+        cu = self._dim(blk, names[u]) if names[u] in blk.words else self._pos[u]
+        cv = self._dim(blk, names[v]) if names[v] in blk.words else self._pos[v]
+        ang = self._plain(blk, "R") if "R" in blk.words else 0.0
+        was = xf.rot
+        xf.rot = False
+        c = xf.apply(_put(u, v, cu, cv))
+        xf.rot = was
+        xf.set_rotation((u, v), (c[u], c[v]), ang)
+        self._xf_changed()
+
+    def _xf_changed(self) -> None:
+        self._xf_on = self._xf.active
+        if self._comp is not None and self._comp.active:
+            raise NcError(
+                "mirror/scaling/rotation change while cutter compensation is active",
+                self._line,
+                1,
+                self.file,
+            )
+        # the program point stays; the machine reaches it on the next move
+
+    def _g10(self, blk: Block) -> None:
+        words = blk.words
+        if "L" not in words:
+            raise self._err("G10 needs L (L2: work offset, L10/L12: tool offset)", blk, "G")
+        lv = int(words["L"])
+        if "P" not in words:
+            raise self._err("G10 needs P", blk, "G")
+        p = self._int_word(blk, "P")
+        if lv in (2, 20):
+            if lv == 20 or p > 6:
+                raise self._err(f"G10 L{lv} P{p}: only P0..P6 (common, G54..G59)", blk, "P")
+            ofs = self._wofs[p]
+            for letter in "XYZ":
+                if letter in words:
+                    i = _AXIS_OF[letter]
+                    val = self._dim(blk, letter) * (0.5 if letter == "X" and self._diam else 1.0)
+                    ofs[i] = val if self._abs else ofs[i] + val
+            if p in (0, self._wcs):
+                self._refresh_offsets(resync=True)
+        elif lv in (1, 10, 11, 12, 13):
+            if "R" not in words:
+                raise self._err(f"G10 L{lv} needs R (offset value)", blk, "G")
+            val = self._dim(blk, "R")
+            cur = self._tools.get(p, ToolOffset())
+            if lv in (1, 10, 11):
+                new = ToolOffset((val if self._abs else cur.length + val), cur.radius, cur.x, cur.z)
+            else:
+                new = ToolOffset(cur.length, val if self._abs else cur.radius + val, cur.x, cur.z)
+            self._tools[p] = new
+        else:
+            raise self._err(f"G10 L{lv} is not supported", blk, "L")
+
+    def _reference_return(self, blk: Block, code: int, exact: bool) -> None:
+        if self._comp is not None and self._comp.active:
+            raise self._err("G28/G30 with cutter compensation active (cancel with G40)", blk, "G")
+        if code == 300 and "P" in blk.words and int(blk.words["P"]) not in (1, 2):
+            raise self._err("G30 P3/P4 (third/fourth reference) is not configured", blk, "P")
+        words = blk.words
+        named = [i for i, letter in enumerate("XYZ") if letter in words]
+        if self._lathe:
+            if "U" in words:
+                named.append(0)
+            if "W" in words:
+                named.append(2)
+        ref = self._home if code == 280 else self._second_ref
+        if named:
+            mid = self._target(blk, words)
+            self._line_to(mid, None, blk, exact)
+        else:
+            named = [0, 1, 2]
+        m = list(self._mach)
+        for i in set(named):
+            m[i] = ref[i]
+        mt = (m[0], 0.0 if self._lathe else m[1], m[2])
+        self._check(mt, blk, blk.line)
+        self._out.append(StraightTraverse(blk.line, mt, exact))
+        self._mach = mt
+        self._pos = self._prog_from_machine()
+        self._moved = True
+
+    def _coordinate_set(self, blk: Block) -> None:
+        words = blk.words
+        if "S" in words:
+            self._max_rpm = words["S"]
+        named = [letter for letter in "XYZ" if letter in words]
+        if not named:
+            return
+        if self._xf_on:
+            raise self._err("G92 while mirror/scaling/rotation is active", blk, "G")
+        w = self._wofs[self._wcs]
+        c = self._wofs[0]
+        t = self._tlo
+        for letter in named:
+            i = _AXIS_OF[letter]
+            val = self._dim(blk, letter) * (0.5 if letter == "X" and self._diam else 1.0)
+            self._g92[i] = self._mach[i] - w[i] - c[i] - t[i] - val
+        self._refresh_offsets(resync=True)
+
+    def _g53(self, blk: Block, motion: int | None, exact: bool) -> None:
+        if not self._abs:
+            raise self._err("G53 needs absolute mode (G90)", blk, "G")
+        if self._comp is not None and self._comp.active:
+            raise self._err("G53 with cutter compensation active", blk, "G")
+        mo = motion if motion is not None else self._motion
+        if mo not in (0, 10):
+            raise self._err("G53 moves only with G0 or G1", blk, "G")
+        m = list(self._mach)
+        for letter in "XYZ":
+            if letter in blk.words:
+                val = self._dim(blk, letter) * (0.5 if letter == "X" and self._diam else 1.0)
+                m[_AXIS_OF[letter]] = val
+        mt = (m[0], 0.0 if self._lathe else m[1], m[2])
+        self._check(mt, blk, blk.line)
+        if mo == 0:
+            self._out.append(StraightTraverse(blk.line, mt, exact))
+        else:
+            self._out.append(StraightFeed(blk.line, mt, self._feed(blk), exact))
+        if motion is not None:
+            self._motion = motion
+        self._mach = mt
+        self._pos = self._prog_from_machine()
+        self._moved = True
+
+    # --- canned cycles ----------------------------------------------------------------
+
+    def _cycle_block(self, blk: Block, code: int | None, exact: bool) -> None:
+        words = blk.words
+        if code == 800:
+            self._cycle = 800
+            self._cyc_init = None
+            self._motion_block(blk, words, exact, None)
+            return
+        if self._comp is not None and self._comp.active:
+            raise self._err("canned cycle with cutter compensation active", blk, "G")
+        w = self._pw
+        if code is not None:
+            if self._cycle == 800 or self._cyc_init is None:
+                self._cyc_init = self._pos[w]
+            self._cycle = code
+        wn = _AXIS_NAME[w]
+        init = self._cyc_init if self._cyc_init is not None else self._pos[w]
+        if "R" in words:
+            r = self._dim(blk, "R")
+            self._cyc_r = r if self._abs else init + r
+        if wn in words:
+            z = self._dim(blk, wn)
+            if self._abs:
+                self._cyc_z = z
+            else:
+                base = self._cyc_r if self._cyc_r is not None else init
+                self._cyc_z = base + z
+        if "Q" in words:
+            self._cyc_q = self._dim(blk, "Q")
+        if "P" in words:
+            self._cyc_p = words["P"] / 1000.0
+        reps = 1
+        for letter in "KL":
+            if letter in words:
+                k = words[letter]
+                if k != int(k) or not 0 <= k <= MAX_REPEAT:
+                    raise self._err(f"{letter} repeat count must be 0..{MAX_REPEAT}", blk, letter)
+                reps = int(k)
+        u, v = self._pu, self._pv
+        names = _AXIS_NAME
+        has_pos = names[u] in words or names[v] in words
+        if not (has_pos or wn in words or "R" in words):
+            return
+        if self._cyc_z is None:
+            raise self._err(f"canned cycle needs the hole bottom {wn}", blk, "G")
+        if self._cyc_r is None:
+            raise self._err("canned cycle needs the R level", blk, "G")
+        cyc = self._cycle
+        rr, zz = self._cyc_r, self._cyc_z
+        if cyc != 870 and rr < zz - _EPS:
+            raise self._err(f"R level below the hole bottom {wn}", blk, "R")
+        if cyc == 870 and rr > zz + _EPS:
+            raise self._err(f"G87 back boring needs R below the bore top {wn}", blk, "R")
+        if init < rr:
+            init = rr  # LinuxCNC: from below R the cycle starts at R
+        if cyc in (730, 830) and self._cyc_q <= 0:
+            raise self._err("peck drilling needs Q > 0 (peck depth)", blk, "Q")
+        if cyc in (730, 830) and abs(zz - rr) / self._cyc_q > MAX_PECKS:
+            raise self._err(f"more than {MAX_PECKS} pecks per hole", blk, "Q")
+        pos_words = {k: words[k] for k in (names[u], names[v]) if k in words}
+        for _ in range(reps):
+            if self._pos[w] < rr - _EPS:  # below R: climb to R before moving sideways
+                self._line_to(self._at_w(rr), None, blk, True)
+            # position in the plane at the current level
+            if pos_words:
+                fake = Block(blk.line, blk.text)
+                fake.words = pos_words
+                fake.nopoint = blk.nopoint
+                tgt = self._target(fake, pos_words)
+                p = list(self._pos)
+                p[u], p[v] = tgt[u], tgt[v]
+                self._line_to((p[0], p[1], p[2]), None, blk, True)
+            self._drill(blk, cyc, init, rr, zz)
+
+    def _at_w(self, level: float) -> tuple[float, float, float]:
+        p = list(self._pos)
+        p[self._pw] = level
+        return (p[0], p[1], p[2])
+
+    def _drill(self, blk: Block, cyc: int, init: float, r: float, z: float) -> None:
+        line = blk.line
+        w = self._pw
+        feed = self._feed(blk)
+        back = init if self._retract == 980 or cyc == 870 else r
+        rapid, lin = self._line_to, self._line_to
+        d = 1.0 if cyc == 870 else -1.0  # direction into the hole (tool axis points up)
+        if cyc == 870:  # back boring: orient, shift, go below the part, cut upwards
+            q = self._cyc_q
+            self._orient_shift(blk, q)
+            rapid(self._shifted(self._at_w(r), q), None, blk, True)
+            rapid(self._at_w(r), None, blk, True)
+            self._spin(line, SpindleDirection.CW)
+            lin(self._at_w(z), feed, blk, True)
+            self._orient_shift(blk, q)
+            rapid(self._shifted(self._at_w(init), q), None, blk, True)
+            rapid(self._at_w(init), None, blk, True)
+            self._spin(line, SpindleDirection.CW)
+            return
+        if abs(self._pos[w] - r) > _EPS:
+            rapid(self._at_w(r), None, blk, True)
+        if cyc in (730, 830):
+            q = self._cyc_q
+            depth = r
+            while True:
+                nxt = depth + d * q
+                if (nxt - z) * d > 0:
+                    nxt = z
+                if cyc == 830 and depth != r:
+                    rapid(self._at_w(depth - d * PECK_CLEARANCE_MM), None, blk, True)
+                lin(self._at_w(nxt), feed, blk, True)
+                depth = nxt
+                if abs(depth - z) < _EPS:
+                    break
+                if cyc == 730:
+                    rapid(self._at_w(depth - d * PECK_RETRACT_MM), None, blk, True)
+                else:
+                    rapid(self._at_w(r), None, blk, True)
+            rapid(self._at_w(back), None, blk, True)
+            return
+        if cyc in (740, 840):
+            fwd = SpindleDirection.CW if cyc == 840 else SpindleDirection.CCW
+            rev = SpindleDirection.CCW if cyc == 840 else SpindleDirection.CW
+            self._spin(line, fwd)
+            lin(self._at_w(z), feed, blk, True)
+            if self._cyc_p > 0:
+                self._emit(Dwell(line, self._cyc_p))
+            self._spin(line, rev)
+            lin(self._at_w(r), feed, blk, True)
+            self._spin(line, fwd)
+            if back != r:
+                rapid(self._at_w(back), None, blk, True)
+            return
+        lin(self._at_w(z), feed, blk, True)
+        if cyc in (820, 880, 890, 760) and self._cyc_p > 0:
+            self._emit(Dwell(line, self._cyc_p))
+        if cyc == 760:
+            q = self._cyc_q
+            self._orient_shift(blk, q)
+            rapid(self._shifted(self._at_w(back), q), None, blk, True)
+            rapid(self._at_w(back), None, blk, True)
+            self._spin(line, SpindleDirection.CW)
+        elif cyc in (850, 890):
+            lin(self._at_w(r), feed, blk, True)
+            if back != r:
+                rapid(self._at_w(back), None, blk, True)
+        elif cyc == 860:
+            self._spin(line, SpindleDirection.STOP)
+            rapid(self._at_w(back), None, blk, True)
+            self._spin(line, SpindleDirection.CW)
+        elif cyc == 880:
+            self._spin(line, SpindleDirection.STOP)
+            self._emit(ProgramStop(line, StopKind.PROGRAM_STOP))  # manual retract
+            rapid(self._at_w(back), None, blk, True)
+            self._spin(line, SpindleDirection.CW)
+        else:  # 810, 820
+            rapid(self._at_w(back), None, blk, True)
+
+    def _shifted(self, p: tuple[float, float, float], q: float) -> tuple[float, float, float]:
+        lst = list(p)
+        lst[self._pu] += q  # shift along +u (G17: +X), Fanuc parameter RD default
+        return (lst[0], lst[1], lst[2])
+
+    def _orient_shift(self, blk: Block, q: float) -> None:
+        self._emit(Spindle(blk.line, SpindleDirection.ORIENT, self._s))
+        self._line_to(self._shifted(self._pos, q), None, blk, True)
+
+    def _spin(self, line: int, direction: SpindleDirection) -> None:
+        self._spindle = direction
+        self._emit_spindle(line)
+
+    # --- subprograms ------------------------------------------------------------------
+
+    def _call(self, blk: Block) -> None:
+        words = blk.words
+        if "P" not in words:
+            raise self._err("M98 needs P (program number)", blk, "M")
+        p = self._int_word(blk, "P")
+        if "L" in words:
+            reps = self._int_word(blk, "L")
+            number = p
+        elif p >= 10000:
+            reps, number = p // 10000, p % 10000
+        else:
+            reps, number = 1, p
+        if reps > MAX_REPEAT:
+            raise self._err(f"M98 repeat count above {MAX_REPEAT}", blk, "L")
+        if reps == 0:
+            return
+        if len(self._frames) > MAX_SUB_NESTING:
+            raise self._err(
+                f"subprogram nesting deeper than {MAX_SUB_NESTING} levels (recursion?)", blk, "M"
+            )
+        opened = self._lib.open(number)
+        if opened is None:
+            raise self._err(f"M98: program O{number} not found", blk, "P")
+        it, file = opened
+        self._frames.append(_Frame(it, file, number, reps, blk.line))
+
+    def _return(self, blk: Block) -> None:
+        if len(self._frames) == 1:
+            raise self._err(
+                "M99 in the main program would repeat it for ever (no caller to return to)",
+                blk,
+                "M",
+            )
+        if "P" in blk.words:
+            raise self._err("M99 P (return to a sequence number) is not supported", blk, "P")
+        fr = self._frames.pop()
+        if fr.repeats > 1:
+            opened = self._lib.open(fr.number)  # type: ignore[arg-type]
+            assert opened is not None
+            nf = _Frame(opened[0], opened[1], fr.number, fr.repeats - 1, fr.call_line)
+            self._frames.append(nf)
+
+
+def _put(u: int, v: int, cu: float, cv: float) -> tuple[float, float, float]:
+    p = [0.0, 0.0, 0.0]
+    p[u], p[v] = cu, cv
+    return (p[0], p[1], p[2])
+
+
+_STOPS = {
+    0: StopKind.PROGRAM_STOP,
+    1: StopKind.OPTIONAL_STOP,
+    2: StopKind.PROGRAM_END,
+    30: StopKind.PROGRAM_END_REWIND,
+}
+CHECK_MAX_ERRORS = 1000
+
+
+def check(
+    lines: Iterable[str] | str,
+    params: MachineParams,
+    *,
+    file: str = "<program>",
+    programs: Mapping[int, str | Iterable[str]] | None = None,
+    tools: Mapping[int, ToolOffset] | None = None,
+    work_offsets: Mapping[int, tuple[float, ...]] | None = None,
+    max_blocks: int = 5_000_000,
+    block_delete: bool = False,
+) -> list[NcError]:
+    """Interpret a whole program and return ALL its errors (at most CHECK_MAX_ERRORS).
+
+    After an error the checker carries on with the next block, with the modal state as the
+    failed block left it. Nothing is kept of the canonical commands.
+    """
+    interp = Interpreter(
+        params,
+        programs=programs,
+        tools=tools,
+        file=file,
+        work_offsets=work_offsets,
+        max_blocks=max_blocks,
+        block_delete=block_delete,
+    )
+    for _ in interp._run(lines, recover=True):
+        pass
+    return interp.errors

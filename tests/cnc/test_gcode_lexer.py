@@ -1,0 +1,90 @@
+"""Lexer: word-address format, comments, block delete, numbers, and where errors point."""
+
+import pytest
+
+from cnc.errors import NcError
+from cnc.gcode import parse_line
+
+
+def test_words_any_order_signs_leading_zeros() -> None:
+    b = parse_line("N0010 X-010.5 G01 Y+.5 F0100", 7)
+    assert b is not None and b.line == 7
+    assert b.g == [10]
+    assert b.words == {"N": 10.0, "X": -10.5, "Y": 0.5, "F": 100.0}
+
+
+def test_lowercase_spaces_and_tabs() -> None:
+    b = parse_line("g1\tx 10 y - 2.5", 1)
+    assert b.g == [10] and b.words == {"X": 10.0, "Y": -2.5}
+
+
+@pytest.mark.parametrize(
+    ("text", "g"),
+    [("G0", [0]), ("G00", [0]), ("G50.1", [501]), ("G51.1 G17", [511, 170]), ("G90.1", [901])],
+)
+def test_g_numbers_keep_decimal_subcodes(text: str, g: list[int]) -> None:
+    assert parse_line(text, 1).g == g
+
+
+def test_comments_paren_and_semicolon() -> None:
+    b = parse_line("G1 (move (not nested X1) X2 ; rest Y9", 1)
+    assert b.words == {"X": 2.0}
+
+
+def test_comment_only_and_blank_lines_are_none() -> None:
+    assert parse_line("   ", 1) is None
+    assert parse_line("(just a comment)", 1) is None
+    assert parse_line("; remark", 1) is None
+
+
+def test_tape_mark_block_delete_and_program_numbers() -> None:
+    assert parse_line("%", 1).tape
+    b = parse_line("/N20 G0 X1", 1)
+    assert b.delete and b.words["X"] == 1.0
+    assert parse_line("/2 X1", 1).delete
+    assert parse_line("O1234 (MAIN)", 1).program == 1234
+    assert parse_line(":0042", 1).program == 42
+
+
+def test_least_increment_marks_words_without_point() -> None:
+    b = parse_line("X25 Y25. Z2.5 F100", 1, least_increment=True)
+    assert b.nopoint == {"X", "F"}
+    assert parse_line("X25", 1).nopoint is None  # calculator style: nothing to scale
+
+
+@pytest.mark.parametrize(
+    ("text", "col", "fragment"),
+    [
+        ("G1 X10 (open", 8, "unterminated comment"),
+        ("G1 X10 )", 8, "without a matching"),
+        ("G1 X1.2.3", 4, "malformed number"),
+        ("G1 X", 4, "without a value"),
+        ("G01 X1/8", 7, "fractions not allowed"),
+        ("G1 X10 $", 8, "unexpected character"),
+        ("12 G1", 1, "without an address"),
+        ("#1 = 10", 1, "Macro B"),
+        ("G1 X[#1+2]", 5, "Macro B"),
+        ("IF [#1 GT 2] GOTO 10", 4, "Macro B"),
+        ("WHILE #1 LT 3 DO1", 7, "Macro B"),
+        ("WHILE", 1, "Macro B (WHILE)"),
+        ("GOTO 10", 1, "Macro B (GOTO)"),
+        ("X1 X2", 4, "appears twice"),
+        ("G1 X1 % ", 7, "must stand alone"),
+        ("G1.23 X1", 1, "unknown G code"),
+        ("M3.5", 1, "malformed M code"),
+        ("G1 O12", 4, "must start the block"),
+    ],
+)
+def test_errors_name_line_column_and_reason(text: str, col: int, fragment: str) -> None:
+    with pytest.raises(NcError) as ei:
+        parse_line(text, 12, "p.nc")
+    err = ei.value
+    assert (err.line, err.col, err.file) == (12, col, "p.nc")
+    assert fragment in err.message
+    assert str(err).startswith(f"p.nc:12:{col}: ")
+
+
+def test_columns_survive_comments() -> None:
+    with pytest.raises(NcError) as ei:
+        parse_line("(abc) G1 X1 X2", 1)
+    assert ei.value.col == 13
