@@ -11,13 +11,14 @@ import asyncio
 import contextlib
 import logging
 import threading
+import time
 from collections import deque
 from collections.abc import Callable
 from dataclasses import dataclass
 
 from plc.image import ImageSize, Snapshot, WriteQueue
 from plc.modbus.allowlist import AllowList
-from plc.modbus.frame import FrameViolation, MbapDecoder, encode
+from plc.modbus.frame import MAX_ADU, FrameViolation, MbapDecoder, encode
 from plc.modbus.map import ModbusMap
 from plc.modbus.pdu import (
     GATEWAY_TARGET_FAILED,
@@ -29,6 +30,8 @@ from plc.modbus.pdu import (
 
 log = logging.getLogger("plc.modbus")
 audit = logging.getLogger("plc.modbus.write")
+
+_monotonic = time.monotonic
 
 #: Frames a connection may have waiting behind an unanswered write in ack-after-scan mode.
 _MAX_BACKLOG = 32
@@ -219,10 +222,9 @@ class ModbusFace:
         """Close connections stuck on a partial frame or idle too long."""
         limits = [self.frame_timeout] + ([self.idle_timeout] if self.idle_timeout else [])
         tick = max(0.005, min(limits) / 4)
-        loop = asyncio.get_running_loop()
         while True:
             await asyncio.sleep(tick)
-            now = loop.time()
+            now = _monotonic()
             for conn in list(self._connections):
                 if conn.partial_since is not None and now - conn.partial_since > self.frame_timeout:
                     self.stats.frame_timeouts += 1
@@ -253,6 +255,7 @@ class _Connection(asyncio.Protocol):
         self._backlog: deque = deque()
         self._waiting = False  # ack-after-scan: a write response is outstanding
         self._write_paused = False
+        self._fast = not face.ack_after_scan
         self._loop = asyncio.get_running_loop()
 
     # -- asyncio.Protocol -------------------------------------------------------------
@@ -261,7 +264,7 @@ class _Connection(asyncio.Protocol):
         self.transport = transport  # type: ignore[assignment]
         peer = transport.get_extra_info("peername")
         self.peer = f"{peer[0]}:{peer[1]}" if peer else "?"
-        self.last_rx = self._loop.time()
+        self.last_rx = _monotonic()
         face = self.face
         if len(face._connections) >= face.max_connections:
             self.stats.connections_refused += 1
@@ -292,8 +295,26 @@ class _Connection(asyncio.Protocol):
     def data_received(self, data: bytes) -> None:
         if self.closed:
             return
-        now = self._loop.time()
-        self.last_rx = now
+        self.last_rx = now = _monotonic()
+        n = len(data)
+        # Fast path, the normal case of a polling client: exactly one whole, well-formed
+        # frame at a frame boundary. Anything else takes the general decoder below.
+        if (
+            self._fast
+            and self.partial_since is None
+            and 8 <= n <= MAX_ADU
+            and not (data[2] or data[3])
+            and (data[4] << 8 | data[5]) == n - 6
+        ):
+            try:
+                response, _ = self._answer(data[6], data[7:])
+            except PduSizeError as e:
+                self._violation(str(e))
+                return
+            self.transport.write(
+                data[:4] + (len(response) + 1).to_bytes(2, "big") + data[6:7] + response
+            )
+            return
         try:
             frames = self.decoder.feed(data)
         except FrameViolation as e:
