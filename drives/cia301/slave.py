@@ -1,0 +1,398 @@
+"""A CiA 301 slave: NMT, heartbeat, SDO, PDO, SYNC and EMCY around a `DriveApplication`.
+
+`CanopenSlave.handle(msg)` processes one received frame and `advance(dt)` runs the timers;
+both send through the python-can bus given at construction and do nothing else, so the same
+object runs under the lockstep hub (which calls both), under a realtime hub, or on any
+python-can bus through `start()`, a small receive-and-tick thread.
+"""
+
+from __future__ import annotations
+
+import threading
+import time
+from functools import partial
+
+import can
+
+from drives import EDS_PATH
+from drives.application import DriveApplication
+from drives.bus.hub import SimBus
+from drives.cia301.emcy import EmcyProducer
+from drives.cia301.heartbeat import HeartbeatConsumer, HeartbeatProducer
+from drives.cia301.nmt import (
+    RESET_COMMUNICATION,
+    RESET_NODE,
+    NmtState,
+    emcy_allowed,
+    nmt_transition,
+    pdo_allowed,
+    sdo_allowed,
+    sync_allowed,
+)
+from drives.cia301.od import ObjectDictionary
+from drives.cia301.pdo import PdoChannel, PdoService
+from drives.cia301.sdo_server import SdoServer
+from drives.cia301.sync import SyncConsumer
+
+EMCY_HEARTBEAT_LOST = 0x8130
+EMCY_BUS_OFF_RECOVERED = 0x8140
+EMCY_SYNC_TIMEOUT = 0x8100
+EMCY_PDO_LENGTH = 0x8210
+EMCY_PDO_LENGTH_EXCEEDED = 0x8220
+EMCY_SYNC_LENGTH = 0x8240
+
+
+class CanopenSlave:
+    """One CANopen node. See the module docstring; `docs/canopen.md` lists the behaviour."""
+
+    def __init__(
+        self,
+        node_id: int,
+        bus: can.BusABC,
+        application: DriveApplication,
+        *,
+        eds_path: str = EDS_PATH,
+        boot: bool = True,
+        sdo_timeout_s: float = 1.0,
+    ) -> None:
+        if not 1 <= node_id <= 127:
+            raise ValueError(f"node_id must be 1..127, got {node_id}")
+        self.node_id = node_id
+        self.bus = bus
+        self.application = application
+        self.state = NmtState.INITIALISING
+        self.time_s = 0.0
+        self.send_failures = 0
+        self._bus_off = False
+        self._guard_toggle = 0
+        self._lock = threading.RLock()
+        self._dispatch: dict[int, object] = {}
+        self._thread: threading.Thread | None = None
+        self._running = False
+        self.od = ObjectDictionary(eds_path, node_id, application)
+        self.emcy = EmcyProducer(self.od)
+        self.heartbeat = HeartbeatProducer(self.od)
+        self.consumer = HeartbeatConsumer(self.od)
+        self.sync = SyncConsumer(self.od, self._rebuild_dispatch)
+        self.sdo = SdoServer(self.od, timeout_s=sdo_timeout_s)
+        self.pdo = PdoService(self.od, self._rebuild_dispatch)
+        consumer_hook = self.od.write_hooks.get(0x1016)
+        if consumer_hook is not None:
+
+            def write_consumer(entry, value):
+                consumer_hook(entry, value)
+                self._rebuild_dispatch()
+
+            self.od.write_hooks[0x1016] = write_consumer
+        self._rebuild_dispatch()
+        if isinstance(bus, SimBus):
+            bus.add_listener(self.handle)
+            bus.hub.add_clocked(self)
+        if boot:
+            self.boot()
+
+    # ------------------------------------------------------------------ dispatch
+    def _rebuild_dispatch(self) -> None:
+        if not hasattr(self, "pdo"):
+            return  # services still being constructed
+        n = self.node_id
+        table: dict[int, object] = {
+            0x000: self._on_nmt,
+            self.sync.cob_id: self._on_sync,
+            0x600 + n: self._on_sdo,
+            0x700 + n: self._on_guarding,
+        }
+        for node_id in self.consumer.monitored:
+            table.setdefault(0x700 + node_id, self._on_heartbeat)
+        for channel in self.pdo.rpdos:
+            if channel.valid:
+                table.setdefault(channel.cob_id, partial(self._on_rpdo, channel))
+        for channel in self.pdo.tpdos:
+            if channel.valid and channel.rtr_allowed:
+                table.setdefault(channel.cob_id, partial(self._on_tpdo_rtr, channel))
+        self._dispatch = table
+
+    def handle(self, msg: can.Message) -> None:
+        """Process one received frame (replies go out through the bus)."""
+        if msg.is_error_frame or msg.is_extended_id:
+            return
+        handler = self._dispatch.get(msg.arbitration_id)
+        if handler is not None:
+            with self._lock:
+                handler(msg)
+
+    # ------------------------------------------------------------------ sending
+    def _send(self, cob_id: int, data: bytes, *, remote: bool = False) -> bool:
+        msg = can.Message(
+            arbitration_id=cob_id,
+            data=data,
+            is_extended_id=False,
+            is_remote_frame=remote,
+            check=False,
+        )
+        try:
+            self.bus.send(msg)
+        except can.CanError:
+            self.send_failures += 1
+            self._bus_off = True
+            return False
+        if self._bus_off:
+            self._bus_off = False
+            self._emit_emcy(EMCY_BUS_OFF_RECOVERED)
+            self.application.on_communication_fault(EMCY_BUS_OFF_RECOVERED)
+            self._pump_application_emcy()
+        return True
+
+    def _emit_emcy(self, error_code: int, manufacturer: bytes = b"\x00" * 5) -> None:
+        data = self.emcy.frame(error_code, manufacturer)
+        cob_id = self.emcy.cob_id
+        if cob_id is None:
+            return
+        if emcy_allowed(self.state):
+            self._send(cob_id, data)
+        else:
+            self.emcy.queue.append(data)
+
+    def _pump_application_emcy(self) -> None:
+        for request in self.application.take_emcy():
+            self.emcy.application_register = request.error_register & 0xEF
+            self._emit_emcy(request.error_code, request.manufacturer)
+
+    def _raise_communication_error(self, code: int) -> None:
+        """A communication fault: EMCY once per condition, then tell the application."""
+        if code in self.emcy.communication_errors:
+            return
+        self.emcy.communication_errors.add(code)
+        self._emit_emcy(code)
+        self.application.on_communication_fault(code)
+        self._pump_application_emcy()
+
+    def _clear_communication_error(self, code: int) -> None:
+        if code in self.emcy.communication_errors:
+            self.emcy.communication_errors.discard(code)
+            self._emit_emcy(0x0000)
+
+    # ------------------------------------------------------------------ NMT
+    def boot(self) -> None:
+        """Initialising -> boot-up frame -> Pre-operational (power-on or after a reset)."""
+        with self._lock:
+            self._set_state(NmtState.INITIALISING)
+            self._send(0x700 + self.node_id, b"\x00")
+            self.heartbeat.elapsed_s = 0.0
+            self._set_state(NmtState.PRE_OPERATIONAL)
+
+    def _set_state(self, state: NmtState) -> None:
+        if state is self.state:
+            return
+        self.state = state
+        self.application.on_nmt_state(state.label)
+        if emcy_allowed(state) and self.emcy.queue:
+            cob_id = self.emcy.cob_id
+            while self.emcy.queue and cob_id is not None:
+                self._send(cob_id, self.emcy.queue.popleft())
+        if state is not NmtState.OPERATIONAL:
+            for channel in self.pdo.rpdos:
+                channel.pending = None
+        else:
+            for channel in self.pdo.tpdos:
+                channel.last_sent, channel.since_sent, channel.sync_count = None, 1e9, 0
+        self._pump_application_emcy()
+
+    def reset_communication(self) -> None:
+        """NMT reset communication: 0x1000-0x1FFF back to defaults, then boot-up."""
+        with self._lock:
+            self.od.reset(0x1000, 0x1FFF)
+            self._reset_services()
+            self.boot()
+
+    def reset_node(self) -> None:
+        """NMT reset node: every stored object back to its default, then boot-up."""
+        with self._lock:
+            self.od.reset(0x0000, 0xFFFF)
+            self._reset_services()
+            self.boot()
+
+    def _reset_services(self) -> None:
+        self.emcy.communication_errors.clear()
+        self.emcy.history.clear()
+        self.emcy.queue.clear()
+        self.sdo.reset()
+        self.sync.reset()
+        self.consumer.reload()
+        self.pdo.reload()
+        self._guard_toggle = 0
+
+    def _on_nmt(self, msg: can.Message) -> None:
+        data = msg.data
+        if len(data) != 2 or data[1] not in (0, self.node_id):
+            return
+        if self.state is NmtState.INITIALISING:
+            return
+        result = nmt_transition(self.state, data[0])
+        if result is None:
+            return
+        if result == RESET_NODE:
+            self.reset_node()
+        elif result == RESET_COMMUNICATION:
+            self.reset_communication()
+        else:
+            self._set_state(result)
+
+    def _on_guarding(self, msg: can.Message) -> None:
+        # Node guarding answers an RTR only when the heartbeat producer is off (CiA 301).
+        if not msg.is_remote_frame or self.heartbeat.period_s > 0:
+            return
+        if self.state is NmtState.INITIALISING:
+            return
+        self._send(0x700 + self.node_id, bytes([(self._guard_toggle << 7) | self.state.value]))
+        self._guard_toggle ^= 1
+
+    def _on_heartbeat(self, msg: can.Message) -> None:
+        if msg.is_remote_frame or not msg.data:
+            return
+        recovered = self.consumer.on_heartbeat(msg.arbitration_id - 0x700, msg.data[0])
+        if recovered and not self.consumer.any_timeout:
+            self._clear_communication_error(EMCY_HEARTBEAT_LOST)
+
+    # ------------------------------------------------------------------ SDO
+    def _on_sdo(self, msg: can.Message) -> None:
+        if not sdo_allowed(self.state) or msg.is_remote_frame:
+            return
+        tx = 0x580 + self.node_id
+        for response in self.sdo.on_request(bytes(msg.data)):
+            self._send(tx, response)
+        self._pump_application_emcy()
+
+    # ------------------------------------------------------------------ SYNC and PDO
+    def _on_sync(self, msg: can.Message) -> None:
+        if not sync_allowed(self.state) or msg.is_remote_frame:
+            return
+        if len(msg.data) > 1:
+            self._raise_communication_error(EMCY_SYNC_LENGTH)
+            return
+        if self.sync.on_sync():
+            self._clear_communication_error(EMCY_SYNC_TIMEOUT)
+        operational = self.state is NmtState.OPERATIONAL
+        if operational:
+            for channel in self.pdo.rpdos:
+                if channel.pending is not None:
+                    data, channel.pending = channel.pending, None
+                    self.pdo.unpack(channel, data)
+        self.application.on_sync()
+        if operational:
+            for channel in self.pdo.tpdos:
+                if not channel.valid or not channel.synchronous:
+                    continue
+                if channel.trans_type == 0:
+                    data = self.pdo.pack(channel)
+                    if data != channel.last_sent:
+                        self._send_tpdo(channel, data)
+                else:
+                    channel.sync_count += 1
+                    if channel.sync_count >= channel.trans_type:
+                        channel.sync_count = 0
+                        self._send_tpdo(channel, self.pdo.pack(channel))
+        self._pump_application_emcy()
+
+    def _send_tpdo(self, channel: PdoChannel, data: bytes) -> None:
+        if self._send(channel.cob_id, data):
+            channel.last_sent = data
+            channel.since_sent = 0.0
+
+    def _on_rpdo(self, channel: PdoChannel, msg: can.Message) -> None:
+        if not pdo_allowed(self.state) or msg.is_remote_frame:
+            return
+        size = len(msg.data)
+        if size < channel.length:
+            channel.length_error = True
+            self._raise_communication_error(EMCY_PDO_LENGTH)
+            return
+        if size > channel.length:
+            self._raise_communication_error(EMCY_PDO_LENGTH_EXCEEDED)
+        elif channel.length_error or self.emcy.communication_errors:
+            channel.length_error = False
+            if not any(c.length_error for c in self.pdo.rpdos):
+                self._clear_communication_error(EMCY_PDO_LENGTH)
+            self._clear_communication_error(EMCY_PDO_LENGTH_EXCEEDED)
+        if channel.synchronous:
+            channel.pending = bytes(msg.data)
+        else:
+            self.pdo.unpack(channel, msg.data)
+            self._pump_application_emcy()
+
+    def _on_tpdo_rtr(self, channel: PdoChannel, msg: can.Message) -> None:
+        if msg.is_remote_frame and pdo_allowed(self.state):
+            self._send_tpdo(channel, self.pdo.pack(channel))
+
+    # ------------------------------------------------------------------ time
+    def advance(self, dt_s: float) -> None:
+        """Run the timers over dt_s, integrate the application, send what became due."""
+        with self._lock:
+            self.time_s += dt_s
+            state = self.state
+            if state is NmtState.INITIALISING:
+                return
+            if self.heartbeat.due(dt_s):
+                self._send(0x700 + self.node_id, bytes([state.value]))
+            if self.sdo.transfer is not None:
+                for response in self.sdo.advance(dt_s):
+                    self._send(0x580 + self.node_id, response)
+            if self.consumer.monitored and self.consumer.advance(dt_s):
+                self._raise_communication_error(EMCY_HEARTBEAT_LOST)
+            if self.sync.advance(dt_s) and state is NmtState.OPERATIONAL:
+                self._raise_communication_error(EMCY_SYNC_TIMEOUT)
+            self.application.advance(dt_s)
+            self._pump_application_emcy()
+            if self.state is NmtState.OPERATIONAL:
+                self._event_tpdos(dt_s)
+
+    def _event_tpdos(self, dt_s: float) -> None:
+        for channel in self.pdo.tpdos:
+            if not channel.valid or not channel.event_driven:
+                continue
+            channel.since_sent += dt_s
+            if channel.since_sent + 1e-12 < channel.inhibit_100us * 1e-4:
+                continue
+            data = self.pdo.pack(channel)
+            timer = channel.event_timer_ms * 1e-3
+            if data != channel.last_sent or (timer > 0 and channel.since_sent + 1e-12 >= timer):
+                self._send_tpdo(channel, data)
+
+    # ------------------------------------------------------------------ realtime shell
+    def start(self, tick_s: float = 0.001) -> None:
+        """Serve in realtime on a plain python-can bus: one thread receives and ticks.
+
+        On a `SimBus` the hub delivers and ticks instead: a realtime hub is started here, a
+        lockstep hub is stepped by its owner.
+        """
+        if isinstance(self.bus, SimBus):
+            if self.bus.hub.mode == "realtime":
+                self.bus.hub.start()
+                return
+            raise RuntimeError("lockstep hub: step it with hub.advance(dt) instead of start()")
+        if self._thread is not None:
+            return
+        self._running = True
+        self._thread = threading.Thread(
+            target=self._serve, args=(tick_s,), name=f"canopen-slave-{self.node_id}", daemon=True
+        )
+        self._thread.start()
+
+    def stop(self) -> None:
+        self._running = False
+        if self._thread is not None:
+            self._thread.join(timeout=5.0)
+            self._thread = None
+
+    def _serve(self, tick_s: float) -> None:
+        last = next_tick = time.perf_counter()
+        next_tick += tick_s
+        while self._running:
+            msg = self.bus.recv(timeout=max(0.0, next_tick - time.perf_counter()))
+            if msg is not None:
+                self.handle(msg)
+            now = time.perf_counter()
+            if now >= next_tick:
+                self.advance(now - last)
+                last = now
+                next_tick = max(next_tick + tick_s, now)
