@@ -1,0 +1,113 @@
+"""Publishing the outbox: at-least-once delivery of the events written with each change.
+
+Events are read in id order and marked published only after the sink accepted them, so a
+crash between the two publishes an event twice, never zero times. Consumers deduplicate by
+the event id carried in every payload.
+"""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Callable
+from dataclasses import dataclass
+from datetime import UTC, datetime
+
+from sqlalchemy import select
+from sqlalchemy.orm import Session, sessionmaker
+
+from dnc import models as m
+from dnc.db import transaction
+
+
+@dataclass(frozen=True, slots=True)
+class Event:
+    id: int
+    at: datetime
+    topic: str
+    payload: dict
+
+    def to_json(self) -> str:
+        return json.dumps(
+            {"event_id": self.id, "at": self.at.isoformat(), "topic": self.topic, **self.payload},
+            separators=(",", ":"),
+        )
+
+
+def events_after(sessions: sessionmaker[Session], after_id: int, limit: int = 500) -> list[Event]:
+    """The event log in order, for the SSE stream (resumable by Last-Event-ID)."""
+    with transaction(sessions) as s:
+        rows = s.scalars(
+            select(m.OutboxEvent)
+            .where(m.OutboxEvent.id > after_id)
+            .order_by(m.OutboxEvent.id)
+            .limit(limit)
+        )
+        return [Event(r.id, r.at, r.topic, r.payload) for r in rows]
+
+
+class OutboxPublisher:
+    def __init__(
+        self,
+        sessions: sessionmaker[Session],
+        sink: Callable[[Event], None],
+        *,
+        now: Callable[[], datetime] | None = None,
+    ) -> None:
+        self._sessions = sessions
+        self._sink = sink
+        self._now = now or (lambda: datetime.now(UTC))
+
+    def publish_pending(self, batch: int = 100) -> int:
+        """Publish up to `batch` unpublished events; returns how many were delivered.
+
+        A sink failure stops the batch: the failed event and everything after it stay
+        unpublished and are retried on the next call, in order.
+        """
+        delivered = 0
+        with transaction(self._sessions) as s:
+            stmt = (
+                select(m.OutboxEvent)
+                .where(m.OutboxEvent.published_at.is_(None))
+                .order_by(m.OutboxEvent.id)
+                .limit(batch)
+                .with_for_update(skip_locked=True)
+            )
+            for row in s.scalars(stmt):
+                try:
+                    self._sink(Event(row.id, row.at, row.topic, row.payload))
+                except Exception:
+                    break
+                row.published_at = self._now()
+                delivered += 1
+        return delivered
+
+
+class MqttSink:
+    """Publishes each event with QoS 1 to `<prefix>/<topic>` and waits for the broker's PUBACK."""
+
+    def __init__(
+        self,
+        host: str = "127.0.0.1",
+        port: int = 1883,
+        *,
+        timeout_s: float = 5.0,
+        client_id: str = "",
+    ) -> None:
+        import paho.mqtt.client as mqtt
+
+        self._client = mqtt.Client(mqtt.CallbackAPIVersion.VERSION2, client_id=client_id)
+        self._timeout = timeout_s
+        self._prefix = prefix.rstrip("/")
+        self._client.connect(host, port, keepalive=30)
+        self._client.loop_start()
+
+    def __call__(self, event: Event) -> None:
+        topic = f"{self._prefix}/{event.topic}" if self._prefix else event.topic
+        info = self._client.publish(topic, event.to_json(), qos=1)
+        info.wait_for_publish(self._timeout)
+        if not info.is_published():
+            raise TimeoutError(f"MQTT broker did not acknowledge event {event.id}")
+
+    def close(self) -> None:
+        self._client.loop_stop()
+        self._client.disconnect()
