@@ -83,13 +83,17 @@ class OutboxPublisher:
 
 
 class MqttSink:
-    """Publishes each event with QoS 1 to `<prefix>/<topic>` and waits for the broker's PUBACK."""
+    """Publishes each event with QoS 1 to `[prefix/]topic` and waits for the broker's PUBACK.
+
+    A prefix lets several cells share one broker (`plant/cell7/fmscell/job/...`).
+    """
 
     def __init__(
         self,
         host: str = "127.0.0.1",
         port: int = 1883,
         *,
+        prefix: str = "",
         timeout_s: float = 5.0,
         client_id: str = "",
     ) -> None:
