@@ -3,7 +3,7 @@
 from drives.bus.candump import CandumpWriter, candump_frame, candump_line
 from drives.bus.config import open_bus
 from drives.bus.frame import frame_bits, nominal_bits, worst_case_bits
-from drives.bus.hub import BusLoadAccount, CanHub, SimBus, drop_hub, get_hub
+from drives.bus.hub import BusLoadAccount, CanHub, SimBus, connect_network, drop_hub, get_hub
 from drives.bus.loadplan import (
     BusLoadWarning,
     BusOverloadError,
@@ -25,6 +25,7 @@ __all__ = [
     "axis_traffic",
     "candump_frame",
     "candump_line",
+    "connect_network",
     "drop_hub",
     "frame_bits",
     "get_hub",

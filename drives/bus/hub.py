@@ -629,3 +629,16 @@ class SimBus(can.BusABC):
             return
         self.hub._detach(self)
         super().shutdown()
+
+
+def connect_network(network: Any, endpoint: SimBus) -> Any:
+    """Put a `canopen.Network` on an endpoint without a Notifier thread.
+
+    Frames reach the network's listeners synchronously in the delivering call, so a stock
+    master runs deterministically under a lockstep hub (an SDO request is answered before
+    `send` returns). `network.connect()` with the endpoint as `bus` also works, threaded.
+    """
+    network.bus = endpoint
+    for listener in network.listeners:
+        endpoint.add_listener(listener.on_message_received)
+    return network

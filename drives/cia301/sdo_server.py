@@ -234,7 +234,7 @@ class SdoServer:
                 "block-down", index, subindex, size=size, crc=bool(command & 0x04)
             )
             self.transfer.phase = "segments"
-            return [bytes([0xA4]) + data[1:4] + bytes([BLOCK_SIZE, 0, 0, 0])]
+            return [bytes([0xA0 | (command & 0x04)]) + data[1:4] + bytes([BLOCK_SIZE, 0, 0, 0])]
         if transfer is None or transfer.kind != "block-down" or transfer.phase != "end":
             return [self._abort(ABORT_COMMAND, 0, 0)]
         unused = (command >> 2) & 0x07
@@ -299,7 +299,7 @@ class SdoServer:
                 blksize=blksize,
             )
             self.transfer.phase = "start"
-            return [_SIZE.pack(0xC6, index, subindex, len(value))]
+            return [_SIZE.pack(0xC2 | (command & 0x04), index, subindex, len(value))]
         if transfer is None or transfer.kind != "block-up":
             return [self._abort(ABORT_COMMAND, 0, 0)]
         if sub_command == 3 and transfer.phase == "start":
