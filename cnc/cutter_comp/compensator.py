@@ -9,11 +9,13 @@ it makes with its successor. See docs/cutter_comp.md for the geometry and the fi
 from __future__ import annotations
 
 import math
+from collections import deque
 from dataclasses import dataclass, replace
 from enum import Enum
 from typing import Literal
 
 from cnc.cutter_comp import geometry as g
+from cnc.cutter_comp import interference as clash
 from cnc.errors import NcError
 
 Point = tuple[float, float]
@@ -59,6 +61,15 @@ class _Mode(Enum):
 
 
 @dataclass(slots=True)
+class _Staged:
+    """A compensated segment waiting for the interference check of later elements."""
+
+    seg: Segment
+    tag: int  # index of the contour element it belongs to
+    shape: clash.Element | None  # None: not checked (start-up, cancel, zero-length)
+
+
+@dataclass(slots=True)
 class _Held:
     """The element read ahead: its start on the tool path is known, its end is not."""
 
@@ -77,12 +88,25 @@ class CutterCompensation:
     arc of the tool radius around the programmed corner (line/line corners turning less
     than `geometry.SHALLOW_ANGLE` are extended to their intersection instead).
 
-    Read-ahead is one in-plane element (zero-length segments in between are queued, not
-    counted). Every refusal is an `NcError` naming the offending segment's line and column.
+    Read-ahead: one in-plane element resolves a corner; on top of that each compensated
+    segment is held until `lookahead` further contour elements are known and is checked
+    against the programmed contour from `lookahead` elements before to `lookahead` after
+    its own (the interference check): closer than the tool radius is a gouge. Zero-length
+    segments are queued in order, never counted. `lookahead=0` keeps only the corner
+    read-ahead and the local checks (reversed or vanished elements, inside arcs, no
+    intersection). Every refusal is an `NcError` naming the offending segment's line and
+    column.
     """
 
-    def __init__(self, file: str = "<program>") -> None:
+    def __init__(self, file: str = "<program>", lookahead: int = 3) -> None:
+        if lookahead < 0:
+            raise ValueError("lookahead must be >= 0")
         self._file = file
+        self._lookahead = lookahead
+        self._queue: deque[_Staged] = deque()
+        # (index, programmed segment, shape) of the last contour elements
+        self._window: deque[tuple[int, Segment, clash.Element]] = deque(maxlen=lookahead + 2)
+        self._idx = 0  # index of the newest contour element
         self._mode = _Mode.INACTIVE
         self._side = 1.0
         self._r = 0.0
@@ -176,15 +200,15 @@ class CutterCompensation:
 
         self._check_continuity(seg)
         self._prog = seg.end
-        out: list[Segment] = []
         if zero:
             if mode is _Mode.CANCEL and self._held is not None:
-                out = self._finish_held()  # G40 fixes the last end: perpendicular
+                self._stage(self._finish_held(), self._idx)  # G40 fixes the end: perpendicular
             if self._held is None:
-                out.append(self._at_tool(seg))
+                self._stage([self._at_tool(seg)], self._idx)
             else:
                 self._trail.append(seg)
-            return out
+            # after G40 no contour element can follow: nothing is left to check against
+            return self._release(everything=mode is _Mode.CANCEL)
 
         if mode is _Mode.CANCEL:
             if seg.kind == "arc":
@@ -193,8 +217,7 @@ class CutterCompensation:
                     seg.line,
                     seg.col,
                 )
-            if self._held is not None:
-                out = self._finish_held()
+            out = self._finish_held() if self._held is not None else []
             out.append(
                 Segment(
                     "line",
@@ -208,26 +231,32 @@ class CutterCompensation:
                     "cancel",
                 )
             )
+            self._stage(out, self._idx)
             self._mode = _Mode.INACTIVE
             self._released = None
             self._tool = seg.end
-            return out
+            self._window.clear()  # the next G41/G42 starts a new contour
+            return self._release(everything=True)
 
         elem = self._element(seg)
         held = self._held
+        # Local checks first (their messages are the most specific), then the window.
         if held is not None and held.startup:
-            out.append(self._startup_segment(held, elem.off_start))
+            out = [self._startup_segment(held, elem.off_start)]
             out.extend(self._trail_at(elem.off_start))
             elem.ps, elem.ts = elem.off_start, 0.0
+            base = 1
         elif held is not None:
-            out.extend(self._corner(held, elem, seg))
+            out, base = self._corner(held, elem, seg), 0
         elif self._released is not None:
-            out.extend(self._corner_after_sync(self._released, elem, seg))
+            out, base = self._corner_after_sync(self._released, elem, seg), 1
         else:  # pragma: no cover - ACTIVE always holds or has released an element
             raise self._error("cutter compensation: internal state lost", seg.line, seg.col)
+        self._add_contour(seg, elem)
+        self._stage(out, self._idx - 1 + base)
         self._held = _Held(seg, elem, startup=False)
         self._released = None
-        return out
+        return self._release()
 
     def flush(self) -> list[Segment]:
         """End of program or a synchronisation point: emit everything held back.
@@ -237,9 +266,64 @@ class CutterCompensation:
         then makes an inside corner with it, that is a gouge (the released element can no
         longer be trimmed) and push() raises.
         """
-        if self._held is None:
-            return []
-        return self._finish_held()
+        if self._held is not None:
+            self._stage(self._finish_held(), self._idx)
+        return self._release(everything=True)
+
+    # --- interference check -------------------------------------------------------------
+
+    def _add_contour(self, seg: Segment, elem: g.OffsetElement) -> None:
+        """Register a new programmed contour element and check the held output against it."""
+        self._idx += 1
+        if seg.kind == "line":
+            shape: clash.Element = (seg.start, seg.end)
+        else:
+            assert seg.center is not None
+            full = elem.sweep >= 2.0 * math.pi
+            shape = clash.Arc.of(seg.start, seg.end, seg.center, seg.ccw, full)
+        self._window.append((self._idx, seg, shape))
+        for staged in self._queue:
+            if staged.shape is not None and staged.tag >= self._idx - self._lookahead:
+                self._interfere(staged, seg, shape)
+
+    def _stage(self, outs: list[Segment], tag: int) -> None:
+        checking = self._lookahead > 0 and self._r > self._tol
+        for seg in outs:
+            own = self._idx if seg.role in ("corner", "startup") else tag
+            shape: clash.Element | None = None
+            if checking and seg.role in ("contour", "corner") and seg.start != seg.end:
+                shape = (seg.start, seg.end)
+                if seg.kind == "arc":
+                    assert seg.center is not None
+                    shape = clash.Arc.of(seg.start, seg.end, seg.center, seg.ccw, False)
+            elif checking and seg.kind == "arc" and seg.role == "contour":
+                assert seg.center is not None  # a full circle: start == end
+                shape = clash.Arc.of(seg.start, seg.end, seg.center, seg.ccw, True)
+            staged = _Staged(seg, own, shape)
+            if shape is not None:
+                for idx, prog, pshape in self._window:
+                    if idx >= own - self._lookahead:
+                        self._interfere(staged, prog, pshape)
+            self._queue.append(staged)
+
+    def _interfere(self, staged: _Staged, prog: Segment, pshape: clash.Element) -> None:
+        assert staged.shape is not None
+        d = clash.distance(staged.shape, pshape)
+        if d < self._r - g.INTERFERENCE_TOL_REL * self._scale:
+            raise self._gouge(
+                staged.seg,
+                f"the tool path of this block passes {d:.6g} from the programmed contour of "
+                f"line {prog.line}, {self._r - d:.6g} closer than the tool radius "
+                f"{self._r:.6g} (interference check over {self._lookahead} elements)",
+            )
+
+    def _release(self, everything: bool = False) -> list[Segment]:
+        """Hand over the segments no later element can still veto."""
+        out: list[Segment] = []
+        q = self._queue
+        while q and (everything or q[0].tag + self._lookahead <= self._idx):
+            out.append(q.popleft().seg)
+        return out
 
     # --- corners ----------------------------------------------------------------------
 

@@ -24,6 +24,10 @@ LEN_TOL_REL = 1e-9
 #: compensation is on (the interpreter's own arithmetic leaves ~1e-15 gaps; a real gap means
 #: a work offset changed under compensation).
 CONTINUITY_TOL_REL = 1e-7
+#: The interference check refuses a compensated point closer to the programmed contour
+#: than r - INTERFERENCE_TOL_REL * scale. Exact contacts (inside-corner trim points, corner
+#: arcs, the element's own offset) sit at exactly r up to rounding, far inside this margin.
+INTERFERENCE_TOL_REL = 1e-8
 #: Outside line/line corners turning by less than this (radians) are joined at the
 #: intersection of the extended offset lines instead of with a micro-arc. The tool centre
 #: then stands off by r*(1/cos(a/2) - 1) <= 1.25e-9 * r beyond the radius.

@@ -471,7 +471,7 @@ def test_zero_length_before_outside_corner_arc():
 
 
 def test_zero_length_before_startup_and_after_cancel_are_uncompensated():
-    cc = CutterCompensation()
+    cc = CutterCompensation(lookahead=0)  # release as soon as the corner is known
     cc.start("left", 1.0)
     z = L((0, -5), (0, -5), 1, "Z")
     assert cc.push(z) == [z]
@@ -591,3 +591,69 @@ def test_bad_side_and_radius():
         cc.start("up", 1.0)  # type: ignore[arg-type]
     with pytest.raises(NcError):
         cc.start("left", math.nan)
+
+
+def test_release_waits_for_the_interference_lookahead():
+    # Push p=0 is the start-up, push p=k the contour element k (source line k+1). Element k's
+    # path is computed at push k+1 (its end corner needs element k+1) and handed over once
+    # `lookahead` = n further elements are known: at push max(k+1, k+n). A corner arc
+    # belongs to the element after the corner (j) and the start-up to element 1.
+    contour = [L((0, 0), (10, 0), 2), L((10, 0), (10, 10), 3), L((10, 10), (20, 10), 4)]
+    contour += [L((20, 10), (20, 20), 5), L((20, 20), (30, 20), 6)]
+    for n in (0, 1, 3):
+        cc = CutterCompensation(lookahead=n)
+        cc.start("left", 1.0)
+        released = [(p, s) for p, seg in enumerate([UP, *contour]) for s in cc.push(seg)]
+        released += [(99, s) for s in cc.flush()]
+        roles = [s.role for _, s in released]
+        assert roles == ["startup", "contour", "contour", "corner", "contour", "contour"] + [
+            "corner",
+            "contour",
+        ]
+        for p, s in released:
+            k = s.line - 1
+            want = {"startup": 1 + n, "corner": k + n, "contour": max(k + 1, k + n)}[s.role]
+            assert p == (want if want <= 5 else 99), (n, p, s)
+
+
+def test_interference_check_finds_a_neck_no_single_element_shows():
+    # A (0,0)->(10,0), B ->(13,-3) (right turn, outside: arc), C ->(13,1.5) (inside),
+    # D ->(5,1.5) (inside). G41 r=1: no element reverses (B' 1.83 long, C' from y=-0.586 to
+    # 0.5), but D's offset y=0.5 runs 0.5 above A (y=0) for x in [5,10]: the tool cuts into A.
+    segs = [
+        L((0, -5), (0, 0), 1),
+        L((0, 0), (10, 0), 2),
+        L((10, 0), (13, -3), 3),
+        L((13, -3), (13, 1.5), 4),
+        L((13, 1.5), (5, 1.5), 5),
+    ]
+    with pytest.raises(NcError) as e:
+        run("left", 1.0, segs)
+    # A's path is the first one checked against D: it passes 0.5 from D's contour.
+    assert e.value.line == 2 and "line 5" in e.value.message and "0.5 from" in e.value.message
+    cc = CutterCompensation(lookahead=0)  # without the window only local checks remain
+    cc.start("left", 1.0)
+    out = [o for s in segs for o in cc.push(s)] + cc.flush()
+    assert out[-1].start == (12.0, 0.5) and out[-1].end == (5.0, 0.5)
+
+
+def test_closed_pocket_started_at_a_corner_is_a_gouge():
+    # Type A start-up at an inside corner puts the tool centre on the neighbouring wall:
+    # (0,1) is at distance 0 from the last edge x=0. A real overcut, refused.
+    pocket = [L((5, 5), (0, 0), 1), L((0, 0), (10, 0), 2), L((10, 0), (10, 10), 3)]
+    pocket += [L((10, 10), (0, 10), 4), L((0, 10), (0, 0), 5)]
+    with pytest.raises(NcError, match="gouge"):
+        run("left", 1.0, pocket, cancel=L((0, 0), (5, 5), 6))
+    # Entering mid-edge (a lead-in onto the middle of the first wall) is clean.
+    pocket = [L((5, 5), (5, 0), 1), L((5, 0), (10, 0), 2), L((10, 0), (10, 10), 3)]
+    pocket += [L((10, 10), (0, 10), 4), L((0, 10), (0, 0), 5), L((0, 0), (5, 0), 6)]
+    out = run("left", 1.0, pocket, cancel=L((5, 0), (5, 5), 7))
+    assert [o.end for o in out] == [
+        (5.0, 1.0),
+        (9.0, 1.0),
+        (9.0, 9.0),
+        (1.0, 9.0),
+        (1.0, 1.0),
+        (5.0, 1.0),
+        (5, 5),
+    ]
