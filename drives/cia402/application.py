@@ -499,7 +499,7 @@ class Drive402:
         self._pp_next = None
         self._hm = None
         self._hm_status = HM.HomingStatus.NOT_STARTED
-        self._window_timer = 0.0
+        self._window_timer = math.inf  # standing on its own position: target reached
 
     def _raise_fault(self, code: int, emcy: bool = True) -> None:
         if self._power.state == State.NOT_READY_TO_SWITCH_ON:
@@ -722,7 +722,7 @@ class Drive402:
             if self._seg_t < self._seg_T:
                 self._seg_t += h
                 if self._seg_t >= self._seg_T:
-                    d.pos, d.vel = self._seg_to, 0.0
+                    d.pos, d.vel = self._seg_to, self._seg_v
                 else:
                     d.pos += self._seg_v * h
                     d.vel = self._seg_v
