@@ -8,7 +8,7 @@ PLC; the stock server (ModbusTcpServer + ModbusDeviceContext over ModbusSequenti
 coils 9216 / di 1024 / ir 1024 / hr 2048 like our default map) has no scan.
 
 Prints one JSON object. Targets: >= 15k req/s on one connection, >= 30k req/s on eight.
-Usage: bench_modbus.py [--seconds 10] [--client-procs 2]
+Usage: bench_modbus.py [--seconds 10] [--client-procs 2] [--switch-interval 0.0005]
 """
 
 from __future__ import annotations
@@ -18,7 +18,6 @@ import json
 import multiprocessing as mp
 import os
 import socket
-import statistics
 import struct
 import sys
 import time
@@ -34,9 +33,10 @@ REQUEST_REGS = 10
 # -- servers (each in its own process) --------------------------------------------------
 
 
-def serve_ours(ready, stop) -> None:
+def serve_ours(ready, stop, switch_interval: float) -> None:
     import threading
 
+    sys.setswitchinterval(switch_interval)
     from plc.image import ImageSize, ProcessImage, WriteQueue
     from plc.modbus import ModbusFace
 
@@ -45,11 +45,16 @@ def serve_ours(ready, stop) -> None:
     queue = WriteQueue()
     state = {"snap": image.snapshot(0)}
 
+    lateness: list[tuple[float, float]] = []
+
     def scan_loop() -> None:
-        # Stand-in for the PLC runtime: drain writes, change some words, publish, every 10 ms.
+        # Stand-in for the PLC runtime: drain writes, change some words, publish, every 10 ms;
+        # its wake lateness shows what the face costs a scan thread in the same process.
         n = 0
         next_t = time.monotonic()
         while not stop.is_set():
+            now = time.monotonic()
+            lateness.append((now, now - next_t))
             for batch in queue.drain():
                 for w in batch:
                     image.apply(w)
@@ -59,18 +64,22 @@ def serve_ours(ready, stop) -> None:
             next_t += 0.010
             time.sleep(max(0.0, next_t - time.monotonic()))
 
-    threading.Thread(target=scan_loop, daemon=True).start()
+    scan = threading.Thread(target=scan_loop, daemon=True)
+    scan.start()
     face = ModbusFace(lambda: state["snap"], queue, size, port=0, idle_timeout=None)
     face.start_in_thread()
     ready.put(face.bound_port)
     stop.wait()
     face.stop_thread()
+    scan.join()
+    ready.put(lateness)
 
 
-def serve_pymodbus(ready, stop) -> None:
+def serve_pymodbus(ready, stop, switch_interval: float) -> None:
     import asyncio
     import logging
 
+    sys.setswitchinterval(switch_interval)
     from pymodbus.datastore import (
         ModbusDeviceContext,
         ModbusSequentialDataBlock,
@@ -121,7 +130,7 @@ def client_worker(port: int, connections: int, start_at: float, seconds: float, 
     end_at = start_at + seconds
     bad = 0
     while True:
-        t0 = time.perf_counter()
+        t0 = time.monotonic()
         for s in socks:
             s.sendall(req)
         for s in socks:
@@ -132,7 +141,7 @@ def client_worker(port: int, connections: int, start_at: float, seconds: float, 
                     raise ConnectionError("server closed")
                 data += chunk
             bad += data[7] != 3
-        now = time.perf_counter()
+        now = time.monotonic()
         if now >= start_at:
             if now > end_at:
                 break
@@ -148,7 +157,7 @@ def measure(port: int, connections: int, procs: int, seconds: float) -> dict:
     procs = min(procs, connections)
     per = [connections // procs + (i < connections % procs) for i in range(procs)]
     out = mp.Queue()
-    start_at = time.perf_counter() + 1.0  # warm-up: connect and settle first
+    start_at = time.monotonic() + 1.0  # warm-up: connect and settle first
     workers = [
         mp.Process(target=client_worker, args=(port, n, start_at, seconds, out)) for n in per
     ]
@@ -161,6 +170,7 @@ def measure(port: int, connections: int, procs: int, seconds: float) -> dict:
     lat = sorted(x for r in results for x in r[1])
     bad = sum(r[2] for r in results)
     return {
+        "window": (start_at, start_at + seconds),
         "req_per_s": round(total / seconds),
         "round_p50_us": round(lat[len(lat) // 2] * 1e6, 1) if lat else None,
         "round_p99_us": round(lat[int(len(lat) * 0.99)] * 1e6, 1) if lat else None,
@@ -168,13 +178,22 @@ def measure(port: int, connections: int, procs: int, seconds: float) -> dict:
     }
 
 
-def run_server(target, runs: list[tuple[int, int]], seconds: float) -> list[dict]:
+def run_server(target, runs: list[tuple[int, int]], seconds: float, switch: float) -> list[dict]:
     ready, stop = mp.Queue(), mp.Event()
-    server = mp.Process(target=target, args=(ready, stop), daemon=True)
+    server = mp.Process(target=target, args=(ready, stop, switch), daemon=True)
     server.start()
     try:
         port = ready.get(timeout=20)
-        return [measure(port, conns, procs, seconds) for conns, procs in runs]
+        results = [measure(port, conns, procs, seconds) for conns, procs in runs]
+        stop.set()
+        if target is serve_ours:
+            lateness = ready.get(timeout=20)
+            for r in results:
+                a, b = r["window"]
+                r["scan_lateness"] = _lateness_stats([x for t, x in lateness if a <= t <= b])
+        for r in results:
+            del r["window"]
+        return results
     finally:
         stop.set()
         server.join(10)
@@ -182,14 +201,32 @@ def run_server(target, runs: list[tuple[int, int]], seconds: float) -> list[dict
             server.kill()
 
 
+def _lateness_stats(xs: list[float]) -> dict:
+    if not xs:
+        return {}
+    xs = sorted(xs)
+    return {
+        "scans": len(xs),
+        "p50_ms": round(xs[len(xs) // 2] * 1e3, 3),
+        "p99_ms": round(xs[min(len(xs) - 1, int(len(xs) * 0.99))] * 1e3, 3),
+        "max_ms": round(xs[-1] * 1e3, 3),
+    }
+
+
 def main() -> None:
     ap = argparse.ArgumentParser()
     ap.add_argument("--seconds", type=float, default=10.0, help="per measurement")
     ap.add_argument("--client-procs", type=int, default=2, help="client processes for 8 conns")
+    ap.add_argument(
+        "--switch-interval",
+        type=float,
+        default=0.0005,
+        help="sys.setswitchinterval in both server processes (the anchor's scan-thread advice)",
+    )
     args = ap.parse_args()
     runs = [(1, 1), (8, args.client_procs)]
-    ours = run_server(serve_ours, runs, args.seconds)
-    peer = run_server(serve_pymodbus, runs, args.seconds)
+    ours = run_server(serve_ours, runs, args.seconds, args.switch_interval)
+    peer = run_server(serve_pymodbus, runs, args.seconds, args.switch_interval)
     o1, o8 = ours[0]["req_per_s"], ours[1]["req_per_s"]
     p1, p8 = peer[0]["req_per_s"], peer[1]["req_per_s"]
     print(
@@ -198,6 +235,7 @@ def main() -> None:
                 "workload": f"FC03 x {REQUEST_REGS} registers, 1 outstanding per connection",
                 "seconds_per_measurement": args.seconds,
                 "client_processes_for_8": args.client_procs,
+                "server_switch_interval_s": args.switch_interval,
                 "cpus": os.cpu_count(),
                 "ours_1conn_req_s": o1,
                 "ours_8conn_req_s": o8,
@@ -213,12 +251,12 @@ def main() -> None:
                 "pymodbus_detail": {"1conn": peer[0], "8conn": peer[1]},
                 "peer": "pymodbus 3.16.1 ModbusTcpServer + ModbusDeviceContext "
                 "(ModbusSequentialDataBlock)",
-                "note": "ours includes a 10 ms fake scan thread; round = one request on each "
-                "of a client process's connections",
+                "note": "ours includes a 10 ms fake scan thread in the server process whose "
+                "wake lateness is reported; round = one request on each of a client process's "
+                "connections; loopback, figures depend on other load on the box",
             }
         )
     )
-    _ = statistics  # kept for ad-hoc analysis
 
 
 if __name__ == "__main__":

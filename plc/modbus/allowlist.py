@@ -150,7 +150,8 @@ def _parse_item(item: str) -> AllowEntry:
     _check_order(first, last)
     if last > 65535:
         raise AllowListError(f"address {last} beyond 65535")
-    return AllowEntry(table, first, last, f"{table}:{first}-{last}")
+    text = f"{table}:{first}-{last}" if dash else f"{table}:{first}"
+    return AllowEntry(table, first, last, text)
 
 
 def _parse_iec(item: str) -> AllowEntry:

@@ -158,6 +158,8 @@ class ModbusFace:
         for conn in list(self._connections):
             conn.close()
         await server.wait_closed()
+        for _ in range(3):  # let the transports deliver connection_lost before the loop stops
+            await asyncio.sleep(0)
 
     async def __aenter__(self) -> ModbusFace:
         await self.start()
@@ -398,20 +400,12 @@ class _Connection(asyncio.Protocol):
         that drained the queue just before the put; scan M+2 drains after it. So M+2 is the
         first snapshot sure to include the batch.
         """
-        get = self.get_snapshot
-        target = get().scan + 2
-        deadline = self._loop.time() + self.face.ack_timeout
-        while (snap := get()).scan < target:
-            if self._loop.time() > deadline or self.closed:
-                response = bytes((pdu[0] | 0x80, SERVER_DEVICE_FAILURE))
-                self.stats.exceptions += 1
-                break
-            await asyncio.sleep(0.0005)
-        else:
-            # FC23's read part must show the image after the write: re-read this snapshot.
-            response = self.handler.handle(pdu, snap)[0] if pdu[0] == 0x17 else pdu[:5]
-            if pdu[0] in (0x05, 0x06):
-                response = pdu
+        try:
+            response = await self._response_after_scan(pdu)
+        except Exception:  # a failing snapshot source must not leave the client waiting
+            self.stats.internal_errors += 1
+            log.exception("%s: waiting for the scan failed", self.peer)
+            response = bytes((pdu[0] | 0x80, SERVER_DEVICE_FAILURE))
         if self.closed:
             return
         self.transport.write(encode(tid, unit, response))
@@ -421,6 +415,19 @@ class _Connection(asyncio.Protocol):
         self._update_reading()
         if backlog:
             self._serve(backlog)
+
+    async def _response_after_scan(self, pdu: bytes) -> bytes:
+        get = self.get_snapshot
+        target = get().scan + 2
+        deadline = _monotonic() + self.face.ack_timeout
+        while (snap := get()).scan < target:
+            if _monotonic() > deadline or self.closed:
+                self.stats.exceptions += 1
+                return bytes((pdu[0] | 0x80, SERVER_DEVICE_FAILURE))
+            await asyncio.sleep(0.0005)
+        if pdu[0] == 0x17:  # FC23's read half shows the image after its write
+            return self.handler.handle(pdu, snap)[0]
+        return pdu if pdu[0] in (0x05, 0x06) else pdu[:5]
 
     def _update_reading(self) -> None:
         if self.closed or self.transport is None:
