@@ -121,9 +121,8 @@ class SdoServer:
     def _current_address(self, data: bytes) -> tuple[int, int]:
         if self.transfer is not None:
             return self.transfer.index, self.transfer.subindex
-        if len(data) >= 4:
-            _, index, subindex = _HEAD.unpack_from(data)
-            return index, subindex
+        if len(data) >= 3:  # echo the multiplexer of the refused frame, as far as it goes
+            return data[1] | data[2] << 8, data[3] if len(data) >= 4 else 0
         return 0, 0
 
     def _abort(self, code: int, index: int | None = None, subindex: int | None = None) -> bytes:

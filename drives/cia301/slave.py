@@ -138,7 +138,10 @@ class CanopenSlave:
             return False
         if self._bus_off:
             self._bus_off = False
+            # Reported once after recovery, with the communication bit set while it is sent.
+            self.emcy.communication_errors.add(EMCY_BUS_OFF_RECOVERED)
             self._emit_emcy(EMCY_BUS_OFF_RECOVERED)
+            self.emcy.communication_errors.discard(EMCY_BUS_OFF_RECOVERED)
             self.application.on_communication_fault(EMCY_BUS_OFF_RECOVERED)
             self._pump_application_emcy()
         return True
