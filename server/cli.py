@@ -5,6 +5,7 @@ from __future__ import annotations
 import typer
 
 from cnc.cli import nc_app
+from dnc.cli import dnc_app
 from drives.cli import drives_app
 from plc.cli import plc_app
 
@@ -17,6 +18,7 @@ app = typer.Typer(
 app.add_typer(nc_app, name="nc")
 app.add_typer(plc_app, name="plc")
 app.add_typer(drives_app, name="drives")
+app.add_typer(dnc_app, name="dnc")
 
 
 @app.command()

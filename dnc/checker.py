@@ -1,0 +1,36 @@
+"""The NC check run on every upload: the NC kernel's own checker, per machine kind."""
+
+from __future__ import annotations
+
+import dataclasses
+from functools import cache
+from typing import Any
+
+MAX_STORED_ERRORS = 100
+KIND_TO_MACHINE = {"mill": "mill3", "lathe": "lathe2"}
+UNBOUNDED_MM = 1e9
+
+
+@cache
+def _params(machine_kind: str):
+    from cnc.config import builtin_machine
+
+    params = builtin_machine(KIND_TO_MACHINE.get(machine_kind, "mill3")).params
+    # The host does not know the machines' work offsets (G54..G59 are set at the machine),
+    # so soft limits in machine coordinates cannot be judged here; the machine checks them
+    # when the program is loaded. Everything else (syntax, modal groups, arcs, F, cutter
+    # compensation, subprograms) is checked exactly as the machine will.
+    axes = tuple(
+        dataclasses.replace(a, min_mm=-UNBOUNDED_MM, max_mm=UNBOUNDED_MM) for a in params.axes
+    )
+    return dataclasses.replace(params, axes=axes)
+
+
+def nc_checker(text: str, machine_kind: str) -> list[dict[str, Any]]:
+    """Errors as plain data ({line, col, message}) for storing with the revision."""
+    from cnc.interp import check
+
+    errors = check(text.splitlines(), _params(machine_kind), file="program")
+    return [
+        {"line": e.line, "col": e.col, "message": e.message} for e in errors[:MAX_STORED_ERRORS]
+    ]
