@@ -205,7 +205,10 @@ def parse_line(
         body = body[1:]
         if body[:1].isdigit():  # /1../9: optional block-skip switches, treated as '/'
             body = body[1:]
-    squeezed = body.translate(_SQUEEZE).upper()
+    squeezed = body.replace(" ", "")
+    if "\t" in squeezed:
+        squeezed = squeezed.replace("\t", "")
+    squeezed = squeezed.upper()
     if squeezed[:1] in ("O", ":"):
         m = re.match(r"[O:](\d+)", squeezed)
         if not m:
@@ -213,7 +216,9 @@ def parse_line(
         blk.program = int(m.group(1))
         squeezed = squeezed[m.end() :]
     if not _FAST_BLOCK.fullmatch(squeezed):
-        raise _diagnose(text, line, file)
+        squeezed = squeezed.translate(_SQUEEZE)  # other control characters
+        if not _FAST_BLOCK.fullmatch(squeezed):
+            raise _diagnose(text, line, file)
     words = blk.words
     for letter, num in _WORD.findall(squeezed):
         if letter == "G":

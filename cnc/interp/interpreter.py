@@ -104,6 +104,7 @@ _UNSUPPORTED_G = {
     660: "unsupported: Fanuc Macro B (G66 modal macro call)",
     670: "unsupported: Fanuc Macro B (G67 macro call cancel)",
 }
+_MOTION_CODES = frozenset((0, 10, 20, 30))
 _CYCLE_NAMES = {730, 740, 760, 810, 820, 830, 840, 850, 860, 870, 880, 890}
 _LATHE_UNSUPPORTED = {
     **{c: "lathe canned cycle" for c in (700, 710, 720, 730, 740, 750, 760)},
@@ -421,12 +422,30 @@ class Interpreter:
             fr.header_seen = True
         fr.body_started = True
         words = blk.words
-        if not (words or blk.g or blk.m):
+        g = blk.g
+        if not (words or g or blk.m):
             return
         self._line = line = blk.line
         self._executed += 1
         if self.max_blocks is not None and self._executed > self.max_blocks:
             raise self._err(f"program executes more than {self.max_blocks} blocks", blk)
+        # fast path: a motion block (G0..G3 at most) without any other modal change
+        if (
+            not blk.m
+            and (not g or (len(g) == 1 and g[0] in _MOTION_CODES))
+            and words.keys() <= self._fast_words
+            and self._cycle == 800
+            and not self._xf_on
+            and self._comp is None
+        ):
+            if g:
+                self._motion = g[0]
+            if "N" in words:
+                self._nword = int(words["N"])
+            if "F" in words:
+                self._set_feed(blk, words["F"])
+            self._motion_block(blk, words, False, g[0] if g else None)
+            return
         if not words.keys() <= self._words_ok:
             for k in words:
                 if k not in self._words_ok:
@@ -478,21 +497,6 @@ class Interpreter:
                     f"M{code} and M{prev} of one M group '{grp}' in one block", blk, "M", i + 1
                 )
             mset[grp] = code if grp != "coolant" or prev is None else 78
-
-        # fast path: an ordinary motion block without any modal change
-        if (
-            not gset
-            and not mset
-            and not aux
-            and self._cycle == 800
-            and words.keys() <= self._fast_words
-            and not self._xf_on
-            and self._comp is None
-        ):
-            if "F" in words:
-                self._set_feed(blk, words["F"])
-            self._motion_block(blk, words, exact, None)
-            return
 
         # --- units first: they decide how every number in the block is read ---
         u = gset.get("units")
@@ -638,7 +642,7 @@ class Interpreter:
                 self._coordinate_set(blk)
             elif nonmodal == 530:
                 self._g53(blk, gset.get("motion"), exact)
-        if consumed and ("motion" in gset or "cycle" in gset):
+        if consumed and nonmodal != 530 and ("motion" in gset or "cycle" in gset):
             raise self._err("a motion G code cannot share a block with this G code", blk, "G")
         # --- motion ---
         mo = gset.get("motion")
@@ -1012,8 +1016,15 @@ class Interpreter:
         if self._lathe:
             m = (m[0], 0.0, m[2])
             mc = (mc[0], 0.0, mc[2])
-        self._check(m, blk, blk.line)
-        self._check_arc_extent(ms, m, mc, cw_out, turns, blk)
+        r = math.hypot(ms[u] - mc[u], ms[v] - mc[v])
+        for idx, lo, hi, _ in self._limits:
+            if idx in (u, v):
+                if mc[idx] - r < lo - 1e-9 or mc[idx] + r > hi + 1e-9:
+                    self._check(m, blk, blk.line)
+                    self._check_arc_extent(ms, m, mc, cw_out, turns, blk)
+                    break
+            elif not lo - 1e-9 <= m[idx] <= hi + 1e-9:
+                self._check(m, blk, blk.line)
         self._out.append(ArcFeed(blk.line, m, mc, self._plane_enum, cw_out, feed, turns, exact))
         self._pos = e
         self._mach = m
@@ -1425,12 +1436,12 @@ class Interpreter:
         if cyc == 870:  # back boring: orient, shift, go below the part, cut upwards
             q = self._cyc_q
             self._orient_shift(blk, q)
-            rapid(self._shifted(self._at_w(r), q), None, blk, True)
+            rapid(self._shifted(self._at_w(r), -q), None, blk, True)
             rapid(self._at_w(r), None, blk, True)
             self._spin(line, SpindleDirection.CW)
             lin(self._at_w(z), feed, blk, True)
             self._orient_shift(blk, q)
-            rapid(self._shifted(self._at_w(init), q), None, blk, True)
+            rapid(self._shifted(self._at_w(init), -q), None, blk, True)
             rapid(self._at_w(init), None, blk, True)
             self._spin(line, SpindleDirection.CW)
             return
@@ -1474,8 +1485,8 @@ class Interpreter:
         if cyc == 760:
             q = self._cyc_q
             self._orient_shift(blk, q)
-            rapid(self._shifted(self._at_w(back), q), None, blk, True)
             rapid(self._at_w(back), None, blk, True)
+            rapid(self._shifted(self._at_w(back), -q), None, blk, True)
             self._spin(line, SpindleDirection.CW)
         elif cyc in (850, 890):
             lin(self._at_w(r), feed, blk, True)
