@@ -3,7 +3,8 @@
 FC03 read of 10 holding registers, sequential request/response per connection (one request
 outstanding per connection), on 1 and on 8 connections, loopback only. Each server runs in its
 own process; clients run in separate processes on raw sockets so neither the client nor a
-shared GIL dominates. Our face runs with a 10 ms fake scan thread publishing snapshots, as in a
+shared GIL dominates. Both servers run at once and the clients alternate 1 s slices between
+them, so a busy neighbour on the box costs both the same. Our face runs with a 10 ms fake scan thread publishing snapshots, as in a
 PLC; the stock server (ModbusTcpServer + ModbusDeviceContext over ModbusSequentialDataBlock,
 coils 9216 / di 1024 / ir 1024 / hr 2048 like our default map) has no scan.
 
@@ -28,6 +29,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 TARGET_1 = 15_000
 TARGET_8 = 30_000
 REQUEST_REGS = 10
+SLICE_S = 1.0
 
 
 # -- servers (each in its own process) --------------------------------------------------
@@ -116,89 +118,105 @@ def _free_port() -> int:
 # -- clients ----------------------------------------------------------------------------
 
 
-def client_worker(port: int, connections: int, start_at: float, seconds: float, out) -> None:
-    """Keep one FC03 outstanding on each of `connections` sockets; count answers in window."""
-    socks = []
-    for _ in range(connections):
-        s = socket.create_connection(("127.0.0.1", port))
-        s.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
-        socks.append(s)
+def client_worker(ports: dict[str, int], connections: int, pipe) -> None:
+    """Hold `connections` sockets to each server; on command, keep one FC03 outstanding on
+    each socket to one server during a time window and report the answers counted."""
+    socks = {name: [_connect(port) for _ in range(connections)] for name, port in ports.items()}
     req = struct.pack(">HHHBBHH", 1, 0, 6, 1, 3, 0, REQUEST_REGS)
     size = 9 + 2 * REQUEST_REGS
-    count = 0
-    lat: list[float] = []
-    end_at = start_at + seconds
-    bad = 0
-    while True:
-        t0 = time.monotonic()
-        for s in socks:
-            s.sendall(req)
-        for s in socks:
-            data = s.recv(size)
-            while len(data) < size:
-                chunk = s.recv(size - len(data))
-                if not chunk:
-                    raise ConnectionError("server closed")
-                data += chunk
-            bad += data[7] != 3
-        now = time.monotonic()
-        if now >= start_at:
-            if now > end_at:
-                break
-            count += len(socks)
-            if len(lat) < 200_000:
+    while (cmd := pipe.recv()) is not None:
+        name, start_at, end_at = cmd
+        group = socks[name]
+        count = bad = 0
+        lat: list[float] = []
+        while True:
+            t0 = time.monotonic()
+            for s in group:
+                s.sendall(req)
+            for s in group:
+                data = s.recv(size)
+                while len(data) < size:
+                    chunk = s.recv(size - len(data))
+                    if not chunk:
+                        raise ConnectionError(f"{name} closed the connection")
+                    data += chunk
+                bad += data[7] != 3
+            now = time.monotonic()
+            if now >= start_at:
+                if now > end_at:
+                    break
+                count += len(group)
                 lat.append(now - t0)
-    for s in socks:
-        s.close()
-    out.put((count, lat, bad))
+        pipe.send((count, lat, bad))
+    for group in socks.values():
+        for s in group:
+            s.close()
 
 
-def measure(port: int, connections: int, procs: int, seconds: float) -> dict:
+def _connect(port: int) -> socket.socket:
+    s = socket.create_connection(("127.0.0.1", port))
+    s.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
+    return s
+
+
+def measure(ports: dict[str, int], connections: int, procs: int, seconds: float) -> dict:
+    """Alternate short slices between the servers so both see the same background load."""
     procs = min(procs, connections)
     per = [connections // procs + (i < connections % procs) for i in range(procs)]
-    out = mp.Queue()
-    start_at = time.monotonic() + 1.0  # warm-up: connect and settle first
-    workers = [
-        mp.Process(target=client_worker, args=(port, n, start_at, seconds, out)) for n in per
-    ]
-    for w in workers:
+    pipes, workers = [], []
+    for n in per:
+        here, there = mp.Pipe()
+        w = mp.Process(target=client_worker, args=(ports, n, there))
         w.start()
-    results = [out.get(timeout=seconds + 30) for _ in workers]
+        pipes.append(here)
+        workers.append(w)
+    slices = max(1, round(seconds / SLICE_S))
+    totals = {name: [0, [], 0, []] for name in ports}  # count, latencies, bad, windows
+    order = list(ports)
+    for k in range(slices + 1):  # slice 0 is a warm-up for both, not counted
+        for name in order if k % 2 else order[::-1]:
+            start_at = time.monotonic() + 0.05
+            end_at = start_at + (0.3 if k == 0 else seconds / slices)
+            for p in pipes:
+                p.send((name, start_at, end_at))
+            results = [p.recv() for p in pipes]
+            if k == 0:
+                continue
+            t = totals[name]
+            t[0] += sum(r[0] for r in results)
+            for r in results:
+                t[1].extend(r[1])
+            t[2] += sum(r[2] for r in results)
+            t[3].append((start_at, end_at))
+    for p in pipes:
+        p.send(None)
     for w in workers:
         w.join()
-    total = sum(r[0] for r in results)
-    lat = sorted(x for r in results for x in r[1])
-    bad = sum(r[2] for r in results)
-    return {
-        "window": (start_at, start_at + seconds),
-        "req_per_s": round(total / seconds),
-        "round_p50_us": round(lat[len(lat) // 2] * 1e6, 1) if lat else None,
-        "round_p99_us": round(lat[int(len(lat) * 0.99)] * 1e6, 1) if lat else None,
-        "bad_answers": bad,
-    }
+    out = {}
+    for name, (count, lat, bad, windows) in totals.items():
+        lat.sort()
+        out[name] = {
+            "windows": windows,
+            "req_per_s": round(count / seconds),
+            "round_p50_us": round(lat[len(lat) // 2] * 1e6, 1) if lat else None,
+            "round_p99_us": round(lat[int(len(lat) * 0.99)] * 1e6, 1) if lat else None,
+            "bad_answers": bad,
+        }
+    return out
 
 
-def run_server(target, runs: list[tuple[int, int]], seconds: float, switch: float) -> list[dict]:
+def start_server(target, switch: float):
     ready, stop = mp.Queue(), mp.Event()
     server = mp.Process(target=target, args=(ready, stop, switch), daemon=True)
     server.start()
-    try:
-        port = ready.get(timeout=20)
-        results = [measure(port, conns, procs, seconds) for conns, procs in runs]
-        stop.set()
-        if target is serve_ours:
-            lateness = ready.get(timeout=20)
-            for r in results:
-                a, b = r["window"]
-                r["scan_lateness"] = _lateness_stats([x for t, x in lateness if a <= t <= b])
-        for r in results:
-            del r["window"]
-        return results
-    finally:
-        stop.set()
-        server.join(10)
-        if server.is_alive():
-            server.kill()
+    return server, ready, stop, ready.get(timeout=20)
+
+
+def stop_server(server, stop) -> None:
+    stop.set()
+    server.join(10)
+    if server.is_alive():
+        server.kill()
 
 
 def _lateness_stats(xs: list[float]) -> dict:
@@ -215,7 +233,7 @@ def _lateness_stats(xs: list[float]) -> dict:
 
 def main() -> None:
     ap = argparse.ArgumentParser()
-    ap.add_argument("--seconds", type=float, default=10.0, help="per measurement")
+    ap.add_argument("--seconds", type=float, default=10.0, help="per measurement and server")
     ap.add_argument("--client-procs", type=int, default=2, help="client processes for 8 conns")
     ap.add_argument(
         "--switch-interval",
@@ -224,11 +242,26 @@ def main() -> None:
         help="sys.setswitchinterval in both server processes (the anchor's scan-thread advice)",
     )
     args = ap.parse_args()
-    runs = [(1, 1), (8, args.client_procs)]
-    ours = run_server(serve_ours, runs, args.seconds, args.switch_interval)
-    peer = run_server(serve_pymodbus, runs, args.seconds, args.switch_interval)
-    o1, o8 = ours[0]["req_per_s"], ours[1]["req_per_s"]
-    p1, p8 = peer[0]["req_per_s"], peer[1]["req_per_s"]
+    ours_srv, ours_ready, ours_stop, ours_port = start_server(serve_ours, args.switch_interval)
+    peer_srv, _, peer_stop, peer_port = start_server(serve_pymodbus, args.switch_interval)
+    ports = {"ours": ours_port, "pymodbus": peer_port}
+    try:
+        one = measure(ports, 1, 1, args.seconds)
+        eight = measure(ports, 8, args.client_procs, args.seconds)
+    finally:
+        ours_stop.set()
+        lateness = ours_ready.get(timeout=20)
+        stop_server(ours_srv, ours_stop)
+        stop_server(peer_srv, peer_stop)
+    for run in (one, eight):
+        windows = run["ours"]["windows"]
+        run["ours"]["scan_lateness"] = _lateness_stats(
+            [x for t, x in lateness if any(a <= t <= b for a, b in windows)]
+        )
+        for r in run.values():
+            del r["windows"]
+    o1, o8 = one["ours"]["req_per_s"], eight["ours"]["req_per_s"]
+    p1, p8 = one["pymodbus"]["req_per_s"], eight["pymodbus"]["req_per_s"]
     print(
         json.dumps(
             {
@@ -247,13 +280,16 @@ def main() -> None:
                 "target_8conn_req_s": TARGET_8,
                 "meets_target_1conn": o1 >= TARGET_1,
                 "meets_target_8conn": o8 >= TARGET_8,
-                "ours_detail": {"1conn": ours[0], "8conn": ours[1]},
-                "pymodbus_detail": {"1conn": peer[0], "8conn": peer[1]},
+                "ours_detail": {"1conn": one["ours"], "8conn": eight["ours"]},
+                "pymodbus_detail": {"1conn": one["pymodbus"], "8conn": eight["pymodbus"]},
                 "peer": "pymodbus 3.16.1 ModbusTcpServer + ModbusDeviceContext "
                 "(ModbusSequentialDataBlock)",
+                "method": f"both servers up at once; {SLICE_S} s slices alternate between them "
+                "so both see the same background load",
                 "note": "ours includes a 10 ms fake scan thread in the server process whose "
-                "wake lateness is reported; round = one request on each of a client process's "
-                "connections; loopback, figures depend on other load on the box",
+                "wake lateness (during our slices) is reported; round = one request on each of "
+                "a client process's connections; loopback; figures depend on other load on "
+                "the box",
             }
         )
     )
