@@ -136,7 +136,8 @@ class PduHandler:
                     if seg.start <= address and address + count <= seg.end:
                         i = address - seg.start
                         words = getattr(snap, _LOWER[seg.area])[i : i + count]
-                        return b"\x03" + bytes((2 * count,)) + _pack_words(words), None
+                        if len(words) == count:
+                            return b"\x03" + bytes((2 * count,)) + _pack_words(words), None
         return self._read_registers("hr", pdu, snap)
 
     def _read_input_registers(self, pdu: bytes, snap: Snapshot) -> Result:
@@ -264,17 +265,21 @@ def _expect_counted_size(pdu: bytes, header: int) -> int:
 
 
 def _gather_bits(snap: Snapshot, pieces: list[Piece]) -> bytes:
-    if len(pieces) == 1:
-        area, i, n = pieces[0]
-        return getattr(snap, _LOWER[area])[i : i + n]
-    return b"".join(getattr(snap, _LOWER[a])[i : i + n] for a, i, n in pieces)
+    bits = b"".join(getattr(snap, _LOWER[a])[i : i + n] for a, i, n in pieces)
+    if len(bits) != sum(n for _, _, n in pieces):  # snapshot smaller than the map
+        raise _Refused(SERVER_DEVICE_FAILURE)
+    return bits
 
 
 def _gather_words(snap: Snapshot, pieces: list[Piece]) -> tuple[int, ...]:
     if len(pieces) == 1:
         area, i, n = pieces[0]
-        return getattr(snap, _LOWER[area])[i : i + n]
-    return sum((getattr(snap, _LOWER[a])[i : i + n] for a, i, n in pieces), ())
+        words = getattr(snap, _LOWER[area])[i : i + n]
+    else:
+        words = sum((getattr(snap, _LOWER[a])[i : i + n] for a, i, n in pieces), ())
+    if len(words) != sum(n for _, _, n in pieces):  # snapshot smaller than the map
+        raise _Refused(SERVER_DEVICE_FAILURE)
+    return words
 
 
 def _pack_words(words: tuple[int, ...]) -> bytes:

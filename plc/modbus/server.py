@@ -135,6 +135,7 @@ class ModbusFace:
         """Bind and serve on the running event loop."""
         if self._server is not None:
             raise RuntimeError("ModbusFace already started")
+        self._check_snapshot_fits()
         self._loop = loop = asyncio.get_running_loop()
         self._server = await loop.create_server(
             lambda: _Connection(self), self.host, self.port, reuse_address=True
@@ -143,6 +144,18 @@ class ModbusFace:
         log.info(
             "Modbus TCP face on %s:%d (writable: %s)", self.host, self.bound_port, self.writable
         )
+
+    def _check_snapshot_fits(self) -> None:
+        """Refuse to serve a map larger than the image: it would answer short data."""
+        snap = self.get_snapshot()
+        for table in ("coil", "di", "ir", "hr"):
+            for seg in self.map.segments(table):
+                have = len(snap.area(seg.area))
+                if have < seg.count:
+                    raise ValueError(
+                        f"ModbusFace: snapshot %{seg.area} has {have} entries but the map "
+                        f"serves {seg.count}; pass the image's ImageSize"
+                    )
 
     async def stop(self) -> None:
         """Stop listening and close every client connection."""

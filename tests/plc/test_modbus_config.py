@@ -167,3 +167,20 @@ def test_decoder_rejects_bad_header_early():
         MbapDecoder().feed(b"\x00\x01\x01\x00")
     with pytest.raises(FrameViolation, match="length 600"):
         MbapDecoder().feed(b"\x00\x01\x00\x00\x02\x58")
+
+
+def test_face_refuses_a_map_larger_than_the_image():
+    plc = FakeScan(ImageSize(qw=8))
+    face = ModbusFace(plc.get_snapshot, plc.queue, ImageSize(), port=0)  # size forgotten
+    with pytest.raises(ValueError, match="snapshot %QW has 8 entries but the map serves 1024"):
+        face.start_in_thread()
+
+
+def test_short_snapshot_answers_04_not_short_data():
+    from plc.modbus import PduHandler
+
+    small = FakeScan(ImageSize(qw=8, qx=8))
+    handler = PduHandler(MAP, AllowList.read_only().resolve(MAP))
+    assert handler.handle(b"\x03\x00\x00\x00\x0a", small.snap) == (b"\x83\x04", None)
+    assert handler.handle(b"\x01\x00\x00\x00\x0a", small.snap) == (b"\x81\x04", None)
+    assert handler.handle(b"\x03\x00\x00\x00\x08", small.snap)[0][:2] == b"\x03\x10"
