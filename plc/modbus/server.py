@@ -9,11 +9,12 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import ipaddress
 import logging
 import threading
 import time
 from collections import deque
-from collections.abc import Callable
+from collections.abc import Callable, Iterable
 from dataclasses import dataclass
 
 from plc.image import ImageSize, Snapshot, WriteQueue
@@ -64,6 +65,9 @@ class ModbusFace:
     for `idle_timeout` seconds (None: never), is closed. At most `max_connections` clients
     are served at once; further ones are accepted and closed at once.
 
+    `allowed_clients` (IP addresses or networks, e.g. ["127.0.0.1", "10.1.0.0/16"]) refuses
+    connections from any other source address; None accepts every client.
+
     Unit id: with `unit_id=None` (default) every unit id is served and echoed, as a Modbus/TCP
     end device does. With `unit_id=N` only N and 0xFF are served; others get exception 0x0B.
 
@@ -89,6 +93,7 @@ class ModbusFace:
         ack_after_scan: bool = False,
         ack_timeout: float = 1.0,
         identity: DeviceIdentity | None = None,
+        allowed_clients: Iterable[str] | None = None,
     ) -> None:
         if mb_map is None:
             mb_map = ModbusMap(size)
@@ -115,6 +120,14 @@ class ModbusFace:
         self.idle_timeout = idle_timeout
         self.ack_after_scan = ack_after_scan
         self.ack_timeout = ack_timeout
+        try:
+            self.allowed_clients = (
+                None
+                if allowed_clients is None
+                else tuple(ipaddress.ip_network(c, strict=False) for c in allowed_clients)
+            )
+        except ValueError as e:
+            raise ValueError(f"ModbusFace: allowed_clients: {e}") from None
         self.stats = FaceStats()
         self._server: asyncio.Server | None = None
         self._sweeper: asyncio.Task | None = None
@@ -251,6 +264,14 @@ class ModbusFace:
                     conn.close()
 
 
+def _peer_allowed(peer, networks) -> bool:
+    try:
+        address = ipaddress.ip_address(peer[0])
+    except (TypeError, ValueError, IndexError):
+        return False
+    return any(address in net for net in networks)
+
+
 class _Connection(asyncio.Protocol):
     """One client. Frames are answered in arrival order."""
 
@@ -281,6 +302,12 @@ class _Connection(asyncio.Protocol):
         self.peer = f"{peer[0]}:{peer[1]}" if peer else "?"
         self.last_rx = _monotonic()
         face = self.face
+        if face.allowed_clients is not None and not _peer_allowed(peer, face.allowed_clients):
+            self.stats.connections_refused += 1
+            log.warning("%s: refused, not in allowed_clients", self.peer)
+            self.closed = True
+            transport.close()
+            return
         if len(face._connections) >= face.max_connections:
             self.stats.connections_refused += 1
             log.warning("%s: refused, %d connections open", self.peer, len(face._connections))

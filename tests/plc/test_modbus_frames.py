@@ -252,3 +252,22 @@ def test_binds_loopback_by_default(start_face):
     assert face.host == "127.0.0.1"
     with socket.create_connection(("127.0.0.1", face.bound_port), timeout=1):
         pass
+
+
+@pytest.mark.parametrize(
+    ("allowed", "served"),
+    [(["127.0.0.1"], True), (["127.0.0.0/8", "::1"], True), (["10.0.0.0/8"], False), ([], False)],
+)
+def test_allowed_clients(start_face, raw_clients, allowed, served):
+    face, _ = start_face(allowed_clients=allowed)
+    client = raw_clients(face.bound_port)
+    if served:
+        assert client.request(FC03) == b"\x03\x04\x00\x00\x00\x00"
+    else:
+        assert client.closed_by_server()
+        assert face.stats.connections_refused == 1
+
+
+def test_allowed_clients_typo_is_an_error(start_face):
+    with pytest.raises(ValueError, match="allowed_clients"):
+        start_face(allowed_clients=["127.0.0.300"])
