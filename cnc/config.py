@@ -358,9 +358,10 @@ _Marks = dict[tuple[Any, ...], Node]
 
 
 def _compose(text: str, file: str) -> Node:
-    loader = yaml.SafeLoader(text)
-    loader.name = file
+    loader = None
     try:
+        loader = yaml.SafeLoader(text)
+        loader.name = file
         node = loader.get_single_node()
     except yaml.MarkedYAMLError as exc:
         mark = exc.problem_mark or exc.context_mark
@@ -369,8 +370,11 @@ def _compose(text: str, file: str) -> Node:
         raise ConfigError([ConfigProblem("", reason, file, line, col)]) from None
     except yaml.YAMLError as exc:
         raise ConfigError([ConfigProblem("", f"YAML: {exc}", file)]) from None
+    except RecursionError:
+        raise ConfigError([ConfigProblem("", "YAML nested too deeply", file)]) from None
     finally:
-        loader.dispose()
+        if loader is not None:
+            loader.dispose()
     if node is None:
         raise ConfigError([ConfigProblem("", "the configuration is empty", file, 1, 1)])
     return node
@@ -381,11 +385,18 @@ def _key(node: Node) -> Any:
 
 
 def _dotted(path: tuple[Any, ...]) -> str:
-    return ".".join(str(p) for p in path)
+    # A key with control characters is shown escaped so that a problem stays on one line.
+    return ".".join(str(p) if str(p).isprintable() else repr(p) for p in path)
 
 
-def _check_keys(node: Node, path: tuple[Any, ...], problems: list[ConfigProblem]) -> None:
-    """Duplicate keys are errors (PyYAML keeps the last one silently); expand `<<` merges."""
+def _check_keys(
+    node: Node, path: tuple[Any, ...], problems: list[ConfigProblem], visited: set[int]
+) -> None:
+    """Duplicate keys are errors (PyYAML keeps the last one silently); expand `<<` merges.
+    Aliased nodes are walked once, so an alias bomb or a recursive alias cannot hang."""
+    if id(node) in visited:
+        return
+    visited.add(id(node))
     if isinstance(node, MappingNode):
         seen: dict[Any, Node] = {}
         for k, _v in node.value:
@@ -407,24 +418,27 @@ def _check_keys(node: Node, path: tuple[Any, ...], problems: list[ConfigProblem]
             seen[kv] = k
         yaml.SafeLoader("").flatten_mapping(node)
         for k, v in node.value:
-            _check_keys(v, (*path, _key(k)), problems)
+            _check_keys(v, (*path, _key(k)), problems, visited)
     elif isinstance(node, SequenceNode):
         for i, v in enumerate(node.value):
-            _check_keys(v, (*path, i), problems)
+            _check_keys(v, (*path, i), problems, visited)
 
 
-def _index(node: Node, path: tuple[Any, ...], marks: _Marks) -> None:
+def _index(node: Node, path: tuple[Any, ...], marks: _Marks, visited: set[int]) -> None:
     """Key path -> the node to point at: a scalar's value, or a block's key."""
     marks[path] = node
+    if id(node) in visited:
+        return  # an alias: its positions are those of the anchor
+    visited.add(id(node))
     if isinstance(node, MappingNode):
         for k, v in node.value:
             kv = _key(k)
-            _index(v, (*path, kv), marks)
+            _index(v, (*path, kv), marks, visited)
             if isinstance(v, MappingNode | SequenceNode):
                 marks[(*path, kv)] = k
     elif isinstance(node, SequenceNode):
         for i, v in enumerate(node.value):
-            _index(v, (*path, i), marks)
+            _index(v, (*path, i), marks, visited)
 
 
 def _merge_nodes(base: Node, over: Node) -> Node:
@@ -507,7 +521,7 @@ def _resolve_bases(node: Node, src_dir: Path, path: tuple[Any, ...], depth: int 
             )
     base = _read(target)
     problems: list[ConfigProblem] = []
-    _check_keys(base.node, (), problems)
+    _check_keys(base.node, (), problems, set())
     if problems:
         raise ConfigError(problems)
     base_node = _resolve_bases(base.node, target.parent, path, depth + 1)
@@ -517,8 +531,15 @@ def _resolve_bases(node: Node, src_dir: Path, path: tuple[Any, ...], depth: int 
 
 def _prepare(src: _Source) -> tuple[Any, _Marks]:
     """Check keys, resolve `base:`, construct plain data and index key positions."""
+    try:
+        return _prepare_nodes(src)
+    except RecursionError:
+        raise ConfigError([ConfigProblem("", "YAML nested too deeply", src.file)]) from None
+
+
+def _prepare_nodes(src: _Source) -> tuple[Any, _Marks]:
     problems: list[ConfigProblem] = []
-    _check_keys(src.node, (), problems)
+    _check_keys(src.node, (), problems, set())
     if problems:
         raise ConfigError(problems)
     node = src.node
@@ -532,7 +553,7 @@ def _prepare(src: _Source) -> tuple[Any, _Marks]:
         elif machines is None:
             node = _resolve_bases(node, src.directory, ())
     marks: _Marks = {}
-    _index(node, (), marks)
+    _index(node, (), marks, set())
     try:
         data = yaml.SafeLoader("").construct_document(node)
     except yaml.MarkedYAMLError as exc:

@@ -423,3 +423,69 @@ def test_docs_document_every_key():
 def test_docs_show_the_shipped_mill_as_it_is():
     doc = (ROOT / "docs" / "configuration.md").read_text(encoding="utf-8")
     assert (MACHINES_DIR / "mill3.yaml").read_text(encoding="utf-8") in doc
+
+
+# --- hostile input: only ConfigError, never a crash or a hang ------------------------------
+
+BOMB = """
+a: &a ["x", "x", "x", "x", "x", "x", "x", "x", "x"]
+b: &b [*a, *a, *a, *a, *a, *a, *a, *a, *a]
+c: &c [*b, *b, *b, *b, *b, *b, *b, *b, *b]
+d: &d [*c, *c, *c, *c, *c, *c, *c, *c, *c]
+e: &e [*d, *d, *d, *d, *d, *d, *d, *d, *d]
+f: &f [*e, *e, *e, *e, *e, *e, *e, *e, *e]
+g: &g [*f, *f, *f, *f, *f, *f, *f, *f, *f]
+h: &h [*g, *g, *g, *g, *g, *g, *g, *g, *g]
+machines: {m1: {base: mill3, description: *h}}
+"""
+
+
+@pytest.mark.parametrize(
+    ("text", "expected"),
+    [
+        (BOMB, "machines.m1.description: must be a string, got a list"),
+        ("machines: {m1: {base: mill3, description: &r [*r]}}\n", "must be a string"),
+        ("machines: &m {m1: *m}\n", "machines.m1"),
+        ("machines:\n  m1: {base: mill3, host: &x {<<: *x}}\n", ""),
+        ("[" * 1500 + "]" * 1500, "nested too deeply"),
+        ("\x00\x01", "YAML"),
+        ("? [1, 2]\n: x\n", ""),
+        ("machines: {1: {base: mill3}}\n", "machines.1: must be a string, got 1"),
+        ("machines:\n  m1:\n", "machines.m1: must be a mapping, got null"),
+    ],
+)
+def test_hostile_yaml_gets_config_error(tmp_path, text, expected):
+    path = write(tmp_path, text)
+    with pytest.raises(ConfigError) as info:
+        load_cell_config(path)
+    assert expected in str(info.value)
+
+
+json_scalars = st.none() | st.booleans() | st.integers() | st.floats() | st.text(max_size=8)
+json_values = st.recursive(
+    json_scalars,
+    lambda inner: (
+        st.lists(inner, max_size=3) | st.dictionaries(st.text(max_size=8), inner, max_size=3)
+    ),
+    max_leaves=10,
+)
+section_keys = st.sampled_from(
+    [*MachineConfig.model_fields, "base", "axes", "X", "max_accel", "plant", "screw", "lead"]
+)
+
+
+@settings(max_examples=80, deadline=None)
+@given(
+    section=st.dictionaries(section_keys, json_values, max_size=6),
+    keep_base=st.booleans(),
+)
+def test_random_sections_only_ever_raise_config_error(section, keep_base):
+    if keep_base:
+        section = {**section, "base": "mill3"}
+    try:
+        load_machine_params({"machines": {"m1": section}})
+    except ConfigError as exc:
+        assert str(exc)  # one line per problem, never empty
+        assert all(
+            line.startswith(("<config>:", str(MACHINES_DIR))) for line in str(exc).splitlines()
+        )
