@@ -132,6 +132,7 @@ class ModbusFace:
         self._server: asyncio.Server | None = None
         self._sweeper: asyncio.Task | None = None
         self._connections: set[_Connection] = set()
+        self._tasks: set[asyncio.Task] = set()
         self._loop: asyncio.AbstractEventLoop | None = None
         self._thread: threading.Thread | None = None
 
@@ -183,6 +184,9 @@ class ModbusFace:
             self._sweeper = None
         for conn in list(self._connections):
             conn.close()
+        for task in list(self._tasks):
+            task.cancel()
+        await asyncio.gather(*self._tasks, return_exceptions=True)
         await server.wait_closed()
         for _ in range(3):  # let the transports deliver connection_lost before the loop stops
             await asyncio.sleep(0)
@@ -398,7 +402,9 @@ class _Connection(asyncio.Protocol):
                 self._backlog.extend(frames)
                 self._waiting = True
                 self._update_reading()
-                self._loop.create_task(self._answer_after_scan(tid, unit, pdu))
+                task = self._loop.create_task(self._answer_after_scan(tid, unit, pdu))
+                self.face._tasks.add(task)
+                task.add_done_callback(self.face._tasks.discard)
                 return
             out.append(encode(tid, unit, response))
         if out:

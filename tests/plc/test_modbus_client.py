@@ -204,3 +204,13 @@ def test_ack_after_scan_without_scans_is_exception_04(start_face, raw_clients):
     c = raw_clients(face.bound_port)
     assert c.request(struct.pack(">BHH", 6, 0, 1)) == b"\x86\x04"
     assert len(plc.queue.drain()) == 1  # still queued: the PLC applies it when it scans
+
+
+def test_stop_while_a_write_waits_for_its_scan(start_face, raw_clients):
+    face, plc = start_face(writable="hr:0-9", ack_after_scan=True, ack_timeout=30)
+    c = raw_clients(face.bound_port)
+    c.send(c.frame(struct.pack(">BHH", 6, 0, 1)))
+    _wait_queued(face, 1)
+    face.stop_thread()  # must not hang on the waiting answer
+    assert c.closed_by_server()
+    assert face._tasks == set()
