@@ -285,6 +285,8 @@ def dda_circle(
       fed one pulse per clock until it arrives (the explicit end-point condition, task 4 of
       000_nc_book.md §4.1).
     """
+    if endpoint not in ("register", "counters"):
+        raise NcError(f"unknown DDA end-point handling {endpoint!r}")
     cap = _capacity(n_bits, capacity)
     sx, sy = int(start[0]), int(start[1])
     ex, ey = int(end[0]), int(end[1])
@@ -306,8 +308,10 @@ def dda_circle(
             "the hardware DDA interpolates within one quadrant only; split the arc at the"
             " quadrant boundaries (or use endpoint='counters')"
         )
-    if endpoint not in ("register", "counters"):
-        raise NcError(f"unknown DDA end-point handling {endpoint!r}")
+    if 2 * cap * len(pieces) > _MAX_CLOCKS:
+        raise NcError(
+            f"a DDA arc with a register of capacity {cap} takes more than {_MAX_CLOCKS} clocks"
+        )
 
     software = endpoint == "counters"
     q1 = q2 = 0

@@ -225,6 +225,7 @@ def test_hardware_mode_refuses_arcs_across_quadrants():
         ((15, 0), (0, 15), {}, "needs n_bits or capacity"),
         ((15, 0), (0, 15), {"n_bits": 4, "capacity": 16}, "not both"),
         ((15, 0), (0, 15), {"n_bits": 4, "endpoint": "magic"}, "unknown DDA end-point"),
+        ((15, 0), (0, 15), {"n_bits": 40}, "more than 10000000 clocks"),
     ],
 )
 def test_circle_bad_input(start, end, kwargs, message):
