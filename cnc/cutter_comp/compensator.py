@@ -176,10 +176,11 @@ class CutterCompensation:
 
     def push(self, seg: Segment) -> list[Segment]:
         """Feed the next programmed segment; returns the compensated segments now final."""
-        self._grow_scale(seg)
         mode = self._mode
         if mode is _Mode.INACTIVE:
             return [seg]
+        self._validate(seg)
+        self._grow_scale(seg)
         zero = self._is_zero(seg)
         if mode is _Mode.STARTUP:
             if zero:
@@ -476,6 +477,17 @@ class CutterCompensation:
                 "on the inside of the arc",
             )
         return e
+
+    def _validate(self, seg: Segment) -> None:
+        if seg.kind not in ("line", "arc"):
+            raise self._error(
+                f"cutter compensation: unknown segment kind {seg.kind!r}", seg.line, seg.col
+            )
+        coords = [*seg.start, *seg.end, *(seg.center or ())]
+        if not all(math.isfinite(c) for c in coords):
+            raise self._error(
+                "cutter compensation: non-finite coordinate in the move", seg.line, seg.col
+            )
 
     def _is_zero(self, seg: Segment) -> bool:
         if seg.kind == "arc":

@@ -585,6 +585,20 @@ def test_discontinuous_contour_is_refused():
     assert str(e.value).startswith("part.nc:3:1: cutter compensation")
 
 
+def test_bad_segments_are_refused_with_their_position():
+    for bad in [
+        Segment("line", (0, 0), (math.inf, 0), None, False, 4, 2),
+        Segment("spline", (0, 0), (1, 0), None, False, 4, 2),  # type: ignore[arg-type]
+        Segment("arc", (0, 0), (1, 0), None, True, 4, 2),
+    ]:
+        cc = CutterCompensation()
+        cc.start("left", 1.0)
+        cc.push(UP)
+        with pytest.raises(NcError) as e:
+            cc.push(bad)
+        assert (e.value.line, e.value.col) == (4, 2)
+
+
 def test_bad_side_and_radius():
     cc = CutterCompensation()
     with pytest.raises(NcError):
