@@ -908,18 +908,6 @@ def default_cell_config() -> CellConfig:
 # --- documentation -------------------------------------------------------------------------
 
 
-def _type_name(annotation: Any) -> str:
-    text = str(annotation).replace("typing.", "")
-    for word, plain in (
-        ("<class '", ""),
-        ("'>", ""),
-        ("NoneType", "null"),
-        ("Annotated[", ""),
-    ):
-        text = text.replace(word, plain)
-    return text
-
-
 def config_reference_markdown() -> str:
     """One Markdown table per section: key, type, default, meaning (docs/configuration.md
     embeds this text; a test keeps them equal)."""
