@@ -575,6 +575,7 @@ class Drive402:
         )
         self._hm_status = HM.HomingStatus.IN_PROGRESS
         if not segs:
+            self._hm.latched = self.plant.theta_meas
             self._set_home(self.plant.theta_meas)
 
     def _set_home(self, measured: float) -> None:
@@ -752,6 +753,7 @@ class Drive402:
         if mode == HOMING:
             hm = self._hm
             if hm is not None:
+                hm.standstill = abs(self.plant.vel_meas) < self.params.loops.standstill_velocity
                 done = hm.drive(d, h)
                 if hm.error:
                     self._hm_status = (

@@ -115,13 +115,14 @@ class HomingRun:
         self.latched: float | None = None  # measured angle of the home position
         self.error = False
         self.braking = not segments
+        self.standstill = True  # the axis' actual speed is below the standstill threshold
 
     def drive(self, dem, h: float) -> bool:
         """Advance the demand one sub-step; True once the axis has stopped after the latch."""
         from drives.cia402.profile import ramp_velocity, stop_step
 
         if self.braking or self.error:
-            return stop_step(dem, self.acc, h)
+            return stop_step(dem, self.acc, h) and self.standstill
         seg = self.segments[self.i]
         speed = self.creep if seg.creep else self.fast
         ramp_velocity(dem, seg.direction * speed, self.acc, self.acc, h)

@@ -113,8 +113,10 @@ class SwitchParams:
 
     negative_limit: float | None = -0.005  # active for x <= value
     positive_limit: float | None = 0.555  # active for x >= value
-    home_switch: float | None = 0.010  # edge; active for x >= value ("positive home switch")
-    home_switch_active_below: bool = False  # True: active for x <= value (negative home switch)
+    home_switch: float | None = 0.010  # m, the dog's edge
+    # True: active for x <= edge, a dog over the negative end (methods 5, 6, 21, 22);
+    # False: active for x >= edge, a "positive home switch" (methods 3, 4, 19, 20)
+    home_switch_active_below: bool = True
     initial_position: float = 0.200  # m, table position at power-on
 
 

@@ -66,7 +66,9 @@ class Plant:
         self.backlash = p.screw.backlash
         self.theta = 0.0
         self._nut_origin = p.switches.initial_position
-        self._rotor_origin = 0.0  # physical rotor angle at encoder count zero
+        # physical rotor angle at encoder count zero: the rotor is keyed to the screw, so the
+        # index mark sits at fixed table positions (rotor angle = x / metres-per-rad)
+        self._rotor_origin = p.switches.initial_position / p.metres_per_motor_rad
         self.table_x = p.switches.initial_position
         self.power_on_reset()
         self.vdc = p.dc_link.mains_voltage
@@ -156,21 +158,11 @@ class Plant:
         a = self._decay
         fault = 0
 
-        # --- feedback: encoder read and speed from the count difference
+        # --- feedback: the encoder was read at the end of the previous sub-step
+        theta_m = self.counts * self._rad_per_count
+        vel_m = self.vel_meas
         if self.encoder_broken:
             fault = ENCODER
-        counts = math.floor(self.theta / self._rad_per_count) + self.encoder_offset
-        dc = counts - self._prev_counts
-        max_step = (
-            p.encoder.max_speed_factor * m.max_speed_rpm * _TWO_PI / 60.0 * h / self._rad_per_count
-        )
-        if abs(dc) > max_step + 2:
-            fault = ENCODER  # implausible jump between two reads
-        self._prev_counts = counts
-        self.counts = counts
-        theta_m = counts * self._rad_per_count
-        vel_m = dc * self._rad_per_count / h
-        self.vel_meas = vel_m
 
         # --- velocity and current loops
         omega = self.omega
@@ -249,6 +241,18 @@ class Plant:
                 self.table_x = nut + half
         else:
             self.table_x = nut
+
+        # --- encoder read at the end of the sub-step; speed from the count difference
+        counts = math.floor(self.theta / self._rad_per_count) + self.encoder_offset
+        dc = counts - self._prev_counts
+        max_step = (
+            p.encoder.max_speed_factor * m.max_speed_rpm * _TWO_PI / 60.0 * h / self._rad_per_count
+        )
+        if abs(dc) > max_step + 2:
+            fault = ENCODER  # implausible jump between two reads
+        self._prev_counts = counts
+        self.counts = counts
+        self.vel_meas = dc * self._rad_per_count / h
 
         # --- DC link (implicit in the conductances): C·dV/dt = I_src − I_inv − V·g
         dl = p.dc_link
