@@ -138,6 +138,27 @@ class _Delayed:
     msg: can.Message = field(compare=False)
 
 
+_new_message = can.Message.__new__
+
+
+def _wire_message(msg: can.Message, timestamp: float, channel: str) -> can.Message:
+    """A fresh received copy of `msg`: filled slot by slot, as Message() costs ~3 us."""
+    wire = _new_message(can.Message)
+    wire.timestamp = timestamp
+    wire.arbitration_id = msg.arbitration_id
+    wire.is_extended_id = msg.is_extended_id
+    wire.is_remote_frame = msg.is_remote_frame
+    wire.is_error_frame = False
+    wire.channel = channel
+    wire.dlc = msg.dlc
+    wire.data = bytearray(msg.data)
+    wire.is_fd = False
+    wire.is_rx = True
+    wire.bitrate_switch = False
+    wire.error_state_indicator = False
+    return wire
+
+
 def _priority(msg: can.Message) -> tuple[int, int, int, int]:
     """Arbitration order: base ID, then 11-bit before 29-bit, extension, data before remote."""
     if msg.is_extended_id:
@@ -436,16 +457,7 @@ class CanHub:
             and not msg.is_remote_frame
         )
         end = self._occupy(queued_at, bits, is_sync)
-        wire = can.Message(
-            timestamp=end,
-            arbitration_id=msg.arbitration_id,
-            is_extended_id=msg.is_extended_id,
-            is_remote_frame=msg.is_remote_frame,
-            dlc=msg.dlc,
-            data=bytes(msg.data),
-            channel=self.channel,
-            check=False,
-        )
+        wire = _wire_message(msg, end, self.channel)
         self._fan_out(sender, wire)
 
     def _transmit_error(self, sender: SimBus, msg: can.Message) -> None:

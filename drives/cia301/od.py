@@ -35,10 +35,14 @@ ABORT_LENGTH_LOW = 0x06070013
 Value = int | float | str | bytes
 
 
-@lru_cache(maxsize=64)
-def load_od(eds_path: str, node_id: int) -> canopen.ObjectDictionary:
-    """The EDS parsed once per (file, node-ID); definitions are shared and never mutated."""
-    return canopen.import_od(eds_path, node_id)
+@lru_cache(maxsize=16)
+def load_od(eds_path: str) -> canopen.ObjectDictionary:
+    """The EDS parsed once per file with node-ID 0; definitions are shared, never mutated.
+
+    `$NODEID` defaults are marked `relative` by canopen; `ObjectDictionary.reset` adds the
+    node-ID, so one parse (~0.1 s) serves every node on the bus.
+    """
+    return canopen.import_od(eds_path, 0)
 
 
 @dataclass(slots=True)
@@ -78,7 +82,8 @@ class ObjectDictionary:
     """Storage + access rules. Hooks let the services validate writes and compute reads."""
 
     def __init__(self, eds_path: str, node_id: int, application: DriveApplication) -> None:
-        self.definitions = load_od(eds_path, node_id)
+        self.node_id = node_id
+        self.definitions = load_od(eds_path)
         self.application = application
         self._entries: dict[tuple[int, int], Entry] = {}
         self._objects: dict[int, Any] = {}
@@ -129,6 +134,8 @@ class ObjectDictionary:
                 default = entry.var.default
                 if default is None:
                     default = b"" if entry.codec is None else 0
+                elif entry.var.relative:
+                    default += self.node_id
                 self._store[(index, subindex)] = default
 
     # ------------------------------------------------------------------ values

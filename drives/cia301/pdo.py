@@ -222,7 +222,16 @@ class PdoService:
     def pack(self, channel: PdoChannel) -> bytes:
         """Sample the mapped objects of a TPDO."""
         get = self.od.get
-        values = [0 if e is None else get(e.index, e.subindex) for e in channel.targets]
+        read = self.od.application.read_object
+        hooks = self.od.read_hooks
+        values = [
+            0
+            if e is None
+            else read(e.index, e.subindex)
+            if e.owned and e.index not in hooks
+            else get(e.index, e.subindex)
+            for e in channel.targets
+        ]
         try:
             return channel.codec.pack(*values)
         except struct.error:

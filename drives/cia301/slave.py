@@ -34,6 +34,8 @@ from drives.cia301.pdo import PdoChannel, PdoService
 from drives.cia301.sdo_server import SdoServer
 from drives.cia301.sync import SyncConsumer
 
+_new_message = can.Message.__new__
+
 EMCY_HEARTBEAT_LOST = 0x8130
 EMCY_BUS_OFF_RECOVERED = 0x8140
 EMCY_SYNC_TIMEOUT = 0x8100
@@ -67,6 +69,9 @@ class CanopenSlave:
         self._guard_toggle = 0
         self._lock = threading.RLock()
         self._dispatch: dict[int, object] = {}
+        self._sync_rpdos: list[PdoChannel] = []
+        self._sync_tpdos: list[PdoChannel] = []
+        self._event_tpdos: list[PdoChannel] = []
         self._thread: threading.Thread | None = None
         self._running = False
         self.od = ObjectDictionary(eds_path, node_id, application)
@@ -111,6 +116,10 @@ class CanopenSlave:
             if channel.valid and channel.rtr_allowed:
                 table.setdefault(channel.cob_id, partial(self._on_tpdo_rtr, channel))
         self._dispatch = table
+        # The per-SYNC and per-tick loops only visit channels that can act.
+        self._sync_rpdos = [c for c in self.pdo.rpdos if c.valid and c.synchronous]
+        self._sync_tpdos = [c for c in self.pdo.tpdos if c.valid and c.synchronous]
+        self._event_tpdos = [c for c in self.pdo.tpdos if c.valid and c.event_driven]
 
     def handle(self, msg: can.Message) -> None:
         """Process one received frame (replies go out through the bus)."""
@@ -123,13 +132,16 @@ class CanopenSlave:
 
     # ------------------------------------------------------------------ sending
     def _send(self, cob_id: int, data: bytes, *, remote: bool = False) -> bool:
-        msg = can.Message(
-            arbitration_id=cob_id,
-            data=data,
-            is_extended_id=False,
-            is_remote_frame=remote,
-            check=False,
-        )
+        msg = _new_message(can.Message)  # slot by slot: Message() costs ~3 us per frame
+        msg.timestamp = 0.0
+        msg.arbitration_id = cob_id
+        msg.is_extended_id = False
+        msg.is_remote_frame = remote
+        msg.is_error_frame = False
+        msg.channel = None
+        msg.dlc = len(data)
+        msg.data = bytearray(data)
+        msg.is_fd = msg.is_rx = msg.bitrate_switch = msg.error_state_indicator = False
         try:
             self.bus.send(msg)
         except can.CanError:
@@ -277,15 +289,13 @@ class CanopenSlave:
             self._clear_communication_error(EMCY_SYNC_TIMEOUT)
         operational = self.state is NmtState.OPERATIONAL
         if operational:
-            for channel in self.pdo.rpdos:
+            for channel in self._sync_rpdos:
                 if channel.pending is not None:
                     data, channel.pending = channel.pending, None
                     self.pdo.unpack(channel, data)
         self.application.on_sync()
         if operational:
-            for channel in self.pdo.tpdos:
-                if not channel.valid or not channel.synchronous:
-                    continue
+            for channel in self._sync_tpdos:
                 if channel.trans_type == 0:
                     data = self.pdo.pack(channel)
                     if data != channel.last_sent:
@@ -347,12 +357,10 @@ class CanopenSlave:
             self.application.advance(dt_s)
             self._pump_application_emcy()
             if self.state is NmtState.OPERATIONAL:
-                self._event_tpdos(dt_s)
+                self._send_event_tpdos(dt_s)
 
-    def _event_tpdos(self, dt_s: float) -> None:
-        for channel in self.pdo.tpdos:
-            if not channel.valid or not channel.event_driven:
-                continue
+    def _send_event_tpdos(self, dt_s: float) -> None:
+        for channel in self._event_tpdos:
             channel.since_sent += dt_s
             if channel.since_sent + 1e-12 < channel.inhibit_100us * 1e-4:
                 continue

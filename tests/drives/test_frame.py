@@ -6,6 +6,7 @@ import statistics
 import pytest
 
 from drives.bus.frame import (
+    TRAILER_BITS,
     crc15,
     frame_bits,
     nominal_bits,
@@ -116,3 +117,22 @@ def test_remote_frame_has_no_data_field_but_keeps_dlc():
 def test_bad_frames_are_refused_with_the_reason(kwargs, message):
     with pytest.raises(ValueError, match=message):
         unstuffed_bits(**kwargs)
+
+
+def test_table_driven_length_equals_the_bit_by_bit_reference():
+    rng = random.Random(11)
+    patterns = (0x00, 0xFF, 0xF0, 0x0F, 0x1F, 0xF8, 0x83)
+    for _ in range(5000):
+        extended = rng.random() < 0.3
+        remote = rng.random() < 0.1
+        can_id = rng.randrange(1 << (29 if extended else 11))
+        if rng.random() < 0.1:
+            can_id = rng.choice([0, (1 << (29 if extended else 11)) - 1])
+        data = bytes(
+            rng.choice(patterns) if rng.random() < 0.6 else rng.randrange(256)
+            for _ in range(rng.randrange(9))
+        )
+        dlc = rng.randrange(9) if remote else None
+        bits = unstuffed_bits(can_id, data, extended=extended, remote=remote, dlc=dlc)
+        reference = len(bits) + stuff_bit_count(bits) + TRAILER_BITS
+        assert frame_bits.__wrapped__(can_id, data, extended, remote, dlc) == reference
