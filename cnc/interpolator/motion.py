@@ -1,0 +1,438 @@
+"""`Motion`: the look-ahead planner and the IPO-cycle interpolator behind one pure API.
+
+The machine drives it once per IPO cycle::
+
+    m = Motion(params)
+    while program:                     # feed the look-ahead while it has room
+        if not m.push(cmd): break
+    s = m.step()                       # next setpoint: s.pose, s.velocity, s.line, s.sync
+    if s.sync is not None:             # a sync point (M-function, dwell, tool change...)
+        ...do it...; m.acknowledge()   # motion stays at rest until acknowledged
+
+No clock is read: time advances by exactly one IPO cycle per `step()`, so the same
+commands always give the same samples, bit for bit.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from cnc.canon import MOTION_TYPES, SetPathMode
+from cnc.errors import NcError
+from cnc.params import MachineParams
+from cnc.planner.limits import AxisLimits
+from cnc.planner.path import Path
+from cnc.planner.profile import Span, partition, solve
+from cnc.planner.scurve import change_distance
+
+DROP_EVERY = 256
+
+
+@dataclass(frozen=True, slots=True)
+class Sample:
+    """One IPO-cycle setpoint."""
+
+    t: float  # seconds since the Motion was created (cycle count x IPO cycle)
+    pose: tuple[float, ...]  # commanded machine position, mm
+    velocity: float  # path velocity, mm/s
+    line: int  # source line of the block being executed (0 before the first)
+    sync: object | None = None  # a sync-point command reached in this cycle
+
+
+class Motion:
+    """Look-ahead planner + interpolator for one machine (pure, stepped per IPO cycle)."""
+
+    def __init__(
+        self,
+        params: MachineParams,
+        start: tuple[float, ...] | None = None,
+        ipo_cycle_s: float | None = None,
+    ) -> None:
+        t = params.ipo_cycle_s if ipo_cycle_s is None else ipo_cycle_s
+        if not 0.0005 <= t <= 0.008 + 1e-12:
+            raise NcError(f"IPO cycle {t * 1000:g} ms outside 0.5..8 ms")
+        if params.lookahead < 1:
+            raise NcError("look-ahead must hold at least one block")
+        self.params = params
+        self.ipo = t
+        self.lim = AxisLimits.from_params(params, t)
+        if start is None:
+            start = (0.0, 0.0, 0.0)
+        self._pose = tuple(float(x) for x in start)
+        self.path = Path(params, self.lim, self._pose)
+        self.single_block = False
+        self._feed_ovr = 1.0
+        self._rapid_ovr = 1.0
+        self._hold = False
+        self._eop = False
+        self._cycle = 0
+        self._s = 0.0
+        self._v = 0.0
+        self._a = 0.0
+        self._spans: list[Span] = []
+        self._si = 0
+        self._t = 0.0
+        self._hint = 0
+        self._kp = 0  # segment under the current position
+        self._kdone = 0  # first segment not yet finished
+        self._blocks_done = 0
+        self._line = 0
+        self._sync_queue: list = []
+        self._waiting = None
+        self._dirty = False
+        self._urgent = False
+        self._sb_wait = False
+        self._sb_seen = False
+        self.replans = 0
+
+    # -- feeding ------------------------------------------------------------------------
+    def space(self) -> int:
+        """Motion blocks the look-ahead can still take."""
+        return self.params.lookahead - (self.path.blocks - self._blocks_done)
+
+    def push(self, cmd) -> bool:
+        """Queue one canonical command; False (nothing queued) when the look-ahead is full."""
+        if isinstance(cmd, MOTION_TYPES):
+            if self.space() <= 0:
+                return False
+            self.path.add_motion(cmd, self._protect_s())
+            self._dirty = True
+        elif isinstance(cmd, SetPathMode):
+            self.path.set_path_mode(cmd)
+        elif self._s >= self.path.end_s and not self._ahead():
+            self._sync_queue.append(cmd)
+        else:
+            self.path.add_sync(cmd)
+        return True
+
+    def end_of_program(self) -> None:
+        """No more commands will come: the path end is final."""
+        self._eop = True
+
+    # -- operator -----------------------------------------------------------------------
+    def set_feed_override(self, f: float) -> None:
+        """Feed override 0..2 (0..200 %); 0 holds feed moves like a feed hold."""
+        f = min(max(float(f), 0.0), 2.0)
+        if f != self._feed_ovr:
+            self._feed_ovr = f
+            self._urgent = True
+
+    def set_rapid_override(self, f: float) -> None:
+        """Rapid override 0..1 (0..100 %); 0 holds like a feed hold."""
+        f = min(max(float(f), 0.0), 1.0)
+        if f != self._rapid_ovr:
+            self._rapid_ovr = f
+            self._urgent = True
+
+    def feed_hold(self) -> None:
+        """Decelerate along the path (jerk-limited) to rest; `resume()` continues."""
+        if not self._hold:
+            self._hold = True
+            self._urgent = True
+
+    def resume(self) -> None:
+        """Cycle start: leave feed hold or a single-block stop."""
+        if self._hold or self._sb_wait:
+            self._hold = False
+            self._sb_wait = False
+            self._urgent = True
+
+    def set_single_block(self, on: bool) -> None:
+        if bool(on) != self.single_block:
+            self.single_block = bool(on)
+            self._urgent = True
+
+    def acknowledge(self) -> None:
+        """The sync-point command last reported is done; motion may continue."""
+        self._waiting = None
+
+    # -- status -------------------------------------------------------------------------
+    @property
+    def feed_override(self) -> float:
+        return self._feed_ovr
+
+    @property
+    def rapid_override(self) -> float:
+        return self._rapid_ovr
+
+    @property
+    def waiting(self):
+        """The sync-point command awaiting `acknowledge()`, or None."""
+        return self._waiting
+
+    @property
+    def holding(self) -> bool:
+        return self._hold or self._sb_wait
+
+    @property
+    def idle(self) -> bool:
+        """Nothing left to move or hand over (the program may still push more)."""
+        return (
+            not self._ahead()
+            and self._v == 0.0
+            and self._waiting is None
+            and not self._sync_queue
+            and not self.path.head_sync
+        )
+
+    @property
+    def pose(self) -> tuple[float, ...]:
+        return self._pose
+
+    # -- the IPO cycle ------------------------------------------------------------------
+    def step(self) -> Sample:
+        """Advance one IPO cycle and return the setpoint."""
+        self._cycle += 1
+        tnow = self._cycle * self.ipo
+        if self._waiting is not None:
+            return Sample(tnow, self._pose, 0.0, self._line)
+        if self.path.head_sync:
+            self._sync_queue.extend(self.path.head_sync)
+            self.path.head_sync.clear()
+        if self._sync_queue:
+            cmd = self._sync_queue.pop(0)
+            self._waiting = cmd
+            self._line = getattr(cmd, "line", self._line)
+            return Sample(tnow, self._pose, 0.0, self._line, cmd)
+        self._maybe_replan()
+        self._advance(self.ipo)
+        return Sample(tnow, self._pose, self._v, self._line)
+
+    # -- internals ----------------------------------------------------------------------
+    def _ahead(self) -> bool:
+        return self._s < self.path.end_s
+
+    def _protect_s(self) -> float:
+        if self._si < len(self._spans):
+            return self._spans[self._si].s1
+        return self._s
+
+    def _maybe_replan(self) -> None:
+        if self._sb_wait or (self._hold and self._v == 0.0 and not self._spans):
+            self._urgent = False
+            return
+        if (
+            self._urgent
+            or self._dirty
+            or self._si >= len(self._spans)
+            and self._ahead()
+            and self._v == 0.0
+        ):
+            self._replan()
+
+    def _ovr_hold(self) -> bool:
+        return self._feed_ovr == 0.0 or self._rapid_ovr == 0.0
+
+    def _replan(self) -> None:
+        urgent = self._urgent
+        self._urgent = False
+        self._dirty = False
+        self.replans += 1
+        lead = self._lead(urgent)
+        if lead is not None:
+            s0, v0 = lead.s1, lead.v1
+        else:
+            s0, v0 = self._s, self._v
+        segs = self.path.segs
+        k = self._kp
+        n = len(segs)
+        while k < n and segs[k].s1 <= s0:
+            k += 1
+        fo, ro = self._feed_ovr, self._rapid_ovr
+        spans: list[Span] = []
+        if lead is not None and lead.stop:
+            pass  # the lead ends at rest: the next plan starts from there
+        elif k < n:
+            if self._hold or self._ovr_hold():
+                spans = self._plan_stop(k, s0, v0, fo, ro)
+            elif self.single_block:
+                spans = self._plan_single_block(k, s0, v0, fo, ro)
+            else:
+                spans, _ok = solve(partition(segs, k, s0, fo, ro, False, None), v0)
+        self._spans = ([lead] if lead is not None else []) + spans
+        self._si = 0
+        self._t = 0.0
+        self._hint = 0
+
+    def _lead(self, urgent: bool) -> Span | None:
+        """The part of the current motion that must run on as planned (a != 0 now)."""
+        if self._si >= len(self._spans) or self._a == 0.0:
+            return None
+        sp = self._spans[self._si]
+        rows = sp.phases
+        i = self._hint
+        t0, dt, s, v, a, j = rows[i]
+        x = self._t - t0
+        a_now = a + j * x
+        s_now = self._s - sp.s0
+        v_now = v + x * (a + 0.5 * j * x)
+        if urgent and a_now > 0.0:
+            jj = sp.jerk_limit
+            tail = [(0.0, a_now / jj, 0.0, v_now, a_now, -jj)]
+        else:
+            tail = [(0.0, t0 + dt - self._t, 0.0, v_now, a_now, j)]
+            k = i + 1
+            acc = a + j * dt
+            while k < len(rows) and abs(acc) > 1e-9 * max(1.0, abs(a_now)):
+                tt0, tdt, _ts, _tv, ta, tj = rows[k]
+                tail.append((0.0, tdt, 0.0, 0.0, ta, tj))
+                acc = ta + tj * tdt
+                k += 1
+        # re-integrate the tail so times and states are relative to now
+        out = []
+        tt = 0.0
+        ss = 0.0
+        vv = v_now
+        aa = a_now
+        for _t0, d, _s, _v, _a, jj2 in tail:
+            if d <= 0.0:
+                continue
+            out.append((tt, d, ss, vv, aa, jj2))
+            ss += d * (vv + d * (0.5 * aa + d * jj2 / 6.0))
+            vv += d * (aa + 0.5 * jj2 * d)
+            aa += jj2 * d
+            tt += d
+        if not out:
+            return None
+        s1 = sp.s0 + s_now + ss
+        if s1 > sp.s1:
+            s1 = sp.s1
+        lead = Span(self._s, s1, out, tt, v_now, vv, False, sp.vmax, sp.jerk_limit)
+        if s1 >= sp.s1:
+            lead.stop = sp.stop
+            lead.single_block_stop = sp.single_block_stop
+        if vv <= 0.0:
+            lead.v1 = 0.0
+            lead.stop = True
+        return lead
+
+    def _stop_limits(self, k: int, s0: float, dist: float) -> tuple[float, float]:
+        segs = self.path.segs
+        at = jt = float("inf")
+        while k < len(segs):
+            g = segs[k]
+            at = min(at, g.at)
+            jt = min(jt, g.jt)
+            if g.s1 >= s0 + dist:
+                break
+            k += 1
+        return at, jt
+
+    def _plan_stop(self, k, s0, v0, fo, ro) -> list[Span]:
+        if v0 == 0.0:
+            return []
+        segs = self.path.segs
+        g = segs[k]
+        at, jt = g.at, g.jt
+        dist = change_distance(v0, 0.0, at, jt)
+        for _ in range(4):
+            at, jt = self._stop_limits(k, s0, dist)
+            dist = change_distance(v0, 0.0, at, jt)
+        extra = 0.0
+        for _ in range(60):
+            stop_s = s0 + dist * (1.0 + 1e-9) + extra + 1e-9
+            parts = partition(segs, k, s0, max(fo, 1.0), max(ro, 1.0), False, stop_s)
+            for p in parts:  # a hold only ever slows down
+                if p[2] > v0:
+                    p[2] = v0
+                if p[6] > v0:
+                    p[6] = v0
+            spans, ok = solve(parts, v0)
+            if ok:
+                return spans
+            extra = extra * 2.0 + 0.05 * dist + 1e-6
+        return spans
+
+    def _plan_single_block(self, k, s0, v0, fo, ro) -> list[Span]:
+        segs = self.path.segs
+        kk = k
+        spans: list[Span] = []
+        while kk < len(segs):
+            while kk < len(segs) and not segs[kk].block_last:
+                kk += 1
+            if kk >= len(segs):
+                kk = len(segs) - 1
+            parts = partition(segs, k, s0, fo, ro, False, segs[kk].s1)
+            spans, ok = solve(parts, v0)
+            if ok:
+                break
+            kk += 1
+        if spans:
+            spans[-1].single_block_stop = True
+        return spans
+
+    def _advance(self, dt: float) -> None:
+        while True:
+            if self._si >= len(self._spans):
+                if self._spans:
+                    self._spans = []
+                    self._si = 0
+                if self._ahead() and not self.holding and not self._ovr_hold():
+                    self._replan()
+                    if not self._spans:
+                        self._v = 0.0
+                        self._a = 0.0
+                        return
+                    continue
+                self._v = 0.0
+                self._a = 0.0
+                return
+            sp = self._spans[self._si]
+            t = self._t + dt
+            if t < sp.dur:
+                self._t = t
+                s, v, a, self._hint = sp.state(t, self._hint)
+                self._s, self._v, self._a = s, v, a
+                self._place(s)
+                return
+            dt = t - sp.dur
+            self._s = sp.s1
+            self._v = sp.v1
+            self._a = 0.0
+            self._place(sp.s1)
+            self._si += 1
+            self._t = 0.0
+            self._hint = 0
+            if sp.stop or sp.v1 == 0.0:
+                # at rest: the rest of this cycle is spent standing, so a stop point is
+                # always sampled exactly; sync commands hanging here come next
+                self._v = 0.0
+                self._spans = []
+                self._si = 0
+                self._arrived()
+                if getattr(sp, "single_block_stop", False):
+                    self._sb_wait = True
+                return
+            if self._dirty:
+                self._replan()
+
+    def _arrived(self) -> None:
+        segs = self.path.segs
+        k = self._kdone - 1
+        if 0 <= k < len(segs) and segs[k].s1 == self._s and segs[k].sync_after:
+            self._sync_queue.extend(segs[k].sync_after)
+            segs[k].sync_after = []
+
+    def _place(self, s: float) -> None:
+        segs = self.path.segs
+        n = len(segs)
+        kp = self._kp
+        while kp < n - 1 and s > segs[kp].s1:
+            kp += 1
+        kd = self._kdone
+        while kd < n and segs[kd].s1 <= s:
+            if segs[kd].block_last:
+                self._blocks_done += 1
+            kd += 1
+        if kp < n:
+            g = segs[kp]
+            # at a piece end take the stored end point: s0 + length - s0 may round short
+            self._pose = g.geom.end if s >= g.s1 else g.geom.point(s - g.s0)
+            self._line = g.line
+        drop = min(kp, kd - 1)
+        if drop >= DROP_EVERY:
+            del segs[:drop]
+            kp -= drop
+            kd -= drop
+        self._kp = kp
+        self._kdone = kd

@@ -1,0 +1,208 @@
+"""The look-ahead path: canonical motion commands turned into pieces with junctions.
+
+Each motion block becomes one or two `Segment`s (a G64 corner between two lines adds a
+circular blend and trims both lines). Pieces are laid end to end on one path-length axis
+`s`, so the velocity profile is a function of time to s and knows nothing of geometry.
+Non-motion commands become sync points: they hang on the segment they follow, whose end
+is then an exact stop.
+"""
+
+from __future__ import annotations
+
+from cnc.canon import ArcFeed, PathMode, SetPathMode, StraightFeed, StraightTraverse
+from cnc.errors import NcError
+from cnc.params import MachineParams
+from cnc.planner.geometry import Line, arc_from_canon, blend
+from cnc.planner.limits import AxisLimits, junction_cap, piece_limits
+
+KINK_SPAN_BREAK = 1e-9  # tangent jumps above this end a velocity span (a = 0 there)
+
+
+class Segment:
+    """One piece of the path with its static limits and its end junction."""
+
+    __slots__ = (
+        "geom",
+        "s0",
+        "s1",
+        "line",
+        "block",
+        "block_last",
+        "vphys",
+        "at",
+        "jt",
+        "feed",
+        "normal_axis",
+        "stop_end",
+        "jcap_end",
+        "break_end",
+        "sync_after",
+        "exact",
+        "tolerance",
+        "orig_len",
+    )
+
+    def __init__(self, geom, line, block, feed, normal_axis, lim, exact, tolerance):
+        self.geom = geom
+        self.s0 = 0.0
+        self.s1 = 0.0
+        self.line = line
+        self.block = block
+        self.block_last = True
+        self.feed = feed  # mm/s, None for rapid
+        self.normal_axis = normal_axis
+        self.vphys, self.at, self.jt = piece_limits(lim, geom, normal_axis)
+        self.stop_end = True  # until the next piece is known
+        self.jcap_end = 0.0
+        self.break_end = True
+        self.sync_after: list = []
+        self.exact = exact
+        self.tolerance = tolerance
+        self.orig_len = geom.length
+
+    def vcap(self, feed_ovr: float, rapid_ovr: float) -> float:
+        if self.feed is None:
+            return self.vphys * rapid_ovr
+        v = self.feed * feed_ovr
+        return v if v < self.vphys else self.vphys
+
+
+class Path:
+    """Segments not yet executed, in order, with absolute path coordinates."""
+
+    def __init__(self, params: MachineParams, lim: AxisLimits, start: tuple[float, ...]):
+        self.params = params
+        self.lim = lim
+        self.segs: list[Segment] = []
+        self.base = 0  # executed segments dropped from the front of `segs`
+        self.end_pose = start
+        self.end_s = 0.0
+        self.mode = PathMode.CONTINUOUS
+        self.tolerance = params.default_path_tolerance
+        self.blocks = 0
+        self.max_feed = params.max_feed / 60.0
+        self.head_sync: list = []  # sync commands before any pending segment
+
+    # -- building -----------------------------------------------------------------------
+    def set_path_mode(self, cmd: SetPathMode) -> None:
+        self.mode = cmd.mode
+        tol = cmd.tolerance
+        self.tolerance = tol if tol > 0.0 else self.params.default_path_tolerance
+
+    def add_motion(self, cmd, protect_s: float) -> None:
+        """Append a motion block. Path before `protect_s` is committed and never reshaped."""
+        start = self.end_pose
+        end = tuple(float(x) for x in cmd.end)
+        if len(end) != len(start):
+            raise NcError(f"pose has {len(end)} axes, machine has {len(start)}", cmd.line)
+        exact = self.mode is PathMode.EXACT_STOP or cmd.exact_stop
+        if isinstance(cmd, StraightTraverse):
+            geom = Line(start, end)
+            feed = None
+            normal = -1
+        elif isinstance(cmd, StraightFeed):
+            geom = Line(start, end)
+            feed = self._feed(cmd)
+            normal = -1
+        elif isinstance(cmd, ArcFeed):
+            normal = cmd.plane.value
+            center = tuple(float(x) for x in cmd.center)
+            r0 = _plane_dist(start, center, normal)
+            r1 = _plane_dist(end, center, normal)
+            if r0 <= 1e-9 or r1 <= 1e-9:
+                raise NcError("arc with zero radius", cmd.line)
+            geom = arc_from_canon(start, end, center, normal, cmd.clockwise, cmd.turns)
+            feed = self._feed(cmd)
+        else:  # pragma: no cover - guarded by the caller
+            raise TypeError(cmd)
+        self.end_pose = end
+        if geom.length <= 1e-12:
+            return  # a zero-length move does not touch the path
+        self.blocks += 1
+        seg = Segment(geom, cmd.line, self.blocks, feed, normal, self.lim, exact, self.tolerance)
+        prev = self.segs[-1] if self.segs else None
+        if prev is None:
+            seg.s0 = self.end_s
+        else:
+            self._join(prev, seg, protect_s)
+        seg.s1 = seg.s0 + seg.geom.length
+        self.segs.append(seg)
+        self.end_s = seg.s1
+
+    def _feed(self, cmd) -> float:
+        if not cmd.feed or cmd.feed <= 0.0:
+            raise NcError("feed move without a feed rate (F)", cmd.line)
+        f = cmd.feed / 60.0
+        return f if f < self.max_feed else self.max_feed
+
+    def add_sync(self, cmd) -> None:
+        if self.segs:
+            self.segs[-1].sync_after.append(cmd)
+        else:
+            self.head_sync.append(cmd)
+
+    def _join(self, prev: Segment, seg: Segment, protect_s: float) -> None:
+        """Decide the junction prev -> seg: blend, pass at a capped speed, or stop."""
+        seg.s0 = prev.s1
+        if prev.exact or prev.sync_after:
+            return  # prev.stop_end stays True: exact stop or sync point
+        pg, sg = prev.geom, seg.geom
+        if (
+            isinstance(pg, Line)
+            and isinstance(sg, Line)
+            and (prev.feed is None) == (seg.feed is None)
+        ):
+            # each line end may use half of the programmed line; never reshape what the
+            # executor has committed to
+            avail1 = min(0.5 * prev.orig_len, pg.length, prev.s1 - max(protect_s, prev.s0))
+            avail2 = 0.5 * sg.length
+            res = blend(pg.end, pg.u, sg.u, prev.tolerance, avail1, avail2) if avail1 > 0 else None
+            if res is not None:
+                arc, d = res
+                lim = self.lim
+                bseg = Segment(
+                    arc, prev.line, prev.block, prev.feed, -1, lim, False, prev.tolerance
+                )
+                if pg.length - d <= 1e-12 and protect_s <= prev.s0:
+                    # the previous line is used up: the blend takes its place
+                    self.segs.pop()
+                    arc.start = pg.start
+                    bseg.block_last = prev.block_last
+                    before = self.segs[-1] if self.segs else None
+                    bseg.s0 = prev.s0
+                    if before is not None and not before.stop_end:
+                        self._set_junction(before, bseg)
+                else:
+                    prev.geom = pg.with_ends(pg.start, arc.start)
+                    prev.s1 = prev.s0 + prev.geom.length
+                    prev.block_last = False
+                    bseg.s0 = prev.s1
+                    self._set_junction(prev, bseg)
+                bseg.s1 = bseg.s0 + arc.length
+                self.segs.append(bseg)
+                seg.geom = sg.with_ends(arc.end, sg.end)
+                seg.s0 = bseg.s1
+                self._set_junction(bseg, seg)
+                return
+        self._set_junction(prev, seg)
+
+    def _set_junction(self, a: Segment, b: Segment) -> None:
+        ga, gb = a.geom, b.geom
+        ta = ga.tangent(ga.length)
+        tb = gb.tangent(0.0)
+        ka = ga.curvature(ga.length)
+        kb = gb.curvature(0.0)
+        du = tuple(y - x for x, y in zip(ta, tb, strict=True))
+        dk = tuple(y - x for x, y in zip(ka, kb, strict=True))
+        big = max(abs(x) for x in du) > KINK_SPAN_BREAK
+        at_max = a.at if a.at > b.at else b.at
+        cap = junction_cap(self.lim, du, dk, ga.length, at_max, not big)
+        if (a.feed is None) != (b.feed is None) and big:
+            cap = 0.0  # a corner between a rapid and a feed move is an exact stop
+        a.jcap_end = cap
+        a.break_end = big
+        a.stop_end = cap <= 0.0
+
+
+def _plane_dist(p, c, normal: int) -> float:
+    return sum((p[i] - c[i]) ** 2 for i in range(len(p)) if i != normal) ** 0.5

@@ -1,0 +1,206 @@
+"""Look-ahead velocity planning over the path: spans, backward/forward passes, S-curves.
+
+The path from the current point to the next stop is cut into *spans*: runs of pieces
+whose speed caps agree within SPAN_RATIO and whose junctions allow that speed. The path
+acceleration is zero at every span boundary, so each span gets its own closed-form
+S-curve (jerk-limited change, cruise, jerk-limited change) with the smallest tangential
+limits of its pieces. A backward pass finds the highest entry speed from which every
+later cap can still be met; a forward pass takes the highest speed reachable from the
+current state.
+"""
+
+from __future__ import annotations
+
+from cnc.planner.path import Segment
+from cnc.planner.scurve import change_distance, change_phases, min_reach, reach
+
+SPAN_RATIO = 0.95
+
+
+class Span:
+    """One planned stretch [s0, s1] of the path: phases (t0, dt, s, v, a, j), s relative."""
+
+    __slots__ = (
+        "s0",
+        "s1",
+        "phases",
+        "dur",
+        "v0",
+        "v1",
+        "stop",
+        "vmax",
+        "jerk_limit",
+        "single_block_stop",
+    )
+
+    def __init__(self, s0, s1, phases, dur, v0, v1, stop, vmax, jerk_limit=0.0):
+        self.s0 = s0
+        self.s1 = s1
+        self.phases = phases
+        self.dur = dur
+        self.v0 = v0
+        self.v1 = v1
+        self.stop = stop
+        self.vmax = vmax
+        self.jerk_limit = jerk_limit
+        self.single_block_stop = False
+
+    def state(self, t: float, hint: int = 0) -> tuple[float, float, float, int]:
+        """(s, v, a, phase index) at time t into the span; s is absolute and clamped."""
+        ph = self.phases
+        i = hint
+        n = len(ph)
+        while i + 1 < n and t >= ph[i + 1][0]:
+            i += 1
+        t0, _dt, s, v, a, j = ph[i]
+        x = t - t0
+        sa = s + x * (v + x * (0.5 * a + x * j / 6.0))
+        va = v + x * (a + 0.5 * j * x)
+        aa = a + j * x
+        length = self.s1 - self.s0
+        if sa > length:
+            sa = length
+        elif sa < 0.0:
+            sa = 0.0
+        return self.s0 + sa, va, aa, i
+
+
+def integrate(phases: list[tuple[float, float]], v0: float, a0: float = 0.0):
+    """Turn (dt, jerk) phases into (t0, dt, s, v, a, j) rows; returns rows, end state."""
+    rows = []
+    t = s = 0.0
+    v = v0
+    a = a0
+    for dt, j in phases:
+        if dt <= 0.0:
+            continue
+        rows.append((t, dt, s, v, a, j))
+        s += dt * (v + dt * (0.5 * a + dt * j / 6.0))
+        v += dt * (a + 0.5 * j * dt)
+        a += j * dt
+        t += dt
+    return rows, t, s, v, a
+
+
+def span_phases(v0, v1, vmax, length, at, jt) -> tuple[list[tuple[float, float]], float]:
+    """(dt, jerk) phases covering `length` from v0 to v1 under vmax; returns peak too."""
+    if v0 <= vmax:
+        lo = v0 if v0 > v1 else v1
+    else:
+        lo = v1  # starting above the cap (override lowered): brake first
+    hi = vmax
+    if change_distance(v0, hi, at, jt) + change_distance(hi, v1, at, jt) <= length or lo >= hi:
+        vp = hi
+    else:
+        for _ in range(64):
+            mid = 0.5 * (lo + hi)
+            if change_distance(v0, mid, at, jt) + change_distance(mid, v1, at, jt) <= length:
+                lo = mid
+            else:
+                hi = mid
+        vp = lo
+    d1 = change_distance(v0, vp, at, jt)
+    d2 = change_distance(vp, v1, at, jt)
+    cruise = length - d1 - d2
+    phases = change_phases(v0, vp, at, jt)
+    if cruise > 0.0 and vp > 0.0:
+        phases.append((cruise / vp, 0.0))
+    phases += change_phases(vp, v1, at, jt)
+    return phases, vp
+
+
+def partition(
+    segs: list[Segment],
+    k: int,
+    s_start: float,
+    feed_ovr: float,
+    rapid_ovr: float,
+    single_block: bool,
+    stop_s: float | None,
+) -> list[list]:
+    """Cut the path from s_start to the next stop into spans.
+
+    Each item: [s0, s1, vmax, vmax_hi, at, jt, end_cap, stop].
+    """
+    out: list[list] = []
+    cur = None
+    n = len(segs)
+    while k < n:
+        g = segs[k]
+        a = s_start if s_start > g.s0 else g.s0
+        b = g.s1
+        vc = g.vcap(feed_ovr, rapid_ovr)
+        stop_here = False
+        if stop_s is not None and stop_s < b:
+            b = stop_s
+            stop_here = True
+        if cur is None:
+            cur = [a, b, vc, vc, g.at, g.jt, 0.0, False]
+        else:
+            cur[1] = b
+            if vc < cur[2]:
+                cur[2] = vc
+            if vc > cur[3]:
+                cur[3] = vc
+            if g.at < cur[4]:
+                cur[4] = g.at
+            if g.jt < cur[5]:
+                cur[5] = g.jt
+        if stop_here or g.stop_end or k == n - 1 or (single_block and g.block_last):
+            cur[7] = True
+            out.append(cur)
+            return out
+        vn = segs[k + 1].vcap(feed_ovr, rapid_ovr)
+        jc = g.jcap_end
+        lo = cur[2] if cur[2] < vn else vn
+        hi = cur[3] if cur[3] > vn else vn
+        if g.break_end or jc < lo or lo < SPAN_RATIO * hi:
+            cur[6] = jc if jc < lo else lo
+            out.append(cur)
+            cur = None
+        k += 1
+    if cur is not None:
+        cur[7] = True
+        out.append(cur)
+    return out
+
+
+def solve(parts: list[list], v_start: float) -> tuple[list[Span], bool]:
+    """Backward and forward passes over the spans, then one S-curve per span.
+
+    The flag is False when the start speed is too high to meet a later cap (the plan then
+    brakes as hard as it may and the caller looks for a later stop point).
+    """
+    n = len(parts)
+    ok = True
+    if n == 0:
+        return [], ok
+    vb = [0.0] * (n + 1)
+    vb[n] = 0.0 if parts[-1][7] else parts[-1][6]
+    for i in range(n - 1, -1, -1):
+        p = parts[i]
+        v = reach(vb[i + 1], p[1] - p[0], p[4], p[5])
+        if v > p[2]:
+            v = p[2]
+        if i > 0 and v > parts[i - 1][6]:
+            v = parts[i - 1][6]
+        vb[i] = v
+    spans = []
+    v = v_start
+    for i in range(n):
+        p = parts[i]
+        length = p[1] - p[0]
+        at, jt = p[4], p[5]
+        v1 = reach(v, length, at, jt)
+        if v1 > vb[i + 1]:
+            v1 = vb[i + 1]
+        if v > v1 and change_distance(v, v1, at, jt) > length:
+            v1 = min_reach(v, length, at, jt)
+            ok = False
+        phases, _vp = span_phases(v, v1, p[2], length, at, jt)
+        rows, dur, _s, _v, _a = integrate(phases, v)
+        if not rows:
+            rows = [(0.0, 0.0, 0.0, v, 0.0, 0.0)]
+        spans.append(Span(p[0], p[1], rows, dur, v, v1, p[7] and i == n - 1, p[2], jt))
+        v = v1
+    return spans, ok
