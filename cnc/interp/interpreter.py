@@ -140,6 +140,8 @@ class Interpreter:
 
     `programs` maps program numbers to program text (str or lines) for M98 calls;
     `tools` maps offset numbers to ToolOffset (H, D and lathe T offsets share the table);
+    None means "no tool table known" (offsets read as 0, as a DNC-side check needs), while
+    a mapping makes a missing entry an error;
     `work_offsets` maps 1..6 (G54..G59) and 0 (common/EXT) to offsets in mm;
     `block_delete` is the BLOCK DELETE switch (`/` blocks are skipped when True);
     `start` is the machine position in mm (default: every axis at its reference point);
@@ -173,6 +175,7 @@ class Interpreter:
         self._groups = _LATHE_GROUP if self._lathe else _GROUP
         self._lib = ProgramLibrary(programs)
         self._tools: dict[int, ToolOffset] = dict(tools or {})
+        self._tools_known = tools is not None
         self._limits: list[tuple[int, float, float, str]] = []
         home = [0.0, 0.0, 0.0]
         for ax in params.axes:
@@ -446,12 +449,15 @@ class Interpreter:
                 self._set_feed(blk, words["F"])
             self._motion_block(blk, words, False, g[0] if g else None)
             return
+        for i, code in enumerate(g):
+            if code in _UNSUPPORTED_G:
+                raise self._err(_UNSUPPORTED_G[code], blk, "G", i + 1)
         if not words.keys() <= self._words_ok:
             for k in words:
                 if k not in self._words_ok:
                     if k == "Y" and self._lathe:
                         raise self._err("a lathe has no Y axis", blk, k)
-                    if k in "ABCEUVW" and not self._lathe:
+                    if k in "ABCUVW" and not self._lathe:
                         raise self._err(f"unknown address {k} (axis {k} is not configured)", blk, k)
                     raise self._err(f"unknown address {k}", blk, k)
         n = words.get("N")
@@ -474,8 +480,8 @@ class Interpreter:
                 continue
             if (
                 grp in gset
-                or (grp == "cycle" and "motion" in gset)
-                or (grp == "motion" and "cycle" in gset)
+                or (grp == "cycle" and code != 800 and "motion" in gset)
+                or (grp == "motion" and gset.get("cycle", 800) != 800)
             ):
                 raise self._err(
                     f"{_fmt_g(code)} and another G code of modal group '{grp}' in one block",
@@ -784,6 +790,8 @@ class Interpreter:
                 self._tlo = (0.0, 0.0, 0.0)
             else:
                 off = self._tools.get(ofs)
+                if off is None and not self._tools_known:
+                    off = ToolOffset()
                 if off is None:
                     raise self._err(f"T{t}: no tool offset number {ofs}", blk, "T")
                 self._tlo = (off.x, 0.0, off.z)
@@ -798,6 +806,8 @@ class Interpreter:
             return ToolOffset()
         off = self._tools.get(number)
         if off is None:
+            if not self._tools_known:
+                return ToolOffset()  # no tool table given (e.g. a DNC check): offsets read 0
             raise self._err(f"{letter}{number}: no such tool offset", blk, letter)
         return off
 
@@ -1436,13 +1446,13 @@ class Interpreter:
         if cyc == 870:  # back boring: orient, shift, go below the part, cut upwards
             q = self._cyc_q
             self._orient_shift(blk, q)
-            rapid(self._shifted(self._at_w(r), -q), None, blk, True)
             rapid(self._at_w(r), None, blk, True)
+            rapid(self._shifted(self._at_w(r), -q), None, blk, True)
             self._spin(line, SpindleDirection.CW)
             lin(self._at_w(z), feed, blk, True)
             self._orient_shift(blk, q)
-            rapid(self._shifted(self._at_w(init), -q), None, blk, True)
             rapid(self._at_w(init), None, blk, True)
+            rapid(self._shifted(self._at_w(init), -q), None, blk, True)
             self._spin(line, SpindleDirection.CW)
             return
         if abs(self._pos[w] - r) > _EPS:

@@ -1,0 +1,81 @@
+"""Fuzz: random text and random valid-looking programs give canonical commands or NcError.
+
+Nothing else may escape (no IndexError, ZeroDivisionError, RecursionError...), and every
+example finishes in bounded time (pytest-timeout guards the whole test; the interpreter is
+run with a block budget so runaway subprogram repeats end with an NcError).
+"""
+
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+
+from cnc.errors import NcError
+from cnc.interp import Interpreter, ToolOffset, check
+from cnc.params import AxisParams, DecimalStyle, MachineParams
+
+BIG = tuple(AxisParams(a, -500, 500, 30000, 3000, 5e4) for a in "XYZ")
+PARAMS = [
+    MachineParams(axes=BIG),
+    MachineParams(axes=BIG, decimal_style=DecimalStyle.LEAST_INCREMENT),
+    MachineParams(
+        kind="lathe",
+        axes=(AxisParams("X", -500, 500, 1, 1, 1), AxisParams("Z", -500, 500, 1, 1, 1)),
+    ),
+]
+TOOLS = {1: ToolOffset(10.0, 3.0, 0.5, -0.5), 2: ToolOffset(-5.0, 0.0)}
+
+G_CODES = ["0", "1", "2", "3", "4", "9", "10", "15", "16", "17", "18", "19", "20", "21", "28",
+           "30", "40", "41", "42", "43", "44", "49", "50", "50.1", "51", "51.1", "53", "54", "55",
+           "59", "61", "64", "65", "68", "69", "73", "74", "76", "80", "81", "82", "83", "84",
+           "85", "86", "87", "88", "89", "90", "90.1", "91", "91.1", "92", "94", "95", "96",
+           "97", "98", "99", "5", "33"]  # fmt: skip
+M_CODES = ["0", "1", "2", "3", "4", "5", "6", "7", "8", "9", "19", "30", "98", "99", "60"]
+LETTERS = "XYZIJKRFSTPQLHDUWEAN"
+
+number = st.one_of(
+    st.integers(-2000, 2000).map(str),
+    st.floats(-600, 600, allow_nan=False, allow_infinity=False).map(lambda v: f"{v:.3f}"),
+    st.sampled_from(["0", ".5", "-.5", "1.", "0000", "+3", "1e5", "--1", "1.2.3", ""]),
+)
+word = st.one_of(
+    st.builds(lambda g: "G" + g, st.sampled_from(G_CODES)),
+    st.builds(lambda m: "M" + m, st.sampled_from(M_CODES)),
+    st.builds(lambda a, n: a + n, st.sampled_from(LETTERS), number),
+    st.sampled_from(["(comment)", "(open", ")", ";x", "/", "%", "#1", "[", "O12", ":7", "\t"]),
+)
+block = st.lists(word, min_size=0, max_size=7).map(" ".join)
+program = st.lists(block, min_size=1, max_size=25).map("\n".join)
+SUBS = {
+    1: "O1\nG91 G1 X1 F100\nG90\nM99\n",
+    2: "O2\nM98 P2\nM99\n",
+    3: ["O3", "G0 X5", "M98 P1 L3", "M99"],
+}
+
+
+def _run_all(text: str, params: MachineParams) -> None:
+    interp = Interpreter(params, programs=SUBS, tools=TOOLS, max_blocks=20_000)
+    try:
+        for _ in interp.run(text):
+            pass
+    except NcError as err:
+        assert err.line >= 0 and err.col >= 0 and err.message
+    _ = interp.state  # the snapshot works in any state
+    errs = check(text, params, programs=SUBS, tools=TOOLS, max_blocks=20_000)
+    assert all(isinstance(e, NcError) for e in errs)
+
+
+@settings(max_examples=300, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(program, st.sampled_from(PARAMS))
+def test_fuzz_valid_looking_programs(text: str, params: MachineParams) -> None:
+    _run_all(text, params)
+
+
+@settings(max_examples=200, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(st.text(max_size=400), st.sampled_from(PARAMS))
+def test_fuzz_random_text(text: str, params: MachineParams) -> None:
+    _run_all(text, params)
+
+
+@settings(max_examples=100, deadline=None)
+@given(st.binary(max_size=300))
+def test_fuzz_random_bytes_as_latin1(data: bytes) -> None:
+    _run_all(data.decode("latin-1"), PARAMS[0])
