@@ -89,6 +89,7 @@ class _Checker:
         self.sink = sink
         self.table = new_table(size)
         self.address_owner: dict[tuple[str, int], str] = {}
+        self._ref_cache: dict[tuple[str, str, str], Ref] = {}
 
     # -- tag table -------------------------------------------------------------------------
     def declare(self) -> None:
@@ -163,6 +164,16 @@ class _Checker:
 
     # -- operands ----------------------------------------------------------------------------
     def operand(self, op: Operand, kind: str, mnemonic: str) -> Ref | None:
+        key = (op.kind, op.text.upper(), kind)
+        hit = self._ref_cache.get(key)
+        if hit is not None:
+            return hit
+        ref = self._operand(op, kind, mnemonic)
+        if ref is not None:
+            self._ref_cache[key] = ref
+        return ref
+
+    def _operand(self, op: Operand, kind: str, mnemonic: str) -> Ref | None:
         err = self.sink.error
         if kind == "label":
             if op.kind != "tag" or "." in op.text:

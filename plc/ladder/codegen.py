@@ -48,8 +48,11 @@ RUNTIME_GLOBALS = {"_tdiv": _tdiv, "_tmod": _tmod, "_lim": _lim}
 class _RungGen:
     """Emits the statements of one rung as (indent, text) pairs."""
 
-    def __init__(self, rung: RRung, jump_ids: dict[tuple[int, int], str]) -> None:
+    def __init__(
+        self, rung: RRung, jump_ids: dict[tuple[int, int], str], fixed_presets: set[int]
+    ) -> None:
         self.rung = rung
+        self.fixed_presets = fixed_presets
         self.out: list[tuple[int, str]] = []
         self.n = 0
         self.jump_ids = jump_ids
@@ -195,7 +198,9 @@ class _RungGen:
         assert sym is not None
         s = {k: f"v[{i}]" for k, i in sym.members.items()}
         pre = refs[1]
-        if pre.value is not None:
+        if sym.members["PRE"] in self.fixed_presets:
+            pass  # constant preset: set once in the initial slot values
+        elif pre.value is not None:
             self.emit(f"{s['PRE']} = {pre.value}")
         else:
             self.emit(f"_p = {pre.expr}")
@@ -235,7 +240,8 @@ class _RungGen:
         sym = refs[0].symbol
         assert sym is not None
         s = {k: f"v[{i}]" for k, i in sym.members.items()}
-        self.emit(f"{s['PRE']} = {refs[1].expr}")
+        if sym.members["PRE"] not in self.fixed_presets:
+            self.emit(f"{s['PRE']} = {refs[1].expr}")
         edge = s["CU"] if m == "CTU" else s["CD"]
         if m == "CTU":
             step = [
@@ -277,6 +283,35 @@ def _wrap_lines() -> list[str]:
     ]
 
 
+def _walk(items: list[RElement]):
+    for el in items:
+        if isinstance(el, RBranch):
+            for leg in el.legs:
+                yield from _walk(leg)
+        else:
+            yield el
+
+
+def _fixed_presets(resolved: Resolved) -> set[int]:
+    """PRE slots driven by exactly one constant: stored once in `v_init`, not every scan.
+
+    Mutates `resolved.table.v_init` for those slots.
+    """
+    seen: dict[int, set[int | None]] = {}
+    for rr in resolved.rungs:
+        for el in _walk(rr.elements):
+            if el.spec.mnemonic in ("TON", "TOF", "RTO", "CTU", "CTD"):
+                sym = el.refs[0].symbol
+                assert sym is not None
+                seen.setdefault(sym.members["PRE"], set()).add(el.refs[1].value)
+    fixed: set[int] = set()
+    for slot, values in seen.items():
+        if len(values) == 1 and None not in values:
+            resolved.table.v_init[slot] = next(iter(values))
+            fixed.add(slot)
+    return fixed
+
+
 def generate(resolved: Resolved) -> tuple[str, list[int | None]]:
     """Python source of the scan function and, per generated line, the rung it belongs to."""
     rungs = resolved.rungs
@@ -290,6 +325,7 @@ def generate(resolved: Resolved) -> tuple[str, list[int | None]]:
             target = resolved.labels[label]
             for k in range(rr.number + 1, target):
                 covers[k].add(name)
+    fixed_presets = _fixed_presets(resolved)
     lines: list[str] = []
     line_rung: list[int | None] = []
 
@@ -315,7 +351,7 @@ def generate(resolved: Resolved) -> tuple[str, list[int | None]]:
             put(f"    if not ({' or '.join(sorted(guard))}):", rr.number)
             base = 2
         put("    " * base + f"# rung {rr.number} (line {rr.line}): {text}", rr.number)
-        gen = _RungGen(rr, jump_ids)
+        gen = _RungGen(rr, jump_ids, fixed_presets)
         gen.seq(rr.elements, "True", top=True)
         if not gen.out:
             gen.emit("pass")

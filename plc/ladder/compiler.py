@@ -8,6 +8,7 @@ source rung through `CompiledProgram.locate`.
 
 from __future__ import annotations
 
+import gc
 import hashlib
 import linecache
 import traceback
@@ -96,6 +97,24 @@ class CompiledProgram:
         return f"{self.file}:{rung.line}: rung {rung.number}"
 
 
+def _without_gc(fn):
+    """Run a compile step with the cyclic GC paused: building many small objects otherwise
+    triggers collections whose cost grows with the heap (superlinear compile times)."""
+
+    def wrapper(*args, **kwargs):
+        enabled = gc.isenabled()
+        gc.disable()
+        try:
+            return fn(*args, **kwargs)
+        finally:
+            if enabled:
+                gc.enable()
+
+    wrapper.__doc__ = fn.__doc__
+    wrapper.__name__ = fn.__name__
+    return wrapper
+
+
 def _tag_infos(program: Program, symbols: dict[str, Symbol]) -> dict[str, TagInfo]:
     out: dict[str, TagInfo] = {}
     for key, sym in symbols.items():
@@ -140,6 +159,7 @@ def check_text(
     return check_program(program, sink, size, watchdog_ms)
 
 
+@_without_gc
 def compile_program(
     program: Program,
     sink: DiagnosticSink | None = None,
@@ -185,6 +205,7 @@ def compile_program(
     )
 
 
+@_without_gc
 def compile_text(
     text: str,
     file: str = "<ladder>",

@@ -124,6 +124,7 @@ class Runtime:
             Debounce(self.config.debounce_samples) if self.config.debounce_samples else None
         )
         self._last_retain: dict | None = None
+        self._bits_cache: dict[str, tuple[list, bytes]] = {}
         self._next_retain_ms: int | None = None
         if retain_store is not None:
             self._restore_retain()
@@ -183,7 +184,7 @@ class Runtime:
         if self.io is not None:
             self.io.write_outputs(img.qx, img.qw, now_ms)
         self.stats.record(exec_ms * 1000.0, late_ms, exec_ms > cfg.period_ms)
-        snap = img.snapshot(self.scan_count)
+        snap = self._publish()
         self.snapshot = snap
         self._v_pub = tuple(v)
         if self.retain_store is not None and cfg.retain_save_ms > 0:
@@ -193,6 +194,23 @@ class Runtime:
                 self._next_retain_ms = now_ms + cfg.retain_save_ms
                 self.save_retain(now_ms)
         return snap
+
+    def _publish(self) -> Snapshot:
+        """The scan's Snapshot (same content as `ProcessImage.snapshot`). Converting a bit
+        list to bytes is the costly part of publishing, so an unchanged bit area reuses the
+        previous scan's bytes."""
+        img, cache = self.image, self._bits_cache
+        bits = []
+        for area in ("ix", "qx", "mx"):
+            lst = getattr(img, area)
+            hit = cache.get(area)
+            if hit is None or hit[0] != lst:
+                hit = (lst[:], bytes(lst))
+                cache[area] = hit
+            bits.append(hit[1])
+        return Snapshot(
+            self.scan_count, bits[0], bits[1], bits[2], tuple(img.iw), tuple(img.qw), tuple(img.mw)
+        )
 
     def _apply_writes(self) -> None:
         img = self.image
@@ -463,6 +481,8 @@ class Runtime:
 def _slot_pairs(prev: TagInfo, new: TagInfo):
     if new.members:
         for m, b in new.members.items():
+            if m == "PRE":
+                continue  # the new program's preset operand decides the preset
             a = prev.members.get(m)
             if a is not None:
                 yield a, b
