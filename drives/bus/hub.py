@@ -221,6 +221,8 @@ class CanHub:
         self.faults: list[FrameFault] = []
         self.error_frames = 0
         self.dropped_frames = 0
+        #: worst queue-to-end-of-frame latency per traffic class, seconds
+        self.worst_latency_s = {"pdo": 0.0, "sdo": 0.0, "other": 0.0}
         self._now = start_time
         self._bus_free_at = start_time
         self._lock = threading.RLock()
@@ -457,6 +459,10 @@ class CanHub:
             and not msg.is_remote_frame
         )
         end = self._occupy(queued_at, bits, is_sync)
+        ident = msg.arbitration_id
+        kind = "pdo" if 0x180 <= ident < 0x580 else "sdo" if 0x580 <= ident < 0x680 else "other"
+        if end - queued_at > self.worst_latency_s[kind]:
+            self.worst_latency_s[kind] = end - queued_at
         wire = _wire_message(msg, end, self.channel)
         self._fan_out(sender, wire)
 

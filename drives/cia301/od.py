@@ -86,6 +86,7 @@ class ObjectDictionary:
         self.definitions = load_od(eds_path)
         self.application = application
         self._entries: dict[tuple[int, int], Entry] = {}
+        self.entries = self._entries  # read-only view for the services
         self._objects: dict[int, Any] = {}
         for index in self.definitions:
             obj = self.definitions[index]

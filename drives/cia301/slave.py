@@ -32,12 +32,14 @@ from drives.cia301.nmt import (
 from drives.cia301.od import ObjectDictionary
 from drives.cia301.pdo import PdoChannel, PdoService
 from drives.cia301.sdo_server import SdoServer
+from drives.cia301.store import ParameterStore
 from drives.cia301.sync import SyncConsumer
 
 _new_message = can.Message.__new__
 
 EMCY_HEARTBEAT_LOST = 0x8130
 EMCY_BUS_OFF_RECOVERED = 0x8140
+EMCY_RPDO_TIMEOUT = 0x8250
 EMCY_SYNC_TIMEOUT = 0x8100
 EMCY_PDO_LENGTH = 0x8210
 EMCY_PDO_LENGTH_EXCEEDED = 0x8220
@@ -72,6 +74,7 @@ class CanopenSlave:
         self._sync_rpdos: list[PdoChannel] = []
         self._sync_tpdos: list[PdoChannel] = []
         self._event_tpdos: list[PdoChannel] = []
+        self._deadline_rpdos: list[PdoChannel] = []
         self._thread: threading.Thread | None = None
         self._running = False
         self.od = ObjectDictionary(eds_path, node_id, application)
@@ -81,6 +84,10 @@ class CanopenSlave:
         self.sync = SyncConsumer(self.od, self._rebuild_dispatch)
         self.sdo = SdoServer(self.od, timeout_s=sdo_timeout_s)
         self.pdo = PdoService(self.od, self._rebuild_dispatch)
+        self.store = ParameterStore(self.od)
+        self._life_guarding = False
+        self._life_guard_lost = False
+        self._since_guard_s = 0.0
         consumer_hook = self.od.write_hooks.get(0x1016)
         if consumer_hook is not None:
 
@@ -120,6 +127,7 @@ class CanopenSlave:
         self._sync_rpdos = [c for c in self.pdo.rpdos if c.valid and c.synchronous]
         self._sync_tpdos = [c for c in self.pdo.tpdos if c.valid and c.synchronous]
         self._event_tpdos = [c for c in self.pdo.tpdos if c.valid and c.event_driven]
+        self._deadline_rpdos = [c for c in self.pdo.rpdos if c.valid and c.event_timer_ms]
 
     def handle(self, msg: can.Message) -> None:
         """Process one received frame (replies go out through the bus)."""
@@ -217,6 +225,7 @@ class CanopenSlave:
         """NMT reset communication: 0x1000-0x1FFF back to defaults, then boot-up."""
         with self._lock:
             self.od.reset(0x1000, 0x1FFF)
+            self.store.apply(0x1000, 0x1FFF)
             self._reset_services()
             self.boot()
 
@@ -224,6 +233,7 @@ class CanopenSlave:
         """NMT reset node: every stored object back to its default, then boot-up."""
         with self._lock:
             self.od.reset(0x0000, 0xFFFF)
+            self.store.apply(0x0000, 0xFFFF)
             self._reset_services()
             self.boot()
 
@@ -236,6 +246,8 @@ class CanopenSlave:
         self.consumer.reload()
         self.pdo.reload()
         self._guard_toggle = 0
+        self._life_guarding = self._life_guard_lost = False
+        self._since_guard_s = 0.0
 
     def _on_nmt(self, msg: can.Message) -> None:
         data = msg.data
@@ -261,12 +273,19 @@ class CanopenSlave:
             return
         self._send(0x700 + self.node_id, bytes([(self._guard_toggle << 7) | self.state.value]))
         self._guard_toggle ^= 1
+        # Life guarding starts with the first guard RTR (CiA 301 7.2.8.3.1).
+        self._life_guarding = True
+        self._since_guard_s = 0.0
+        if self._life_guard_lost:
+            self._life_guard_lost = False
+            if not self.consumer.any_timeout:
+                self._clear_communication_error(EMCY_HEARTBEAT_LOST)
 
     def _on_heartbeat(self, msg: can.Message) -> None:
         if msg.is_remote_frame or not msg.data:
             return
         recovered = self.consumer.on_heartbeat(msg.arbitration_id - 0x700, msg.data[0])
-        if recovered and not self.consumer.any_timeout:
+        if recovered and not self.consumer.any_timeout and not self._life_guard_lost:
             self._clear_communication_error(EMCY_HEARTBEAT_LOST)
 
     # ------------------------------------------------------------------ SDO
@@ -315,6 +334,11 @@ class CanopenSlave:
     def _on_rpdo(self, channel: PdoChannel, msg: can.Message) -> None:
         if not pdo_allowed(self.state) or msg.is_remote_frame:
             return
+        channel.since_rx, channel.rx_seen = 0.0, True
+        if channel.timed_out:
+            channel.timed_out = False
+            if not any(c.timed_out for c in self.pdo.rpdos):
+                self._clear_communication_error(EMCY_RPDO_TIMEOUT)
         size = len(msg.data)
         if size < channel.length:
             channel.length_error = True
@@ -354,10 +378,31 @@ class CanopenSlave:
                 self._raise_communication_error(EMCY_HEARTBEAT_LOST)
             if self.sync.advance(dt_s) and state is NmtState.OPERATIONAL:
                 self._raise_communication_error(EMCY_SYNC_TIMEOUT)
+            if self._life_guarding:
+                self._check_life_guarding(dt_s)
+            if self._deadline_rpdos and state is NmtState.OPERATIONAL:
+                self._check_rpdo_deadlines(dt_s)
             self.application.advance(dt_s)
             self._pump_application_emcy()
             if self.state is NmtState.OPERATIONAL:
                 self._send_event_tpdos(dt_s)
+
+    def _check_life_guarding(self, dt_s: float) -> None:
+        self._since_guard_s += dt_s
+        lifetime_ms = int(self.od.get(0x100C, 0)) * int(self.od.get(0x100D, 0))
+        if lifetime_ms and not self._life_guard_lost and self._since_guard_s * 1e3 > lifetime_ms:
+            self._life_guard_lost = True
+            self._raise_communication_error(EMCY_HEARTBEAT_LOST)
+
+    def _check_rpdo_deadlines(self, dt_s: float) -> None:
+        # 0x14xx:05 is the RPDO deadline (CANopenNode): monitoring starts at the first frame.
+        for channel in self._deadline_rpdos:
+            if not channel.rx_seen or channel.timed_out:
+                continue
+            channel.since_rx += dt_s
+            if channel.since_rx * 1e3 > channel.event_timer_ms:
+                channel.timed_out = True
+                self._raise_communication_error(EMCY_RPDO_TIMEOUT)
 
     def _send_event_tpdos(self, dt_s: float) -> None:
         for channel in self._event_tpdos:
