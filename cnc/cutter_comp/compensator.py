@@ -352,10 +352,10 @@ class CutterCompensation:
         else:  # outside corner: roll around the programmed corner with the tool radius
             x, xb = ne, ns
             inserts.append(self._corner_arc(ne, ns, corner, bseg))
-        out = [self._contour(held, x, a.param(x, near_end=True))]
+        out = [self._contour(held, x, a.param(x, near_end=True, tol=tol))]
         out.extend(self._trail_at(x))
         out.extend(inserts)
-        b.ps, b.ts = xb, b.param(xb, near_end=False)
+        b.ps, b.ts = xb, b.param(xb, near_end=False, tol=self._tol)
         self._tool = xb
         return out
 
@@ -391,7 +391,7 @@ class CutterCompensation:
         else:
             xb = ns
             out.append(self._corner_arc(ne, ns, a.p1, bseg))
-        b.ps, b.ts = xb, b.param(xb, near_end=False)
+        b.ps, b.ts = xb, b.param(xb, near_end=False, tol=self._tol)
         self._tool = xb
         return out
 

@@ -66,12 +66,6 @@ def left_normal(t: Point) -> Point:
     return (-t[1], t[0])
 
 
-def wrap_pi(a: float) -> float:
-    """Angle folded into (-pi, pi]."""
-    a = math.remainder(a, 2.0 * math.pi)
-    return math.pi if a == -math.pi else a
-
-
 @dataclass(slots=True)
 class OffsetElement:
     """One programmed line or arc together with its equidistant (offset) curve.
@@ -126,20 +120,29 @@ class OffsetElement:
         t = left_normal((rv[0] / n, rv[1] / n))
         return t if self.ccw else (-t[0], -t[1])
 
-    def param(self, x: Point, near_end: bool) -> float:
+    def param(self, x: Point, near_end: bool, tol: float) -> float:
         """Position of `x` (a point on the offset curve) measured along it from off_start.
 
-        For arcs the angle is unwrapped next to the start or the end of the element, so a
-        trim point slightly outside the element gets a slightly negative (or beyond-length)
-        position instead of wrapping around the circle.
+        On a line the position may fall outside [0, off_length] (an extended or reversed
+        element). On an arc a trim point is read as lying *inside* the element: walking
+        backwards from the end (near_end) or forwards from the start by 0..2 pi, so a trim
+        of more than the sweep shows as a reversed element instead of wrapping round the
+        circle. Within `tol` of the end point itself counts as no trim at all.
         """
         if self.kind == "line":
             return dot(sub(x, self.off_start), self.d)
         ang = math.atan2(x[1] - self.center[1], x[0] - self.center[0])
+        two_pi = 2.0 * math.pi
         if near_end:
             a1 = self.a0 + self.sigma * self.sweep
-            return self.off_radius * (self.sweep + wrap_pi(self.sigma * (ang - a1)))
-        return self.off_radius * wrap_pi(self.sigma * (ang - self.a0))
+            back = (self.sigma * (a1 - ang)) % two_pi
+            if (two_pi - back) * self.off_radius <= tol:
+                back = 0.0
+            return self.off_radius * (self.sweep - back)
+        fwd = (self.sigma * (ang - self.a0)) % two_pi
+        if (two_pi - fwd) * self.off_radius <= tol:
+            fwd = 0.0
+        return self.off_radius * fwd
 
 
 def make_line(p0: Point, p1: Point, side: float, r: float) -> OffsetElement:

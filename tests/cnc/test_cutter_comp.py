@@ -671,3 +671,38 @@ def test_closed_pocket_started_at_a_corner_is_a_gouge():
         (5.0, 1.0),
         (5, 5),
     ]
+
+
+def test_arc_trimmed_at_both_ends():
+    # +X to (10,0), ccw quarter about the origin to (0,10), then -Y: two inside corners for
+    # G41 r=1. Offset circle R=9 meets y=1 at (sqrt80, 1) and x=1 at (1, sqrt80).
+    s80 = math.sqrt(80.0)
+    segs = [UP, L((0, 0), (10, 0), 2), QUARTER, L((0, 10), (0, 3), 4)]
+    out = run("left", 1.0, segs)
+    assert_path(
+        out,
+        [
+            ("line", (0, -5), (0, 1), None, False, "startup"),
+            ("line", (0, 1), (s80, 1), None, False, "contour"),
+            ("arc", (s80, 1), (1, s80), (0, 0), True, "contour"),
+            ("line", (1, s80), (1, 3), None, False, "contour"),
+        ],
+    )
+
+
+def test_gouge_short_arc_between_two_inside_corners():
+    # +X to the origin, a 10 deg ccw arc about (-5,0) (R=5, starting upwards: left turn),
+    # then a left turn of 90 deg. With G41 r=1 each corner trims asin(1/4) = 14.5 deg from
+    # the offset arc (R=4): more than its 10 deg, so the compensated arc would run backwards.
+    t = math.radians(10.0)
+    e = (-5 + 5 * math.cos(t), 5 * math.sin(t))
+    c_dir = (-math.cos(t), -math.sin(t))
+    segs = [
+        L((-10, -5), (-10, 0), 1),
+        L((-10, 0), (0, 0), 2),
+        A((0, 0), e, (-5, 0), True, 3),
+        L(e, (e[0] + 10 * c_dir[0], e[1] + 10 * c_dir[1]), 4),
+    ]
+    with pytest.raises(NcError) as err:
+        run("left", 1.0, segs)
+    assert err.value.line == 3 and "reverses" in err.value.message
