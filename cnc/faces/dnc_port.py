@@ -1,0 +1,531 @@
+"""The machine's DNC port: ISO tape over TCP with parity, XON/XOFF and a small command set.
+
+The protocol (docs/dnc_port.md) is modelled on a Fanuc serial port with remote buffer,
+carried over TCP the way a serial device server carries it. Each operation begins with a
+command line; a connection may run several operations in turn:
+
+    READ [Onnnn]    receive a tape into program memory          -> OK Onnnn <bytes> <sha256>
+    DRIP            execute while receiving (BTR), XON/XOFF paced -> OK DRIP <blocks>
+    PUNCH Onnnn     send a program: DC2, tape, DC4
+    DIR             list program memory                           -> lines, OK <count>
+    DELETE Onnnn    remove a program                               -> OK
+    LISTEN          stay connected for remote requests: DC2 %\\nO9999\\n(/REQ nnnn)\\n% DC4
+    QUIT            close
+
+A connection that starts straight with tape (`%`, NUL leader, blank lines) is a READ, so a
+plain DNC package sending through a serial-to-TCP bridge works unchanged. Errors answer
+`ERR <alarm> <text>`; the ones the seed calls alarms (parity, transfer cut off, memory full,
+overrun) also raise the machine alarm through `on_alarm`.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import hashlib
+import logging
+import re
+import socket
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+
+from cnc.faces.drip import DripBuffer
+from cnc.faces.tape import (
+    CR,
+    LF,
+    NUL,
+    PERCENT,
+    PUNCH_OFF,
+    PUNCH_ON,
+    XOFF,
+    XON,
+    TapeDecoder,
+    add_parity,
+    encode_program,
+    parity_error_at,
+    strip_parity,
+)
+from cnc.program_memory import MemoryFull, ProgramMemory
+
+log = logging.getLogger(__name__)
+
+# DNC alarms (number, text). The machine's alarm list shows them with source "DNC".
+ALARM_PARITY = 2001
+ALARM_MEMORY_FULL = 2002
+ALARM_NOT_IN_MEMORY = 2003
+ALARM_CUT_OFF = 2004
+ALARM_NO_NUMBER = 2005
+ALARM_UNKNOWN_COMMAND = 2006
+ALARM_TIMEOUT = 2007
+ALARM_BLOCK_TOO_LONG = 2008
+ALARM_REFUSED = 2009
+ALARM_OVERRUN = 2010
+FATAL_TO_CONNECTION = {
+    ALARM_PARITY,
+    ALARM_CUT_OFF,
+    ALARM_MEMORY_FULL,
+    ALARM_OVERRUN,
+    ALARM_TIMEOUT,
+    ALARM_BLOCK_TOO_LONG,
+    ALARM_UNKNOWN_COMMAND,
+}
+RAISES_ALARM = {ALARM_PARITY, ALARM_CUT_OFF, ALARM_MEMORY_FULL, ALARM_OVERRUN, ALARM_TIMEOUT}
+
+REMOTE_REQUEST_PROGRAM = 9999
+_O_WORD = re.compile(r"^\s*(?:N\d+\s*)?[O:]\s*(\d{1,5})\b", re.I)
+_NUMBER_ARG = re.compile(r"^[O:]?(\d{1,5})$", re.I)
+_COMMAND_MAX = 80
+LINE_BUFFER_BYTES = 4096
+# After XOFF, bytes still arriving within this time were on the wire before the sender could
+# see the XOFF; bytes after it mean the sender ignores flow control.
+XOFF_GRACE_S = 0.1
+# A sender that honours XOFF has at most its socket buffers in flight when it sees XOFF (the
+# host client measures about 1.6 KB); ten times that means it does not honour XOFF.
+IN_FLIGHT_MAX = 16 * 1024
+
+Policy = Callable[[str, int | None], str | None]
+"""(operation, program number) -> None to allow, or the reason the machine refuses it."""
+
+
+def program_number(lines: list[str]) -> int | None:
+    """The O number of the first block that has one (before any motion)."""
+    for line in lines[:5]:
+        m = _O_WORD.match(line)
+        if m:
+            return int(m.group(1))
+    return None
+
+
+def stored_text(lines: list[str]) -> str:
+    """The form a received program is kept in: `%`, its blocks, `%`, LF line ends."""
+    return "%\n" + "".join(f"{ln}\n" for ln in lines) + "%\n"
+
+
+def sha256_text(text: str) -> str:
+    return hashlib.sha256(text.encode("utf-8")).hexdigest()
+
+
+class DncError(Exception):
+    def __init__(self, alarm: int, text: str) -> None:
+        super().__init__(f"{alarm} {text}")
+        self.alarm, self.text = alarm, text
+
+
+@dataclass
+class DncPortStats:
+    programs_received: int = 0
+    programs_punched: int = 0
+    drip_blocks: int = 0
+    xoff_sent: int = 0
+    errors: dict[int, int] = field(default_factory=dict)
+
+
+class DncPort:
+    def __init__(
+        self,
+        memory: ProgramMemory,
+        *,
+        host: str = "127.0.0.1",
+        port: int = 0,
+        parity: bool = False,
+        idle_timeout_s: float = 30.0,
+        drip: Callable[[], DripBuffer] | None = None,
+        on_alarm: Callable[[int, str], None] | None = None,
+        policy: Policy | None = None,
+        xoff_slack_bytes: int = 256,
+        max_block: int = 4096,
+    ) -> None:
+        self.memory = memory
+        self.host, self.port, self.parity = host, port, parity
+        self.idle_timeout_s = idle_timeout_s
+        self._drip = drip
+        self._on_alarm = on_alarm or (lambda n, t: None)
+        self._policy = policy or (lambda op, n: None)
+        self.xoff_slack = xoff_slack_bytes
+        self.max_block = max_block
+        self.stats = DncPortStats()
+        self._server: asyncio.Server | None = None
+        self._listeners: set[asyncio.Queue[str]] = set()
+        self._loop: asyncio.AbstractEventLoop | None = None
+        self._sessions: set[asyncio.Task] = set()
+
+    @property
+    def bound_port(self) -> int:
+        if self._server is None:
+            raise RuntimeError("DNC port not started")
+        return self._server.sockets[0].getsockname()[1]
+
+    async def start(self) -> None:
+        self._loop = asyncio.get_running_loop()
+        # Small buffers make the TCP stream behave like the serial line it stands for: a
+        # sender cannot run more than a few kilobytes ahead of what the machine has read.
+        self._server = await asyncio.start_server(
+            self._session, self.host, self.port, limit=LINE_BUFFER_BYTES
+        )
+
+    async def stop(self) -> None:
+        server, self._server = self._server, None
+        if server is None:
+            return
+        server.close()
+        for task in list(self._sessions):
+            task.cancel()
+        for task in list(self._sessions):
+            with contextlib.suppress(asyncio.CancelledError, Exception):
+                await task
+        await server.wait_closed()
+
+    def remote_request(self, number: int) -> int:
+        """Ask the host for program `number` (the operator's remote request). Thread-safe.
+
+        Returns how many listening host connections the request went to; 0 means no host is
+        listening, which the machine reports to the operator.
+        """
+        text = f"O{REMOTE_REQUEST_PROGRAM}\n(/REQ {number})"
+        if self._loop is None:
+            return 0
+        for queue in list(self._listeners):
+            self._loop.call_soon_threadsafe(queue.put_nowait, text)
+        return len(self._listeners)
+
+    # --------------------------------------------------------------------------- sessions
+
+    async def _session(self, reader: asyncio.StreamReader, writer: asyncio.StreamWriter) -> None:
+        task = asyncio.current_task()
+        self._sessions.add(task)
+        sock = writer.get_extra_info("socket")
+        if sock is not None:
+            sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, LINE_BUFFER_BYTES)
+        conn = _Conn(reader, writer, self.parity)
+        try:
+            while True:
+                try:
+                    command, arg, pushback = await conn.read_command(self.idle_timeout_s)
+                    if command is None or command == "QUIT":
+                        return
+                    await self._dispatch(conn, command, arg, pushback)
+                except TimeoutError:  # idle connection
+                    return
+                except DncError as exc:
+                    self._error(exc)
+                    await conn.reply(f"ERR {exc.alarm} {exc.text}")
+                    if exc.alarm in FATAL_TO_CONNECTION:
+                        return  # the stream is mid-tape: resynchronising is the host's job
+        except (ConnectionError, asyncio.IncompleteReadError):
+            pass
+        except asyncio.CancelledError:
+            raise
+        except Exception:  # a bug must cost one connection, never the port
+            log.exception("DNC session failed")
+        finally:
+            self._sessions.discard(task)
+            with contextlib.suppress(Exception):
+                writer.close()
+
+    async def _dispatch(self, conn: _Conn, command: str, arg: str, pushback: bytes) -> None:
+        if command == "READ":
+            await self._read(conn, _number(arg) if arg else None, pushback)
+        elif command == "DRIP":
+            await self._drip_feed(conn, pushback)
+        elif command == "PUNCH":
+            await self._punch(conn, _required_number(arg))
+        elif command == "DIR":
+            entries = self.memory.directory()
+            for e in entries:
+                await conn.reply(f"O{e.number:04d} {e.size} {e.sha256}")
+            await conn.reply(f"OK {len(entries)} programs, {self.memory.free} bytes free")
+        elif command == "DELETE":
+            number = _required_number(arg)
+            self._allow("DELETE", number)
+            if number not in self.memory:
+                raise DncError(ALARM_NOT_IN_MEMORY, f"program O{number:04d} not in memory")
+            self.memory.delete(number)
+            await conn.reply(f"OK O{number:04d} deleted")
+        elif command == "LISTEN":
+            await self._listen(conn)
+        else:
+            raise DncError(ALARM_UNKNOWN_COMMAND, f"unknown command {command!r}")
+
+    def _allow(self, op: str, number: int | None) -> None:
+        reason = self._policy(op, number)
+        if reason:
+            raise DncError(ALARM_REFUSED, f"{op} refused: {reason}")
+
+    def _error(self, exc: DncError) -> None:
+        self.stats.errors[exc.alarm] = self.stats.errors.get(exc.alarm, 0) + 1
+        if exc.alarm in RAISES_ALARM:
+            self._on_alarm(exc.alarm, exc.text)
+
+    async def _receive_tape(self, conn: _Conn, pushback: bytes, on_block) -> None:
+        """Decode one tape from the connection, handing each block to `on_block`."""
+        decoder = TapeDecoder(parity=self.parity, max_block=self.max_block)
+        data = pushback
+        while True:
+            for ev in decoder.feed(data):
+                if ev.kind == "line":
+                    await on_block(ev.text)
+                elif ev.kind == "parity_error":
+                    raise DncError(
+                        ALARM_PARITY, f"parity error at byte {ev.offset}; program rejected"
+                    )
+                elif ev.kind == "overlong":
+                    raise DncError(
+                        ALARM_BLOCK_TOO_LONG,
+                        f"block longer than {self.max_block} characters at byte {ev.offset}",
+                    )
+                elif ev.kind == "end":
+                    conn.unread(data[ev.offset - (decoder.offset - len(data)) + 1 :])
+                    return
+            try:
+                data = await conn.read_raw(self.idle_timeout_s)
+            except TimeoutError:
+                raise DncError(
+                    ALARM_TIMEOUT, f"no data for {self.idle_timeout_s:g} s; transfer abandoned"
+                ) from None
+            if not data:
+                what = "closing %" if decoder.started else "tape start %"
+                raise DncError(
+                    ALARM_CUT_OFF, f"transfer cut off before the {what} at byte {decoder.offset}"
+                )
+
+    async def _read(self, conn: _Conn, number: int | None, pushback: bytes) -> None:
+        lines: list[str] = []
+        size = 4  # the two % lines
+
+        async def keep(block: str) -> None:
+            nonlocal size
+            size += len(block) + 1
+            if size > self.memory.capacity:
+                raise DncError(
+                    ALARM_MEMORY_FULL,
+                    f"program exceeds the program memory of {self.memory.capacity} bytes; "
+                    "use drip-feed (DRIP) for programs larger than memory",
+                )
+            lines.append(block)
+
+        await self._receive_tape(conn, pushback, keep)
+        number = number or program_number(lines)
+        if number is None:
+            raise DncError(ALARM_NO_NUMBER, "no program number: the first block needs an O word")
+        self._allow("READ", number)
+        text = stored_text(lines)
+        try:
+            entry = self.memory.store(number, text)
+        except MemoryFull as exc:
+            raise DncError(ALARM_MEMORY_FULL, str(exc)) from None
+        self.stats.programs_received += 1
+        await conn.reply(f"OK O{number:04d} {entry.size} {entry.sha256}")
+
+    async def _drip_feed(self, conn: _Conn, pushback: bytes) -> None:
+        if self._drip is None:
+            raise DncError(ALARM_REFUSED, "DRIP refused: this machine has no drip-feed (BTR) input")
+        self._allow("DRIP", None)
+        buffer = self._drip()
+        count = 0
+
+        async def feed(block: str) -> None:
+            nonlocal count
+            while buffer.fill and buffer.fill + len(block) + 1 > buffer.high:
+                await conn.send_control(XOFF)
+                self.stats.xoff_sent += 1
+                await conn.hold(buffer, self.xoff_slack, self.idle_timeout_s)
+                await conn.send_control(XON)
+            try:
+                buffer.put(block)
+            except OverflowError:
+                raise DncError(
+                    ALARM_BLOCK_TOO_LONG,
+                    f"block of {len(block)} characters exceeds the drip-feed buffer",
+                ) from None
+            count += 1
+
+        try:
+            await self._receive_tape(conn, pushback, feed)
+        except DncError as exc:
+            buffer.abort(exc.text)
+            raise
+        buffer.end()
+        self.stats.drip_blocks += count
+        await conn.reply(f"OK DRIP {count} blocks")
+
+    async def _punch(self, conn: _Conn, number: int) -> None:
+        self._allow("PUNCH", number)
+        try:
+            text = self.memory.get(number)
+        except KeyError:
+            raise DncError(ALARM_NOT_IN_MEMORY, f"program O{number:04d} not in memory") from None
+        await conn.send_tape(text)
+        self.stats.programs_punched += 1
+
+    async def _listen(self, conn: _Conn) -> None:
+        queue: asyncio.Queue[str] = asyncio.Queue()
+        self._listeners.add(queue)
+        command_task: asyncio.Future | None = None
+        request_task: asyncio.Future | None = None
+        try:
+            await conn.reply("OK LISTEN")
+            while True:
+                if command_task is None:
+                    command_task = asyncio.ensure_future(conn.read_command(None))
+                request_task = asyncio.ensure_future(queue.get())
+                done, _ = await asyncio.wait(
+                    {command_task, request_task}, return_when=asyncio.FIRST_COMPLETED
+                )
+                if request_task in done:
+                    # The request program is a few bytes: no flow control, and no second
+                    # reader racing the pending command read.
+                    await conn.send_tape(request_task.result(), flow_control=False)
+                    continue
+                request_task.cancel()
+                command, arg, pushback = command_task.result()
+                command_task = None
+                if command is None or command == "QUIT":
+                    return
+                try:
+                    await self._dispatch(conn, command, arg, pushback)
+                except DncError as exc:
+                    self._error(exc)
+                    await conn.reply(f"ERR {exc.alarm} {exc.text}")
+                    if exc.alarm in FATAL_TO_CONNECTION:
+                        return
+        finally:
+            self._listeners.discard(queue)
+            for pending in (command_task, request_task):
+                if pending is not None and not pending.done():
+                    pending.cancel()
+                    with contextlib.suppress(asyncio.CancelledError, Exception):
+                        await pending
+
+
+class _Conn:
+    """Byte-level I/O of one connection: parity, pushback, XOFF from the peer."""
+
+    def __init__(self, reader: asyncio.StreamReader, writer: asyncio.StreamWriter, parity: bool):
+        self.reader, self.writer, self.parity = reader, writer, parity
+        self._pending = b""
+
+    def unread(self, data: bytes) -> None:
+        self._pending = data + self._pending
+
+    async def read_raw(self, timeout: float | None) -> bytes:
+        if self._pending:
+            data, self._pending = self._pending, b""
+            return data
+        return await asyncio.wait_for(self.reader.read(4096), timeout)
+
+    async def read_command(self, timeout: float | None) -> tuple[str | None, str, bytes]:
+        """The next command, or ("READ", "", tape bytes) when the peer starts with tape."""
+        buf = b""
+        while True:
+            data = await self.read_raw(timeout)
+            if not data:
+                return None, "", b""
+            buf += data
+            plain = strip_parity(buf) if self.parity else buf
+            lead = plain.lstrip(bytes([NUL, LF, CR, XON, XOFF]))
+            if lead[:1] == bytes([PERCENT]):
+                return "READ", "", buf
+            nl = plain.find(b"\n", len(plain) - len(lead))
+            if nl < 0:
+                if len(lead) > _COMMAND_MAX:
+                    raise DncError(ALARM_UNKNOWN_COMMAND, "command line too long")
+                continue
+            if self.parity and parity_error_at(buf[: nl + 1]) is not None:
+                raise DncError(ALARM_PARITY, "parity error in command line")
+            line = plain[len(plain) - len(lead) : nl].decode("ascii", "replace").strip()
+            self.unread(buf[nl + 1 :])
+            if not line:
+                buf = b""
+                continue
+            word, _, arg = line.partition(" ")
+            return word.upper(), arg.strip(), b""
+
+    async def reply(self, text: str) -> None:
+        data = (text + "\n").encode("ascii", "replace")
+        self.writer.write(add_parity(data) if self.parity else data)
+        await self.writer.drain()
+
+    async def send_control(self, code: int) -> None:
+        data = bytes([code])
+        self.writer.write(add_parity(data) if self.parity else data)
+        await self.writer.drain()
+
+    async def hold(self, buffer: DripBuffer, slack: int, timeout: float) -> None:
+        """After XOFF: wait until the NC has drained the buffer to its low-water mark.
+
+        The line keeps being read, as a UART would. What arrives within XOFF_GRACE_S was
+        already on its way; more than `slack` bytes after that, or more than IN_FLIGHT_MAX
+        bytes in all, is an overrun (Fanuc's "buffer overflow" alarm).
+        """
+        extra = bytearray()
+        late = 0
+        start = time.monotonic()
+        while not buffer.below_low_water():
+            if buffer.aborted:
+                raise DncError(ALARM_CUT_OFF, f"drip-feed ended by the machine: {buffer.aborted}")
+            try:
+                data = await asyncio.wait_for(self.reader.read(4096), 0.002)
+            except TimeoutError:
+                if time.monotonic() - start > timeout:
+                    raise DncError(ALARM_TIMEOUT, "the NC took no block for too long") from None
+                continue
+            if not data:
+                break
+            extra += data
+            if time.monotonic() - start > XOFF_GRACE_S:
+                late += len(data)
+            if late > slack or len(extra) > IN_FLIGHT_MAX:
+                raise DncError(
+                    ALARM_OVERRUN,
+                    f"overrun: {late or len(extra)} bytes received after XOFF "
+                    "(the sender ignores XOFF)",
+                )
+        self._pending += bytes(extra)
+
+    async def send_tape(self, text: str, *, flow_control: bool = True) -> None:
+        """DC2, the program as tape, DC4 — pausing while the peer has sent XOFF."""
+        payload = bytes([PUNCH_ON]) + encode_program(text) + bytes([PUNCH_OFF])
+        if self.parity:
+            payload = add_parity(payload)
+        if not flow_control:
+            self.writer.write(payload)
+            await self.writer.drain()
+            return
+        stopped = False
+        for i in range(0, len(payload), 256):
+            stopped = await self._peer_flow(stopped, block=False)
+            while stopped:
+                stopped = await self._peer_flow(stopped, block=True)
+            self.writer.write(payload[i : i + 256])
+            await self.writer.drain()
+
+    async def _peer_flow(self, stopped: bool, *, block: bool) -> bool:
+        """Consume XON/XOFF the peer sent; returns whether sending must pause."""
+        try:
+            data = await asyncio.wait_for(self.reader.read(64), 5.0 if block else 0)
+        except TimeoutError:
+            if block:
+                raise DncError(ALARM_TIMEOUT, "the receiver stayed in XOFF for 5 s") from None
+            return stopped
+        if not data:
+            raise ConnectionError("peer closed during punch")
+        for b in strip_parity(data) if self.parity else data:
+            if b == XOFF:
+                stopped = True
+            elif b == XON:
+                stopped = False
+        return stopped
+
+
+def _number(arg: str) -> int:
+    m = _NUMBER_ARG.match(arg.strip())
+    if not m:
+        raise DncError(ALARM_NO_NUMBER, f"not a program number: {arg!r} (expected Onnnn)")
+    return int(m.group(1))
+
+
+def _required_number(arg: str) -> int:
+    if not arg:
+        raise DncError(ALARM_NO_NUMBER, "this command needs a program number (Onnnn)")
+    return _number(arg)

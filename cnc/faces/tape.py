@@ -1,0 +1,142 @@
+"""ISO 6983 tape code on a byte stream: even parity, flow control and program framing.
+
+Pure functions and an incremental decoder, shared by the machine's DNC port and the host's
+transfer client so that both ends agree byte for byte.
+
+The character set is ISO 7-bit. With parity on, bit 7 of every byte is set so that the byte
+holds an even number of ones (ISO 840 / EIA RS-358 tape, "7E" on a serial line); a byte with
+odd parity is a parity error, which the seed (000_nc_book.md, DNC) says must reject the
+program. Flow and punch control use the device control characters a Fanuc remote buffer
+uses: DC1 resume (XON), DC3 stop (XOFF), DC2 start of punch output, DC4 end of punch output.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+NUL, LF, CR = 0x00, 0x0A, 0x0D
+DC1 = XON = 0x11
+DC2 = PUNCH_ON = 0x12
+DC3 = XOFF = 0x13
+DC4 = PUNCH_OFF = 0x14
+PERCENT = 0x25
+CONTROL = frozenset({DC1, DC2, DC3, DC4})
+
+_ONES = bytes(bin(i).count("1") for i in range(256))
+_WITH_PARITY = bytes(((i | 0x80) if _ONES[i] % 2 else i) & 0xFF for i in range(128)) + bytes(128)
+
+
+def add_parity(data: bytes) -> bytes:
+    """Set bit 7 where needed so every byte has even parity. Input must be 7-bit."""
+    if any(b > 0x7F for b in data):
+        raise ValueError("tape text must be 7-bit ASCII before parity is added")
+    return data.translate(_WITH_PARITY)
+
+
+def parity_error_at(data: bytes) -> int | None:
+    """Offset of the first byte with odd parity, or None."""
+    for i, b in enumerate(data):
+        if _ONES[b] % 2:
+            return i
+    return None
+
+
+def strip_parity(data: bytes) -> bytes:
+    return bytes(b & 0x7F for b in data)
+
+
+def encode_program(text: str, *, parity: bool = False, leader: int = 0) -> bytes:
+    """A program as tape bytes: optional NUL leader, `%`, the blocks with LF ends, `%`.
+
+    A text that already carries its `%` marks is sent as it is (they are not doubled).
+    """
+    body = text.replace("\r\n", "\n").replace("\r", "\n")
+    lines = [ln for ln in body.split("\n")]
+    while lines and not lines[-1].strip():
+        lines.pop()
+    if not lines or lines[0].strip() != "%":
+        lines.insert(0, "%")
+    if len(lines) == 1 or lines[-1].strip() != "%":
+        lines.append("%")
+    raw = b"\0" * leader + ("\n".join(lines) + "\n").encode("ascii")
+    return add_parity(raw) if parity else raw
+
+
+@dataclass(frozen=True, slots=True)
+class TapeEvent:
+    kind: str  # start | line | end | control | parity_error | overlong
+    text: str = ""
+    offset: int = 0  # byte offset in the stream
+    code: int = 0  # the control character, for kind == "control"
+
+
+# Decoder states
+_LEADER, _PERCENT_LINE, _BODY, _DONE, _FAILED = range(5)
+
+
+@dataclass
+class TapeDecoder:
+    """Incremental decoder: bytes in, tape events out.
+
+    Leader (NULs, blank lines, anything) before the first `%` is skipped, as is the rest of
+    the `%` line; CR is ignored; DC1-DC4 are reported as control events and never appear in
+    text. A block that is just `%` ends the tape; everything after it (trailer) is ignored.
+    With parity on, the first parity error ends decoding: the program must be rejected.
+    """
+
+    parity: bool = False
+    max_block: int = 4096
+    offset: int = 0
+    _state: int = _LEADER
+    _block: bytearray = field(default_factory=bytearray)
+
+    @property
+    def started(self) -> bool:
+        return self._state != _LEADER
+
+    @property
+    def ended(self) -> bool:
+        return self._state == _DONE
+
+    @property
+    def failed(self) -> bool:
+        return self._state == _FAILED
+
+    def feed(self, data: bytes) -> list[TapeEvent]:
+        events: list[TapeEvent] = []
+        for b in data:
+            pos = self.offset
+            self.offset += 1
+            state = self._state
+            if state >= _DONE:
+                continue
+            if self.parity:
+                if _ONES[b] % 2:
+                    self._state = _FAILED
+                    events.append(TapeEvent("parity_error", offset=pos))
+                    continue
+                b &= 0x7F
+            if b in CONTROL:
+                events.append(TapeEvent("control", offset=pos, code=b))
+            elif b in (NUL, CR):
+                pass
+            elif state == _LEADER:
+                if b == PERCENT:
+                    self._state = _PERCENT_LINE
+                    events.append(TapeEvent("start", offset=pos))
+            elif state == _PERCENT_LINE:
+                if b == LF:
+                    self._state = _BODY
+            elif b == LF:
+                block = self._block.decode("ascii", "replace")
+                self._block.clear()
+                events.append(TapeEvent("line", block, offset=pos))
+            elif b == PERCENT and not self._block.strip():
+                self._state = _DONE
+                events.append(TapeEvent("end", offset=pos))
+            elif len(self._block) >= self.max_block:
+                self._state = _FAILED
+                events.append(TapeEvent("overlong", offset=pos))
+            else:
+                self._block.append(b)
+        return events

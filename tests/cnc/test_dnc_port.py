@@ -1,0 +1,269 @@
+"""The machine's DNC port over real sockets, driven by the host's DncClient and raw sockets."""
+
+from __future__ import annotations
+
+import contextlib
+import socket
+import threading
+import time
+
+import pytest
+
+from cnc.faces.dnc_port import DncPort
+from cnc.faces.drip import DripBuffer
+from cnc.faces.loop_thread import LoopThread
+from cnc.faces.tape import XOFF, add_parity, encode_program
+from cnc.program_memory import ProgramMemory
+from dnc.transfer import DncClient, TransferError, canonical_text, iter_blocks, sha256_text
+
+PROG = "%\nO1234 (PLATE)\nG21 G90\nG0 X10 Y10\nG1 X50 F300\nM30\n%\n"
+
+
+class Machine:
+    """The parts of a machine the DNC port touches, with its alarms collected."""
+
+    def __init__(self, *, capacity=4096, parity=False, drip_capacity=1024, policy=None):
+        self.memory = ProgramMemory(capacity)
+        self.alarms: list[tuple[int, str]] = []
+        self.drip_buffers: list[DripBuffer] = []
+        self.loop = LoopThread("dnc-test").start()
+
+        def new_drip():
+            buf = DripBuffer(drip_capacity)
+            self.drip_buffers.append(buf)
+            return buf
+
+        self.port = DncPort(
+            self.memory,
+            parity=parity,
+            drip=new_drip,
+            on_alarm=lambda n, t: self.alarms.append((n, t)),
+            policy=policy,
+            idle_timeout_s=5,
+        )
+        self.loop.run(self.port.start)
+
+    def client(self, **kw) -> DncClient:
+        return DncClient(
+            "127.0.0.1", self.port.bound_port, parity=self.port.parity, timeout_s=5, **kw
+        )
+
+    def raw(self) -> socket.socket:
+        s = socket.create_connection(("127.0.0.1", self.port.bound_port), timeout=5)
+        return s
+
+    def close(self):
+        self.loop.run(self.port.stop)
+        self.loop.stop()
+
+
+@pytest.fixture
+def machine():
+    m = Machine()
+    yield m
+    m.close()
+
+
+@pytest.fixture
+def parity_machine():
+    m = Machine(parity=True)
+    yield m
+    m.close()
+
+
+def read_all(sock: socket.socket) -> bytes:
+    out = b""
+    while True:
+        try:
+            data = sock.recv(4096)
+        except TimeoutError:
+            return out
+        if not data:
+            return out
+        out += data
+
+
+def test_send_stores_the_program_and_verifies_by_sha(machine):
+    with machine.client() as c:
+        result = c.send_program(PROG)
+    assert result.number == 1234
+    assert result.sha256 == sha256_text(canonical_text(PROG))
+    assert machine.memory.get(1234) == canonical_text(PROG)
+
+
+def test_punch_round_trip_and_directory(machine):
+    with machine.client() as c:
+        sent = c.send_program(PROG)
+        punched = c.punch(1234)
+        listing = c.directory()
+    assert sha256_text(punched) == sent.sha256
+    assert listing == [(1234, sent.size, sent.sha256)]
+
+
+def test_parity_tape_round_trip(parity_machine):
+    with parity_machine.client() as c:
+        sent = c.send_program(PROG)
+        assert sha256_text(c.punch(1234)) == sent.sha256
+
+
+def test_parity_error_rejects_the_program_and_raises_an_alarm(parity_machine):
+    tape = bytearray(add_parity(b"READ\n") + encode_program(PROG, parity=True))
+    tape[12] ^= 0x01  # one bit flipped on the line
+    with parity_machine.raw() as s:
+        s.sendall(bytes(tape))
+        answer = read_all(s)
+    assert b"ERR 2001 parity error at byte" in bytes(b & 0x7F for b in answer)
+    assert 1234 not in parity_machine.memory
+    assert parity_machine.alarms[0][0] == 2001
+
+
+def test_transfer_cut_off_stores_nothing(machine):
+    with machine.raw() as s:
+        s.sendall(b"READ\n" + encode_program(PROG)[:30])
+        s.shutdown(socket.SHUT_WR)
+        answer = read_all(s)
+    assert b"ERR 2004 transfer cut off before the closing %" in answer
+    assert machine.memory.directory() == []
+    assert machine.alarms == [(2004, answer.decode().split(" ", 2)[2].strip())]
+
+
+def test_program_larger_than_memory_is_refused_with_drip_feed_suggested(machine):
+    big = "O7\n" + "G1 X1 Y1 F100\n" * 400
+    with machine.client() as c, pytest.raises(TransferError) as err:
+        c.send_program(big)
+    assert err.value.alarm == 2002 and "use drip-feed" in err.value.message
+    assert machine.memory.directory() == []
+
+
+def test_plain_tape_without_command_is_a_read(machine):
+    with machine.raw() as s:
+        s.sendall(b"\0\0\0" + encode_program(PROG))
+        s.shutdown(socket.SHUT_WR)
+        answer = read_all(s)
+    assert answer.startswith(b"OK O1234 ")
+    assert 1234 in machine.memory
+
+
+@pytest.mark.parametrize(
+    "command, answer",
+    [
+        (b"FORMAT\n", b"ERR 2006 unknown command 'FORMAT'"),
+        (b"PUNCH O99\n", b"ERR 2003 program O0099 not in memory"),
+        (b"PUNCH\n", b"ERR 2005 this command needs a program number"),
+        (b"DELETE X1\n", b"ERR 2005 not a program number: 'X1'"),
+        (b"READ\n%\nG0 X1\n%\n", b"ERR 2005 no program number"),
+        (b"DIR\n", b"OK 0 programs, 4096 bytes free"),
+    ],
+)
+def test_command_answers(machine, command, answer):
+    with machine.raw() as s:
+        s.sendall(command)
+        s.shutdown(socket.SHUT_WR)
+        assert read_all(s).startswith(answer)
+
+
+def test_machine_policy_refuses_with_its_reason():
+    m = Machine(policy=lambda op, n: "program is running" if n == 1234 else None)
+    try:
+        with (
+            m.client() as c,
+            pytest.raises(TransferError, match="alarm 2009: READ refused: program is running"),
+        ):
+            c.send_program(PROG)
+    finally:
+        m.close()
+
+
+def test_delete_frees_memory(machine):
+    with machine.client() as c:
+        c.send_program(PROG)
+        c.delete(1234)
+        assert c.directory() == []
+
+
+def _drain(buffer_list, out, done, stop):
+    """The NC's side: take blocks as it executes them, more slowly than the wire brings them."""
+    while not stop.is_set():
+        if not buffer_list:
+            time.sleep(0.001)
+            continue
+        block = buffer_list[0].take()
+        if block is None:
+            done.set()
+            return
+        if block is False:
+            time.sleep(0.001)
+            continue
+        out.append(block)
+        if len(out) % 20 == 0:
+            time.sleep(0.002)
+
+
+def test_drip_feed_of_a_program_larger_than_memory_with_xon_xoff(machine):
+    blocks = [f"N{n} G1 X{n % 100} Y{n % 37} F500" for n in range(1, 3001)]  # ~75 KB
+    assert sum(len(b) + 1 for b in blocks) > 10 * machine.memory.capacity
+    taken, done, stop = [], threading.Event(), threading.Event()
+    nc = threading.Thread(target=_drain, args=(machine.drip_buffers, taken, done, stop))
+    nc.start()
+    try:
+        with machine.client(chunk=128) as c:
+            result = c.drip_feed(iter_blocks(["O55\n", "\n".join(blocks)]))
+        assert done.wait(10)
+    finally:
+        stop.set()
+        nc.join()
+    assert taken == ["O55", *blocks]
+    assert result.blocks == len(blocks) + 1 and result.xoff_count > 0
+    buf = machine.drip_buffers[0]
+    assert buf.max_fill <= buf.capacity
+    assert machine.memory.directory() == []  # nothing went to program memory
+
+
+def test_sender_ignoring_xoff_gets_an_overrun_alarm(machine):
+    flood = b"DRIP\n%\n" + b"G1 X1 Y1 F100\n" * 10000  # 140 KB, and no NC takes anything
+    with machine.raw() as s:
+        s.settimeout(5)
+        with contextlib.suppress(OSError):  # the machine closing on us is the point
+            s.sendall(flood)
+        answer = read_all(s)
+    assert bytes([XOFF]) in answer and b"ERR 2010 overrun" in answer
+    assert machine.alarms[-1][0] == 2010
+    assert machine.drip_buffers[0].aborted
+
+
+def test_remote_request_is_answered_with_the_program(machine):
+    served, stop = [], threading.Event()
+
+    def host():
+        with machine.client() as c:
+            served.append(c.listen(lambda n: PROG if n == 1234 else None, until=stop.is_set))
+
+    t = threading.Thread(target=host)
+    t.start()
+    deadline = time.monotonic() + 5
+    while machine.port.remote_request(1234) == 0 and time.monotonic() < deadline:
+        time.sleep(0.01)  # until the host's LISTEN is registered
+    while 1234 not in machine.memory and time.monotonic() < deadline:
+        time.sleep(0.01)
+    stop.set()
+    t.join(5)
+    assert machine.memory.get(1234) == canonical_text(PROG)
+    assert served[0] >= 1
+
+
+def test_garbage_does_not_hurt_the_port_or_other_clients(machine):
+    with machine.raw() as s:
+        s.sendall(bytes(range(256)) * 4)
+        s.shutdown(socket.SHUT_WR)
+        read_all(s)
+    with machine.client() as c:
+        assert c.send_program(PROG).number == 1234
+
+
+def test_unreachable_port_is_a_connect_error():
+    with socket.socket() as probe:
+        probe.bind(("127.0.0.1", 0))
+        port = probe.getsockname()[1]
+    with pytest.raises(TransferError) as err, DncClient("127.0.0.1", port, timeout_s=1):
+        pass
+    assert err.value.kind == "connect" and err.value.retryable
