@@ -62,9 +62,9 @@ class RealtimeRunner:
             while not self._stop.is_set():
                 deadline = start + k * period_ns
                 now = self.clock_ns()
-                if now < deadline:
+                while now < deadline:  # an early wake-up waits again
                     if self._stop.wait((deadline - now) / 1e9):
-                        break
+                        return
                     now = self.clock_ns()
                 behind = (now - deadline) // period_ns
                 if behind > 0:  # skip whole missed periods
