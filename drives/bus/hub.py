@@ -492,10 +492,14 @@ class CanHub:
     def _fan_out(self, sender: SimBus | None, wire: can.Message) -> None:
         for observer in self.observers:
             observer(wire)
+        ident = -1 if wire.is_extended_id or wire.is_error_frame else wire.arbitration_id
         for bus in self.endpoints:
             if bus is sender and not bus.receive_own_messages:
                 continue
             if bus._bus_off:
+                continue
+            accept = bus.accept_ids
+            if accept is not None and ident not in accept:
                 continue
             bus._receive(wire)
 
@@ -584,17 +588,41 @@ class SimBus(can.BusABC):
         self._rx: deque[can.Message] = deque()
         self._rx_cond = threading.Condition()
         self._listeners: list[Listener] = []
+        self._accepts: dict[Listener, set[int] | None] = {}
         self._bus_off = False
         self.rx_overruns = 0
+        #: acceptance filter like a controller's: 11-bit IDs delivered to this endpoint, or
+        #: None for everything (29-bit and error frames are then filtered out as well)
+        self.accept_ids: set[int] | None = None
         super().__init__(channel=hub.channel, can_filters=can_filters, **kwargs)
         hub._attach(self)
 
-    def add_listener(self, listener: Listener) -> None:
-        """Deliver received frames by calling `listener(msg)` in the delivering thread."""
+    def add_listener(self, listener: Listener, accept: set[int] | None = None) -> None:
+        """Deliver received frames by calling `listener(msg)` in the delivering thread.
+
+        `accept` (11-bit IDs) lets the hub skip frames no listener wants, like a
+        controller's acceptance filter; one listener without `accept` disables filtering.
+        """
         self._listeners.append(listener)
+        self._accepts[listener] = accept
+        self._update_filter()
+
+    def set_accept(self, listener: Listener, accept: set[int] | None) -> None:
+        """Change the identifiers `listener` wants (None = everything)."""
+        self._accepts[listener] = accept
+        self._update_filter()
 
     def remove_listener(self, listener: Listener) -> None:
         self._listeners.remove(listener)
+        self._accepts.pop(listener, None)
+        self._update_filter()
+
+    def _update_filter(self) -> None:
+        wanted = list(self._accepts.values())
+        if not wanted or any(a is None for a in wanted):
+            self.accept_ids = None
+        else:
+            self.accept_ids = set().union(*wanted)
 
     @property
     def bus_off(self) -> bool:

@@ -123,6 +123,8 @@ class CanopenSlave:
             if channel.valid and channel.rtr_allowed:
                 table.setdefault(channel.cob_id, partial(self._on_tpdo_rtr, channel))
         self._dispatch = table
+        if isinstance(self.bus, SimBus):
+            self.bus.set_accept(self.handle, set(table))  # the hub skips frames we ignore
         # The per-SYNC and per-tick loops only visit channels that can act.
         self._sync_rpdos = [c for c in self.pdo.rpdos if c.valid and c.synchronous]
         self._sync_tpdos = [c for c in self.pdo.tpdos if c.valid and c.synchronous]

@@ -382,3 +382,46 @@ def test_frame_bits_agree_with_wire_accounting(hub):
     hub.deliver()
     assert hub.load.total_bits == frame_bits(0x181, b"\x37\x06\xe8\x03\x00\x00")
     assert candump_frame(msg(0x181, b"\x37\x06")) == "181#3706"
+
+
+def test_acceptance_filter_skips_other_identifiers(hub):
+    a, b = hub.endpoint(), hub.endpoint()
+    spy = []
+    b.add_listener(spy.append, accept={0x181})
+    a.send(msg(0x181, b"\x01"))
+    a.send(msg(0x182, b"\x02"))
+    a.send(can.Message(arbitration_id=0x181, is_extended_id=True))
+    hub.deliver()
+    assert [(m.arbitration_id, m.is_extended_id) for m in spy] == [(0x181, False)]
+
+
+def test_a_listener_without_filter_disables_filtering(hub):
+    a, b = hub.endpoint(), hub.endpoint()
+    filtered, everything = [], []
+    b.add_listener(filtered.append, accept={0x181})
+    b.add_listener(everything.append)
+    a.send(msg(0x182))
+    hub.deliver()
+    assert len(everything) == 1 and len(filtered) == 1  # listeners share the endpoint
+    b.remove_listener(everything.append)
+    a.send(msg(0x182))
+    hub.deliver()
+    assert len(filtered) == 1
+
+
+def test_two_slaves_can_share_one_endpoint(app):
+    from drives.cia301 import CanopenSlave
+    from tests.drives.conftest import FakeDrive
+
+    hub = CanHub()
+    shared = hub.endpoint("drives")
+    master = hub.endpoint("master")
+    replies = collect(master)
+    CanopenSlave(1, shared, app)
+    CanopenSlave(2, shared, FakeDrive())
+    assert [m.arbitration_id for m in replies] == [0x701, 0x702]  # boot-ups
+    replies.clear()
+    master.send(msg(0x601, bytes.fromhex("4000100000000000")))
+    master.send(msg(0x602, bytes.fromhex("4000100000000000")))
+    assert [m.arbitration_id for m in replies] == [0x581, 0x582]
+    hub.close()
