@@ -661,11 +661,7 @@ class Drive402:
         if self._hm is not None and st == State.OPERATION_ENABLED:
             self._observe_homing(inputs, new_inputs, th_prev, x_prev)
         if rising & 3 and st in _ENERGIZED and not fault:
-            hm_bits = (
-                3
-                if self._hm is None
-                else (1 if self._homing_uses(1) else 0) | (2 if self._homing_uses(2) else 0)
-            )
+            hm_bits = (1 if self._homing_uses(1) else 0) | (2 if self._homing_uses(2) else 0)
             if rising & 3 & ~hm_bits:
                 if self._hm is not None:
                     self._hm.error = True
@@ -674,7 +670,13 @@ class Drive402:
                     fault = 0x8612
         if fault:
             self._raise_fault(fault)
-        elif stopped and self._power.stop is not None:
+        # `stopped` belongs to the stop that was running: a fault that just ended OPERATION
+        # ENABLED starts a new one, a fault repeated during FAULT REACTION ACTIVE does not.
+        if (
+            stopped
+            and not (fault and st == State.OPERATION_ENABLED)
+            and self._power.stop is not None
+        ):
             self._sm(None, stopped=True)
 
     def _current_limit(self) -> float:
