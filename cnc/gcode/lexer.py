@@ -26,7 +26,7 @@ _MACRO_WORDS = ("GOTO", "WHILE", "IF", "THEN", "DO", "END", "EQ", "NE", "GT", "G
 _G_CODE: dict[str, int] = {}
 for _n in range(100):
     for _txt in {str(_n), f"{_n:02d}", f"{_n:03d}"}:
-        _G_CODE[_txt] = _n * 10
+        _G_CODE[_txt] = _G_CODE["+" + _txt] = _n * 10
         _G_CODE[_txt + "."] = _n * 10
         _G_CODE[_txt + ".0"] = _n * 10
         for _d in range(1, 10):
@@ -41,20 +41,29 @@ class Block:
     `nopoint` is the set of letters written without a decimal point, filled only when the
     machine reads such numbers in least-increment style (the interpreter scales them,
     because the increment depends on G20/G21, which may be in the same block).
+    `delete` (a `/` block), `program` (the O number of a program header) and `tape` (a `%`
+    mark) are rare, so they are class defaults overridden only on a `MarkedBlock`.
     """
 
-    __slots__ = ("line", "text", "words", "g", "m", "nopoint", "delete", "program", "tape")
+    __slots__ = ("line", "text", "words", "g", "m", "nopoint")
+    delete = False
+    program: int | None = None
+    tape = False
 
-    def __init__(self, line: int, text: str) -> None:
+    def __init__(
+        self,
+        line: int,
+        text: str,
+        words: dict[str, float] | None = None,
+        g: list[int] | None = None,
+        m: list[int] | None = None,
+    ) -> None:
         self.line = line
         self.text = text
-        self.words: dict[str, float] = {}
-        self.g: list[int] = []
-        self.m: list[int] = []
+        self.words: dict[str, float] = {} if words is None else words
+        self.g: list[int] = [] if g is None else g
+        self.m: list[int] = [] if m is None else m
         self.nopoint: set[str] | None = None
-        self.delete = False
-        self.program: int | None = None  # O number when the block is a program header
-        self.tape = False  # a `%` tape start/end mark
 
     def col(self, letter: str, nth: int = 1) -> int:
         """1-based column of the `nth` occurrence of address `letter` (1 if not found)."""
@@ -62,6 +71,18 @@ class Block:
 
     def __repr__(self) -> str:
         return f"Block(line={self.line}, g={self.g}, m={self.m}, words={self.words})"
+
+
+class MarkedBlock(Block):
+    """A block with a block-delete slash, a program number or a tape mark."""
+
+    __slots__ = ("delete", "program", "tape")
+
+    def __init__(self, line: int, text: str) -> None:
+        super().__init__(line, text)
+        self.delete = False
+        self.program = None
+        self.tape = False
 
 
 def blank_comments(text: str, line: int, file: str) -> str:
@@ -189,8 +210,22 @@ def parse_line(
     if not body:
         return None
     first = body[0]
-    blk = Block(line, text)
-    if first == "%":
+    if first in _MARKS:
+        return _parse_marked(text, body, line, file, least_increment)
+    squeezed = body.replace(" ", "")
+    if "\t" in squeezed:
+        squeezed = squeezed.replace("\t", "")
+    return _words(Block(line, text), squeezed.upper(), text, line, file, least_increment)
+
+
+_MARKS = frozenset("%/Oo:")
+
+
+def _parse_marked(
+    text: str, body: str, line: int, file: str, least_increment: bool
+) -> Block | None:
+    blk = MarkedBlock(line, text)
+    if body[0] == "%":
         if body.strip("% \t"):
             raise NcError(
                 "'%' (tape start/end) must stand alone in its block",
@@ -200,54 +235,71 @@ def parse_line(
             )
         blk.tape = True
         return blk
-    if first == "/":
+    if body[0] == "/":
         blk.delete = True
         body = body[1:]
         if body[:1].isdigit():  # /1../9: optional block-skip switches, treated as '/'
             body = body[1:]
-    squeezed = body.replace(" ", "")
-    if "\t" in squeezed:
-        squeezed = squeezed.replace("\t", "")
-    squeezed = squeezed.upper()
+    squeezed = body.translate(_SQUEEZE).upper()
     if squeezed[:1] in ("O", ":"):
         m = re.match(r"[O:](\d+)", squeezed)
         if not m:
             raise NcError("program number O needs digits", line, find_col(text, squeezed[0]), file)
         blk.program = int(m.group(1))
         squeezed = squeezed[m.end() :]
+    return _words(blk, squeezed, text, line, file, least_increment)
+
+
+def _words(
+    blk: Block, squeezed: str, text: str, line: int, file: str, least_increment: bool
+) -> Block:
     if not _FAST_BLOCK.fullmatch(squeezed):
         squeezed = squeezed.translate(_SQUEEZE)  # other control characters
         if not _FAST_BLOCK.fullmatch(squeezed):
             raise _diagnose(text, line, file)
+    pairs = _WORD.findall(squeezed)
     words = blk.words
-    for letter, num in _WORD.findall(squeezed):
-        if letter == "G":
-            code = _G_CODE.get(num.lstrip("+"))
-            if code is None:
-                code = _g_code_slow(num)
-            if code is None:
-                raise NcError(f"unknown G code G{num}", line, find_col(text, "G"), file)
-            blk.g.append(code)
-        elif letter == "M":
-            if "." in num or num[0] in "+-":
-                raise NcError(f"malformed M code M{num}", line, find_col(text, "M"), file)
-            blk.m.append(int(num))
+    ng = 0
+    for letter, num in pairs:
+        if letter in _GMO:
+            ng += 1
+            if letter == "G":
+                code = _G_CODE.get(num)
+                if code is None:
+                    code = _g_code_slow(num)
+                if code is None:
+                    raise NcError(
+                        f"unknown G code G{num}", line, find_col(text, "G", len(blk.g) + 1), file
+                    )
+                blk.g.append(code)
+            elif letter == "M":
+                if "." in num or num[0] in "+-":
+                    raise NcError(
+                        f"malformed M code M{num}", line, find_col(text, "M", len(blk.m) + 1), file
+                    )
+                blk.m.append(int(num))
+            else:
+                raise NcError(
+                    "program number O must start the block", line, find_col(text, "O"), file
+                )
         else:
-            if letter in words:
+            words[letter] = float(num)
+    if len(words) + ng != len(pairs):
+        seen: set[str] = set()
+        for letter, _ in pairs:
+            if letter in seen and letter not in _GMO:
                 raise NcError(
                     f"address {letter} appears twice in the block",
                     line,
                     find_col(text, letter, 2),
                     file,
                 )
-            if letter == "O":
-                raise NcError(
-                    "program number O must start the block", line, find_col(text, "O"), file
-                )
-            words[letter] = float(num)
-            if least_increment and "." not in num:
-                if blk.nopoint is None:
-                    blk.nopoint = {letter}
-                else:
-                    blk.nopoint.add(letter)
+            seen.add(letter)
+    if least_increment:
+        nopoint = {letter for letter, num in pairs if "." not in num and letter not in _GMO}
+        if nopoint:
+            blk.nopoint = nopoint
     return blk
+
+
+_GMO = frozenset("GMO")

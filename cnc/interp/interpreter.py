@@ -184,6 +184,12 @@ class Interpreter:
                 self._limits.append((idx, ax.min_mm, ax.max_mm, ax.name))
                 home[idx] = ax.home_mm
         self._home = tuple(home)
+        lo = [-math.inf] * 3
+        hi = [math.inf] * 3
+        for idx, a, b, _ in self._limits:
+            lo[idx], hi[idx] = a - 1e-9, b + 1e-9
+        self._lo = tuple(lo)
+        self._hi = tuple(hi)
         self._axes_present = {ax.name for ax in params.axes}
         self._second_ref = (
             tuple(params.second_reference_mm[:3]) if params.second_reference_mm else self._home
@@ -253,6 +259,7 @@ class Interpreter:
         self._comp_uv = (0.0, 0.0)
         self._comp_w = 0.0
         self._polar_ra = (0.0, 0.0)
+        self._simple = True
 
     def _compute_off(self) -> tuple[float, float, float]:
         w = self._wofs[self._wcs]
@@ -384,6 +391,7 @@ class Interpreter:
         self._ended = True
 
     def _record(self, err: NcError, file: str) -> None:
+        self._update_simple()
         if err.file == "<program>" and file != "<program>":
             err.file = file
         self.errors.append(err)
@@ -434,12 +442,10 @@ class Interpreter:
             raise self._err(f"program executes more than {self.max_blocks} blocks", blk)
         # fast path: a motion block (G0..G3 at most) without any other modal change
         if (
-            not blk.m
+            self._simple
+            and not blk.m
             and (not g or (len(g) == 1 and g[0] in _MOTION_CODES))
             and words.keys() <= self._fast_words
-            and self._cycle == 800
-            and not self._xf_on
-            and self._comp is None
         ):
             if g:
                 self._motion = g[0]
@@ -675,6 +681,14 @@ class Interpreter:
             self._call(blk)
         elif sub == 99:
             self._return(blk)
+        self._update_simple()
+
+    def _update_simple(self) -> None:
+        """Whether the next plain motion block may take the fast path."""
+        comp = self._comp
+        self._simple = (
+            self._cycle == 800 and not self._xf_on and (comp is None or not comp.active)
+        )
 
     # --- words --------------------------------------------------------------------------
 
@@ -920,9 +934,9 @@ class Interpreter:
         m = (t[0] + o[0], t[1] + o[1], t[2] + o[2])
         if self._lathe:
             m = (m[0], 0.0, m[2])
-        for idx, lo, hi, _ in self._limits:
-            if not lo - 1e-9 <= m[idx] <= hi + 1e-9:
-                self._check(m, blk, line)
+        lo, hi = self._lo, self._hi
+        if not (lo[0] <= m[0] <= hi[0] and lo[1] <= m[1] <= hi[1] and lo[2] <= m[2] <= hi[2]):
+            self._check(m, blk, line)
         if feed is None:
             self._out.append(StraightTraverse(line, m, exact))
         else:
