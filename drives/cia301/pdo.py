@@ -65,6 +65,7 @@ class PdoChannel:
     last_sent: bytes | None = None
     since_sent: float = 1e9  # seconds since the last transmission (inhibit, event timer)
     length_error: bool = False
+    started: bool = False  # synchronous TPDO: SYNC start value (0x18xx:06) reached
     since_rx: float = 0.0  # RPDO deadline monitoring (0x14xx:05)
     rx_seen: bool = False
     timed_out: bool = False
@@ -122,6 +123,7 @@ class PdoService:
         channel.pending = None
         channel.last_sent = None
         channel.since_sent = 1e9
+        channel.started = False
         channel.since_rx, channel.rx_seen, channel.timed_out = 0.0, False, False
         count = self._value(channel.map_index, 0)
         entries = [self._value(channel.map_index, s) for s in range(1, count + 1)]

@@ -221,6 +221,7 @@ class CanopenSlave:
         else:
             for channel in self.pdo.tpdos:
                 channel.last_sent, channel.since_sent, channel.sync_count = None, 1e9, 0
+                channel.started = False
         self._pump_application_emcy()
 
     def reset_communication(self) -> None:
@@ -303,9 +304,11 @@ class CanopenSlave:
     def _on_sync(self, msg: can.Message) -> None:
         if not sync_allowed(self.state) or msg.is_remote_frame:
             return
-        if len(msg.data) > 1:
+        overflow = self.sync.overflow
+        if len(msg.data) != (1 if overflow else 0):
             self._raise_communication_error(EMCY_SYNC_LENGTH)
             return
+        counter = msg.data[0] if overflow else 0
         if self.sync.on_sync():
             self._clear_communication_error(EMCY_SYNC_TIMEOUT)
         operational = self.state is NmtState.OPERATIONAL
@@ -322,6 +325,15 @@ class CanopenSlave:
                     if data != channel.last_sent:
                         self._send_tpdo(channel, data)
                 else:
+                    if not channel.started:
+                        # With a SYNC counter and a start value the first transmission is at
+                        # the SYNC whose counter equals it; otherwise at the n-th SYNC
+                        # (CANopenNode, CTT "PDO 13").
+                        if overflow and channel.sync_start:
+                            if counter != channel.sync_start:
+                                continue
+                            channel.sync_count = channel.trans_type - 1
+                        channel.started = True
                     channel.sync_count += 1
                     if channel.sync_count >= channel.trans_type:
                         channel.sync_count = 0

@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from drives.application import ABORT_VALUE_RANGE, ObjectAccessError
+from drives.application import ABORT_DEVICE_STATE, ABORT_VALUE_RANGE, ObjectAccessError
 from drives.cia301.od import Entry, ObjectDictionary
 
 SYNC_TIMEOUT_FACTOR = 1.5  # CANopenNode: SYNC lost after 1.5 x 0x1006
@@ -18,6 +18,20 @@ class SyncConsumer:
         self.count = 0
         if (0x1005, 0) in od:
             od.write_hooks[0x1005] = self._write_cob_id
+        if (0x1019, 0) in od:
+            od.write_hooks[0x1019] = self._write_overflow
+
+    @property
+    def overflow(self) -> int:
+        """0x1019: 0 = SYNC without counter byte, else the counter runs 1..overflow."""
+        return int(self.od.get(0x1019, 0)) if (0x1019, 0) in self.od else 0
+
+    def _write_overflow(self, entry: Entry, value: int) -> None:
+        if value == 1 or value > 240:
+            raise ObjectAccessError(ABORT_VALUE_RANGE, f"counter overflow {value}: 0 or 2..240")
+        if self.period_s > 0:
+            raise ObjectAccessError(ABORT_DEVICE_STATE, "0x1019 only while 0x1006 is 0")
+        self.od.set(0x1019, 0, value)
 
     @property
     def cob_id(self) -> int:

@@ -276,3 +276,21 @@ def test_lockstep_determinism_same_scenario_same_candump_hash():
 def test_node_id_out_of_range_is_refused(cell, app, node_id):
     with pytest.raises(ValueError, match="node_id"):
         CanopenSlave(node_id, cell.hub.endpoint(), app)
+
+
+def test_synchronization_counter_byte_and_sync_start_value(cell, app, slave):
+    assert cell.send("605#2F19100001000000") == ["585#8019100030000906"]  # 1 is invalid
+    assert cell.send("605#2F19100005000000") == ["585#6019100000000000"]  # counts 1..5
+    cell.send("605#2F02180203000000")  # TPDO3 every 3rd SYNC
+    cell.send("605#2F02180604000000")  # start at counter value 4
+    cell.send("605#2302180185030000")
+    cell.send("000#0105")
+    cell.advance(0.001)
+    sent = [bool(cell.send(f"080#{c:02X}")) for c in (1, 2, 3, 4, 5, 1, 2, 3, 4)]
+    assert sent == [False, False, False, True, False, False, True, False, False]
+    assert cell.send("080#") == ["085#4082110000000000"]  # counter byte missing
+
+
+def test_synchronization_counter_refused_while_period_set(cell, slave):
+    cell.send("605#23061000E8030000")
+    assert cell.send("605#2F19100005000000") == ["585#8019100022000008"]
