@@ -67,6 +67,7 @@ class _Staged:
     seg: Segment
     tag: int  # index of the contour element it belongs to
     shape: clash.Element | None  # None: not checked (start-up, cancel, zero-length)
+    box: clash.Box | None = None
 
 
 @dataclass(slots=True)
@@ -105,7 +106,9 @@ class CutterCompensation:
         self._lookahead = lookahead
         self._queue: deque[_Staged] = deque()
         # (index, programmed segment, shape) of the last contour elements
-        self._window: deque[tuple[int, Segment, clash.Element]] = deque(maxlen=lookahead + 2)
+        self._window: deque[tuple[int, Segment, clash.Element, clash.Box]] = deque(
+            maxlen=lookahead + 2
+        )
         self._idx = 0  # index of the newest contour element
         self._mode = _Mode.INACTIVE
         self._side = 1.0
@@ -282,10 +285,11 @@ class CutterCompensation:
             assert seg.center is not None
             full = elem.sweep >= 2.0 * math.pi
             shape = clash.Arc.of(seg.start, seg.end, seg.center, seg.ccw, full)
-        self._window.append((self._idx, seg, shape))
+        box = clash.bbox(shape)
+        self._window.append((self._idx, seg, shape, box))
         for staged in self._queue:
             if staged.shape is not None and staged.tag >= self._idx - self._lookahead:
-                self._interfere(staged, seg, shape)
+                self._interfere(staged, seg, shape, box)
 
     def _stage(self, outs: list[Segment], tag: int) -> None:
         checking = self._lookahead > 0 and self._r > self._tol
@@ -300,17 +304,23 @@ class CutterCompensation:
             elif checking and seg.kind == "arc" and seg.role == "contour":
                 assert seg.center is not None  # a full circle: start == end
                 shape = clash.Arc.of(seg.start, seg.end, seg.center, seg.ccw, True)
-            staged = _Staged(seg, own, shape)
+            staged = _Staged(seg, own, shape, None if shape is None else clash.bbox(shape))
             if shape is not None:
-                for idx, prog, pshape in self._window:
-                    if idx >= own - self._lookahead:
-                        self._interfere(staged, prog, pshape)
+                for idx, prog, pshape, pbox in self._window:
+                    # An element's own offset keeps exactly r from it by construction.
+                    if idx >= own - self._lookahead and idx != own:
+                        self._interfere(staged, prog, pshape, pbox)
             self._queue.append(staged)
 
-    def _interfere(self, staged: _Staged, prog: Segment, pshape: clash.Element) -> None:
-        assert staged.shape is not None
+    def _interfere(
+        self, staged: _Staged, prog: Segment, pshape: clash.Element, pbox: clash.Box
+    ) -> None:
+        assert staged.shape is not None and staged.box is not None
+        limit = self._r - g.INTERFERENCE_TOL_REL * self._scale
+        if clash.box_gap(staged.box, pbox) >= limit:
+            return
         d = clash.distance(staged.shape, pshape)
-        if d < self._r - g.INTERFERENCE_TOL_REL * self._scale:
+        if d < limit:
             raise self._gouge(
                 staged.seg,
                 f"the tool path of this block passes {d:.6g} from the programmed contour of "

@@ -55,6 +55,25 @@ class Arc:
 Element = tuple[Point, Point] | Arc  # a line segment (start, end) or an arc
 
 
+Box = tuple[float, float, float, float]  # u_min, v_min, u_max, v_max
+
+
+def bbox(e: Element) -> Box:
+    """A box around the element (for arcs: around the whole circle; cheap and safe)."""
+    if isinstance(e, Arc):
+        (cu, cv), r = e.center, e.radius
+        return (cu - r, cv - r, cu + r, cv + r)
+    (au, av), (bu, bv) = e
+    return (min(au, bu), min(av, bv), max(au, bu), max(av, bv))
+
+
+def box_gap(p: Box, q: Box) -> float:
+    """A lower bound of the distance between anything inside box p and inside box q."""
+    gu = max(0.0, p[0] - q[2], q[0] - p[2])
+    gv = max(0.0, p[1] - q[3], q[1] - p[3])
+    return math.hypot(gu, gv)
+
+
 def point_segment(p: Point, a: Point, b: Point) -> float:
     ab = sub(b, a)
     den = dot(ab, ab)
