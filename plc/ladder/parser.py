@@ -36,6 +36,7 @@ _TOKEN = re.compile(
 _TIME_PART = re.compile(r"(\d+(?:\.\d+)?)(ms|d|h|m|s)", re.IGNORECASE)
 _TIME_UNIT_MS = {"d": 86_400_000, "h": 3_600_000, "m": 60_000, "s": 1000, "ms": 1}
 TYPES = ("BOOL", "INT", "TIMER", "COUNTER")
+MAX_BRANCH_DEPTH = 32  # deeper nesting is refused: no drawn rung needs it, recursion does
 
 
 @dataclass(slots=True)
@@ -114,6 +115,7 @@ class _RungParser:
         self.toks = tokens
         self.i = 0
         self.sink = sink
+        self.depth = 0
 
     def peek(self) -> Token | None:
         return self.toks[self.i] if self.i < len(self.toks) else None
@@ -167,6 +169,16 @@ class _RungParser:
         return Instr(word, ops, tok.line, tok.col)
 
     def branch(self, bst: Token) -> Branch | None:
+        if self.depth >= MAX_BRANCH_DEPTH:
+            self.sink.error(bst.line, bst.col, f"branches nested deeper than {MAX_BRANCH_DEPTH}")
+            return None
+        self.depth += 1
+        try:
+            return self._branch(bst)
+        finally:
+            self.depth -= 1
+
+    def _branch(self, bst: Token) -> Branch | None:
         legs: list[list[Element]] = []
         while True:
             start = self.peek()

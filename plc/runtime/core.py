@@ -129,7 +129,9 @@ class Runtime:
         if retain_store is not None:
             self._restore_retain()
         self.snapshot: Snapshot = self.image.snapshot(0)
-        self._v_pub: tuple = tuple(self._v)
+        # the program and its slot values of the last published scan, replaced as one
+        # object so a reader on another thread never pairs one program with another's slots
+        self._pub: tuple[CompiledProgram, tuple] = (program, tuple(self._v))
 
     # -- the scan ----------------------------------------------------------------------------
     def scan(self, now_ms: int, late_ms: float = 0.0) -> Snapshot:
@@ -186,7 +188,7 @@ class Runtime:
         self.stats.record(exec_ms * 1000.0, late_ms, exec_ms > cfg.period_ms)
         snap = self._publish()
         self.snapshot = snap
-        self._v_pub = tuple(v)
+        self._pub = (self.program, tuple(v))
         if self.retain_store is not None and cfg.retain_save_ms > 0:
             if self._next_retain_ms is None:
                 self._next_retain_ms = now_ms + cfg.retain_save_ms
@@ -290,7 +292,7 @@ class Runtime:
             del self.alarms[number]
 
     # -- forcing, write-once, reading ----------------------------------------------------------
-    def resolve(self, name: str) -> Target:
+    def resolve(self, name: str, program: CompiledProgram | None = None) -> Target:
         """An IEC address (`%QX0.1`) or a tag (`Motor`, `T1.ACC`) -> (area, index)."""
         if name.startswith("%"):
             parsed = parse_address(name)
@@ -301,7 +303,7 @@ class Runtime:
                 raise KeyError(f"{name} is outside the image")
             return area, index
         base, _, member = name.partition(".")
-        info = self.program.tag(base)
+        info = (program or self.program).tag(base)
         if member:
             from plc.ladder.instructions import MEMBER_ALIASES
 
@@ -355,14 +357,16 @@ class Runtime:
 
     def read(self, name: str) -> int | bool | dict:
         """A value as published by the last scan (safe from any thread)."""
+        program, values = self._pub
+        snapshot = self.snapshot
         if not name.startswith("%") and "." not in name:
-            info = self.program.tag(name)
+            info = program.tag(name)
             if info.members:
-                return {m: self._v_pub[i] for m, i in info.members.items()}
-        area, index = self.resolve(name)
+                return {m: values[i] for m, i in info.members.items()}
+        area, index = self.resolve(name, program)
         if area == "V":
-            return self._v_pub[index]
-        value = self.snapshot.area(area)[index]
+            return values[index]
+        value = snapshot.area(area)[index]
         return bool(value) if area in BIT_AREAS else value
 
     # -- online change -----------------------------------------------------------------------
