@@ -95,7 +95,7 @@ class Motion:
         if isinstance(cmd, MOTION_TYPES):
             if self.space() <= 0:
                 return False
-            self.path.add_motion(cmd, self._protect_s())
+            self.path.add_motion(cmd, self._protect_s(), not self.single_block)
             self._dirty = True
         elif isinstance(cmd, SetPathMode):
             self.path.set_path_mode(cmd)

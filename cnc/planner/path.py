@@ -89,8 +89,11 @@ class Path:
         tol = cmd.tolerance
         self.tolerance = tol if tol > 0.0 else self.params.default_path_tolerance
 
-    def add_motion(self, cmd, protect_s: float) -> None:
-        """Append a motion block. Path before `protect_s` is committed and never reshaped."""
+    def add_motion(self, cmd, protect_s: float, join: bool = True) -> None:
+        """Append a motion block. Path before `protect_s` is committed and never reshaped.
+
+        `join=False` makes the junction with the previous block an exact stop (single block).
+        """
         start = self.end_pose
         end = tuple(float(x) for x in cmd.end)
         if len(end) != len(start):
@@ -123,6 +126,8 @@ class Path:
         prev = self.segs[-1] if self.segs else None
         if prev is None:
             seg.s0 = self.end_s
+        elif not join:
+            seg.s0 = prev.s1
         else:
             self._join(prev, seg, protect_s)
         seg.s1 = seg.s0 + seg.geom.length

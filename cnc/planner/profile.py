@@ -131,7 +131,7 @@ def partition(
         b = g.s1
         vc = g.vcap(feed_ovr, rapid_ovr)
         stop_here = False
-        if stop_s is not None and stop_s < b:
+        if stop_s is not None and stop_s <= b:
             b = stop_s
             stop_here = True
         if cur is None:
