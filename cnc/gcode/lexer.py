@@ -273,7 +273,7 @@ def _words(
                     )
                 blk.g.append(code)
             elif letter == "M":
-                if "." in num or num[0] in "+-":
+                if "." in num or num[0] in "+-" or len(num) > 9:
                     raise NcError(
                         f"malformed M code M{num}", line, find_col(text, "M", len(blk.m) + 1), file
                     )
@@ -283,7 +283,14 @@ def _words(
                     "program number O must start the block", line, find_col(text, "O"), file
                 )
         else:
-            words[letter] = float(num)
+            v = words[letter] = float(num)
+            if not -1e9 < v < 1e9:
+                raise NcError(
+                    f"number {num} after address {letter} is out of range (|value| < 1e9)",
+                    line,
+                    find_col(text, letter),
+                    file,
+                )
     if len(words) + ng != len(pairs):
         seen: set[str] = set()
         for letter, _ in pairs:

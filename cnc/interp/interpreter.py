@@ -686,9 +686,7 @@ class Interpreter:
     def _update_simple(self) -> None:
         """Whether the next plain motion block may take the fast path."""
         comp = self._comp
-        self._simple = (
-            self._cycle == 800 and not self._xf_on and (comp is None or not comp.active)
-        )
+        self._simple = self._cycle == 800 and not self._xf_on and (comp is None or not comp.active)
 
     # --- words --------------------------------------------------------------------------
 

@@ -35,6 +35,7 @@ number = st.one_of(
     st.integers(-2000, 2000).map(str),
     st.floats(-600, 600, allow_nan=False, allow_infinity=False).map(lambda v: f"{v:.3f}"),
     st.sampled_from(["0", ".5", "-.5", "1.", "0000", "+3", "1e5", "--1", "1.2.3", ""]),
+    st.integers(-(10**40), 10**40).map(str),
 )
 word = st.one_of(
     st.builds(lambda g: "G" + g, st.sampled_from(G_CODES)),

@@ -73,6 +73,8 @@ def test_least_increment_marks_words_without_point() -> None:
         ("G1.23 X1", 1, "unknown G code"),
         ("M3.5", 1, "malformed M code"),
         ("G1 O12", 4, "must start the block"),
+        ("G1 X" + "9" * 40, 4, "out of range"),
+        ("M" + "9" * 40, 1, "malformed M code"),
     ],
 )
 def test_errors_name_line_column_and_reason(text: str, col: int, fragment: str) -> None:

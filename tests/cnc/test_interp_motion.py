@@ -222,3 +222,28 @@ def test_property_arc_end_and_radius(cx, cy, r, a0, sweep, cw, use_r) -> None:
 def test_determinism() -> None:
     prog = "G0 X1 Y2\nG1 X5 F100\nG2 X9 Y2 R2\nG3 X1 Y2 R-4\n" * 20
     assert repr(run(prog)) == repr(run(prog))
+
+
+def test_003_tv2_g20_is_modal_for_every_length_word() -> None:
+    cmds = moves("G20\nG00 X1.0\nG01 X2.0 F10.\n")
+    assert [c.end[0] for c in cmds] == pytest.approx([25.4, 50.8])
+
+
+def test_003_tv14_dwell_p_ms_and_x_seconds() -> None:
+    from cnc.canon import Dwell
+
+    assert run("G04 P1000\nG04 X1.0\n") == [Dwell(1, 1.0), Dwell(2, 1.0)]
+    li = MachineParams(axes=BIG, decimal_style=DecimalStyle.LEAST_INCREMENT)
+    assert run("G04 X1000\nG04 P1000\n", li) == [Dwell(1, 1.0), Dwell(2, 1.0)]
+
+
+def test_tv_int_5_g04_x1_is_one_second() -> None:
+    from cnc.canon import Dwell
+
+    assert run("N15 G04 X1\n") == [Dwell(1, 1.0)]
+
+
+def test_lathe_arcs_in_g18_by_default_with_radius_i() -> None:
+    a = moves("G98 G0 X20 Z0\nG2 X40 Z-10 I10 K0 F100\n", LATHE)[-1]  # G98: mm/min
+    assert a.plane is Plane.ZX and a.end == (20.0, 0.0, -10.0)
+    assert a.center == (20.0, 0.0, 0.0)  # start radius 10 + I10 = 20 on X (radius)
