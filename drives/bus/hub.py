@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import heapq
 import itertools
+import logging
 import threading
 import time
 from collections import deque
@@ -27,6 +28,8 @@ import can
 
 from drives.bus.candump import CandumpWriter
 from drives.bus.frame import ERROR_FRAME_BITS, frame_bits
+
+logger = logging.getLogger(__name__)
 
 
 class Clocked(Protocol):
@@ -235,6 +238,7 @@ class CanHub:
         self._thread: threading.Thread | None = None
         self._running = False
         self.late_ticks = 0
+        self.tick_errors = 0
         self.ticks = 0
         if log is not None:
             self.add_observer(CandumpWriter(log, channel).write)
@@ -549,7 +553,11 @@ class CanHub:
                     next_tick += tick
                     dt, last = now - last, now
                     for participant in list(self.clocked):
-                        participant.advance(dt)
+                        try:
+                            participant.advance(dt)
+                        except Exception:  # keep the bus running for everyone else
+                            self.tick_errors += 1
+                            logger.exception("clocked participant %r failed", participant)
                     self.deliver()
 
     def close(self) -> None:

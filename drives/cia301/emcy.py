@@ -23,6 +23,7 @@ class EmcyProducer:
         self.communication_errors: set[int] = set()
         self.history: deque[int] = deque(maxlen=HISTORY_DEPTH)
         self.queue: deque[bytes] = deque(maxlen=64)
+        self.since_sent_s = 1e9
         od.read_hooks[0x1001] = lambda entry: self.register
         if (0x1003, 0) in od:
             od.read_hooks[0x1003] = self._read_history
@@ -42,6 +43,14 @@ class EmcyProducer:
     def cob_id(self) -> int | None:
         raw = int(self.od.get(0x1014, 0)) if (0x1014, 0) in self.od else 0x80
         return None if raw & 0x80000000 else raw & 0x7FF
+
+    @property
+    def inhibit_s(self) -> float:
+        """0x1015 in 100 us units: the least time between two EMCY frames."""
+        return int(self.od.get(0x1015, 0)) * 1e-4 if (0x1015, 0) in self.od else 0.0
+
+    def may_send(self) -> bool:
+        return self.since_sent_s + 1e-12 >= self.inhibit_s
 
     def _read_history(self, entry: Entry) -> int:
         if entry.subindex == 0:
@@ -67,3 +76,4 @@ class EmcyProducer:
         self.communication_errors.clear()
         self.history.clear()
         self.queue.clear()
+        self.since_sent_s = 1e9

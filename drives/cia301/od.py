@@ -18,6 +18,7 @@ import canopen
 from canopen import objectdictionary as odt
 
 from drives.application import (
+    ABORT_GENERAL,
     ABORT_NOT_EXIST,
     ABORT_READ_ONLY,
     ABORT_SUBINDEX,
@@ -68,7 +69,17 @@ class Entry:
 
     def encode(self, value: Value) -> bytes:
         if self.codec is not None:
-            return self.codec.pack(value)
+            try:
+                return self.codec.pack(value)
+            except struct.error:
+                # An application answering 12.0 for an integer is tolerated; a value that
+                # does not fit the type is the application's fault: general error abort.
+                try:
+                    return self.codec.pack(int(round(value)))
+                except (struct.error, TypeError, ValueError):
+                    raise ObjectAccessError(
+                        ABORT_GENERAL, f"0x{self.index:04X}:{self.subindex} value {value!r}"
+                    ) from None
         if isinstance(value, bytes | bytearray):
             return bytes(value)
         return self.var.encode_raw(value)

@@ -8,6 +8,7 @@ with the abort code for anything it refuses; malformed protocol gets the protoco
 from __future__ import annotations
 
 import binascii
+import logging
 import struct
 from dataclasses import dataclass, field
 
@@ -16,6 +17,8 @@ from drives.cia301.od import ObjectDictionary
 
 ABORT_TOGGLE = 0x05030000
 ABORT_TIMEOUT = 0x05040000
+logger = logging.getLogger(__name__)
+
 ABORT_COMMAND = 0x05040001
 ABORT_BLOCK_SIZE = 0x05040002
 ABORT_SEQUENCE = 0x05040003
@@ -114,6 +117,10 @@ class SdoServer:
         except ObjectAccessError as exc:
             index, subindex = self._current_address(data)
             return [self._abort(exc.abort_code, index, subindex)]
+        except Exception:  # an application bug must not take the node off the bus
+            logger.exception("SDO request %s failed", bytes(data).hex())
+            index, subindex = self._current_address(data)
+            return [self._abort(ABORT_GENERAL, index, subindex)]
         index, subindex = self._current_address(data)
         return [self._abort(ABORT_COMMAND, index, subindex)]
 

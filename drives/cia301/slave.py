@@ -8,6 +8,7 @@ python-can bus through `start()`, a small receive-and-tick thread.
 
 from __future__ import annotations
 
+import logging
 import threading
 import time
 from functools import partial
@@ -35,6 +36,7 @@ from drives.cia301.sdo_server import SdoServer
 from drives.cia301.store import ParameterStore
 from drives.cia301.sync import SyncConsumer
 
+logger = logging.getLogger(__name__)
 _new_message = can.Message.__new__
 
 EMCY_HEARTBEAT_LOST = 0x8130
@@ -67,6 +69,7 @@ class CanopenSlave:
         self.state = NmtState.INITIALISING
         self.time_s = 0.0
         self.send_failures = 0
+        self.handler_errors = 0
         self._bus_off = False
         self._guard_toggle = 0
         self._lock = threading.RLock()
@@ -138,7 +141,12 @@ class CanopenSlave:
         handler = self._dispatch.get(msg.arbitration_id)
         if handler is not None:
             with self._lock:
-                handler(msg)
+                try:
+                    handler(msg)
+                except Exception:
+                    # A failing application must not break the bus delivery of other nodes.
+                    self.handler_errors += 1
+                    logger.exception("node %d: frame %03X failed", self.node_id, msg.arbitration_id)
 
     # ------------------------------------------------------------------ sending
     def _send(self, cob_id: int, data: bytes, *, remote: bool = False) -> bool:
@@ -170,13 +178,21 @@ class CanopenSlave:
 
     def _emit_emcy(self, error_code: int, manufacturer: bytes = b"\x00" * 5) -> None:
         data = self.emcy.frame(error_code, manufacturer)
-        cob_id = self.emcy.cob_id
-        if cob_id is None:
+        if self.emcy.cob_id is None:
             return
-        if emcy_allowed(self.state):
-            self._send(cob_id, data)
-        else:
-            self.emcy.queue.append(data)
+        self.emcy.queue.append(data)
+        self._flush_emcy()
+
+    def _flush_emcy(self) -> None:
+        """Send queued EMCYs as far as the NMT state and the inhibit time 0x1015 allow."""
+        cob_id = self.emcy.cob_id
+        if cob_id is None or not emcy_allowed(self.state):
+            return
+        emcy = self.emcy
+        while emcy.queue and emcy.may_send():
+            if emcy.inhibit_s:
+                emcy.since_sent_s = 0.0
+            self._send(cob_id, emcy.queue.popleft())
 
     def _pump_application_emcy(self) -> None:
         for request in self.application.take_emcy():
@@ -211,10 +227,8 @@ class CanopenSlave:
             return
         self.state = state
         self.application.on_nmt_state(state.label)
-        if emcy_allowed(state) and self.emcy.queue:
-            cob_id = self.emcy.cob_id
-            while self.emcy.queue and cob_id is not None:
-                self._send(cob_id, self.emcy.queue.popleft())
+        if self.emcy.queue:
+            self._flush_emcy()
         if state is not NmtState.OPERATIONAL:
             for channel in self.pdo.rpdos:
                 channel.pending = None
@@ -383,6 +397,9 @@ class CanopenSlave:
             state = self.state
             if state is NmtState.INITIALISING:
                 return
+            self.emcy.since_sent_s += dt_s
+            if self.emcy.queue:
+                self._flush_emcy()
             if self.heartbeat.due(dt_s):
                 self._send(0x700 + self.node_id, bytes([state.value]))
             if self.sdo.transfer is not None:

@@ -70,3 +70,20 @@ def test_bus_off_recovery_reports_8140(cell, app, slave):
     cell.hub.recover(endpoint)
     assert cell.advance(0.01) == ["705#7F", "085#4081110000000000"]
     assert ("fault", 0x8140) in app.calls
+
+
+def test_emcy_inhibit_time_spaces_frames(cell, app, slave):
+    assert cell.send("605#2B15100014000000") == ["585#6015100000000000"]  # 20 x 100 us
+    cell.send("000#0105")
+    cell.advance(0.001)
+    app.emcy += [EmcyRequest(0x2310, 0x03), EmcyRequest(0x3210, 0x05), EmcyRequest(0, 0)]
+    times = []
+    for step in range(10):
+        times += [(step, f) for f in cell.advance(0.001) if f.startswith("085#")]
+    assert [s for s, _ in times] == [0, 2, 4]
+    assert [f[4:8] for _, f in times] == ["1023", "1032", "0000"]
+
+
+def test_sdo_server_parameter_record(cell, slave):
+    assert cell.send("605#4000120100000000") == ["585#4300120105060000"]
+    assert cell.send("605#4000120200000000") == ["585#4300120285050000"]

@@ -110,3 +110,49 @@ def test_sdo_server_holds_no_transfer_after_an_abort(cell, slave):
     cell.send("605#7000000000000000")  # wrong toggle -> abort
     assert slave.sdo.transfer is None
     assert cell.send("605#4000100000000000") == ["585#4300100092010200"]
+
+
+class _Broken:
+    """An application with bugs: wrong types, exceptions."""
+
+    def owns(self, index):
+        return 0x6000 <= index <= 0x67FF
+
+    def read_object(self, index, subindex):
+        if index == 0x6064:
+            return 12.0  # float for INTEGER32: tolerated
+        if index == 0x6041:
+            return 70000  # does not fit UNSIGNED16
+        raise RuntimeError("bug")
+
+    def write_object(self, index, subindex, value):
+        raise RuntimeError("bug")
+
+    def on_sync(self):
+        raise RuntimeError("bug")
+
+    def advance(self, dt_s):
+        pass
+
+    def on_nmt_state(self, state):
+        pass
+
+    def on_communication_fault(self, error_code):
+        pass
+
+    def take_emcy(self):
+        return []
+
+
+def test_application_bugs_become_aborts_not_crashes(cell):
+    from drives.cia301 import CanopenSlave
+
+    slave = CanopenSlave(5, cell.hub.endpoint(), _Broken())
+    assert cell.send("605#4064600000000000") == ["585#436460000C000000"]
+    assert cell.send("605#4041600000000000") == ["585#8041600000000008"]
+    assert cell.send("605#4060600000000000") == ["585#8060600000000008"]
+    assert cell.send("605#2B40600006000000") == ["585#8040600000000008"]
+    cell.send("000#0105")
+    assert cell.send("080#") == []  # on_sync raised: counted, the bus goes on
+    assert slave.handler_errors == 1
+    assert cell.send("605#4000100000000000") == ["585#4300100092010200"]
