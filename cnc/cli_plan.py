@@ -1,0 +1,247 @@
+"""`fmscell nc plan FILE`: interpreter -> planner -> interpolator on ideal axes.
+
+Prints one JSON object with the run's figures (docs/motion.md lists the keys). The core
+is `plan_run`, which takes canonical commands and needs no interpreter, so the machine
+and the tests can use it too.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import sys
+from collections.abc import Callable, Iterable
+from pathlib import Path
+
+import typer
+
+from cnc.cli import nc_app
+
+AXIS_INDEX = {"X": 0, "Y": 1, "Z": 2}
+INCH_MM = 25.4
+
+
+class _Deviation:
+    """Distance of each sample from the programmed (unblended) path, searched near the
+    piece last matched: motion runs forward along the path, so a short forward scan
+    suffices."""
+
+    def __init__(self) -> None:
+        self.pieces: list = []
+        self.cum: list[float] = []
+        self.j = 0
+        self.worst = 0.0
+
+    def add(self, piece) -> None:
+        total = self.cum[-1] if self.cum else 0.0
+        self.pieces.append(piece)
+        self.cum.append(total + piece.length)
+
+    def sample(self, pose, travel: float) -> None:
+        from cnc.planner.geometry import distance_to_piece
+
+        if not self.pieces:
+            return
+        j0 = max(self.j - 1, 0)
+        reach = travel + 2.0
+        base = self.cum[j0] - self.pieces[j0].length
+        best = math.inf
+        bj = self.j
+        k = j0
+        while k < len(self.pieces):
+            d = distance_to_piece(pose, self.pieces[k])
+            if d < best:
+                best, bj = d, k
+            if self.cum[k] - base > reach and k > self.j:
+                break
+            k += 1
+        self.j = bj
+        if best > self.worst:
+            self.worst = best
+
+
+def plan_run(
+    params,
+    commands: Iterable,
+    start: tuple[float, ...],
+    ipo: float | None = None,
+    on_sample: Callable | None = None,
+    max_cycles: int = 50_000_000,
+) -> dict:
+    """Run canonical commands through Motion on ideal axes; return the plan figures.
+
+    Dwell sync points hold for their time; every other sync point is acknowledged at
+    once (ideal PLC). `on_sample(sample)` sees every IPO sample.
+    """
+    from cnc.canon import MOTION_TYPES, Dwell, StraightTraverse
+    from cnc.errors import NcError
+    from cnc.interpolator import Motion
+    from cnc.planner.geometry import Line, arc_from_canon
+
+    motion = Motion(params, start=start, ipo_cycle_s=ipo)
+    t = motion.ipo
+    names = [a.name for a in params.axes if a.name in AXIS_INDEX]
+    idx = [AXIS_INDEX[n] for n in names]
+    n = len(start)
+    prev = list(start)
+    v1 = [0.0] * n
+    a1 = [0.0] * n
+    vmax = [0.0] * n
+    amax = [0.0] * n
+    jmax = [0.0] * n
+    dev = _Deviation()
+    blocks = moves = 0
+    last_line = None
+    feed_len = rapid_len = 0.0
+    pos = tuple(start)
+    it = iter(commands)
+    pending = next(it, None)
+    fed_all = pending is None
+    if fed_all:
+        motion.end_of_program()
+    cycles = 0
+    dwell_left = 0
+    last = None
+
+    def take(cmd) -> None:
+        nonlocal blocks, moves, last_line, feed_len, rapid_len, pos
+        if cmd.line != last_line:
+            blocks += 1
+            last_line = cmd.line
+        if isinstance(cmd, MOTION_TYPES):
+            moves += 1
+            end = tuple(float(x) for x in cmd.end)
+            if end != pos or getattr(cmd, "center", None) is not None:
+                if hasattr(cmd, "center"):
+                    piece = arc_from_canon(
+                        pos, end, cmd.center, cmd.plane.value, cmd.clockwise, cmd.turns
+                    )
+                else:
+                    piece = Line(pos, end)
+                if piece.length > 0.0:
+                    dev.add(piece)
+                    if isinstance(cmd, StraightTraverse):
+                        rapid_len += piece.length
+                    else:
+                        feed_len += piece.length
+            pos = end
+
+    while True:
+        while pending is not None and motion.push(pending):
+            take(pending)
+            pending = next(it, None)
+        if pending is None and not fed_all:
+            motion.end_of_program()
+            fed_all = True
+        if dwell_left > 0:
+            dwell_left -= 1
+            if dwell_left == 0:
+                motion.acknowledge()
+        s = motion.step()
+        cycles += 1
+        if cycles > max_cycles:
+            raise NcError(f"plan did not finish within {max_cycles} IPO cycles")
+        last = s
+        p = s.pose
+        for i in range(n):
+            v = (p[i] - prev[i]) / t
+            a = (v - v1[i]) / t
+            j = (a - a1[i]) / t
+            if abs(v) > vmax[i]:
+                vmax[i] = abs(v)
+            if abs(a) > amax[i]:
+                amax[i] = abs(a)
+            if abs(j) > jmax[i]:
+                jmax[i] = abs(j)
+            v1[i] = v
+            a1[i] = a
+        dev.sample(p, s.velocity * t)
+        prev = list(p)
+        if on_sample is not None:
+            on_sample(s)
+        if s.sync is not None:
+            if isinstance(s.sync, Dwell) and s.sync.seconds > 0:
+                dwell_left = max(1, math.ceil(s.sync.seconds / t - 1e-9))
+            else:
+                motion.acknowledge()
+        if fed_all and motion.idle and dwell_left == 0:
+            break
+
+    def per_axis(vals) -> dict[str, float]:
+        return {nm: vals[i] for nm, i in zip(names, idx, strict=True)}
+
+    return {
+        "blocks": blocks,
+        "moves": moves,
+        "cycle_time_s": cycles * t,
+        "ipo_cycle_s": t,
+        "path_length_mm": feed_len,
+        "rapid_length_mm": rapid_len,
+        "final_position": per_axis(last.pose if last else start),
+        "max_abs_velocity": per_axis(vmax),
+        "max_abs_accel": per_axis(amax),
+        "max_abs_jerk": per_axis(jmax),
+        "max_path_deviation_mm": dev.worst,
+        "units": {"velocity": "mm/s", "accel": "mm/s^2", "jerk": "mm/s^3"},
+    }
+
+
+@nc_app.command("plan")
+def plan_cmd(
+    file: Path = typer.Argument(..., help="part program"),
+    config: Path | None = typer.Option(None, "--config", help="machine YAML (default: built-in)"),
+    ipo_ms: float = typer.Option(None, "--ipo-ms", help="IPO cycle in ms (default: machine's)"),
+    trace: Path | None = typer.Option(None, "--trace", help="write one CSV row per IPO sample"),
+    as_json: bool = typer.Option(False, "--json", help="compact one-line JSON"),
+) -> None:
+    """Plan and interpolate FILE on ideal axes; print one JSON object with the figures."""
+    from cnc.errors import NcError
+    from cnc.params import MachineParams
+
+    try:
+        if config is not None:
+            from cnc.config import load_machine_params
+
+            params = load_machine_params(config)
+        else:
+            params = MachineParams()
+        from cnc.interp import Interpreter
+
+        try:
+            text = file.read_text(encoding="latin-1")
+        except OSError as e:
+            raise NcError(f"cannot read program: {e.strerror}", file=str(file)) from e
+        interp = Interpreter(params, file=str(file))
+        start = tuple(interp.state.machine_position)
+        names = [a.name for a in params.axes if a.name in AXIS_INDEX]
+        out = trace.open("w", encoding="ascii", newline="") if trace else None
+        try:
+            on_sample = None
+            if out is not None:
+                out.write("t," + ",".join(names) + ",line\n")
+                cols = [AXIS_INDEX[nm] for nm in names]
+
+                def on_sample(s):
+                    out.write(
+                        f"{s.t!r}," + ",".join(repr(s.pose[i]) for i in cols) + f",{s.line}\n"
+                    )
+
+            ipo = None if ipo_ms is None else ipo_ms / 1000.0
+            report = plan_run(params, interp.run(text), start, ipo, on_sample)
+        finally:
+            if out is not None:
+                out.close()
+        st = interp.state
+        scale = INCH_MM if st.units == "inch" else 1.0
+        report["final_work_position"] = {
+            nm: st.work_position[AXIS_INDEX[nm]] * scale for nm in names
+        }
+    except NcError as e:
+        if not e.file or e.file == "<program>":
+            e.file = str(file)
+        print(str(e), file=sys.stderr)
+        raise typer.Exit(1) from None
+    if as_json:
+        print(json.dumps(report, separators=(",", ":")))
+    else:
+        print(json.dumps(report, indent=2))

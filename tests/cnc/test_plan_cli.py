@@ -1,0 +1,120 @@
+"""`fmscell nc plan`: interpreter -> planner -> interpolator, one JSON object, CSV trace."""
+
+from __future__ import annotations
+
+import csv
+import json
+import math
+
+import pytest
+from typer.testing import CliRunner
+
+import cnc.cli_plan  # noqa: F401  (registers the command on nc_app)
+from cnc.canon import Dwell, PathMode, SetPathMode, StraightFeed, StraightTraverse
+from cnc.cli import nc_app
+from cnc.cli_plan import plan_run
+from cnc.config import MACHINES_DIR
+from cnc.params import MachineParams
+
+PROGRAM = """%
+O1000 (plan test)
+G21 G90 G17 G54 G64 P0.02
+G0 X-50 Y-50 Z-10
+G1 X-100 F3000
+G1 Y-100
+G2 X-150 Y-100 I-25 J0
+G1 X-150 Y-50
+G4 X0.25
+M30
+%
+"""
+
+runner = CliRunner()
+
+
+@pytest.fixture
+def prog(tmp_path):
+    p = tmp_path / "part.nc"
+    p.write_text(PROGRAM)
+    return p
+
+
+def invoke(*args):
+    res = runner.invoke(nc_app, ["plan", *map(str, args)])
+    return res
+
+
+def test_plan_prints_one_json_object_with_the_figures(prog):
+    res = invoke(prog, "--json")
+    assert res.exit_code == 0, res.output
+    rep = json.loads(res.output)
+    assert rep["moves"] == 5
+    assert rep["final_position"] == {"X": -150.0, "Y": -50.0, "Z": -10.0}
+    assert rep["final_work_position"] == {"X": -150.0, "Y": -50.0, "Z": -10.0}
+    assert rep["path_length_mm"] == pytest.approx(50 + 50 + 25 * math.pi + 50, rel=1e-12)
+    assert rep["rapid_length_mm"] == pytest.approx(math.sqrt(50**2 + 50**2 + 10**2), rel=1e-12)
+    assert 0.0 < rep["max_path_deviation_mm"] <= 0.02 + 1e-9
+    p = MachineParams()
+    for ax in p.axes:
+        assert rep["max_abs_velocity"][ax.name] <= ax.max_velocity / 60 * (1 + 1e-9)
+        assert rep["max_abs_accel"][ax.name] <= ax.max_accel * (1 + 1e-9)
+        assert rep["max_abs_jerk"][ax.name] <= ax.max_jerk * (1 + 1e-9)
+    # the dwell is part of the cycle time
+    assert rep["cycle_time_s"] > 0.25
+
+
+def test_trace_csv_has_one_row_per_ipo_sample(prog, tmp_path):
+    out = tmp_path / "trace.csv"
+    res = invoke(prog, "--ipo-ms", "1", "--trace", out)
+    assert res.exit_code == 0, res.output
+    rep = json.loads(res.output)
+    rows = list(csv.reader(out.open()))
+    assert rows[0] == ["t", "X", "Y", "Z", "line"]
+    assert len(rows) - 1 == round(rep["cycle_time_s"] / 0.001)
+    assert [float(x) for x in rows[-1][1:4]] == [-150.0, -50.0, -10.0]
+    ts = [float(r[0]) for r in rows[1:]]
+    assert all(b > a for a, b in zip(ts, ts[1:], strict=False))
+
+
+def test_trace_is_byte_identical_twice(prog, tmp_path):
+    a, b = tmp_path / "a.csv", tmp_path / "b.csv"
+    assert invoke(prog, "--trace", a).exit_code == 0
+    assert invoke(prog, "--trace", b).exit_code == 0
+    assert a.read_bytes() == b.read_bytes()
+
+
+def test_config_file_is_used(prog):
+    res = invoke(prog, "--config", MACHINES_DIR / "mill3.yaml", "--json")
+    assert res.exit_code == 0, res.output
+    assert json.loads(res.output)["final_position"]["X"] == -150.0
+
+
+def test_bad_program_gives_file_line_col(tmp_path):
+    bad = tmp_path / "bad.nc"
+    bad.write_text("G21 G90\nG1 X-10\n")  # feed move without F
+    res = invoke(bad)
+    assert res.exit_code == 1
+    assert f"{bad}:2:" in res.output
+
+
+def test_missing_file_is_a_clear_error(tmp_path):
+    res = invoke(tmp_path / "nope.nc")
+    assert res.exit_code == 1
+    assert "cannot read program" in res.output
+
+
+def test_plan_run_on_canonical_commands():
+    cmds = [
+        SetPathMode(1, PathMode.EXACT_STOP),
+        StraightTraverse(2, (-10.0, 0.0, 0.0)),
+        StraightFeed(3, (-10.0, -10.0, 0.0), 1200.0),
+        Dwell(4, 0.1),
+    ]
+    seen = []
+    rep = plan_run(MachineParams(), cmds, (0.0, 0.0, 0.0), on_sample=seen.append)
+    assert rep["blocks"] == 4 and rep["moves"] == 2
+    assert rep["path_length_mm"] == 10.0 and rep["rapid_length_mm"] == 10.0
+    assert rep["max_path_deviation_mm"] < 1e-12
+    assert len(seen) == round(rep["cycle_time_s"] / 0.002)
+    # the dwell holds the machine for 0.1 s = 50 cycles at the end point
+    assert sum(1 for s in seen if s.pose == (-10.0, -10.0, 0.0)) >= 50
