@@ -17,6 +17,7 @@ Public API::
 
 from plc.runtime.alarms import (
     ALARM_DIV_ZERO,
+    ALARM_IO_FAULT,
     ALARM_PROGRAM_FAULT,
     ALARM_RETAIN_STORE,
     ALARM_TEXT,
@@ -32,6 +33,7 @@ from plc.runtime.stats import ScanStats, Summary
 
 __all__ = [
     "ALARM_DIV_ZERO",
+    "ALARM_IO_FAULT",
     "ALARM_PROGRAM_FAULT",
     "ALARM_RETAIN_STORE",
     "ALARM_TEXT",

@@ -11,6 +11,7 @@ ALARM_DIV_ZERO = 9003
 ALARM_WRITE_REJECTED = 9004
 ALARM_RETAIN_STORE = 9005
 ALARM_PROGRAM_SWAP = 9006
+ALARM_IO_FAULT = 9007
 
 ALARM_TEXT = {
     ALARM_WATCHDOG: "scan watchdog: scan time exceeded the limit; outputs in safe state, PLC in FAULT",
@@ -19,6 +20,7 @@ ALARM_TEXT = {
     ALARM_WRITE_REJECTED: "a queued write was outside the process image and was dropped",
     ALARM_RETAIN_STORE: "retentive memory could not be saved or loaded",
     ALARM_PROGRAM_SWAP: "online change refused: the new program does not fit the image",
+    ALARM_IO_FAULT: "I/O provider failed; outputs in safe state, PLC in FAULT",
 }
 
 

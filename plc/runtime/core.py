@@ -34,6 +34,7 @@ from plc.ladder.symbols import (
 )
 from plc.runtime.alarms import (
     ALARM_DIV_ZERO,
+    ALARM_IO_FAULT,
     ALARM_PROGRAM_FAULT,
     ALARM_RETAIN_STORE,
     ALARM_TEXT,
@@ -145,13 +146,17 @@ class Runtime:
             self._swap()
         img = self.image
         self._apply_writes()
-        if self.io is not None:
-            self.io.read_inputs(self._raw_ix, self._raw_iw, now_ms)
-            if self._debounce is not None:
-                self._debounce.filter(self._raw_ix, img.ix)
+        if self.io is not None and self.mode is not Mode.FAULT:
+            try:
+                self.io.read_inputs(self._raw_ix, self._raw_iw, now_ms)
+            except Exception as exc:  # a broken field bus stops the PLC, not the process
+                self._fault(ALARM_IO_FAULT, f"read_inputs: {type(exc).__name__}: {exc}", now_ms)
             else:
-                img.ix[:] = self._raw_ix
-            img.iw[:] = self._raw_iw
+                if self._debounce is not None:
+                    self._debounce.filter(self._raw_ix, img.ix)
+                else:
+                    img.ix[:] = self._raw_ix
+                img.iw[:] = self._raw_iw
         v = self._v
         for (area, index), value in self._force_in:
             (v if area == "V" else img.area(area))[index] = value
@@ -184,7 +189,10 @@ class Runtime:
         if self.mode is Mode.FAULT:
             self._safe_outputs()  # safety wins over forces
         if self.io is not None:
-            self.io.write_outputs(img.qx, img.qw, now_ms)
+            try:
+                self.io.write_outputs(img.qx, img.qw, now_ms)
+            except Exception as exc:
+                self._fault(ALARM_IO_FAULT, f"write_outputs: {type(exc).__name__}: {exc}", now_ms)
         self.stats.record(exec_ms * 1000.0, late_ms, exec_ms > cfg.period_ms)
         snap = self._publish()
         self.snapshot = snap

@@ -10,6 +10,7 @@ import pytest
 from plc.image import ImageSize, Write
 from plc.ladder import compile_text
 from plc.runtime import (
+    ALARM_IO_FAULT,
     ALARM_PROGRAM_FAULT,
     ALARM_WATCHDOG,
     ALARM_WRITE_REJECTED,
@@ -337,3 +338,28 @@ def test_timers_use_virtual_time_only():
     assert rt.read("Lamp") is False
     rt.scan(1_000_100)
     assert rt.read("Lamp") is True
+
+
+class BrokenIO(SimulatedIO):
+    def __init__(self) -> None:
+        super().__init__()
+        self.fail = False
+
+    def read_inputs(self, ix, iw, now_ms):
+        if self.fail:
+            raise OSError("bus off")
+        super().read_inputs(ix, iw, now_ms)
+
+
+def test_io_failure_faults_the_plc_with_safe_outputs():
+    io = BrokenIO()
+    rt = make(io=io)
+    io.set_input(0, True)
+    rt.scan(0)
+    assert rt.read("Motor") is True
+    io.fail = True
+    rt.scan(10)
+    assert rt.mode is Mode.FAULT and rt.read("Motor") is False
+    assert "bus off" in rt.alarms[ALARM_IO_FAULT].detail
+    rt.scan(20)  # in FAULT the broken provider is not read again
+    assert rt.mode is Mode.FAULT
