@@ -313,6 +313,8 @@ class CanopenSlave:
         for response in self.sdo.on_request(bytes(msg.data)):
             self._send(tx, response)
         self._pump_application_emcy()
+        if self._event_tpdos and self.state is NmtState.OPERATIONAL:
+            self._send_event_tpdos(0.0)  # a write may have changed mapped data: report now
 
     # ------------------------------------------------------------------ SYNC and PDO
     def _on_sync(self, msg: can.Message) -> None:
@@ -384,6 +386,8 @@ class CanopenSlave:
         else:
             self.pdo.unpack(channel, msg.data)
             self._pump_application_emcy()
+            if self._event_tpdos:
+                self._send_event_tpdos(0.0)  # e.g. the statusword answering a controlword
 
     def _on_tpdo_rtr(self, channel: PdoChannel, msg: can.Message) -> None:
         if msg.is_remote_frame and pdo_allowed(self.state):

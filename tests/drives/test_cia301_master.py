@@ -214,3 +214,30 @@ def test_slave_serves_on_python_can_virtual_bus_in_realtime():
         slave.stop()
         network.disconnect()
         slave_bus.shutdown()
+
+
+class _PowerStages(FakeDrive):
+    """Just enough CiA 402 to let BaseNode402 walk to OPERATION ENABLED."""
+
+    STATUS = {0x06: 0x0231, 0x07: 0x0233, 0x0F: 0x0237, 0x00: 0x0250, 0x80: 0x0250}
+
+    def write_object(self, index, subindex, value):
+        super().write_object(index, subindex, value)
+        if index == 0x6040 and value in self.STATUS:
+            self.values[(0x6041, 0)] = self.STATUS[value]
+
+
+def test_base_node_402_changes_state_in_lockstep_without_advancing_time():
+    hub = CanHub()
+    network = connect_network(canopen.Network(), hub.endpoint("master"))
+    node = canopen.BaseNode402(5, EDS_PATH)
+    network.add_node(node)
+    app = _PowerStages()
+    CanopenSlave(5, hub.endpoint("node5"), app)
+    node.setup_402_state_machine()
+    node.nmt.state = "OPERATIONAL"
+    hub.advance(0.001)
+    node.state = "OPERATION ENABLED"  # each controlword RPDO is answered by TPDO1 at once
+    assert node.state == "OPERATION ENABLED"
+    assert [c[3] for c in app.calls if c[:2] == ("write", 0x6040)] == [0x06, 0x07, 0x0F]
+    hub.close()

@@ -137,6 +137,7 @@ def test_rtr_on_tpdo_returns_fresh_data(cell, app, slave):
 
 def test_rpdo_too_long_raises_8220_but_applies(cell, app, slave):
     cell.send("000#0105")
+    cell.advance(0.001)
     assert cell.send("205#0F00E803000000") == ["085#2082110000000000"]
     assert app.values[(0x607A, 0)] == 1000
     assert ("fault", 0x8220) in app.calls
@@ -144,6 +145,7 @@ def test_rpdo_too_long_raises_8220_but_applies(cell, app, slave):
 
 def test_rpdo_length_error_is_signalled_once_until_cleared(cell, app, slave):
     cell.send("000#0105")
+    cell.advance(0.001)
     assert cell.send("205#0F") == ["085#1082110000000000"]
     assert cell.send("205#0F") == []
     assert cell.send("205#0F00E8030000") == ["085#0000000000000000"]
@@ -163,3 +165,10 @@ def test_default_mapping_of_the_eds(slave):
     assert [(e.index, e.subindex) for e in tpdo1.targets] == [(0x6041, 0), (0x6064, 0)]
     assert rpdo1.cob_id == 0x205 and tpdo1.cob_id == 0x185
     assert [c.valid for c in slave.pdo.tpdos] == [True, True, False, False]
+
+
+def test_event_tpdo_answers_an_event_rpdo_at_once(cell, app, slave):
+    cell.send("000#0105")
+    cell.advance(0.001)
+    app.values[(0x6041, 0)] = 0x0221  # what a profile would do on "shutdown"
+    assert cell.send("205#0600E8030000") == ["185#2102E8030000", "285#210200"]
