@@ -455,3 +455,70 @@ def test_interference_window_agrees_with_a_sampled_oracle(moves, side, radius):
     elif hit:
         with pytest.raises(NcError, match="gouge"):
             drive(side, radius, segs[:-1], segs[-1])
+
+
+# ------------------------------------------------------------- random API call sequences
+
+_start = st.tuples(
+    st.just("start"), st.sampled_from(["left", "right"]), st.sampled_from([-2.0, 0.0, 0.5, 2.0])
+)
+_line = st.tuples(st.just("line"), st.integers(-20, 20), st.integers(-20, 20))
+_arc = st.tuples(st.just("arc"), st.integers(-10, 10), st.integers(-10, 10), st.integers(-300, 300))
+_other = st.sampled_from([("cancel",), ("flush",), ("zero",), ("restart",)])
+ops = st.builds(
+    lambda first, lead, body: [first, lead, *body],
+    _start,
+    _line,
+    st.lists(st.one_of(_line, _line, _line, _arc, _arc, _other, _other), min_size=3, max_size=30),
+)
+
+
+@SETTINGS
+@given(ops, st.integers(0, 3))
+def test_any_call_sequence_is_continuous_or_a_clean_error(seq, lookahead):
+    # Whatever order the interpreter calls in, the output stream is one continuous path that
+    # starts at the program's start, carries every payload once or more in program order,
+    # and any refusal is an NcError with a source position.
+    cc = CutterCompensation(lookahead=lookahead)
+    p = (0.0, 0.0)
+    out = []
+    pushed = 0
+    try:
+        for op in seq:
+            if op[0] == "start":
+                cc.start(op[1], op[2], line=pushed + 1, col=1)
+            elif op[0] == "restart":  # G41/G42 again with the first block's side and D
+                cc.start(seq[0][1], seq[0][2], line=pushed + 1, col=1)
+            elif op[0] == "cancel":
+                cc.cancel()
+            elif op[0] == "flush":
+                out += cc.flush()
+            else:
+                if op[0] == "line":
+                    nxt, seg = (p[0] + op[1], p[1] + op[2]), None
+                    seg = Segment("line", p, nxt, None, False, pushed + 1, 1, pushed)
+                elif op[0] == "zero":
+                    nxt = p
+                    seg = Segment("line", p, p, None, False, pushed + 1, 1, pushed)
+                else:
+                    c = (p[0] + op[1], p[1] + op[2])
+                    if c == p:
+                        continue
+                    rad = math.dist(p, c)
+                    ang = math.atan2(p[1] - c[1], p[0] - c[0]) + math.radians(op[3])
+                    nxt = (c[0] + rad * math.cos(ang), c[1] + rad * math.sin(ang))
+                    seg = Segment("arc", p, nxt, c, op[3] > 0, pushed + 1, 1, pushed)
+                out += cc.push(seg)
+                pushed += 1
+                p = nxt
+        out += cc.flush()
+    except NcError as e:
+        assert e.message.startswith("cutter compensation") and 1 <= e.line <= pushed + 1
+        return
+    if not out:
+        return
+    assert out[0].start == (0.0, 0.0)
+    for prev, nxt in zip(out, out[1:], strict=False):
+        assert math.dist(nxt.start, prev.end) <= 1e-9 * 100, (prev, nxt)
+    order = [s.payload for s in out]
+    assert order == sorted(order) and set(order) == set(range(pushed))
