@@ -107,9 +107,11 @@ class Drive402:
         self._od[(0x6075, 0)] = round(m.rated_current * 1000)
         self._od[(0x6076, 0)] = round(m.rated_torque * 1000)
         self._od[(0x6080, 0)] = round(m.max_speed_rpm)
+        self._update_factor()
         for key, value in self._initial_objects.items():
             index, sub = key if isinstance(key, tuple) else (key, 0)
             self._store(index, sub, value)
+        self._update_factor()
         self._power = PowerState()
         self._mode = self._od[(0x6060, 0)]
         self._dem = Demand(self.plant.theta_meas, 0.0)
@@ -144,9 +146,12 @@ class Drive402:
     @property
     def rad_per_unit(self) -> float:
         """Motor radians per position user unit (factor group 0x6091/0x6092)."""
+        return self._rpu
+
+    def _update_factor(self) -> None:
         feed = self._od[(0x6092, 1)]
         revs = self._od[(0x6092, 2)]
-        return 2.0 * math.pi * self.params.screw.gear_ratio * revs / feed
+        self._rpu = 2.0 * math.pi * self.params.screw.gear_ratio * revs / feed
 
     def _to_user(self, rad: float) -> int:
         return round((rad - self._zero) / self.rad_per_unit)
@@ -178,6 +183,8 @@ class Drive402:
             self._on_controlword(value)
         elif index == 0x6060:
             self._set_mode(value)
+        elif index == 0x6092:
+            self._update_factor()
         elif index == 0x60FF and self._mode == PV:
             pass  # PV follows 0x60FF continuously
 
@@ -205,6 +212,13 @@ class Drive402:
             self._sm(None)  # transition 1: self-test passed
         n = max(1, math.ceil(dt_s / self.params.loops.substep - 1e-9))
         h = dt_s / n
+        # objects that cannot change inside advance(): convert them once per call
+        od = self._od
+        rpu = self.rad_per_unit
+        window = od[(0x6065, 0)]
+        self._fe_window = None if window == 0xFFFFFFFF else window * rpu
+        self._fe_timeout = od[(0x6066, 0)] * 1e-3
+        self._ilim = self._current_limit()
         for _ in range(n):
             self._substep(h)
         self.time += dt_s
@@ -638,15 +652,15 @@ class Drive402:
             d.pos, d.vel = p.theta_meas, 0.0
         th_prev = p.theta_meas
         x_prev = p.table_x
-        fault = p.step(h, ctl, d.pos, d.vel, d.vel, self._current_limit(), block_neg, block_pos)
+        fault = p.step(h, ctl, d.pos, d.vel, d.vel, self._ilim, block_neg, block_pos)
         if ctl == VELOCITY:
             d.pos = p.theta_meas
         # following error monitor (position control in OPERATION ENABLED)
         if ctl == POSITION and st == State.OPERATION_ENABLED and power.stop is None:
-            window = self._od[(0x6065, 0)]
-            if window != 0xFFFFFFFF and abs(d.pos - p.theta_meas) > window * self.rad_per_unit:
+            window = self._fe_window
+            if window is not None and abs(d.pos - p.theta_meas) > window:
                 self._fe_timer += h
-                if self._fe_timer > self._od[(0x6066, 0)] * 1e-3 and not fault:
+                if self._fe_timer > self._fe_timeout and not fault:
                     self._fe_latched = True
                     fault = 0x8611
             else:

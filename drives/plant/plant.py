@@ -54,6 +54,8 @@ class Plant:
         self._mpr = p.metres_per_motor_rad
         self._h_cached = -1.0
         self._decay = 0.0
+        self._c = self._constants()
+        self._i2t_limit = (m.peak_current**2 - m.rated_current**2) * p.thermal.i2t_peak_time
         # injections
         self.load_force = 0.0  # N on the table, + pushes toward +x
         self.blocked = False
@@ -138,6 +140,42 @@ class Plant:
         return self.params.motor.km * self.current
 
     # -- one sub-step ---------------------------------------------------------------------
+    def _constants(self) -> tuple:
+        p = self.params
+        m, sc, dl, th, mo = p.motor, p.screw, p.dc_link, p.thermal, p.monitor
+        return (
+            m.resistance,
+            m.kb,
+            m.km,
+            m.max_speed_rpm * _TWO_PI / 60.0,
+            p.loops.kv,
+            p.loops.velocity_feedforward,
+            m.peak_current,
+            m.overcurrent_trip,
+            sc.viscous,
+            sc.coulomb_torque,
+            self._mpr / sc.efficiency,
+            self.inertia,
+            self._mpr,
+            self._rad_per_count,
+            p.encoder.max_speed_factor * m.max_speed_rpm / 60.0 * p.encoder.counts_per_rev,
+            dl.capacitance,
+            1.0 / dl.bleed_resistance,
+            dl.chopper_on,
+            dl.chopper_off,
+            1.0 / dl.chopper_resistance,
+            1.0 / dl.source_resistance,
+            dl.overvoltage_trip,
+            dl.undervoltage_trip,
+            dl.mains_loss_detect,
+            th.time_constant / th.thermal_resistance,
+            th.thermal_resistance,
+            th.trip,
+            m.rated_current**2,
+            mo.blocked_time,
+            mo.blocked_speed,
+        )
+
     def step(
         self,
         h: float,
@@ -150,78 +188,106 @@ class Plant:
         block_positive: bool = False,
     ) -> int:
         """Integrate h seconds. Angles in motor rad (encoder frame). Returns a fault code or 0."""
-        p = self.params
-        m = p.motor
+        (
+            res,
+            kb,
+            km,
+            vmax,
+            kv,
+            kff,
+            ipk,
+            itrip,
+            visc,
+            coul,
+            load_arm,
+            j,
+            mpr,
+            rpc,
+            max_counts_per_s,
+            cap,
+            g_bleed,
+            chop_on,
+            chop_off,
+            g_chop,
+            g_src,
+            ov_trip,
+            uv_trip,
+            loss_detect,
+            c_th,
+            r_th,
+            temp_trip,
+            ir2,
+            blocked_time,
+            blocked_speed,
+        ) = self._c
         if h != self._h_cached:
             self._h_cached = h
-            self._decay = math.exp(-h * m.resistance / m.inductance)
+            self._decay = math.exp(-h * res / self.params.motor.inductance)
         a = self._decay
-        fault = 0
+        fault = ENCODER if self.encoder_broken else 0
 
         # --- feedback: the encoder was read at the end of the previous sub-step
-        theta_m = self.counts * self._rad_per_count
+        theta_m = self.counts * rpc
         vel_m = self.vel_meas
-        if self.encoder_broken:
-            fault = ENCODER
 
         # --- velocity and current loops
         omega = self.omega
         i_old = self.current
         vdc = self.vdc
-        self.current_limited = self.velocity_limited = False
+        current_limited = velocity_limited = False
         if mode == OFF or fault:
             v_app = 0.0
             i_new = 0.0  # freewheel diodes clear the winding current within the sub-step
             self.vel_integral = 0.0
         else:
             if mode == POSITION:
-                v_cmd = p.loops.kv * (pos_demand - theta_m) + p.loops.velocity_feedforward * vel_ff
+                v_cmd = kv * (pos_demand - theta_m) + kff * vel_ff
             else:
                 v_cmd = vel_demand
-            vmax = m.max_speed_rpm * _TWO_PI / 60.0
             if v_cmd > vmax:
-                v_cmd, self.velocity_limited = vmax, True
+                v_cmd, velocity_limited = vmax, True
             elif v_cmd < -vmax:
-                v_cmd, self.velocity_limited = -vmax, True
+                v_cmd, velocity_limited = -vmax, True
             if block_negative and v_cmd < 0.0:
-                v_cmd, self.velocity_limited = 0.0, True
+                v_cmd, velocity_limited = 0.0, True
             if block_positive and v_cmd > 0.0:
-                v_cmd, self.velocity_limited = 0.0, True
+                v_cmd, velocity_limited = 0.0, True
             err = v_cmd - vel_m
-            ilim = m.peak_current if current_limit is None else min(current_limit, m.peak_current)
-            i_cmd = self.kp_v * err + self.vel_integral
+            ilim = ipk if current_limit is None or current_limit > ipk else current_limit
+            integ = self.vel_integral
+            i_cmd = self.kp_v * err + integ
             if i_cmd > ilim:
-                i_cmd, self.current_limited = ilim, True
+                i_cmd, current_limited = ilim, True
                 if err < 0.0:
-                    self.vel_integral += self.ki_v * err * h
+                    integ += self.ki_v * err * h
             elif i_cmd < -ilim:
-                i_cmd, self.current_limited = -ilim, True
+                i_cmd, current_limited = -ilim, True
                 if err > 0.0:
-                    self.vel_integral += self.ki_v * err * h
+                    integ += self.ki_v * err * h
             else:
-                self.vel_integral += self.ki_v * err * h
+                integ += self.ki_v * err * h
+            self.vel_integral = integ
             # deadbeat: the voltage that brings I to i_cmd at the end of the sub-step
-            v_app = m.resistance * (i_cmd - a * i_old) / (1.0 - a) + m.kb * omega
+            v_app = res * (i_cmd - a * i_old) / (1.0 - a) + kb * omega
             if self.inverter_fault:
                 v_app = vdc  # a shorted switch: full link voltage, current runs away
             elif v_app > vdc:
                 v_app = vdc
             elif v_app < -vdc:
                 v_app = -vdc
-            i_ss = (v_app - m.kb * omega) / m.resistance
+            i_ss = (v_app - kb * omega) / res
             i_new = i_ss + (i_old - i_ss) * a
+        self.current_limited = current_limited
+        self.velocity_limited = velocity_limited
         i_avg = 0.5 * (i_old + i_new)
         self.current = i_new
         self.voltage = v_app
 
         # --- mechanics (semi-implicit Euler with stiction)
-        sc = p.screw
-        t_ext = self.load_force * self._mpr / sc.efficiency
-        net = m.km * i_avg + t_ext - sc.viscous * omega
-        tc = sc.coulomb_torque + (1.0e3 if self.blocked else 0.0)
-        j = self.inertia
+        net = km * i_avg + self.load_force * load_arm - visc * omega
+        tc = coul + 1.0e3 if self.blocked else coul
         if omega == 0.0:
-            if abs(net) <= tc:
+            if -tc <= net <= tc:
                 w_new = 0.0
             else:
                 w_new = h * (net - math.copysign(tc, net)) / j
@@ -229,9 +295,10 @@ class Plant:
             w_new = omega + h * (net - math.copysign(tc, omega)) / j
             if w_new * omega < 0.0:
                 w_new = 0.0
-        self.theta += 0.5 * (omega + w_new) * h
+        theta = self.theta + 0.5 * (omega + w_new) * h
+        self.theta = theta
         self.omega = w_new
-        nut = self._nut_origin + self.theta * self._mpr
+        nut = self._nut_origin + theta * mpr
         b = self.backlash
         if b > 0.0:
             half = 0.5 * b
@@ -243,79 +310,67 @@ class Plant:
             self.table_x = nut
 
         # --- encoder read at the end of the sub-step; speed from the count difference
-        counts = math.floor(self.theta / self._rad_per_count) + self.encoder_offset
+        counts = math.floor(theta / rpc) + self.encoder_offset
         dc = counts - self._prev_counts
-        max_step = (
-            p.encoder.max_speed_factor * m.max_speed_rpm * _TWO_PI / 60.0 * h / self._rad_per_count
-        )
-        if abs(dc) > max_step + 2:
+        if abs(dc) > max_counts_per_s * h + 2:
             fault = ENCODER  # implausible jump between two reads
         self._prev_counts = counts
         self.counts = counts
-        self.vel_meas = dc * self._rad_per_count / h
+        self.vel_meas = dc * rpc / h
 
         # --- DC link (implicit in the conductances): C·dV/dt = I_src − I_inv − V·g
-        dl = p.dc_link
         i_inv = v_app * i_avg / vdc if vdc > 1.0 else 0.0
         if self.chopper_failed:
             self.chopper = False
-        elif vdc >= dl.chopper_on:
+        elif vdc >= chop_on:
             self.chopper = True
-        elif vdc <= dl.chopper_off:
+        elif vdc <= chop_off:
             self.chopper = False
-        g = 1.0 / dl.bleed_resistance + (1.0 / dl.chopper_resistance if self.chopper else 0.0)
-        k = h / dl.capacitance
+        g = g_bleed + g_chop if self.chopper else g_bleed
+        k = h / cap
         v_new = (vdc - k * i_inv) / (1.0 + k * g)
-        if self.supply_on and v_new < self.mains_voltage:
-            gs = 1.0 / dl.source_resistance
-            v_new = (vdc + k * (self.mains_voltage * gs - i_inv)) / (1.0 + k * (g + gs))
-            v_new = min(v_new, self.mains_voltage)
-        self.vdc = max(v_new, 0.0)
+        mains = self.mains_voltage
+        if self.supply_on and v_new < mains:
+            v_new = (vdc + k * (mains * g_src - i_inv)) / (1.0 + k * (g + g_src))
+            if v_new > mains:
+                v_new = mains
+        self.vdc = v_new if v_new > 0.0 else 0.0
 
         # --- thermal and I²t
-        th = p.thermal
-        c_th = th.time_constant / th.thermal_resistance
-        self.winding_temp += (
-            h
-            * (
-                i_avg * i_avg * m.resistance
-                - (self.winding_temp - self.ambient) / th.thermal_resistance
-            )
-            / c_th
-        )
-        self.i2t = max(0.0, self.i2t + (i_new * i_new - m.rated_current**2) * h)
+        temp = self.winding_temp
+        temp += h * (i_avg * i_avg * res - (temp - self.ambient) / r_th) / c_th
+        self.winding_temp = temp
+        i2t = self.i2t + (i_new * i_new - ir2) * h
+        self.i2t = i2t if i2t > 0.0 else 0.0
 
         # --- plant monitors (first detected wins; checked every sub-step)
         if fault:
             return fault
-        energized = mode != OFF
-        if abs(i_new) > m.overcurrent_trip:
+        if i_new > itrip or i_new < -itrip:
             return OVERCURRENT
-        if self.vdc > dl.overvoltage_trip:
+        if self.vdc > ov_trip:
             return DC_OVERVOLTAGE
-        if energized:
-            if self.vdc < dl.undervoltage_trip:
+        if mode != OFF:
+            if self.vdc < uv_trip:
                 return DC_UNDERVOLTAGE
             self.mains_lost_for = 0.0 if self.supply_on else self.mains_lost_for + h
-            if self.mains_lost_for > dl.mains_loss_detect:
+            if self.mains_lost_for > loss_detect:
                 return MAINS_PHASE_FAILURE
-            mo = p.monitor
-            if self.current_limited and abs(vel_m) < mo.blocked_speed:
+            if current_limited and -blocked_speed < vel_m < blocked_speed:
                 self.blocked_for += h
-                if self.blocked_for > mo.blocked_time:
+                if self.blocked_for > blocked_time:
                     return MOTOR_BLOCKED
             else:
                 self.blocked_for = 0.0
-        if self.i2t > self.i2t_limit:
+        if self.i2t > self._i2t_limit:
             return I2T
-        if self.winding_temp > th.trip:
+        if temp > temp_trip:
             return OVERTEMPERATURE
         return 0
 
     @property
     def i2t_limit(self) -> float:
-        m, th = self.params.motor, self.params.thermal
-        return (m.peak_current**2 - m.rated_current**2) * th.i2t_peak_time
+        return self._i2t_limit
 
     @property
     def warnings(self) -> bool:
