@@ -139,12 +139,11 @@ def check_program(
     size: ImageSize | None = None,
     watchdog_ms: float | None = None,
 ) -> list[Diagnostic]:
-    """All diagnostics for an already parsed program (parse diagnostics are in `sink`)."""
-    if not sink.has_errors:
-        analyse(program, sink, size, watchdog_ms)
-    else:
-        # still report semantic problems of the lines that did parse
-        analyse(program, sink, size, watchdog_ms)
+    """All diagnostics for a parsed program; `sink` already holds the parse diagnostics.
+
+    The semantic pass runs even after syntax errors so that one run reports everything.
+    """
+    analyse(program, sink, size, watchdog_ms)
     return sink.sorted()
 
 

@@ -38,10 +38,6 @@ class Location:
     def expr(self) -> str:
         return f"{self.area.lower()}[{self.index}]"
 
-    @property
-    def is_bit(self) -> bool:
-        return self.area in ("IX", "QX", "MX") or False
-
 
 def parse_address(text: str) -> tuple[str, int] | str:
     """`%IX1.2` -> ("IX", 10). Returns an error message string when malformed."""

@@ -8,6 +8,8 @@ import sys
 from pathlib import Path
 
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from plc.image import ProcessImage
 from plc.ladder import compile_text, load_file
@@ -95,3 +97,20 @@ def test_differential_against_the_tree_interpreter(rungs, seed):
     for name, t in interp.timers.items():
         slots = program.tag(name).members
         assert {m: v[i] for m, i in slots.items()} == t
+
+
+@settings(max_examples=25, deadline=None)
+@given(st.integers(min_value=0, max_value=10**6))
+def test_differential_property(seed):
+    bench = _bench()
+    text = bench.generate(40, seed)
+    program = compile_text(text, "prop.ld")
+    a, b = ProcessImage(program.size), ProcessImage(program.size)
+    v = list(program.v_init)
+    interp = bench.TreeInterpreter(text, b)
+    for k in range(60):
+        for img in (a, b):
+            bench._pattern(k + seed, img.ix, img.iw)
+        program.scan_fn(a.ix, a.qx, a.mx, a.iw, a.qw, a.mw, v, 10)
+        interp.scan(10)
+    assert a.snapshot(0) == b.snapshot(0)
