@@ -706,3 +706,30 @@ def test_gouge_short_arc_between_two_inside_corners():
     with pytest.raises(NcError) as err:
         run("left", 1.0, segs)
     assert err.value.line == 3 and "reverses" in err.value.message
+
+
+def test_g42_runs_inside_a_clockwise_arc():
+    # cw arc about the origin from (0,10) to (10,0), R=10: G42 (right of a cw arc = towards
+    # the centre) offsets to R=9. Start-up from (0,20) ends at (0,9); the tangent line on
+    # -Y from (10,0) continues at x=9.
+    segs = [L((0, 20), (0, 10), 1), A((0, 10), (10, 0), (0, 0), False, 2), L((10, 0), (10, -10))]
+    out = run("right", 1.0, segs)
+    assert_path(
+        out,
+        [
+            ("line", (0, 20), (0, 9), None, False, "startup"),
+            ("arc", (0, 9), (9, 0), (0, 0), False, "contour"),
+            ("line", (9, 0), (9, -10), None, False, "contour"),
+        ],
+    )
+
+
+def test_g40_then_same_g41_before_any_move_keeps_the_contour():
+    # The inside corner at (10,0) is still trimmed to (9,1): the G40 was taken back.
+    cc = CutterCompensation()
+    cc.start("left", 1.0)
+    out = cc.push(UP) + cc.push(L((0, 0), (10, 0), 2))
+    cc.cancel()
+    cc.start("left", 1.0)
+    out += cc.push(L((10, 0), (10, 10), 3)) + cc.flush()
+    assert [o.end for o in out] == [(0.0, 1.0), (9.0, 1.0), (9.0, 10.0)]
