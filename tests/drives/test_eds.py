@@ -116,3 +116,15 @@ def test_export_round_trip(tmp_path, od):
     canopen.export_od(od, str(path))
     again = canopen.import_od(str(path), 5)
     assert set(again) == set(od)
+
+
+def test_importing_drives_stays_light():
+    import subprocess
+    import sys
+
+    code = "import sys, drives; print('canopen' in sys.modules, 'can' in sys.modules)"
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert out.stdout.split() == ["False", "False"]
+    from drives import CanHub, CanopenSlave
+
+    assert CanHub.__name__ == "CanHub" and CanopenSlave.__name__ == "CanopenSlave"

@@ -294,3 +294,35 @@ def test_synchronization_counter_byte_and_sync_start_value(cell, app, slave):
 def test_synchronization_counter_refused_while_period_set(cell, slave):
     cell.send("605#23061000E8030000")
     assert cell.send("605#2F19100005000000") == ["585#8019100022000008"]
+
+
+def test_od_05_sub_index_255_does_not_exist(cell, slave):
+    assert cell.send("605#401810FF00000000") == ["585#801810FF11000906"]
+
+
+def test_pdo_02_rtr_in_stopped_gets_no_answer(cell, app, slave):
+    cell.send("000#0105")
+    cell.advance(0.001)
+    cell.send("000#0205")
+    assert cell.send("185#R") == []
+
+
+def test_heartbeat_03_disabling_stops_the_producer(cell, slave):
+    cell.send("605#2B1710000A000000")
+    assert cell.advance(0.01) == ["705#7F"]
+    cell.send("605#2B17100000000000")
+    assert cell.advance(0.05) == []
+
+
+def test_heartbeat_04_same_consumer_entry_twice(cell, slave):
+    assert cell.send("605#23161001E8030100") == ["585#6016100100000000"]
+    assert cell.send("605#23161001E8030100") == ["585#6016100100000000"]  # same sub: fine
+    assert cell.send("605#23161002E8030100") == ["585#8016100243000406"]  # node 1 again
+    assert cell.send("605#23161002E8030200") == ["585#6016100200000000"]
+
+
+def test_emergency_05_forced_emcy_matches_1003_sub1(cell, app, slave):
+    app.emcy.append(EmcyRequest(0x7305, 0x21, b"\x00\x00\x00\x00\x07"))
+    emcy = cell.advance(0.001)
+    assert emcy == ["085#0573210000000007"]
+    assert cell.send("605#4003100100000000") == ["585#4303100105730000"]
