@@ -994,7 +994,7 @@ class Interpreter:
                     blk,
                     ci if ci in words else cj,
                 )
-            if not full and r1 != r2:
+            if not full and abs(r1 - r2) > 1e-12 * r1:
                 # put the centre on the chord's perpendicular bisector: no spiral
                 mu, mv = (su + eu) / 2.0, (sv + ev) / 2.0
                 du, dv = eu - su, ev - sv
@@ -1012,41 +1012,54 @@ class Interpreter:
         c[u], c[v], c[w] = cu, cv, s[w]
         feed = self._feed(blk)
         cw_out = cw
-        xf = self._xf
         if self._xf_on:
+            xf = self._xf
             if xf.plane_scale(u, v) is None:
                 raise self._err("arc under unequal in-plane scaling (G51 I/J/K)", blk, "G")
             if xf.rot and xf.rot_uv != (u, v):
                 raise self._err("arc outside the G68 rotation plane", blk, "G")
-            st = xf.apply(s)
             et = xf.apply(e)
             ct = list(xf.apply(c))
-            ct[w] = st[w]
             if xf.handedness(u, v) < 0:
                 cw_out = not cw
         else:
-            st, et, ct = s, e, c
-        if self._comp is not None and self._comp.active:
+            et, ct = e, c
+        comp = self._comp
+        if comp is not None and comp.active:
+            st = self._xf.apply(s) if self._xf_on else s
+            ct[w] = st[w]
             self._comp_arc(st, et, ct, cw_out, feed, turns, blk, exact)
             self._pos = e
             self._moved = True
             return
         o = self._off
+        ms = self._mach  # the arc starts where the tool is
         m = (et[0] + o[0], et[1] + o[1], et[2] + o[2])
-        mc = (ct[0] + o[0], ct[1] + o[1], ct[2] + o[2])
-        ms = (st[0] + o[0], st[1] + o[1], st[2] + o[2])
+        mc = [ct[0] + o[0], ct[1] + o[1], ct[2] + o[2]]
+        mc[w] = ms[w]
         if self._lathe:
             m = (m[0], 0.0, m[2])
-            mc = (mc[0], 0.0, mc[2])
-        r = math.hypot(ms[u] - mc[u], ms[v] - mc[v])
-        for idx, lo, hi, _ in self._limits:
-            if idx in (u, v):
-                if mc[idx] - r < lo - 1e-9 or mc[idx] + r > hi + 1e-9:
-                    self._check(m, blk, blk.line)
-                    self._check_arc_extent(ms, m, mc, cw_out, turns, blk)
-                    break
-            elif not lo - 1e-9 <= m[idx] <= hi + 1e-9:
-                self._check(m, blk, blk.line)
+            mc[1] = 0.0
+        mc = (mc[0], mc[1], mc[2])
+        du, dv = ms[u] - mc[u], ms[v] - mc[v]
+        r = math.sqrt(du * du + dv * dv)
+        eu, ev = m[u] - mc[u], m[v] - mc[v]
+        if abs(math.sqrt(eu * eu + ev * ev) - r) > tol:
+            raise self._err(
+                "arc start is not the current position (an offset changed without a move)",
+                blk,
+                "G",
+            )
+        lo, hi = self._lo, self._hi
+        if not (
+            lo[u] <= mc[u] - r
+            and mc[u] + r <= hi[u]
+            and lo[v] <= mc[v] - r
+            and mc[v] + r <= hi[v]
+            and lo[w] <= m[w] <= hi[w]
+        ):
+            self._check(m, blk, blk.line)
+            self._check_arc_extent(ms, m, mc, cw_out, turns, blk)
         self._out.append(ArcFeed(blk.line, m, mc, self._plane_enum, cw_out, feed, turns, exact))
         self._pos = e
         self._mach = m
