@@ -18,7 +18,12 @@ from cnc.cutter_comp import CutterCompensation, Segment
 from cnc.errors import NcError
 
 TOL_REL = 3e-9
-SETTINGS = settings(max_examples=150, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+SETTINGS = settings(
+    max_examples=150,
+    deadline=None,
+    derandomize=True,  # the project wants deterministic tests: a fixed example sequence
+    suppress_health_check=[HealthCheck.too_slow],
+)
 
 
 def seg_dist(p, a, b):
