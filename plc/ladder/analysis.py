@@ -76,6 +76,7 @@ class Resolved:
     rungs: list[RRung]
     labels: dict[str, int]  # label -> rung number
     estimate_us: float
+    alarms: list[tuple[int, str, str, int]] = field(default_factory=list)  # no, text, area, idx
 
 
 def _is_input_area(area: str) -> bool:
@@ -482,4 +483,25 @@ def analyse(
                 f"estimated scan time {est_ms:.3f} ms is over half the watchdog "
                 f"limit {watchdog_ms:g} ms",
             )
-    return Resolved(program, checker.table, rungs, labels, estimate_us)
+    alarms: list[tuple[int, str, str, int]] = []
+    numbers: dict[int, int] = {}
+    for a in program.alarms:
+        if not 1 <= a.number <= 8999:
+            sink.error(
+                a.line,
+                a.col,
+                f"alarm number {a.number} outside 1..8999 (9000+ are the runtime's own)",
+            )
+            continue
+        if a.number in numbers:
+            sink.error(
+                a.line, a.col, f"alarm {a.number} already declared on line {numbers[a.number]}"
+            )
+            continue
+        numbers[a.number] = a.line
+        ref = checker.operand(a.tag, "bit", "ALARM")
+        if ref is None:
+            continue
+        area, _, rest = ref.expr.partition("[")
+        alarms.append((a.number, a.text, area.upper(), int(rest.rstrip("]"))))
+    return Resolved(program, checker.table, rungs, labels, estimate_us, alarms)

@@ -66,11 +66,23 @@ class TagDecl:
 
 
 @dataclass(slots=True)
+class AlarmDecl:
+    """`ALARM number tag "text"`: the runtime shows alarm `number` while `tag` is 1."""
+
+    number: int
+    tag: Operand
+    text: str
+    line: int
+    col: int
+
+
+@dataclass(slots=True)
 class Program:
     name: str
     file: str
     tags: list[TagDecl] = field(default_factory=list)
     rungs: list[Rung] = field(default_factory=list)
+    alarms: list[AlarmDecl] = field(default_factory=list)
 
 
 def format_elements(elements: list[Element]) -> str:
@@ -98,6 +110,8 @@ def format_program(program: Program) -> str:
         if t.comment:
             line += f"  // {t.comment}"
         out.append(line)
+    for a in program.alarms:
+        out.append(f'ALARM {a.number} {a.tag.text} "{a.text}"')
     out.append("")
     for r in program.rungs:
         if r.comment:

@@ -43,6 +43,16 @@ class TagInfo:
 
 
 @dataclass(frozen=True, slots=True)
+class AlarmInfo:
+    """A program alarm: shown by the runtime while the bit at (area, index) is 1."""
+
+    number: int
+    text: str
+    area: str  # image area or 'V'
+    index: int
+
+
+@dataclass(frozen=True, slots=True)
 class RungInfo:
     number: int
     line: int
@@ -70,6 +80,7 @@ class CompiledProgram:
     v_init: tuple[int | bool, ...]
     diagnostics: tuple[Diagnostic, ...]
     estimate_us: float
+    alarms: tuple[AlarmInfo, ...] = ()
 
     @property
     def warnings(self) -> list[Diagnostic]:
@@ -201,6 +212,7 @@ def compile_program(
         v_init=tuple(resolved.table.v_init),
         diagnostics=tuple(sink.sorted()),
         estimate_us=resolved.estimate_us,
+        alarms=tuple(AlarmInfo(*a) for a in resolved.alarms),
     )
 
 

@@ -86,6 +86,7 @@ KEYWORDS = frozenset(
     {
         "TAG",
         "PROGRAM",
+        "ALARM",
         "AT",
         "RETAIN",
         "BST",

@@ -6,6 +6,7 @@ Grammar (see docs/ladder.md for the full description with examples)::
     line      := [ statement ] [ "//" comment ]        ; a trailing "\\" joins the next line
     statement := "PROGRAM" name
                | "TAG" name ":" type [ "AT" address ] [ "RETAIN" ] [ ":=" int ]
+               | "ALARM" int bit '"' text '"'
                | [ "SOR" ] element { element } [ "EOR" ]          ; a rung
     element   := mnemonic operand*      ; operand count fixed by the mnemonic
                | "BST" element+ { "NXB" element+ } "BND"
@@ -16,7 +17,7 @@ from __future__ import annotations
 import re
 from dataclasses import dataclass
 
-from plc.ladder.ast import Branch, Element, Instr, Operand, Program, Rung, TagDecl
+from plc.ladder.ast import AlarmDecl, Branch, Element, Instr, Operand, Program, Rung, TagDecl
 from plc.ladder.diagnostics import DiagnosticSink
 from plc.ladder.instructions import INSTRUCTIONS, KEYWORDS
 
@@ -27,6 +28,7 @@ _TOKEN = re.compile(
   | (?P<addr>%[A-Za-z]+[0-9]+(?:\.[0-9]+)?)
   | (?P<int>[-+]?(?:16\#[0-9A-Fa-f_]+|2\#[01_]+|[0-9][0-9_]*))
   | (?P<name>[A-Za-z_][A-Za-z0-9_]*(?:\.[A-Za-z_][A-Za-z0-9_]*)?)
+  | (?P<string>"[^"]*")
   | (?P<assign>:=)
   | (?P<colon>:)
   | (?P<bad>\S+)
@@ -85,6 +87,17 @@ def _tokenize(code: str, line: int, col0: int, sink: DiagnosticSink) -> list[Tok
     return tokens
 
 
+def _split_comment(raw: str) -> tuple[str, str, str]:
+    """Like `raw.partition("//")`, but a `//` inside a "string" is not a comment."""
+    quoted = False
+    for i, ch in enumerate(raw):
+        if ch == '"':
+            quoted = not quoted
+        elif not quoted and raw.startswith("//", i):
+            return raw[:i], "//", raw[i + 2 :]
+    return raw, "", ""
+
+
 def _logical_lines(text: str) -> list[tuple[list[tuple[int, int, str]], str]]:
     """Split into statements: each is a list of (line, first col, code) pieces and a comment.
 
@@ -94,7 +107,7 @@ def _logical_lines(text: str) -> list[tuple[list[tuple[int, int, str]], str]]:
     pending: list[tuple[int, int, str]] = []
     comments: list[str] = []
     for n, raw in enumerate(text.splitlines(), start=1):
-        code, sep, comment = raw.partition("//")
+        code, sep, comment = _split_comment(raw)
         if sep:
             comments.append(comment.strip())
         stripped = code.rstrip()
@@ -273,6 +286,24 @@ def _parse_tag(tokens: list[Token], comment: str, sink: DiagnosticSink) -> TagDe
     return decl
 
 
+def _parse_alarm(tokens: list[Token], sink: DiagnosticSink) -> AlarmDecl | None:
+    kw = tokens[0]
+    expected = (("int",), ("name", "addr"), ("string",))
+    args = tokens[1:]
+    for i, kinds in enumerate(expected):
+        if i >= len(args) or args[i].kind not in kinds:
+            at = args[i] if i < len(args) else tokens[-1]
+            sink.error(at.line, at.col, 'expected: ALARM number tag "text"')
+            return None
+    if len(args) > 3:
+        sink.error(args[3].line, args[3].col, 'expected: ALARM number tag "text"')
+        return None
+    num, tag, text = args
+    kind = "address" if tag.kind == "addr" else "tag"
+    operand = Operand(kind, tag.text.upper() if kind == "address" else tag.text, tag.line, tag.col)
+    return AlarmDecl(parse_int(num.text), operand, text.text[1:-1], kw.line, num.col)
+
+
 def parse_program(text: str, file: str = "<ladder>") -> tuple[Program, DiagnosticSink]:
     """Parse neutral text. Returns the tree and the sink holding syntax diagnostics."""
     sink = DiagnosticSink(file)
@@ -294,6 +325,11 @@ def parse_program(text: str, file: str = "<ladder>") -> tuple[Program, Diagnosti
             decl = _parse_tag(tokens, comment, sink)
             if decl is not None:
                 program.tags.append(decl)
+            continue
+        if head == "ALARM":
+            alarm = _parse_alarm(tokens, sink)
+            if alarm is not None:
+                program.alarms.append(alarm)
             continue
         if head == "PROGRAM":
             if len(tokens) != 2 or tokens[1].kind != "name":

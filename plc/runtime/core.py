@@ -172,6 +172,8 @@ class Runtime:
                 self._fault(ALARM_PROGRAM_FAULT, f"{where}: {type(exc).__name__}: {exc}", now_ms)
             if v[SLOT_DIV_ZERO]:
                 self.raise_alarm(ALARM_DIV_ZERO, f"rung {v[SLOT_FAULT_RUNG]}", now_ms)
+            if self.program.alarms:
+                self._program_alarms(now_ms)
         elif self.mode is Mode.STOP and cfg.stop_outputs == "safe":
             self._safe_outputs()
         for (area, index), value in self._force_out:
@@ -204,6 +206,16 @@ class Runtime:
                 self._next_retain_ms = now_ms + cfg.retain_save_ms
                 self.save_retain(now_ms)
         return snap
+
+    def _program_alarms(self, now_ms: int) -> None:
+        """ALARM declarations: active while their bit is 1, cleared when it drops."""
+        img, v, active = self.image, self._v, self.alarms
+        for a in self.program.alarms:
+            on = (v if a.area == "V" else img.area(a.area))[a.index]
+            if on and a.number not in active:
+                self.raise_alarm(a.number, text=a.text, now_ms=now_ms)
+            elif not on and a.number in active and a.number < 9000:
+                del active[a.number]
 
     def _publish(self) -> Snapshot:
         """The scan's Snapshot (same content as `ProcessImage.snapshot`). Converting a bit
@@ -278,12 +290,17 @@ class Runtime:
             del self.alarms[number]
 
     def raise_alarm(
-        self, number: int, detail: str = "", now_ms: int = 0, fatal: bool = False
+        self,
+        number: int,
+        detail: str = "",
+        now_ms: int = 0,
+        fatal: bool = False,
+        text: str | None = None,
     ) -> Alarm:
         """Raise a numbered alarm (kept active until acknowledged); logged every time."""
         alarm = Alarm(
             number,
-            ALARM_TEXT.get(number, f"alarm {number}"),
+            text or ALARM_TEXT.get(number, f"alarm {number}"),
             detail,
             self.scan_count,
             now_ms,

@@ -363,3 +363,51 @@ def test_io_failure_faults_the_plc_with_safe_outputs():
     assert "bus off" in rt.alarms[ALARM_IO_FAULT].detail
     rt.scan(20)  # in FAULT the broken provider is not read again
     assert rt.mode is Mode.FAULT
+
+
+ALARM_PROGRAM = """
+TAG Req : BOOL AT %IX0.0
+TAG Ack : BOOL AT %IX0.1
+TAG Reset : BOOL AT %IX0.2
+TAG Tmo : TIMER
+TAG AlmSpin : BOOL
+ALARM 1012 AlmSpin "spindle not at speed within 2 s"   // text may hold // too
+ALARM 1013 %MX0.0 "lube low"
+XIC Req XIO Ack TON Tmo 2000
+XIC Tmo.DN OTL AlmSpin
+XIC Reset OTU AlmSpin
+"""
+
+
+def test_program_alarms_follow_their_bit():
+    rt = Runtime(compile_text(ALARM_PROGRAM, "alm.ld"))
+    rt.write_once("Req", True)
+    rt.scan(0)
+    rt.scan(1990)
+    assert 1012 not in rt.alarms
+    rt.scan(2000)
+    alarm = rt.alarms[1012]
+    assert alarm.text == "spindle not at speed within 2 s"
+    assert str(alarm) == "PLC 1012: spindle not at speed within 2 s" and not alarm.fatal
+    rt.write_once("Reset", True)
+    rt.scan(2010)
+    assert 1012 not in rt.alarms and [a.number for a in rt.alarm_log] == [1012]
+    rt.write_once("%MX0.0", True)
+    rt.scan(2020)
+    assert rt.alarms[1013].text == "lube low"
+
+
+@pytest.mark.parametrize(
+    "decl, fragment",
+    [
+        ('ALARM 9100 %MX0.0 "x"', "outside 1..8999"),
+        ('ALARM 5 %MW0 "x"', "a word where a bit"),
+        ("ALARM 5 %MX0.0", 'expected: ALARM number tag "text"'),
+        ('ALARM 5 %MX0.0 "a"\nALARM 5 %MX0.1 "b"', "alarm 5 already declared on line 1"),
+    ],
+)
+def test_alarm_declaration_errors(decl, fragment):
+    from plc.ladder import check_text
+
+    diags = check_text(decl + "\nXIC %IX0.0 OTE %QX0.0\n", "a.ld")
+    assert any(fragment in d.message for d in diags), [str(d) for d in diags]
