@@ -274,6 +274,12 @@ class CanHub:
         """Called with every frame put on the wire (the candump writer is one)."""
         self.observers.append(observer)
 
+    def check_load(self, frames: list, sync_period_s: float):
+        """`plan_load` at this hub's bitrate: refuses > 100 %, warns > 70 % (see loadplan)."""
+        from drives.bus.loadplan import plan_load
+
+        return plan_load(frames, sync_period_s=sync_period_s, bitrate=self.bitrate)
+
     # ----------------------------------------------------------------- time
     @property
     def now(self) -> float:
@@ -363,11 +369,31 @@ class CanHub:
     def submit(self, sender: SimBus, msg: can.Message) -> None:
         """Queue a frame in the sender's transmit FIFO (endpoints call this from `send`)."""
         with self._lock:
-            sender._tx.append((self.now, msg))
-            self._pending += 1
             if self.mode == "realtime":
+                sender._tx.append((time.time(), msg))
+                self._pending += 1
                 self._wake.notify()
-            elif self.auto_deliver and not self._delivering:
+                return
+            if (
+                self.auto_deliver
+                and not self._delivering
+                and not self._pending
+                and self._babbler is None
+                and not self.faults
+            ):
+                # Idle bus, nothing to arbitrate against: straight onto the wire, then
+                # deliver whatever the receivers queued in answer.
+                self._delivering = True
+                try:
+                    self._transmit(sender, msg, self._now)
+                finally:
+                    self._delivering = False
+                if self._pending:
+                    self.deliver()
+                return
+            sender._tx.append((self._now, msg))
+            self._pending += 1
+            if self.auto_deliver and not self._delivering:
                 self.deliver()
 
     def _release_delayed(self) -> None:

@@ -196,7 +196,7 @@ class CanopenSlave:
 
     def _pump_application_emcy(self) -> None:
         for request in self.application.take_emcy():
-            self.emcy.application_register = request.error_register & 0xEF
+            self.emcy.application_register = request.error_register & 0xFF
             self._emit_emcy(request.error_code, request.manufacturer)
 
     def _raise_communication_error(self, code: int) -> None:
@@ -244,15 +244,24 @@ class CanopenSlave:
             self.od.reset(0x1000, 0x1FFF)
             self.store.apply(0x1000, 0x1FFF)
             self._reset_services()
+            self._notify_reset("communication")
             self.boot()
 
     def reset_node(self) -> None:
         """NMT reset node: every stored object back to its default, then boot-up."""
         with self._lock:
+            self._notify_reset("node")  # before the kept parameters are written back
             self.od.reset(0x0000, 0xFFFF)
             self.store.apply(0x0000, 0xFFFF)
             self._reset_services()
             self.boot()
+
+    def _notify_reset(self, scope: str) -> None:
+        # Optional hook beyond the DriveApplication protocol: on_nmt_state('INITIALISING')
+        # alone cannot tell "reload your parameters" (node) from "keep them" (communication).
+        hook = getattr(self.application, "on_nmt_reset", None)
+        if hook is not None:
+            hook(scope)
 
     def _reset_services(self) -> None:
         self.emcy.communication_errors.clear()

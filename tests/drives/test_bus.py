@@ -425,3 +425,11 @@ def test_two_slaves_can_share_one_endpoint(app):
     master.send(msg(0x602, bytes.fromhex("4000100000000000")))
     assert [m.arbitration_id for m in replies] == [0x581, 0x582]
     hub.close()
+
+
+def test_hub_checks_planned_load_at_its_bitrate():
+    hub = CanHub(bitrate=500_000)
+    with pytest.raises(BusOverloadError, match="500 kbit/s"):
+        hub.check_load(axis_traffic(2), sync_period_s=0.001)
+    assert hub.check_load(axis_traffic(1), sync_period_s=0.004).worst_case_load < 0.2
+    hub.close()

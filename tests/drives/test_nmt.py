@@ -107,3 +107,11 @@ def test_heartbeat_stops_while_initialising_only(cell, app, slave):
     for _ in range(20):
         out += cell.advance(0.001)
     assert out == ["705#04", "705#04"]
+
+
+def test_optional_reset_hook_tells_node_from_communication(cell, app, slave):
+    scopes = []
+    app.on_nmt_reset = scopes.append
+    cell.send("000#8205")
+    cell.send("000#8105")
+    assert scopes == ["communication", "node"]
