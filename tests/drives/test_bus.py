@@ -433,3 +433,25 @@ def test_hub_checks_planned_load_at_its_bitrate():
         hub.check_load(axis_traffic(2), sync_period_s=0.001)
     assert hub.check_load(axis_traffic(1), sync_period_s=0.004).worst_case_load < 0.2
     hub.close()
+
+
+def test_python_can_can_open_the_simulator_by_interface_name(monkeypatch):
+    # What a `can.interface` entry point `fmscell = "drives.bus.hub:SimBus"` would register.
+    import can.interfaces
+    import can.util
+    import canopen
+
+    monkeypatch.setitem(can.interfaces.BACKENDS, "fmscell", ("drives.bus.hub", "SimBus"))
+    monkeypatch.setattr(can.util, "VALID_INTERFACES", can.util.VALID_INTERFACES | {"fmscell"})
+    drop_hub("cellB")
+    node_side = can.Bus(interface="fmscell", channel="cellB", bitrate=500_000)
+    network = canopen.Network().connect(interface="fmscell", channel="cellB")
+    try:
+        assert node_side.hub is get_hub("cellB") and node_side.hub.bitrate == 500_000
+        seen = threading.Event()
+        network.subscribe(0x185, lambda *args: seen.set())
+        node_side.send(msg(0x185, b"\x01"))
+        assert seen.wait(5.0)
+    finally:
+        network.disconnect()
+        drop_hub("cellB")

@@ -241,3 +241,25 @@ def test_base_node_402_changes_state_in_lockstep_without_advancing_time():
     assert node.state == "OPERATION ENABLED"
     assert [c[3] for c in app.calls if c[:2] == ("write", 0x6040)] == [0x06, 0x07, 0x0F]
     hub.close()
+
+
+def test_realtime_hub_with_stock_sync_producer_and_synchronous_tpdo():
+    hub = CanHub(mode="realtime")
+    network = canopen.Network(hub.endpoint("master"))
+    node = canopen.RemoteNode(5, EDS_PATH)
+    network.add_node(node)
+    network.connect()
+    CanopenSlave(5, hub.endpoint("node5"), FakeDrive()).start()  # starts the hub thread
+    try:
+        node.tpdo.read()
+        node.tpdo[1].trans_type = 1
+        node.tpdo.save()
+        node.nmt.state = "OPERATIONAL"
+        network.sync.start(0.005)
+        assert node.tpdo[1].wait_for_reception(timeout=2.0) is not None
+        assert node.tpdo[1]["Position actual value"].raw == 1000
+        network.sync.stop()
+        assert hub.load.summary()["windows"] >= 1
+    finally:
+        network.disconnect()
+        hub.close()
