@@ -81,12 +81,12 @@ INSTRUCTIONS: dict[str, InstrSpec] = {
     )
 }
 
-# Words with a meaning of their own in the text; they cannot name a tag.
+# Words with a meaning of their own in the text; they cannot name a tag. (ALARM only starts
+# a statement, where a rung never has a tag, so "Alarm" stays a valid tag name.)
 KEYWORDS = frozenset(
     {
         "TAG",
         "PROGRAM",
-        "ALARM",
         "AT",
         "RETAIN",
         "BST",

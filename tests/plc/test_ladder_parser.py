@@ -165,3 +165,11 @@ def test_case_insensitive_names_and_hex_literals():
     text = "TAG Motor : BOOL AT %QX0.0\nTAG w : INT\nxic MOTOR ote motor\nXIC motor MOV 16#7F W\n"
     program = compile_text(text, "c.ld")
     assert program.tag("MOTOR").area == "QX" and "127" in program.python_source
+
+
+def test_alarm_is_a_valid_tag_name():
+    text = 'TAG Alarm : BOOL AT %QX0.0\nALARM 7 Alarm "latched alarm"\nXIC %IX0.0 OTL Alarm\n'
+    program = compile_text(text, "al.ld")
+    assert program.alarms[0].number == 7 and program.alarms[0].area == "QX"
+    again, sink = parse_program(format_program(parse_program(text, "al.ld")[0]), "al.ld")
+    assert not sink.items and again.alarms[0].text == "latched alarm"
