@@ -460,6 +460,7 @@ class Library:
         modbus_address: str = "",
         status_address: str = "",
         memory_bytes: int = 0,
+        dnc_profile: dict | None = None,
         actor: str = "system",
     ) -> dict:
         """Create or update a machine's registry entry (idempotent by name)."""
@@ -469,6 +470,7 @@ class Library:
                 mach = m.Machine(name=name, created_at=self._now())
                 s.add(mach)
             mach.kind, mach.memory_bytes = kind, memory_bytes
+            mach.dnc_profile = dict(dnc_profile or {})
             mach.dnc_address, mach.modbus_address = dnc_address, modbus_address
             mach.status_address = status_address
             s.flush()
@@ -681,6 +683,7 @@ def _machine_dict(x: m.Machine) -> dict:
         modbus_address=x.modbus_address,
         status_address=x.status_address,
         memory_bytes=x.memory_bytes,
+        dnc_profile=dict(x.dnc_profile or {}),
     )
 
 

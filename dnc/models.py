@@ -73,6 +73,8 @@ class Machine(Base):
     modbus_address: Mapped[str] = mapped_column(String(255), default="")
     status_address: Mapped[str] = mapped_column(String(255), default="")
     memory_bytes: Mapped[int] = mapped_column(Integer, default=0)
+    # Per-port protocol profile, CIMCO style: parity, chunk size, time-outs.
+    dnc_profile: Mapped[dict[str, Any]] = mapped_column(JSON, default=dict)
     created_at: Mapped[datetime] = mapped_column(Timestamp)
 
 

@@ -28,6 +28,7 @@ from cnc.faces.tape import (
     strip_parity,
 )
 
+LINE_ALARMS = frozenset({2001, 2004, 2007, 2010})  # parity, cut off, time-out, overrun
 _REQUEST = re.compile(r"/REQ\s*(\d{1,5})", re.I)
 
 
@@ -40,8 +41,11 @@ class TransferError(Exception):
 
     @property
     def retryable(self) -> bool:
-        # A refusal with an alarm (parity, memory full, machine busy) will not cure itself by
-        # resending the same bytes at once; a cut connection or a timeout may.
+        # Line trouble (a cut, a time-out, a parity error, an overrun) may pass on the next
+        # attempt; a refusal for a reason in the machine (memory full, wrong state, no O
+        # number) will not cure itself by resending the same bytes.
+        if self.kind == "refused":
+            return self.alarm in LINE_ALARMS
         return self.kind in ("connect", "cut_off", "timeout", "xoff_timeout", "verify")
 
 

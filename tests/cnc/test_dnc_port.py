@@ -9,52 +9,12 @@ import time
 
 import pytest
 
-from cnc.faces.dnc_port import DncPort
-from cnc.faces.drip import DripBuffer
-from cnc.faces.loop_thread import LoopThread
 from cnc.faces.tape import XOFF, add_parity, encode_program
-from cnc.program_memory import ProgramMemory
 from dnc.transfer import DncClient, TransferError, canonical_text, iter_blocks, sha256_text
 
+from .dnc_helpers import Machine
+
 PROG = "%\nO1234 (PLATE)\nG21 G90\nG0 X10 Y10\nG1 X50 F300\nM30\n%\n"
-
-
-class Machine:
-    """The parts of a machine the DNC port touches, with its alarms collected."""
-
-    def __init__(self, *, capacity=4096, parity=False, drip_capacity=1024, policy=None):
-        self.memory = ProgramMemory(capacity)
-        self.alarms: list[tuple[int, str]] = []
-        self.drip_buffers: list[DripBuffer] = []
-        self.loop = LoopThread("dnc-test").start()
-
-        def new_drip():
-            buf = DripBuffer(drip_capacity)
-            self.drip_buffers.append(buf)
-            return buf
-
-        self.port = DncPort(
-            self.memory,
-            parity=parity,
-            drip=new_drip,
-            on_alarm=lambda n, t: self.alarms.append((n, t)),
-            policy=policy,
-            idle_timeout_s=5,
-        )
-        self.loop.run(self.port.start)
-
-    def client(self, **kw) -> DncClient:
-        return DncClient(
-            "127.0.0.1", self.port.bound_port, parity=self.port.parity, timeout_s=5, **kw
-        )
-
-    def raw(self) -> socket.socket:
-        s = socket.create_connection(("127.0.0.1", self.port.bound_port), timeout=5)
-        return s
-
-    def close(self):
-        self.loop.run(self.port.stop)
-        self.loop.stop()
 
 
 @pytest.fixture

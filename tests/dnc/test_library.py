@@ -164,7 +164,7 @@ def test_program_from_machine_is_a_candidate_and_never_overwrites(library):
 
 def test_machine_registry_is_idempotent_by_name(library):
     library.register_machine("lathe1", "lathe", memory_bytes=1000)
-    library.register_machine("lathe1", "lathe", memory_bytes=2000)
+    library.register_machine("lathe1", "lathe", memory_bytes=2000, dnc_profile={"parity": True})
     assert library.machines() == [
         dict(
             name="lathe1",
@@ -173,6 +173,7 @@ def test_machine_registry_is_idempotent_by_name(library):
             modbus_address="",
             status_address="",
             memory_bytes=2000,
+            dnc_profile={"parity": True},
         )
     ]
     with pytest.raises(NotFound):

@@ -1,0 +1,231 @@
+"""Dispatch execution against a real machine DNC port, directly and through a fault-injecting line."""
+
+from __future__ import annotations
+
+import threading
+from datetime import UTC, datetime, timedelta
+
+import pytest
+
+from dnc.dispatch import Dispatches
+from dnc.transfer import canonical_text
+from dnc.transfer_worker import RetryPolicy, TransferWorker
+from tests.cnc.dnc_helpers import Machine
+
+from .faultport import Fault, FaultPort
+
+MOVES = "".join(f"G1 X{i % 50} Y{i % 7} F300\n" for i in range(60))  # several 256-byte chunks
+PROG = "%\nO1234 (PLATE)\nG21 G90\nG0 X10 Y10\n" + MOVES + "M30\n%\n"
+
+
+class Clock:
+    def __init__(self):
+        self.t = datetime(2026, 11, 21, 8, 0, tzinfo=UTC)
+
+    def __call__(self):
+        return self.t
+
+    def advance(self, seconds):
+        self.t += timedelta(seconds=seconds)
+
+
+@pytest.fixture
+def machine():
+    m = Machine(capacity=8192)
+    yield m
+    m.close()
+
+
+@pytest.fixture
+def released(library):
+    _, rev = library.create_program(number=1234, name="plate", text=PROG)
+    library.release(rev.id, approver="ann", comment="ok")
+    return rev.id
+
+
+def register(library, port, **profile):
+    library.register_machine("mill1", "mill", dnc_address=f"127.0.0.1:{port}", dnc_profile=profile)
+
+
+def dispatch(sessions, released, key="k1", **kw):
+    info, _ = Dispatches(sessions).request(key=key, revision_id=released, machine="mill1", **kw)
+    return info.id
+
+
+def test_memory_dispatch_is_transferred_and_verified(library, sessions, machine, released):
+    register(library, machine.port.bound_port)
+    did = dispatch(sessions, released)
+    worker = TransferWorker(sessions)
+    assert worker.run_once() == [did]
+    d = Dispatches(sessions).get(did)
+    assert (d.state, d.verified, d.attempts, d.error) == ("done", True, 1, None)
+    assert d.bytes_sent > len(PROG)
+    assert machine.memory.get(1234) == canonical_text(PROG)
+    states = [a["detail"]["attempts"] for a in library.audit(entity="dispatch", entity_id=did)]
+    assert len(states) == 4  # requested, transferring, verifying, done
+
+
+@pytest.mark.parametrize(
+    "fault, error",
+    [
+        (Fault("drop", at=30), "cut_off"),
+        (Fault("corrupt", at=40), "verify"),
+        (Fault("xoff_hold", at=20, hold_s=1.0), "xoff_timeout"),
+    ],
+)
+def test_line_faults_are_retried_with_backoff_and_then_succeed(
+    library, sessions, machine, released, fault, error
+):
+    line = FaultPort(machine.port.bound_port, [fault])
+    try:
+        register(library, line.port, xoff_timeout_s=0.3, timeout_s=2)
+        clock = Clock()
+        worker = TransferWorker(sessions, now=clock, retry=RetryPolicy(base_s=2))
+        did = dispatch(sessions, released)
+        worker.run_once()
+        first = Dispatches(sessions).get(did)
+        assert first.state == "pending" and first.error.startswith(error)
+        assert "attempt 1 of 5; retry at 2026-11-21T08:00:02" in first.error
+        assert worker.run_once() == []  # not due yet
+        clock.advance(2)
+        worker.run_once()
+        final = Dispatches(sessions).get(did)
+        assert (final.state, final.verified, final.attempts) == ("done", True, 2)
+        assert machine.memory.get(1234) == canonical_text(PROG)
+    finally:
+        line.close()
+
+
+def test_xoff_storm_is_ridden_out(library, sessions, machine, released):
+    line = FaultPort(machine.port.bound_port, [Fault("xoff_storm", at=10)])
+    try:
+        register(library, line.port)
+        did = dispatch(sessions, released)
+        TransferWorker(sessions).run_once()
+        assert Dispatches(sessions).get(did).state == "done"
+    finally:
+        line.close()
+
+
+def test_parity_error_on_the_line_is_retried(library, sessions, released):
+    m = Machine(capacity=8192, parity=True)
+    line = FaultPort(m.port.bound_port, [Fault("corrupt", at=25)])
+    try:
+        register(library, line.port, parity=True)
+        clock = Clock()
+        worker = TransferWorker(sessions, now=clock)
+        did = dispatch(sessions, released)
+        worker.run_once()
+        first = Dispatches(sessions).get(did)
+        assert first.state == "pending" and "machine alarm 2001: parity error" in first.error
+        assert m.alarms[0][0] == 2001 and 1234 not in m.memory
+        clock.advance(1)
+        worker.run_once()
+        assert Dispatches(sessions).get(did).state == "done"
+    finally:
+        line.close()
+        m.close()
+
+
+def test_attempts_run_out_and_the_dispatch_fails_with_its_reason(
+    library, sessions, machine, released
+):
+    line = FaultPort(machine.port.bound_port, [Fault("drop", at=5)] * 3)
+    try:
+        register(library, line.port)
+        clock = Clock()
+        worker = TransferWorker(sessions, now=clock, retry=RetryPolicy(max_attempts=3, base_s=1))
+        did = dispatch(sessions, released)
+        for _ in range(3):
+            worker.run_once()
+            clock.advance(60)
+        d = Dispatches(sessions).get(did)
+        assert d.state == "failed" and d.attempts == 3 and d.error.startswith("cut_off")
+        assert worker.run_once() == []
+    finally:
+        line.close()
+
+
+def test_memory_full_is_not_retried(library, sessions, released):
+    m = Machine(capacity=64)
+    try:
+        register(library, m.port.bound_port)
+        did = dispatch(sessions, released)
+        TransferWorker(sessions).run_once()
+        d = Dispatches(sessions).get(did)
+        assert d.state == "failed" and "alarm 2002" in d.error and d.attempts == 1
+    finally:
+        m.close()
+
+
+def test_machine_without_address_fails_clearly(library, sessions, released):
+    library.register_machine("mill1", "mill")
+    did = dispatch(sessions, released)
+    TransferWorker(sessions, retry=RetryPolicy(max_attempts=1)).run_once()
+    assert "machine has no DNC address" in Dispatches(sessions).get(did).error
+
+
+def test_start_goes_through_the_starter_after_verification(library, sessions, machine, released):
+    register(library, machine.port.bound_port)
+    started = []
+    did = dispatch(sessions, released, start=True)
+    TransferWorker(sessions, starter=lambda name, number: started.append((name, number))).run_once()
+    assert started == [("mill1", 1234)]
+    assert Dispatches(sessions).get(did).state == "done"
+
+
+def test_start_without_a_starter_is_refused_not_ignored(library, sessions, machine, released):
+    register(library, machine.port.bound_port)
+    did = dispatch(sessions, released, start=True)
+    TransferWorker(sessions).run_once()
+    d = Dispatches(sessions).get(did)
+    assert d.state == "failed" and "no cycle-start path" in d.error
+
+
+def test_restart_requeues_transfers_but_never_restarts_a_start(
+    library, sessions, machine, released, engine
+):
+    register(library, machine.port.bound_port)
+    a = dispatch(sessions, released, key="a")
+    b = dispatch(sessions, released, key="b", start=True)
+    with engine.begin() as conn:  # the host was killed mid-transfer and mid-start
+        conn.exec_driver_sql(f"UPDATE dispatches SET state='transferring' WHERE id={a}")
+        conn.exec_driver_sql(f"UPDATE dispatches SET state='starting' WHERE id={b}")
+    started = []
+    worker = TransferWorker(sessions, starter=lambda *args: started.append(args))
+    worker.run_once()
+    assert Dispatches(sessions).get(a).state == "done"
+    failed = Dispatches(sessions).get(b)
+    assert failed.state == "failed" and "never started twice" in failed.error
+    assert started == []
+
+
+def test_drip_feed_dispatch_streams_to_the_nc(library, sessions, released):
+    m = Machine(capacity=64, drip_capacity=512)  # the program does not fit in memory
+    taken, stop = [], threading.Event()
+
+    def nc():
+        while not stop.is_set():
+            if m.drip_buffers:
+                block = m.drip_buffers[0].take()
+                if block is None:
+                    return
+                if block is not False:
+                    taken.append(block)
+                    continue
+            stop.wait(0.001)
+
+    t = threading.Thread(target=nc)
+    t.start()
+    try:
+        register(library, m.port.bound_port)
+        did = dispatch(sessions, released, mode="drip_feed")
+        TransferWorker(sessions).run_once()
+        t.join(10)
+        d = Dispatches(sessions).get(did)
+        assert (d.state, d.verified) == ("done", None)
+        assert taken == canonical_text(PROG).splitlines()[1:-1]
+    finally:
+        stop.set()
+        t.join()
+        m.close()
