@@ -342,10 +342,21 @@ class Runtime:
         return info.area, info.index
 
     def _value_for(self, target: Target, value: int | bool) -> int | bool:
-        area, _ = target
-        if area in BIT_AREAS or (area == "V" and isinstance(self.program.v_init[target[1]], bool)):
+        area, index = target
+        if area in BIT_AREAS or (area == "V" and isinstance(self.program.v_init[index], bool)):
             return bool(value)
-        return _to_int(int(value)) if area != "V" else int(value)
+        if area == "V" and index in self._ms_slots():
+            return max(0, int(value))  # timer .ACC/.PRE hold ms, wider than INT
+        return _to_int(int(value))
+
+    def _ms_slots(self) -> set[int]:
+        return {
+            i
+            for info in self.program.tags.values()
+            if info.type == "TIMER"
+            for m, i in info.members.items()
+            if m in ("ACC", "PRE")
+        }
 
     def force(self, name: str, value: int | bool) -> None:
         """Pin a value: inputs before the logic, outputs after it, markers/tags both times."""

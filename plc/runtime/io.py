@@ -34,12 +34,15 @@ class SimulatedIO:
         self.iw[index] = int(value)
 
     def read_inputs(self, ix: list[bool], iw: list[int], now_ms: int) -> None:
-        ix[:] = self.ix
-        iw[:] = self.iw
+        # slices of the shorter length: the image's lists never change size
+        n, m = min(len(ix), len(self.ix)), min(len(iw), len(self.iw))
+        ix[:n] = self.ix[:n]
+        iw[:m] = self.iw[:m]
 
     def write_outputs(self, qx: list[bool], qw: list[int], now_ms: int) -> None:
-        self.qx[:] = qx
-        self.qw[:] = qw
+        n, m = min(len(qx), len(self.qx)), min(len(qw), len(self.qw))
+        self.qx[:n] = qx[:n]
+        self.qw[:m] = qw[:m]
 
 
 class Debounce:

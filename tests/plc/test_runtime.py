@@ -411,3 +411,23 @@ def test_alarm_declaration_errors(decl, fragment):
 
     diags = check_text(decl + "\nXIC %IX0.0 OTE %QX0.0\n", "a.ld")
     assert any(fragment in d.message for d in diags), [str(d) for d in diags]
+
+
+def test_written_values_take_the_target_type():
+    rt = make()
+    rt.write_once("Temp", 70000)  # INT tag: wraps like a Modbus register
+    rt.write_once("Run.ACC", 70000)  # timer ms: not an INT
+    rt.write_once("%MX0.3", 5)
+    rt.stop()
+    rt.scan(0)
+    assert rt.read("Temp") == 4464 and rt.read("Run.ACC") == 70000 and rt.read("%MX0.3") is True
+
+
+def test_simulated_io_of_another_size_keeps_the_image_size():
+    from plc.image import ImageSize
+
+    io = SimulatedIO(ImageSize(ix=8, iw=2, qx=8, qw=2))
+    rt = make(io=io)
+    io.set_input(0, True)
+    rt.scan(0)
+    assert len(rt.image.ix) == 1024 and rt.read("Motor") is True and io.qx[0] is True
