@@ -259,7 +259,7 @@ def test_realtime_hub_with_stock_sync_producer_and_synchronous_tpdo():
         assert node.tpdo[1].wait_for_reception(timeout=2.0) is not None
         assert node.tpdo[1]["Position actual value"].raw == 1000
         network.sync.stop()
-        assert hub.load.summary()["windows"] >= 1
+        assert hub.load.total_frames > 0
     finally:
         network.disconnect()
         hub.close()
