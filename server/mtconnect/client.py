@@ -28,6 +28,7 @@ MAX_LINE = 1 << 16
 
 @dataclass
 class ConnectionStats:
+    attempts: int = 0
     connects: int = 0
     disconnects: int = 0
     lines: int = 0
@@ -77,6 +78,7 @@ class AdapterConnection:
 
     async def _run(self) -> None:
         while True:
+            self.stats.attempts += 1
             try:
                 await self._session()
             except asyncio.CancelledError:

@@ -1,0 +1,444 @@
+"""The agent core: sequence semantics, parameter checks and errors as cppagent has them."""
+
+from __future__ import annotations
+
+import random
+
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from server.mtconnect import Agent, CircularBuffer, Observation, build_device
+from server.mtconnect.buffer import Checkpoint
+from tests.server.test_mtconnect_support import (
+    FakeClock,
+    error_code,
+    header,
+    parse,
+    seqs,
+    small_agent,
+    values,
+)
+
+TS = "2026-11-21T06:00:00.000000Z"
+
+
+def feed(agent: Agent, n: int, device: str = "m1") -> None:
+    """n observations that each change `line`."""
+    for i in range(n):
+        agent.ingest_line(device, f"{TS}|line|{1000 + agent.buffer.next_sequence + i}")
+
+
+def doc(agent: Agent, kind: str, device: str | None = None, **params) -> tuple[int, str]:
+    return agent.request(kind, device, {k.rstrip("_"): str(v) for k, v in params.items()})
+
+
+# --- the empty agent -------------------------------------------------------------------------
+
+
+def test_every_item_starts_unavailable_with_its_own_sequence():
+    a = small_agent()
+    n = sum(len(d.all_items) for d in a.devices)
+    status, text = doc(a, "current")
+    root = parse("Streams", text)
+    assert status == 200
+    h = header(root)
+    assert (h["firstSequence"], h["lastSequence"], h["nextSequence"]) == ("1", str(n), str(n + 1))
+    assert sorted(seqs(root)) == list(range(1, n + 1))
+    assert all(v == ["UNAVAILABLE"] for v in values(root).values())
+
+
+def test_instance_id_and_buffer_size_in_header():
+    a = small_agent(buffer_size=64, instance_id=77)
+    h = header(parse("Streams", doc(a, "current")[1]))
+    assert h["instanceId"] == "77" and h["bufferSize"] == "64"
+    assert small_agent(clock=FakeClock(1234.5)).instance_id == 1234
+
+
+# --- sample: from / count / to ------------------------------------------------------------
+
+
+def test_sample_default_count_is_100_from_the_first_sequence():
+    a = small_agent()
+    feed(a, 150)
+    root = parse("Streams", doc(a, "sample")[1])
+    assert seqs(root) == list(range(1, 101))
+    assert header(root)["nextSequence"] == "101"
+
+
+def test_sample_from_and_count():
+    a = small_agent()
+    feed(a, 50)
+    root = parse("Streams", doc(a, "sample", from_=60, count=5)[1])
+    assert seqs(root) == [60, 61, 62, 63, 64]
+    assert header(root)["nextSequence"] == "65"
+
+
+def test_empty_stream_when_nothing_new():
+    a = small_agent()
+    nxt = a.buffer.next_sequence
+    root = parse("Streams", doc(a, "sample", from_=nxt)[1])
+    assert seqs(root) == []
+    assert header(root)["nextSequence"] == str(nxt)
+
+
+def test_negative_count_gives_the_latest():
+    a = small_agent()
+    feed(a, 20)
+    last = a.buffer.last_sequence
+    root = parse("Streams", doc(a, "sample", count=-5)[1])
+    assert seqs(root) == list(range(last - 4, last + 1))
+    # cppagent walks backwards and reports where it stopped
+    assert header(root)["nextSequence"] == str(last - 5)
+
+
+def test_negative_count_from_walks_back_from_from():
+    a = small_agent()
+    feed(a, 20)
+    root = parse("Streams", doc(a, "sample", from_=30, count=-3)[1])
+    assert seqs(root) == [28, 29, 30]
+
+
+def test_from_to_is_inclusive_and_next_is_to_plus_one():
+    a = small_agent()
+    feed(a, 20)
+    root = parse("Streams", doc(a, "sample", from_=10, to=15)[1])
+    assert seqs(root) == list(range(10, 16))
+    h = header(root)
+    assert h["nextSequence"] == "16"
+    assert h["firstSequence"] == "10"  # cppagent reports `from` as firstSequence here
+
+
+def test_to_with_small_count_takes_the_last_before_to():
+    a = small_agent()
+    feed(a, 20)
+    root = parse("Streams", doc(a, "sample", from_=10, to=20, count=3)[1])
+    assert seqs(root) == [18, 19, 20]
+    assert header(root)["nextSequence"] == "21"
+
+
+def test_to_alone_counts_back_from_to():
+    a = small_agent()
+    root = parse("Streams", doc(a, "sample", to=12, count=4)[1])
+    assert seqs(root) == [9, 10, 11, 12]
+
+
+OUT_OF_RANGE = [
+    # (params, message) for an agent of buffer size 1024 holding sequences 1..next-1
+    ({"from": "0"}, "'from' must be greater than 0"),
+    ({"from": "{next1}"}, "'from' must be less than {next1}"),
+    ({"count": "0"}, "'count' must not be zero(0)"),
+    ({"count": "{size1}"}, "'count' must be less than {size1}"),
+    ({"count": "-{size1}"}, "'count' must be greater than -{size1}"),
+    ({"from": "10", "to": "10"}, "'to' must be greater than 10"),
+    ({"from": "10", "to": "9"}, "'to' must be greater than 10"),
+    ({"to": "{next1}"}, "'to' must be less than {next1}"),
+    ({"to": "12", "count": "-2"}, "'count' must be greater than 0"),
+]
+
+
+@pytest.mark.parametrize(("params", "message"), OUT_OF_RANGE)
+def test_sample_out_of_range_like_cppagent(params, message):
+    a = small_agent(buffer_size=1024)
+    nxt = a.buffer.next_sequence
+    fill = {"next1": nxt + 1, "size1": 1025}
+    status, text = a.request("sample", None, {k: v.format(**fill) for k, v in params.items()})
+    assert status == 400
+    assert error_code(text) == ("OUT_OF_RANGE", message.format(**fill))
+
+
+def test_from_below_first_after_wrap_is_out_of_range():
+    a = small_agent(buffer_size=16)
+    feed(a, 40)
+    first = a.buffer.first_sequence
+    assert first > 1 and a.buffer.next_sequence - first == 16
+    status, text = doc(a, "sample", from_=first - 1)
+    assert (status, error_code(text)) == (
+        400,
+        ("OUT_OF_RANGE", f"'from' must be greater than {first - 1}"),
+    )
+    # the default count=100 is out of range for a 16-slot buffer, as in cppagent
+    assert error_code(doc(a, "sample", from_=first)[1]) == (
+        "OUT_OF_RANGE",
+        "'count' must be less than 17",
+    )
+    root = parse("Streams", doc(a, "sample", from_=first, count=16)[1])
+    assert seqs(root)[0] == first and header(root)["firstSequence"] == str(first)
+
+
+# --- current?at ------------------------------------------------------------------------------
+
+
+def test_current_at_is_the_state_at_that_sequence():
+    a = small_agent(checkpoint_frequency=7)
+    a.ingest_line("m1", f"{TS}|exec|ACTIVE|line|1")
+    at = a.buffer.last_sequence
+    a.ingest_line("m1", f"{TS}|exec|FEED_HOLD|line|2")
+    v = values(parse("Streams", doc(a, "current", at=at)[1]))
+    assert v["m1_exec"] == ["ACTIVE"] and v["m1_line"] == ["1"]
+    v = values(parse("Streams", doc(a, "current")[1]))
+    assert v["m1_exec"] == ["FEED_HOLD"]
+
+
+@pytest.mark.parametrize(("at", "message"), [(0, "greater than 0"), ("next", "less than {n}")])
+def test_current_at_out_of_range(at, message):
+    a = small_agent()
+    n = a.buffer.next_sequence
+    status, text = doc(a, "current", at=n if at == "next" else at)
+    assert status == 400
+    assert error_code(text) == ("OUT_OF_RANGE", f"'at' must be {message.format(n=n)}")
+
+
+@settings(max_examples=40, deadline=None)
+@given(
+    size=st.integers(2, 12),
+    freq=st.integers(1, 5),
+    ops=st.lists(
+        st.tuples(st.integers(0, 2), st.sampled_from(["A", "B", "N1", "N2"])), max_size=60
+    ),
+)
+def test_checkpoint_at_equals_replaying_the_whole_history(size, freq, ops):
+    dev = build_device("m", ["X"])
+    cond = dev.by_key["nc_cond"]
+    line = dev.by_key["line"]
+    buf = CircularBuffer(size, freq)
+    history = []
+    for kind, v in ops:
+        if kind == 0:
+            obs = Observation(line, TS, v)
+        elif v in ("A", "B"):
+            obs = Observation(cond, TS, "t", level="FAULT", native_code=v)
+        else:
+            obs = Observation(cond, TS, "", level="NORMAL", native_code="A" if v == "N1" else "")
+        history.append(buf.add(obs))
+    for at in range(buf.first_sequence, buf.next_sequence):
+        replay = Checkpoint()
+        for obs in history[:at]:
+            replay.add(obs)
+        got = buf.checkpoint_at(at)
+        for di in (cond, line):
+            assert got.get(di.id) == replay.get(di.id), at
+
+
+def test_sequences_are_not_truncated_at_32_bits():
+    dev = build_device("m", ["X"])
+    buf = CircularBuffer(8)
+    buf.next_sequence = buf.first_sequence = 2**33 + 5
+    obs = buf.add(Observation(dev.by_key["line"], TS, "1"))
+    assert obs.sequence == 2**33 + 5 and buf.get(2**33 + 5) is obs
+
+
+# --- path, device, parameter errors -----------------------------------------------------
+
+
+@pytest.mark.parametrize(
+    ("device", "path", "expected"),
+    [
+        (
+            None,
+            '//Linear[@name="X"]',
+            {"m1_Xact", "m1_Xcmd", "m1_Xservo", "m2_Xact", "m2_Xcmd", "m2_Xservo"},
+        ),
+        ("m1", '//Linear[@name="X"]', {"m1_Xact", "m1_Xcmd", "m1_Xservo"}),
+        (None, "//DataItem[@type='EXECUTION']", {"m1_exec", "m2_exec"}),
+        (
+            "m2",
+            "//Controller//DataItem[@category='CONDITION']",
+            {"m2_nc_cond", "m2_plc_cond", "m2_bus_cond", "m2_dnc_cond"},
+        ),
+        (
+            None,
+            '//DataItem[@name="exec"]|//DataItem[@name="line"]',
+            {"m1_exec", "m2_exec", "m1_line", "m2_line"},
+        ),
+        (
+            None,
+            '/MTConnectDevices/Devices/Device[@name="m2"]/DataItems/DataItem',
+            {"m2_avail", "m2_asset_chg", "m2_asset_rem"},
+        ),
+        ("fmscell-m2", "//Path//DataItem[@type='PROGRAM']", {"m2_program"}),
+    ],
+)
+def test_path_filter(device, path, expected):
+    a = small_agent()
+    status, text = doc(a, "current", device, path=path)
+    assert status == 200, text
+    assert set(values(parse("Streams", text))) == expected
+
+
+@pytest.mark.parametrize(
+    "path",
+    ["//Linear[@name='Q']", "//DataItem[@type=", "Linear", "//Nothing", "//a[(1)]", ""],
+)
+def test_bad_or_empty_path_is_invalid_xpath(path):
+    a = small_agent()
+    status, text = doc(a, "sample", path=path)
+    code, message = error_code(text)
+    assert (status, code) == (400, "INVALID_XPATH")
+    assert message.startswith("The path could not be parsed. Invalid syntax:")
+
+
+@pytest.mark.parametrize("kind", ["probe", "current", "sample"])
+def test_unknown_device(kind):
+    status, text = small_agent().request(kind, "nope", {})
+    assert (status, error_code(text)) == (404, ("NO_DEVICE", "Could not find the device 'nope'"))
+
+
+@pytest.mark.parametrize(
+    ("kind", "params", "code"),
+    [
+        ("sample", {"count": "abc"}, "QUERY_ERROR"),
+        ("sample", {"from": "-1"}, "QUERY_ERROR"),
+        ("sample", {"count": "99999999999"}, "QUERY_ERROR"),
+        ("current", {"at": "1.5"}, "QUERY_ERROR"),
+        ("sample", {"interval": "100"}, "UNSUPPORTED"),
+        ("current", {"interval": "100"}, "UNSUPPORTED"),
+        ("probe", {"format": "json"}, "UNSUPPORTED"),
+        ("probe", {"deviceType": "Robot"}, "INVALID_REQUEST"),
+        ("sample", {"pretty": "maybe"}, "QUERY_ERROR"),
+        ("assets", {}, "INVALID_URI"),
+    ],
+)
+def test_parameter_errors(kind, params, code):
+    status, text = small_agent().request(kind, None, params)
+    assert status in (400, 404)
+    assert error_code(text)[0] == code
+
+
+def test_interval_range_is_checked_before_unsupported():
+    status, text = small_agent().request("sample", None, {"interval": "-2"})
+    assert error_code(text) == ("OUT_OF_RANGE", "'interval' must be greater than -1")
+
+
+# --- ingest: conditions, duplicates, disconnects ------------------------------------------
+
+
+def test_condition_activation_and_clearing():
+    a = small_agent()
+    a.ingest_line("m1", f"{TS}|nc_cond|FAULT|1012|FAULT||following error X")
+    a.ingest_line("m1", f"{TS}|nc_cond|WARNING|2001|WARNING|HIGH|low air")
+    assert a.value("m1", "nc_cond") == "FAULT,WARNING"
+    v = values(parse("Streams", doc(a, "current", "m1", path="//DataItem[@name='nc_cond']")[1]))
+    assert v == {"m1_nc_cond": ["FAULT", "WARNING"]}
+    a.ingest_line("m1", f"{TS}|nc_cond|NORMAL|1012|||")
+    assert a.value("m1", "nc_cond") == "WARNING"
+    a.ingest_line("m1", f"{TS}|nc_cond|NORMAL||||")
+    assert a.value("m1", "nc_cond") == "NORMAL"
+
+
+def test_condition_attributes_in_the_document():
+    a = small_agent()
+    a.ingest_line("m1", f"{TS}|Xservo|FAULT|1012|FAULT|HIGH|following error X")
+    root = parse("Streams", doc(a, "current", "m1", path="//DataItem[@name='Xservo']")[1])
+    (fault,) = [e for e in root.iter() if e.get("dataItemId") == "m1_Xservo"]
+    assert fault.tag.endswith("}Fault") and fault.text == "following error X"
+    assert (fault.get("nativeCode"), fault.get("qualifier"), fault.get("type")) == (
+        "1012",
+        "HIGH",
+        "ACTUATOR",
+    )
+
+
+def test_duplicates_are_filtered():
+    a = small_agent()
+    assert a.ingest_line("m1", f"{TS}|exec|ACTIVE") == 1
+    assert a.ingest_line("m1", f"{TS}|exec|ACTIVE") == 0
+    assert a.ingest_line("m1", f"{TS}|nc_cond|NORMAL||||") == 1
+    assert a.ingest_line("m1", f"{TS}|nc_cond|NORMAL||||") == 0
+    assert a.ingest_line("m1", f"{TS}|nc_cond|NORMAL|77|||") == 0  # clears nothing
+
+
+def test_unavailable_is_not_duplicated_when_disconnected():
+    a = small_agent()
+    a.ingest_line("m1", f"{TS}|exec|ACTIVE|nc_cond|NORMAL||||")
+    assert a.disconnected("m1") == 2  # only what was available changes
+    assert a.disconnected("m1") == 0
+    assert a.value("m1", "exec") == "UNAVAILABLE"
+    assert a.value("m1", "nc_cond") == "UNAVAILABLE"
+    assert a.value("m1", "asset_chg") == "UNAVAILABLE"
+
+
+def test_adapter_timestamps_are_kept_unless_ignored():
+    a = small_agent()
+    a.ingest_line("m1", "2026-01-02T03:04:05.5|exec|ACTIVE")
+    assert a.latest("m1", "exec").timestamp == "2026-01-02T03:04:05.5Z"
+    b = small_agent(ignore_timestamps=True, clock=FakeClock(0.0))
+    b.ingest_line("m1", "2026-01-02T03:04:05.5|exec|ACTIVE")
+    assert b.latest("m1", "exec").timestamp == "1970-01-01T00:00:00.000000Z"
+    b.ingest_line("m1", "garbage|exec|READY")
+    assert b.latest("m1", "exec").timestamp == "1970-01-01T00:00:00.000000Z"
+
+
+def test_unavailable_literals_and_unknown_keys():
+    a = small_agent()
+    a.ingest_line("m1", f"{TS}|exec|ACTIVE|bogus|1|line|5")
+    assert a.value("m1", "line") == "5"
+    a.ingest_line("m1", f"{TS}|exec|@UNAVAILABLE@|line|unavailable")
+    assert a.value("m1", "exec") == "UNAVAILABLE" and a.value("m1", "line") == "UNAVAILABLE"
+
+
+def test_text_with_markup_and_japanese_characters():
+    a = small_agent()
+    a.ingest_line("m1", f'{TS}|program|"O1 <&> 日本語 \\| x"')
+    v = values(parse("Streams", doc(a, "current", "m1", path="//DataItem[@name='program']")[1]))
+    assert v == {"m1_program": ["O1 <&> 日本語 | x"]}
+
+
+@settings(max_examples=200, deadline=None)
+@given(st.text(max_size=120))
+def test_malformed_lines_never_crash_ingest(line):
+    a = _FUZZ_AGENT
+    a.ingest_line("m1", line)
+    status, text = a.request("current", "m1", {})
+    assert status == 200
+    parse("Streams", text)
+
+
+_FUZZ_AGENT = small_agent(buffer_size=256)
+
+
+def test_probe_document():
+    a = small_agent()
+    root = parse("Devices", doc(a, "probe")[1])
+    ns = "{urn:mtconnect.org:MTConnectDevices:2.5}"
+    devices = root.findall(f"{ns}Devices/{ns}Device")
+    assert [d.get("name") for d in devices] == ["m1", "m2"]
+    ids = [e.get("id") for e in root.iter() if e.get("id")]
+    assert len(ids) == len(set(ids))  # ids are document-unique
+    linear = root.findall(f".//{ns}Linear")
+    assert [c.get("name") for c in linear] == ["X", "Y", "Z", "X", "Z"]
+    xact = next(e for e in root.iter(f"{ns}DataItem") if e.get("id") == "m1_Xact")
+    assert xact.attrib == {
+        "category": "SAMPLE",
+        "id": "m1_Xact",
+        "name": "Xact",
+        "type": "POSITION",
+        "subType": "ACTUAL",
+        "units": "MILLIMETER",
+    }
+    one = parse("Devices", doc(a, "probe", "m2")[1])
+    assert [d.get("name") for d in one.findall(f"{ns}Devices/{ns}Device")] == ["m2"]
+
+
+def test_agent_from_the_default_cell():
+    from cnc.config import default_cell_config
+
+    a = Agent.from_cell(default_cell_config(), clock=FakeClock())
+    assert [d.name for d in a.devices] == list(default_cell_config().machines)
+
+
+def test_refuses_empty_or_duplicate_devices():
+    with pytest.raises(ValueError):
+        Agent([])
+    with pytest.raises(ValueError, match="unique"):
+        Agent([build_device("a", ["X"]), build_device("a", ["X"])])
+
+
+def test_random_streams_keep_header_invariants():
+    rng = random.Random(7)
+    a = small_agent(buffer_size=32, checkpoint_frequency=5)
+    for _ in range(200):
+        a.ingest_line(rng.choice(["m1", "m2"]), f"{TS}|line|{rng.randint(0, 9)}")
+        h = header(parse("Streams", doc(a, "current")[1]))
+        first, last, nxt = int(h["firstSequence"]), int(h["lastSequence"]), int(h["nextSequence"])
+        assert nxt == last + 1 and nxt - first <= 32 and first >= 1
