@@ -89,6 +89,8 @@ def _tokenize(code: str, line: int, col0: int, sink: DiagnosticSink) -> list[Tok
 
 def _split_comment(raw: str) -> tuple[str, str, str]:
     """Like `raw.partition("//")`, but a `//` inside a "string" is not a comment."""
+    if '"' not in raw:
+        return raw.partition("//")
     quoted = False
     for i, ch in enumerate(raw):
         if ch == '"':
