@@ -103,7 +103,7 @@ def main_lines(lines: Iterable[str] | str) -> Lines:
     """Number the main program's lines without reading ahead."""
     if isinstance(lines, str):
         lines = lines.splitlines()
-    yield from enumerate(lines, 1)
+    return enumerate(lines, 1)
 
 
 class ProgramLibrary:

@@ -36,7 +36,7 @@ from cnc.canon import (
     ToolSelect,
 )
 from cnc.errors import NcError
-from cnc.gcode.lexer import Block, parse_line
+from cnc.gcode.lexer import Block, MarkedBlock, parse_line
 from cnc.gcode.source import Lines, ProgramLibrary, main_lines
 from cnc.interp.state import ModalState, ToolOffset
 from cnc.interp.transform import Transform
@@ -260,6 +260,7 @@ class Interpreter:
         self._comp_w = 0.0
         self._polar_ra = (0.0, 0.0)
         self._simple = True
+        self._plainxyz = not self._lathe
 
     def _compute_off(self) -> tuple[float, float, float]:
         w = self._wofs[self._wcs]
@@ -410,28 +411,10 @@ class Interpreter:
     # --- one block --------------------------------------------------------------------
 
     def _block(self, blk: Block, fr: _Frame) -> None:
-        main = len(self._frames) == 1
-        if blk.tape:
-            if main:
-                if fr.body_started:
-                    self._ended = True  # closing '%': end of tape
-                fr.body_started = True
-            elif fr.body_started:
-                raise self._err(f"subprogram O{fr.number} ends without M99", blk)
+        if type(blk) is MarkedBlock and self._marks(blk, fr):
             return
-        if blk.delete and self.block_delete:
-            return
-        if blk.program is not None:
-            if main:
-                if self._program is None and not self._moved:
-                    self._program = blk.program
-                else:
-                    self._ended = True  # the next program in the file: main program ends
-                    return
-            elif fr.header_seen or fr.body_started:
-                raise self._err(f"subprogram O{fr.number} ends without M99", blk)
-            fr.header_seen = True
-        fr.body_started = True
+        if not fr.body_started:
+            fr.body_started = True
         words = blk.words
         g = blk.g
         if not (words or g or blk.m):
@@ -448,11 +431,37 @@ class Interpreter:
             and words.keys() <= self._fast_words
         ):
             if g:
-                self._motion = g[0]
+                mo = self._motion = g[0]
+            else:
+                mo = self._motion
             if "N" in words:
                 self._nword = int(words["N"])
             if "F" in words:
                 self._set_feed(blk, words["F"])
+            if mo < 20 and self._plainxyz and blk.nopoint is None:
+                # the commonest block of all: G0/G1 X Y Z in G90, mm, no transforms
+                if not ("X" in words or "Y" in words or "Z" in words):
+                    return
+                p = self._pos
+                t = (words.get("X", p[0]), words.get("Y", p[1]), words.get("Z", p[2]))
+                o = self._off
+                m = (t[0] + o[0], t[1] + o[1], t[2] + o[2])
+                lo, hi = self._lo, self._hi
+                if not (
+                    lo[0] <= m[0] <= hi[0] and lo[1] <= m[1] <= hi[1] and lo[2] <= m[2] <= hi[2]
+                ):
+                    self._check(m, blk, line)
+                if mo == 0:
+                    self._out.append(StraightTraverse(line, m, False))
+                else:
+                    f = self._f
+                    if f is None or f <= 0.0 or self._per_rev:
+                        f = self._feed(blk)
+                    self._out.append(StraightFeed(line, m, f, False))
+                self._pos = t
+                self._mach = m
+                self._moved = True
+                return
             self._motion_block(blk, words, False, g[0] if g else None)
             return
         for i, code in enumerate(g):
@@ -687,6 +696,34 @@ class Interpreter:
         """Whether the next plain motion block may take the fast path."""
         comp = self._comp
         self._simple = self._cycle == 800 and not self._xf_on and (comp is None or not comp.active)
+        self._plainxyz = (
+            self._simple and self._abs and not self._polar and not self._inch and not self._lathe
+        )
+
+    def _marks(self, blk: MarkedBlock, fr: _Frame) -> bool:
+        """Tape marks, block delete and O headers; True when the block is done with."""
+        main = len(self._frames) == 1
+        if blk.tape:
+            if main:
+                if fr.body_started:
+                    self._ended = True  # closing '%': end of tape
+                fr.body_started = True
+            elif fr.body_started:
+                raise self._err(f"subprogram O{fr.number} ends without M99", blk)
+            return True
+        if blk.delete and self.block_delete:
+            return True
+        if blk.program is not None:
+            if main:
+                if self._program is None and not self._moved:
+                    self._program = blk.program
+                else:
+                    self._ended = True  # the next program in the file: main program ends
+                    return True
+            elif fr.header_seen or fr.body_started:
+                raise self._err(f"subprogram O{fr.number} ends without M99", blk)
+            fr.header_seen = True
+        return False
 
     # --- words --------------------------------------------------------------------------
 
