@@ -247,3 +247,21 @@ def test_lathe_arcs_in_g18_by_default_with_radius_i() -> None:
     a = moves("G98 G0 X20 Z0\nG2 X40 Z-10 I10 K0 F100\n", LATHE)[-1]  # G98: mm/min
     assert a.plane is Plane.ZX and a.end == (20.0, 0.0, -10.0)
     assert a.center == (20.0, 0.0, 0.0)  # start radius 10 + I10 = 20 on X (radius)
+
+
+block_st = st.tuples(
+    st.sampled_from(["G0", "G1", ""]),
+    st.lists(st.sampled_from("XYZ"), min_size=0, max_size=3, unique=True),
+    st.lists(st.integers(-300, 300), min_size=3, max_size=3),
+)
+
+
+@settings(max_examples=100, deadline=None)
+@given(st.lists(block_st, min_size=1, max_size=30), st.sampled_from(["G90", "G91"]))
+def test_property_fast_path_equals_full_path(blocks, dist) -> None:
+    lines = [f"{dist} G1 F500"]
+    for g, axes, vals in blocks:
+        lines.append(" ".join([g] + [f"{a}{v / 10}" for a, v in zip(axes, vals, strict=False)]))
+    fast = "\n".join(lines)
+    slow = "\n".join(line + " G17" for line in lines)  # a modal word forces the full path
+    assert run(fast) == run(slow)
