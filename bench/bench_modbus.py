@@ -242,6 +242,7 @@ def main() -> None:
         help="sys.setswitchinterval in both server processes (the anchor's scan-thread advice)",
     )
     args = ap.parse_args()
+    load_before = os.getloadavg()[0]
     ours_srv, ours_ready, ours_stop, ours_port = start_server(serve_ours, args.switch_interval)
     peer_srv, _, peer_stop, peer_port = start_server(serve_pymodbus, args.switch_interval)
     ports = {"ours": ours_port, "pymodbus": peer_port}
@@ -270,6 +271,7 @@ def main() -> None:
                 "client_processes_for_8": args.client_procs,
                 "server_switch_interval_s": args.switch_interval,
                 "cpus": os.cpu_count(),
+                "loadavg_1min_before_after": [round(load_before, 2), round(os.getloadavg()[0], 2)],
                 "ours_1conn_req_s": o1,
                 "ours_8conn_req_s": o8,
                 "pymodbus_1conn_req_s": p1,
