@@ -154,7 +154,11 @@ CASES = [
     ("fc05-qx-read-only-is-02", fc05(2000, 0xFF00), exc(5, 2), None),
     ("fc05-unmapped-is-02", fc05(5000, 0xFF00), exc(5, 2), None),
     ("fc05-bad-value-unmapped-is-03-first", fc05(5000, 0x1234), exc(5, 3), None),
+    ("fc05-last-writable", fc05(1999, 0xFF00), fc05(1999, 0xFF00), (W("QX", 1999, (1,)),)),
+    ("fc05-top-address-is-02", fc05(65535, 0xFF00), exc(5, 2), None),
     # --- FC06 write single register ------------------------------------------------------
+    ("fc06-last-writable-qw", fc06(9, 3), fc06(9, 3), (W("QW", 9, (3,)),)),
+    ("fc06-top-address-is-02", fc06(65535, 3), exc(6, 2), None),
     ("fc06-ffff-is-minus-one", fc06(5, 0xFFFF), fc06(5, 0xFFFF), (W("QW", 5, (-1,)),)),
     ("fc06-8000-is-int-min", fc06(0, 0x8000), fc06(0, 0x8000), (W("QW", 0, (-32768,)),)),
     ("fc06-mw0", fc06(1024, 1234), fc06(1024, 1234), (W("MW", 0, (1234,)),)),
@@ -170,7 +174,11 @@ CASES = [
     ("fc15-byte-count-lies-is-03", fc15(0, ALT[:16] + [0] * 8, count=16), exc(15, 3), None),
     ("fc15-partly-read-only-is-02", fc15(1990, ALT[:20]), exc(15, 2), None),
     ("fc15-unmapped-is-02", fc15(5000, ALT[:8]), exc(15, 2), None),
+    ("fc15-last-writable", fc15(1999, [1]), head(fc15(1999, [1])), (W("QX", 1999, (1,)),)),
+    ("fc15-wraps-past-65535-is-02", fc15(65535, [1, 1]), exc(15, 2), None),
     # --- FC16 write multiple registers ---------------------------------------------------
+    ("fc16-crossing-allow-list-end-is-02", fc16(9, [1, 2]), exc(16, 2), None),
+    ("fc16-wraps-past-65535-is-02", fc16(65535, [1, 2]), exc(16, 2), None),
     ("fc16-two", fc16(0, [1, 0xFFFE]), head(fc16(0, [1, 2])), (W("QW", 0, (1, -2)),)),
     (
         "fc16-max-123",
