@@ -8,15 +8,17 @@ python-can bus through `start()`, a small receive-and-tick thread.
 
 from __future__ import annotations
 
+import copy
 import logging
 import threading
 import time
 from functools import partial
 
 import can
+import canopen
 
 from drives import EDS_PATH
-from drives.application import DriveApplication
+from drives.application import DriveApplication, ObjectAccessError
 from drives.bus.hub import SimBus
 from drives.cia301.emcy import EmcyProducer
 from drives.cia301.heartbeat import HeartbeatConsumer, HeartbeatProducer
@@ -457,6 +459,39 @@ class CanopenSlave:
             timer = channel.event_timer_ms * 1e-3
             if data != channel.last_sent or (timer > 0 and channel.since_sent + 1e-12 >= timer):
                 self._send_tpdo(channel, data)
+
+    # ------------------------------------------------------------------ artefacts
+    def export_dcf(self, dest) -> None:
+        """Write this node's DCF: the EDS plus current values and its node-ID/bitrate.
+
+        Values go out as `ParameterValue` text written here (decimal integers) because
+        canopen's own formatter writes negative integers as `0x-3`, which it cannot read back.
+        """
+        od = copy.deepcopy(self.od.definitions)
+        od.node_id = self.node_id
+        if isinstance(self.bus, SimBus):
+            od.bitrate = self.bus.hub.bitrate
+        with self._lock:
+            for (index, subindex), entry in self.od.entries.items():
+                if not entry.readable:
+                    continue
+                try:
+                    value = self.od.get(index, subindex)
+                except ObjectAccessError:
+                    continue
+                obj = od[index]
+                var = obj if isinstance(obj, canopen.objectdictionary.ODVariable) else obj[subindex]
+                if isinstance(value, bytes | bytearray):
+                    var.value_raw = bytes(value).hex()
+                elif isinstance(value, float):
+                    var.value_raw = repr(value)
+                elif isinstance(value, str):
+                    var.value_raw = value
+                else:
+                    var.value_raw = str(int(value))
+                if getattr(var, "relative", False) and var.default is not None:
+                    var.default_raw = f"$NODEID+0x{var.default:X}"
+        canopen.export_od(od, dest, doc_type="dcf")
 
     # ------------------------------------------------------------------ realtime shell
     def start(self, tick_s: float = 0.001) -> None:

@@ -105,3 +105,20 @@ def test_start_on_a_lockstep_hub_is_refused(slave):
 
     with pytest.raises(RuntimeError, match="lockstep"):
         slave.start()
+
+
+def test_export_dcf_carries_current_values_and_loads_back(cell, app, slave, tmp_path):
+    import canopen
+
+    cell.send("605#2B171000FA000000")  # 0x1017 = 250
+    cell.send("605#2100210006000000")
+    assert cell.send("605#0358206178697300") == ["585#2000000000000000"]  # "X axis", n=1, c
+    app.values[(0x607C, 0)] = -1234
+    path = tmp_path / "node5.dcf"
+    slave.export_dcf(str(path))
+    od = canopen.import_od(str(path))
+    assert od.node_id == 5 and od.bitrate == 1_000_000
+    assert od[0x1017].value == 250
+    assert od[0x2100].value == "X axis"
+    assert od[0x607C].value == -1234
+    assert od[0x1400][1].default == 0x205 and od[0x1400][1].value == 0x205
