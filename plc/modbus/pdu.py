@@ -98,7 +98,7 @@ class PduHandler:
             0x2B: self._encapsulated_interface,
         }
         # Hot path: FC03 on a request inside one area skips the generic resolver.
-        self._hr_segments = mb_map.segments("hr")
+        self._hr_fast = tuple((s.start, s.end, _LOWER[s.area]) for s in mb_map.segments("hr"))
 
     def handle(self, pdu: bytes, snap: Snapshot) -> Result:
         """Response PDU and the write batch to queue (None for reads and exceptions)."""
@@ -132,10 +132,10 @@ class PduHandler:
         if len(pdu) == 5:
             address, count = _unpack_addr_qty(pdu, 1)
             if 1 <= count <= MAX_READ_REGISTERS:
-                for seg in self._hr_segments:
-                    if seg.start <= address and address + count <= seg.end:
-                        i = address - seg.start
-                        words = getattr(snap, _LOWER[seg.area])[i : i + count]
+                for start, end, attr in self._hr_fast:
+                    if start <= address and address + count <= end:
+                        i = address - start
+                        words = getattr(snap, attr)[i : i + count]
                         if len(words) == count:
                             return b"\x03" + bytes((2 * count,)) + _pack_words(words), None
         return self._read_registers("hr", pdu, snap)
