@@ -418,6 +418,8 @@ class _Connection(asyncio.Protocol):
             return bytes((pdu[0] | 0x80, GATEWAY_TARGET_FAILED)), None
         try:
             response, batch = self.handler.handle(pdu, self.get_snapshot())
+            if batch is not None:
+                self.writes.put(batch)
         except PduSizeError:
             raise
         except Exception:  # a bug must cost one answer, never the server
@@ -427,7 +429,6 @@ class _Connection(asyncio.Protocol):
         if response[0] & 0x80:
             stats.exceptions += 1
         elif batch is not None:
-            self.writes.put(batch)
             stats.write_batches += 1
             if audit.isEnabledFor(logging.INFO):
                 audit.info(

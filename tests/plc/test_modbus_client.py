@@ -214,3 +214,21 @@ def test_stop_while_a_write_waits_for_its_scan(start_face, raw_clients):
     face.stop_thread()  # must not hang on the waiting answer
     assert c.closed_by_server()
     assert face._tasks == set()
+
+
+def test_failing_snapshot_source_costs_one_answer_not_the_server(start_face, raw_clients):
+    plc = FakeScan()
+    calls = {"n": 0}
+
+    def flaky():
+        calls["n"] += 1
+        if calls["n"] == 2:  # the first call is the start-up size check
+            raise RuntimeError("image lock lost")
+        return plc.snap
+
+    face = ModbusFace(flaky, plc.queue, port=0)
+    with face:
+        c = raw_clients(face.bound_port)
+        assert c.request(b"\x03\x00\x00\x00\x01") == b"\x83\x04"
+        assert c.request(b"\x03\x00\x00\x00\x01") == b"\x03\x02\x00\x00"
+        assert face.stats.internal_errors == 1
