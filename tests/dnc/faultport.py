@@ -24,7 +24,11 @@ class FaultPort:
     def __init__(self, upstream_port: int, faults: list[Fault]) -> None:
         self.upstream = upstream_port
         self.faults = list(faults)
-        self.listener = socket.create_server(("127.0.0.1", 0))
+        self.listener = socket.socket()
+        # A small window, like a serial line: the sender cannot run far ahead of the faults.
+        self.listener.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 4096)
+        self.listener.bind(("127.0.0.1", 0))
+        self.listener.listen()
         self.port = self.listener.getsockname()[1]
         self._stop = threading.Event()
         self._threads: list[threading.Thread] = []

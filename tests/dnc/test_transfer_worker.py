@@ -14,7 +14,8 @@ from tests.cnc.dnc_helpers import Machine
 
 from .faultport import Fault, FaultPort
 
-MOVES = "".join(f"G1 X{i % 50} Y{i % 7} F300\n" for i in range(60))  # several 256-byte chunks
+# ~50 KB: far more than the sockets can hold in flight, so XOFF always comes in time.
+MOVES = "".join(f"G1 X{i % 50} Y{i % 7} F300\n" for i in range(2500))
 PROG = "%\nO1234 (PLATE)\nG21 G90\nG0 X10 Y10\n" + MOVES + "M30\n%\n"
 
 
@@ -31,7 +32,7 @@ class Clock:
 
 @pytest.fixture
 def machine():
-    m = Machine(capacity=8192)
+    m = Machine(capacity=128 * 1024)
     yield m
     m.close()
 
@@ -108,7 +109,7 @@ def test_xoff_storm_is_ridden_out(library, sessions, machine, released):
 
 
 def test_parity_error_on_the_line_is_retried(library, sessions, released):
-    m = Machine(capacity=8192, parity=True)
+    m = Machine(capacity=128 * 1024, parity=True)
     line = FaultPort(m.port.bound_port, [Fault("corrupt", at=25)])
     try:
         register(library, line.port, parity=True)
