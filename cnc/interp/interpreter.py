@@ -47,6 +47,7 @@ ARC_TOLERANCE_MM = 0.01  # |start radius - end radius| allowed (000_nc_book TV-I
 MAX_SUB_NESTING = 10  # M98 nesting depth (Fanuc 0i: 10 levels)
 MAX_REPEAT = 9999  # L / K repeat counts
 MAX_PECKS = 10000  # per hole, so a tiny Q cannot flood the planner
+MAX_CYCLE_STEPS = 100_000  # holes x pecks from one cycle block
 PECK_CLEARANCE_MM = 0.5  # G83: stop this far above the previous depth (Fanuc param 5115)
 PECK_RETRACT_MM = 0.5  # G73: retract after each peck (Fanuc param 5114)
 _EPS = 1e-9
@@ -1042,8 +1043,8 @@ class Interpreter:
         turns = 0
         if "P" in words:
             p = words["P"]
-            if p != int(p) or p < 1:
-                raise self._err("arc P (number of turns) must be a positive integer", blk, "P")
+            if p != int(p) or not 1 <= p <= MAX_REPEAT:
+                raise self._err(f"arc P (number of turns) must be 1..{MAX_REPEAT}", blk, "P")
             turns = int(p) - 1
         c = [0.0, 0.0, 0.0]
         c[u], c[v], c[w] = cu, cv, s[w]
@@ -1476,8 +1477,13 @@ class Interpreter:
             init = rr  # LinuxCNC: from below R the cycle starts at R
         if cyc in (730, 830) and self._cyc_q <= 0:
             raise self._err("peck drilling needs Q > 0 (peck depth)", blk, "Q")
-        if cyc in (730, 830) and abs(zz - rr) / self._cyc_q > MAX_PECKS:
+        pecks = abs(zz - rr) / self._cyc_q if cyc in (730, 830) else 1.0
+        if pecks > MAX_PECKS:
             raise self._err(f"more than {MAX_PECKS} pecks per hole", blk, "Q")
+        if reps * pecks > MAX_CYCLE_STEPS:
+            raise self._err(
+                f"cycle block expands to more than {MAX_CYCLE_STEPS} holes x pecks", blk, "K"
+            )
         pos_words = {k: words[k] for k in (names[u], names[v]) if k in words}
         for _ in range(reps):
             if self._pos[w] < rr - _EPS:  # below R: climb to R before moving sideways

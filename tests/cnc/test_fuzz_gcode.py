@@ -45,6 +45,26 @@ word = st.one_of(
 )
 block = st.lists(word, min_size=0, max_size=7).map(" ".join)
 program = st.lists(block, min_size=1, max_size=25).map("\n".join)
+coord = st.integers(-3000, 3000).map(lambda v: f"{v / 10}")
+structured_block = st.one_of(
+    st.builds(lambda g, x, y, z: f"{g} X{x} Y{y} Z{z} F300",
+              st.sampled_from(["G0", "G1", "G90 G1", "G91 G1"]), coord, coord, coord),
+    st.builds(lambda g, x, y, r: f"{g} X{x} Y{y} R{r} F200",
+              st.sampled_from(["G2", "G3"]), coord, coord, coord),
+    st.builds(lambda g, x, y, i, j: f"{g} X{x} Y{y} I{i} J{j} F200",
+              st.sampled_from(["G2", "G3", "G17 G2", "G18 G3", "G19 G2"]), coord, coord, coord,
+              coord),
+    st.builds(lambda c, x, z, r, q, k: f"{c} X{x} Z{z} R{r} Q{q} K{k} F100 P100",
+              st.sampled_from(["G73", "G74", "G76", "G81", "G82", "G83", "G84", "G85", "G86",
+                               "G87", "G88", "G89", "G98 G81", "G99 G83"]),
+              coord, coord, coord, st.integers(0, 50).map(str), st.integers(0, 5).map(str)),
+    st.sampled_from(["G80", "G40", "G41 D1", "G42 D1", "G43 H1", "G49", "G51 P2", "G50",
+                     "G68 R30", "G69", "G51.1 X0", "G50.1", "G16", "G15", "G54", "G55",
+                     "G10 L2 P2 X5", "G92 X0", "G28 Z0", "G53 G0 X0", "M98 P1", "M98 P3 L2",
+                     "S500 M3", "M8", "M9", "T1 M6", "G95", "G94", "G96 S100", "G97 S200",
+                     "G20", "G21", "G61", "G64 P0.1", "G4 P10", "M0", "M1", "M60", "M99"]),
+)  # fmt: skip
+structured = st.lists(structured_block, min_size=1, max_size=30).map("\n".join)
 SUBS = {
     1: "O1\nG91 G1 X1 F100\nG90\nM99\n",
     2: "O2\nM98 P2\nM99\n",
@@ -64,19 +84,25 @@ def _run_all(text: str, params: MachineParams) -> None:
     assert all(isinstance(e, NcError) for e in errs)
 
 
-@settings(max_examples=300, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@settings(max_examples=150, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 @given(program, st.sampled_from(PARAMS))
 def test_fuzz_valid_looking_programs(text: str, params: MachineParams) -> None:
     _run_all(text, params)
 
 
-@settings(max_examples=200, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@settings(max_examples=120, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(structured, st.sampled_from(PARAMS))
+def test_fuzz_structured_programs(text: str, params: MachineParams) -> None:
+    _run_all(text, params)
+
+
+@settings(max_examples=150, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 @given(st.text(max_size=400), st.sampled_from(PARAMS))
 def test_fuzz_random_text(text: str, params: MachineParams) -> None:
     _run_all(text, params)
 
 
-@settings(max_examples=100, deadline=None)
+@settings(max_examples=60, deadline=None)
 @given(st.binary(max_size=300))
 def test_fuzz_random_bytes_as_latin1(data: bytes) -> None:
     _run_all(data.decode("latin-1"), PARAMS[0])

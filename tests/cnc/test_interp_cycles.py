@@ -129,6 +129,8 @@ def test_cycle_errors() -> None:
         run("G0 Z10\nG83 X1 Z-200 R2 Q0.001 F100\n")
     with pytest.raises(NcError, match="feed move without F"):
         run("G0 Z10\nG81 X1 Z-2 R2\n")
+    with pytest.raises(NcError, match="holes x pecks"):
+        run("G0 Z10\nG91 G83 X0.1 Z-100 R-8 Q0.01 K9999 F100\n")
 
 
 def test_cycle_in_other_planes() -> None:
