@@ -101,10 +101,10 @@ class CanopenSlave:
                 self._rebuild_dispatch()
 
             self.od.write_hooks[0x1016] = write_consumer
-        self._rebuild_dispatch()
         if isinstance(bus, SimBus):
             bus.add_listener(self.handle)
             bus.hub.add_clocked(self)
+        self._rebuild_dispatch()  # also installs the acceptance filter on a SimBus
         if boot:
             self.boot()
 

@@ -419,6 +419,8 @@ def test_two_slaves_can_share_one_endpoint(app):
     replies = collect(master)
     CanopenSlave(1, shared, app)
     CanopenSlave(2, shared, FakeDrive())
+    assert {0x601, 0x602, 0x201, 0x202, 0x000, 0x080} <= shared.accept_ids
+    assert 0x603 not in shared.accept_ids
     assert [m.arbitration_id for m in replies] == [0x701, 0x702]  # boot-ups
     replies.clear()
     master.send(msg(0x601, bytes.fromhex("4000100000000000")))
