@@ -991,7 +991,7 @@ class Interpreter:
         if "R" in words:
             if self._ci in words or self._cj in words:
                 raise self._err("arc with both R and I/J/K", blk, "R")
-            r = self._dim(blk, "R")
+            r = words["R"] if blk.nopoint is None and self._scale == 1.0 else self._dim(blk, "R")
             if full:
                 raise self._err("R arc with start point equal to end point (full circle)", blk, "R")
             du, dv = eu - su, ev - sv
@@ -1014,8 +1014,12 @@ class Interpreter:
             ci, cj = self._ci, self._cj
             if ci not in words and cj not in words:
                 raise self._err("arc needs R or a centre (I/J/K)", blk, "G")
-            oi = self._dim(blk, ci) if ci in words else 0.0
-            oj = self._dim(blk, cj) if cj in words else 0.0
+            if blk.nopoint is None and self._scale == 1.0:
+                oi = words.get(ci, 0.0)
+                oj = words.get(cj, 0.0)
+            else:
+                oi = self._dim(blk, ci) if ci in words else 0.0
+                oj = self._dim(blk, cj) if cj in words else 0.0
             if self._arc_abs:
                 cu = oi if ci in words else su
                 cv = oj if cj in words else sv
@@ -1048,7 +1052,9 @@ class Interpreter:
             turns = int(p) - 1
         c = [0.0, 0.0, 0.0]
         c[u], c[v], c[w] = cu, cv, s[w]
-        feed = self._feed(blk)
+        feed = self._f
+        if feed is None or feed <= 0.0 or self._per_rev:
+            feed = self._feed(blk)
         cw_out = cw
         if self._xf_on:
             xf = self._xf
