@@ -76,3 +76,24 @@ def test_g41_refused_with_canned_cycle_and_plane_change() -> None:
 def test_rapid_moves_under_compensation_stay_rapid() -> None:
     cmds = run("G0 X0 Y0\nG41 D1 X10\nG1 X20 F100\nG40 G0 X30\nM30\n")
     assert isinstance([c for c in cmds if c.line == 2][0], StraightTraverse)
+
+
+def test_mirror_swaps_the_compensation_side() -> None:
+    prog = "G0 X0 Y0\n{m}G41 D1 G1 X10 F100\nX50\nG40 G1 X60\nM30\n"
+    plain = [c for c in run(prog.format(m="")) if isinstance(c, StraightFeed) and c.line == 3]
+    mirrored = [
+        c for c in run(prog.format(m="G51.1 X0\n")) if isinstance(c, StraightFeed) and c.line == 4
+    ]
+    assert plain[0].end == pytest.approx((50.0, 5.0, 0.0))
+    # mirrored in X: the path runs towards -X and the tool keeps to the mirrored side (+Y),
+    # i.e. G41 acts as G42 on the machine, as on a Fanuc with programmable mirror image
+    assert mirrored[0].end == pytest.approx((-50.0, 5.0, 0.0))
+
+
+def test_g41_refused_clearly_when_the_compensation_module_is_missing(monkeypatch) -> None:
+    import sys
+
+    monkeypatch.setitem(sys.modules, "cnc.cutter_comp", None)
+    with pytest.raises(NcError, match="cutter radius compensation is not available") as ei:
+        run("G0 X0 Y0\nG41 D1 G1 X10 F100\n")
+    assert (ei.value.line, ei.value.col) == (2, 1)
