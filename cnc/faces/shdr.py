@@ -337,12 +337,11 @@ class ShdrAdapter:
             return
         server.close()
         for writer in list(self._writers):
-            writer.close()
-        for task in list(self._sessions):
-            task.cancel()
-        for task in list(self._sessions):
-            with contextlib.suppress(asyncio.CancelledError, Exception):
-                await task
+            writer.close()  # the sessions see EOF and end by themselves
+        if self._sessions:
+            _, pending = await asyncio.wait(set(self._sessions), timeout=1.0)
+            for task in pending:
+                task.cancel()
         await server.wait_closed()
         self._loop = None
 
@@ -393,7 +392,7 @@ class ShdrAdapter:
                 lines += self.formatter.diff_states(None, state, ts)
             self._write(writer, "".join(ln + "\n" for ln in lines).encode(), len(lines))
             self._writers.add(writer)
-            while True:
+            while self._server is not None:
                 raw = await reader.readline()
                 if not raw:
                     return
@@ -402,6 +401,8 @@ class ShdrAdapter:
                     self._write(writer, f"* PONG {self.heartbeat_ms}\n".encode(), 1)
         except (ConnectionError, asyncio.IncompleteReadError, ValueError):
             pass  # ValueError: a line longer than the stream limit; the agent is confused
+        except asyncio.CancelledError:
+            pass  # stop(): a handler task that re-raises is logged as an error by asyncio
         finally:
             self._writers.discard(writer)
             self._sessions.discard(task)

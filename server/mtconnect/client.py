@@ -60,6 +60,7 @@ class AdapterConnection:
         self.connected = False
         self.stats = ConnectionStats()
         self._task: asyncio.Task | None = None
+        self._stopping = False
 
     def start(self) -> asyncio.Task:
         """Start supervising on the running loop."""
@@ -70,14 +71,16 @@ class AdapterConnection:
         return self._task
 
     async def stop(self) -> None:
+        self._stopping = True
         task, self._task = self._task, None
-        if task is not None:
+        # Python 3.11's wait_for can swallow a cancel that races with its inner future, so
+        # cancel until the task is really done.
+        while task is not None and not task.done():
             task.cancel()
-            with contextlib.suppress(asyncio.CancelledError):
-                await task
+            await asyncio.wait({task}, timeout=0.1)
 
     async def _run(self) -> None:
-        while True:
+        while not self._stopping:
             self.stats.attempts += 1
             try:
                 await self._session()

@@ -110,7 +110,8 @@ def test_adapter_stopped_makes_everything_unavailable_then_reconnect_restores(
     adapter.publish(status, TS)
     conn = start_connection(agent_loop, agent, port)
     try:
-        wait_for(lambda: agent.value("mill1", "exec") == "ACTIVE")
+        # the dump's last line is the last axis' condition: wait for all of it
+        wait_for(lambda: agent.value("mill1", "Zservo") == "NORMAL")
         before = agent.buffer.next_sequence
         machine_loop.run(adapter.stop)
         wait_for(lambda: agent.value("mill1", "avail") == "UNAVAILABLE")
