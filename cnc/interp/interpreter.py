@@ -261,6 +261,7 @@ class Interpreter:
         self._comp_w = 0.0
         self._polar_ra = (0.0, 0.0)
         self._simple = True
+        self._switch = False
         self._plainxyz = not self._lathe
 
     def _compute_off(self) -> tuple[float, float, float]:
@@ -350,7 +351,7 @@ class Interpreter:
         while frames and not self._ended:
             fr = frames[-1]
             file = fr.file
-            nframes = len(frames)
+            self._switch = False  # set by M98/M99/M2/M30/end of tape: leave this frame's loop
             for lineno, text in fr.it:
                 try:
                     blk = parse_line(text, lineno, file, li)
@@ -362,9 +363,12 @@ class Interpreter:
                     out.clear()
                     self._record(err, file)
                 if out:
-                    yield from out
+                    if len(out) == 1:
+                        yield out[0]
+                    else:
+                        yield from out
                     out.clear()
-                if self._ended or len(frames) != nframes or frames[-1] is not fr:
+                if self._switch:
                     break
             else:
                 # the frame's lines ran out
@@ -390,7 +394,7 @@ class Interpreter:
         if out:
             yield from out
             out.clear()
-        self._ended = True
+        self._ended = self._switch = True
 
     def _record(self, err: NcError, file: str) -> None:
         self._update_simple()
@@ -398,7 +402,7 @@ class Interpreter:
             err.file = file
         self.errors.append(err)
         if len(self.errors) >= CHECK_MAX_ERRORS:
-            self._ended = True
+            self._ended = self._switch = True
 
     def _err(self, msg: str, blk: Block, letter: str | None = None, nth: int = 1) -> NcError:
         if letter:
@@ -685,7 +689,7 @@ class Interpreter:
             self._emit(ProgramStop(line, _STOPS[stop]))
             if stop in (2, 30):
                 self._flush_comp()
-                self._ended = True
+                self._ended = self._switch = True
         sub = mset.get("sub")
         if sub == 98:
             self._call(blk)
@@ -707,7 +711,7 @@ class Interpreter:
         if blk.tape:
             if main:
                 if fr.body_started:
-                    self._ended = True  # closing '%': end of tape
+                    self._ended = self._switch = True  # closing '%': end of tape
                 fr.body_started = True
             elif fr.body_started:
                 raise self._err(f"subprogram O{fr.number} ends without M99", blk)
@@ -719,7 +723,9 @@ class Interpreter:
                 if self._program is None and not self._moved:
                     self._program = blk.program
                 else:
-                    self._ended = True  # the next program in the file: main program ends
+                    self._ended = self._switch = (
+                        True  # the next program in the file: main program ends
+                    )
                     return True
             elif fr.header_seen or fr.body_started:
                 raise self._err(f"subprogram O{fr.number} ends without M99", blk)
@@ -1628,6 +1634,7 @@ class Interpreter:
             raise self._err(f"M98: program O{number} not found", blk, "P")
         it, file = opened
         self._frames.append(_Frame(it, file, number, reps, blk.line))
+        self._switch = True
 
     def _return(self, blk: Block) -> None:
         if len(self._frames) == 1:
@@ -1639,6 +1646,7 @@ class Interpreter:
         if "P" in blk.words:
             raise self._err("M99 P (return to a sequence number) is not supported", blk, "P")
         fr = self._frames.pop()
+        self._switch = True
         if fr.repeats > 1:
             opened = self._lib.open(fr.number)  # type: ignore[arg-type]
             assert opened is not None
