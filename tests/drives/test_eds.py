@@ -62,7 +62,7 @@ def test_profile_values(od):
     assert (od[0x605A].min, od[0x605A].max, od[0x605A].default) == (0, 8, 2)
     assert (od[0x605E].min, od[0x605E].max) == (0, 4)
     assert (od[0x6007].min, od[0x6007].max) == (0, 3)
-    assert (od[0x60C2][1].default, od[0x60C2][2].default) == (1, -3)  # 1 ms
+    assert (od[0x60C2][1].default, od[0x60C2][2].default) == (2, -3)  # 2 ms IPO cycle
 
 
 def test_node_id_relative_cob_ids(od):
@@ -128,3 +128,25 @@ def test_importing_drives_stays_light():
     from drives import CanHub, CanopenSlave
 
     assert CanHub.__name__ == "CanHub" and CanopenSlave.__name__ == "CanopenSlave"
+
+
+def test_profile_section_matches_the_cia402_application(od):
+    """CTT "OD 02/08": every object the application owns is in the EDS with its type,
+    access, limits, and the value a freshly powered drive reports as DefaultValue."""
+    from drives.cia402.application import Drive402
+    from drives.cia402.objects import OBJECTS
+
+    types = {"i8": odt.INTEGER8, "u8": odt.UNSIGNED8, "i16": odt.INTEGER16}
+    types |= {"u16": odt.UNSIGNED16, "i32": odt.INTEGER32, "u32": odt.UNSIGNED32}
+    drive = Drive402()
+    mismatches = []
+    for index, subs in OBJECTS.items():
+        for sub, spec in subs.items():
+            obj = od[index]
+            var = obj if isinstance(obj, odt.ODVariable) else obj[sub]
+            expected = (types[spec.dtype], spec.writable, spec.low, spec.high)
+            expected += (drive.read_object(index, sub),)
+            got = (var.data_type, var.writable, var.min, var.max, var.default)
+            if got != expected:
+                mismatches.append((hex(index), sub, got, expected))
+    assert mismatches == []
