@@ -15,6 +15,9 @@ nc_app = typer.Typer(
 def check_cmd(
     file: Path = typer.Argument(..., help="part program file (ISO 6983 / Fanuc)"),
     kind: str = typer.Option("mill", help="machine kind: mill or lathe"),
+    config: Path | None = typer.Option(
+        None, "--config", help="machine YAML (cnc.config); overrides --kind and --decimal"
+    ),
     decimal: str = typer.Option(
         "calculator", help="numbers without a decimal point: calculator or least_increment"
     ),
@@ -39,7 +42,16 @@ def check_cmd(
         typer.echo(f"--decimal must be calculator or least_increment, not {decimal!r}", err=True)
         raise typer.Exit(2) from None
     params = MachineParams(kind=kind, decimal_style=style)
-    if kind == "lathe":
+    if config is not None:
+        from cnc.config import load_machine_params
+        from cnc.errors import NcError
+
+        try:
+            params = load_machine_params(config)
+        except NcError as err:
+            typer.echo(str(err), err=True)
+            raise typer.Exit(2) from None
+    elif kind == "lathe":
         from cnc.params import AxisParams
 
         x, _, z = params.axes
@@ -75,3 +87,7 @@ def check_cmd(
     for e in errors:
         typer.echo(str(e))
     raise typer.Exit(1 if errors else 0)
+
+
+# `nc plan` lives in cnc.cli_plan and registers itself on nc_app when imported.
+from cnc import cli_plan as _cli_plan  # noqa: E402,F401

@@ -62,3 +62,14 @@ def test_block_delete_option(tmp_path) -> None:
     p.write_text("G0 X-1\n/G5\nM30\n")
     assert runner.invoke(app, ["nc", "check", str(p)]).exit_code == 1
     assert runner.invoke(app, ["nc", "check", "--block-delete", str(p)]).exit_code == 0
+
+
+def test_config_option_uses_the_machine_yaml() -> None:
+    machines = Path(__file__).resolve().parents[2] / "cnc" / "machines"
+    prog = str(PROGRAMS / "lathe_shaft.nc")
+    res = runner.invoke(
+        app, ["nc", "check", "--config", str(machines / "lathe2.yaml"), "--no-soft-limits", prog]
+    )
+    assert res.exit_code == 0, res.output
+    res = runner.invoke(app, ["nc", "check", "--config", "/nonexistent.yaml", prog])
+    assert res.exit_code == 2
