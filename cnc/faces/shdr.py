@@ -28,7 +28,7 @@ from cnc.status import UNAVAILABLE, Alarm, MachineStatus
 log = logging.getLogger(__name__)
 
 SHDR_VERSION = "2"
-DEFAULT_HEARTBEAT_MS = 10_000
+DEFAULT_HEARTBEAT_MS = 1_000  # the simulator answers fast; cppagent adapters often use 10 s
 PAIRS_PER_LINE = 32  # keeps lines short enough for any agent's line buffer
 SEND_BUFFER_LIMIT = 1 << 20  # an agent this far behind is dropped; it reconnects to a dump
 
