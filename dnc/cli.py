@@ -67,3 +67,90 @@ def list_(
         typer.echo(f"O{p.number:04d}  {p.machine_kind:<6} {p.name}{tags}  released: {released}")
     if page.next_cursor:
         typer.echo("... more (narrow the search or raise --limit)")
+
+
+def _program_number(text: str) -> int:
+    digits = text.upper().removeprefix("O")
+    if not digits.isdigit():
+        raise typer.BadParameter(f"{text!r} is not a program number (O1234 or 1234)")
+    return int(digits)
+
+
+@dnc_app.command("machine")
+def machine(
+    name: str = typer.Argument(..., help="Machine name, e.g. mill1."),
+    kind: str = typer.Option(..., help="mill or lathe."),
+    dnc: str = typer.Option(..., help="DNC port address host:port."),
+    parity: bool = typer.Option(False, help="ISO 7-bit even parity on the DNC line."),
+    memory: int = typer.Option(0, help="Program memory in bytes (for planning)."),
+    database_url: str | None = DB_OPTION,
+) -> None:
+    """Register (or update) a machine in the host's registry."""
+    lib = _library(database_url)
+    lib.register_machine(
+        name, kind, dnc_address=dnc, memory_bytes=memory, dnc_profile={"parity": parity}
+    )
+    typer.echo(f"machine {name} ({kind}) at {dnc}")
+
+
+@dnc_app.command("send")
+def send(
+    program: str = typer.Argument(..., help="Program number, O1234 or 1234."),
+    machine: str = typer.Option(..., "--machine", "-m", help="Registered machine name."),
+    drip: bool = typer.Option(False, help="Drip-feed (BTR) instead of loading into memory."),
+    database_url: str | None = DB_OPTION,
+) -> None:
+    """Send the released revision of PROGRAM to a machine, verified by reading it back."""
+    import uuid
+
+    from dnc.db import make_engine, migrate, session_factory
+    from dnc.dispatch import Dispatches
+    from dnc.errors import DncError
+    from dnc.transfer_worker import RetryPolicy, TransferWorker
+
+    engine = make_engine(database_url)
+    migrate(engine)
+    sessions = session_factory(engine)
+    lib = _library(database_url)
+    try:
+        kind = lib.machine(machine)["kind"]
+        rev = lib.released_revision(_program_number(program), kind)
+        info, _ = Dispatches(sessions).request(
+            key=f"cli-{uuid.uuid4()}",
+            revision_id=rev.id,
+            machine=machine,
+            mode="drip_feed" if drip else "memory",
+            requested_by="cli",
+        )
+    except DncError as exc:
+        typer.echo(f"refused: {exc.message}", err=True)
+        raise typer.Exit(1) from None
+    state = TransferWorker(sessions, retry=RetryPolicy(max_attempts=1)).run(info.id)
+    done = Dispatches(sessions).get(info.id)
+    if state != "done":
+        typer.echo(f"dispatch {done.id} {state}: {done.error}", err=True)
+        raise typer.Exit(1)
+    check = "verified" if done.verified else "not verifiable (drip-feed)"
+    typer.echo(
+        f"dispatch {done.id}: revision {rev.id} sent to {machine}, {done.bytes_sent} bytes, {check}"
+    )
+
+
+@dnc_app.command("receive")
+def receive(
+    program: str = typer.Argument(..., help="Program number to punch from the machine."),
+    machine: str = typer.Option(..., "--machine", "-m"),
+    database_url: str | None = DB_OPTION,
+) -> None:
+    """Upload a program from a machine; it is stored as a candidate (draft) revision."""
+    from dnc.errors import DncError
+    from dnc.machine_link import upload_from_machine
+    from dnc.transfer import TransferError
+
+    lib = _library(database_url)
+    try:
+        rev = upload_from_machine(lib, machine, _program_number(program))
+    except (DncError, TransferError) as exc:
+        typer.echo(f"refused: {exc.message}", err=True)
+        raise typer.Exit(1) from None
+    typer.echo(f"program {rev.program_id} revision {rev.seq} ({rev.status}) from {machine}")

@@ -177,7 +177,8 @@ class Library:
         """A program punched from a machine lands as a candidate (draft) revision.
 
         It never overwrites anything: if no program with its O number exists for the
-        machine's kind, a new program is created to hold it.
+        machine's kind, a new program is created to hold it. A program identical to the
+        latest revision creates nothing and returns that revision.
         """
         with transaction(self._sessions) as s:
             mach = s.scalar(select(m.Machine).where(m.Machine.name == machine))
@@ -206,6 +207,17 @@ class Library:
                 source=source,
             )
             return rev
+        with transaction(self._sessions) as s:
+            latest = s.scalar(
+                select(m.Revision)
+                .where(m.Revision.program_id == prog_id)
+                .order_by(m.Revision.seq.desc())
+                .limit(1)
+            )
+            if latest is not None and latest.sha256 == sha256_of(text):
+                # Compare on receive: the machine holds exactly the latest revision.
+                self._record(s, source, "revision.received_unchanged", "revision", latest.id)
+                return _revision_info(latest)
         return self.add_revision(
             prog_id, text, author=source, comment=f"received from {machine}", source=source
         )
@@ -487,6 +499,14 @@ class Library:
             if mach is None:
                 raise NotFound(f"unknown machine {name!r}")
             return _machine_dict(mach)
+
+    def note_transfer(self, machine: str, action: str, *, actor: str = "dnc", **detail) -> None:
+        """Record a transfer-side event (remote request served or refused, upload...)."""
+        with transaction(self._sessions) as s:
+            mach = s.scalar(select(m.Machine).where(m.Machine.name == machine))
+            self._record(
+                s, actor, action, "machine", mach.id if mach else None, machine=machine, **detail
+            )
 
     # ----------------------------------------------------------------- tools, fixtures, stock
 

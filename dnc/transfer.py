@@ -90,7 +90,10 @@ class DncClient:
         self.host, self.port, self.parity = host, port, parity
         self.timeout_s, self.xoff_timeout_s, self.chunk = timeout_s, xoff_timeout_s, chunk
         self._sock: socket.socket | None = None
-        self._inbox = b""
+        self._inbox = b""  # reply lines
+        self._punching = False
+        self._tape = bytearray()  # the punch output being received (between DC2 and DC4)
+        self._tapes: list[bytes] = []  # complete punch outputs, oldest first
         self._stopped = False
         self.xoff_count = 0
         self.sent = 0
@@ -150,6 +153,14 @@ class DncClient:
                 self.xoff_count += 1
             elif b == XON:
                 self._stopped = False
+            elif b == PUNCH_ON:
+                self._punching = True
+                self._tape.clear()
+            elif b == PUNCH_OFF and self._punching:
+                self._punching = False
+                self._tapes.append(bytes(self._tape))
+            elif self._punching:
+                self._tape.append(b)
             else:
                 self._inbox += bytes([b])
 
@@ -191,25 +202,16 @@ class DncClient:
         return text
 
     def _receive_tape(self) -> str:
-        """A punched tape (DC2 ... DC4) in stored form."""
-        decoder = TapeDecoder()
-        lines: list[str] = []
+        """The next punched tape (DC2 ... DC4), in stored form."""
         deadline = time.monotonic() + self.timeout_s
-        while True:
+        while not self._tapes:
             if self._inbox.startswith(b"ERR") and b"\n" in self._inbox:
-                self._reply()
-            if PUNCH_ON in self._inbox or decoder.started:
-                data, self._inbox = self._inbox, b""
-                for ev in decoder.feed(data.replace(bytes([PUNCH_ON]), b"")):
-                    if ev.kind == "line":
-                        lines.append(ev.text)
-                if decoder.ended:
-                    rest = data[data.find(bytes([PUNCH_OFF])) + 1 :] if PUNCH_OFF in data else b""
-                    self._inbox = rest
-                    return "%\n" + "".join(f"{ln}\n" for ln in lines) + "%\n"
+                self._reply()  # raises with the machine's reason
             if time.monotonic() > deadline:
                 raise TransferError("timeout", "punch output did not arrive", sent=self.sent)
             self._poll_flow(0.05)
+        lines = [ev.text for ev in TapeDecoder().feed(self._tapes.pop(0)) if ev.kind == "line"]
+        return "%\n" + "".join(f"{ln}\n" for ln in lines) + "%\n"
 
     # -------------------------------------------------------------------------- operations
 
@@ -290,7 +292,7 @@ class DncClient:
         served = 0
         while not until():
             self._poll_flow(poll_s)
-            if PUNCH_ON not in self._inbox or PUNCH_OFF not in self._inbox:
+            if not self._tapes:
                 continue
             request = self._receive_tape()
             m = _REQUEST.search(request)

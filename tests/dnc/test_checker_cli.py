@@ -58,3 +58,38 @@ def test_dnc_import_and_list(tmp_path):
     listed = runner.invoke(app, ["dnc", "list", "--database-url", db])
     assert listed.exit_code == 0
     assert "O1000  mill   PLATE [demo]  released: none" in listed.output
+
+
+def test_dnc_send_and_receive_against_a_machine(tmp_path):
+    from tests.cnc.dnc_helpers import Machine
+
+    db = f"sqlite:///{tmp_path / 'cli.db'}"
+    (tmp_path / "plate.nc").write_text(GOOD)
+    runner = CliRunner()
+    m = Machine(capacity=8192)
+    try:
+        port = m.port.bound_port
+        args = ["--database-url", db]
+        assert (
+            runner.invoke(app, ["dnc", "import", str(tmp_path / "plate.nc"), *args]).exit_code == 0
+        )
+        refused = runner.invoke(app, ["dnc", "send", "O1000", "-m", "mill1", *args])
+        assert refused.exit_code == 1 and "unknown machine 'mill1'" in refused.output
+        added = runner.invoke(
+            app, ["dnc", "machine", "mill1", "--kind", "mill", "--dnc", f"127.0.0.1:{port}", *args]
+        )
+        assert added.exit_code == 0
+        unreleased = runner.invoke(app, ["dnc", "send", "O1000", "-m", "mill1", *args])
+        assert "no released revision of O1000 for mill" in unreleased.output
+        from dnc.db import make_engine, session_factory
+        from dnc.library import Library
+
+        lib = Library(session_factory(make_engine(db)))
+        lib.release(lib.search(number=1000).items[0].latest_revision_id, approver="a", comment="ok")
+        sent = runner.invoke(app, ["dnc", "send", "1000", "-m", "mill1", *args])
+        assert sent.exit_code == 0, sent.output
+        assert "sent to mill1" in sent.output and "verified" in sent.output
+        back = runner.invoke(app, ["dnc", "receive", "O1000", "-m", "mill1", *args])
+        assert back.exit_code == 0 and "revision 1 (released) from mill1" in back.output
+    finally:
+        m.close()

@@ -160,6 +160,8 @@ def test_program_from_machine_is_a_candidate_and_never_overwrites(library):
     assert library.get_program(new.program_id).name == "FIXTURE"
     with pytest.raises(NotFound, match="unknown machine 'mill9'"):
         library.receive_from_machine("mill9", PROG)
+    same = library.receive_from_machine("mill1", edited.encode())  # unchanged since
+    assert same.id == cand.id and len(library.revisions(prog.id)) == 2
 
 
 def test_machine_registry_is_idempotent_by_name(library):
