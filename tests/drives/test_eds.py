@@ -150,3 +150,16 @@ def test_profile_section_matches_the_cia402_application(od):
             if got != expected:
                 mismatches.append((hex(index), sub, got, expected))
     assert mismatches == []
+
+
+def test_shipped_eds_is_what_the_generator_writes(monkeypatch):
+    import importlib.util
+    import sys
+    from pathlib import Path
+
+    path = Path(EDS_PATH).parent / "generate.py"
+    spec = importlib.util.spec_from_file_location("fmscell_eds_generate", path)
+    module = importlib.util.module_from_spec(spec)
+    monkeypatch.setitem(sys.modules, spec.name, module)  # dataclasses look the module up
+    spec.loader.exec_module(module)
+    assert Path(EDS_PATH).read_text() == module.generate(), "run drives/eds/generate.py"
