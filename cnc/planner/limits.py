@@ -37,6 +37,7 @@ class AxisLimits:
     jerk: tuple[float, ...]
     ipo: float
     window: float  # path length that 3 IPO cycles can cover at most, mm
+    dv3: float  # most the path speed can change within 3 IPO cycles, mm/s
 
     @classmethod
     def from_params(cls, params: MachineParams, ipo: float | None = None) -> AxisLimits:
@@ -53,6 +54,7 @@ class AxisLimits:
             jerk=tuple(float(a.max_jerk) for a in axes),
             ipo=t,
             window=3.0 * t * sqrt(sum(v * v for v in vel)),
+            dv3=3.0 * t * sqrt(sum(float(a.max_accel) ** 2 for a in axes)),
         )
 
 
@@ -117,36 +119,91 @@ def junction_cap(
 ) -> float:
     """Highest path speed at a junction with tangent jump du and curvature-vector jump dk.
 
-    `gap` is the length of the piece before the junction: a junction gets the share
-    min(1, gap/window) of half the junction budget, so that any 3-cycle window (path
-    length <= window) holds junctions whose shares sum to at most 2 halves.
+    Passing the junction at speed v adds to the sampled jerk of axis i at most
+    0.75/T * |dk_i| v^2 (acceleration step) + |du_i| v / T^2 (velocity step), and to the
+    sampled acceleration at most |du_i| v / T. A junction may use the share
+    w = min(1, gap / (3T (v + dv3))) of half the junction budget, `gap` being the length
+    of the piece before it: a 3-cycle window covers at most 3T (v + dv3) of path around a
+    junction passed at v, so the shares of all junctions inside one window sum to <= 2.
     """
     t = lim.ipo
-    w = gap / lim.window
-    if w > 1.0:
-        w = 1.0
+    c = lim.dv3
     cap = INF
     for i in range(len(du)):
         dui = abs(du[i])
         dki = abs(dk[i])
         if dui == 0.0 and dki == 0.0:
             continue
-        budget = 0.5 * RHO_JUMP * lim.jerk[i] * w
-        if inside_span:
-            budget -= 0.75 / t * dui * at_max
-        if budget <= 0.0:
-            return 0.0
+        full = 0.5 * RHO_JUMP * lim.jerk[i]
+        lose = 0.75 / t * dui * at_max if inside_span else 0.0
         alpha = 0.75 / t * dki
         beta = dui / (t * t)
-        if alpha > 0.0:
-            v = (-beta + sqrt(beta * beta + 4.0 * alpha * budget)) / (2.0 * alpha)
-        else:
-            v = budget / beta
+        v = _jerk_cap(alpha, beta, full, lose, gap, t, c)
         if dui > 0.0:
-            v = min(v, 0.5 * RHO_KINK_A * lim.acc[i] * t * w / dui)
+            # acceleration share: dui v <= 0.5 RHO_KINK_A A_i T w(v)
+            ba = 0.5 * RHO_KINK_A * lim.acc[i] * t
+            va = ba / dui
+            if gap < 3.0 * t * (va + c):
+                # dui v (v + c) = ba gap / (3T)
+                k = ba * gap / (3.0 * t * dui)
+                va = 0.5 * (-c + sqrt(c * c + 4.0 * k))
+            v = min(v, va)
         if v < cap:
             cap = v
-    return cap
+    return cap if cap > 0.0 else 0.0
+
+
+def _jerk_cap(alpha, beta, full, lose, gap, t, c) -> float:
+    """Largest v with alpha v^2 + beta v + lose <= full * min(1, gap / (3T (v + c)))."""
+
+    def lhs(v):
+        return alpha * v * v + beta * v + lose
+
+    def solve_w1() -> float:
+        b = full - lose
+        if b <= 0.0:
+            return 0.0
+        if alpha > 0.0:
+            return 2.0 * b / (beta + sqrt(beta * beta + 4.0 * alpha * b))
+        return b / beta
+
+    v = solve_w1()
+    if v <= 0.0 or gap >= 3.0 * t * (v + c):
+        return v
+    # w < 1: h(v) = lhs(v) (v + c) - full gap / (3T), increasing and convex for v >= 0;
+    # Newton from above converges monotonically, staying feasible
+    k = full * gap / (3.0 * t)
+    if lose * c >= k:
+        return 0.0
+    # start Newton from the tightest upper bound of the root: each term alone <= k
+    if alpha > 0.0:
+        v = min(v, (k / alpha) ** (1.0 / 3.0))
+        if c > 0.0:
+            v = min(v, sqrt(k / (alpha * c)))
+    if beta > 0.0:
+        v = min(v, sqrt(k / beta))
+        if c > 0.0:
+            v = min(v, k / (beta * c))
+    for _ in range(30):
+        h = lhs(v) * (v + c) - k
+        if h <= 0.0:
+            return v
+        dh = (2.0 * alpha * v + beta) * (v + c) + lhs(v)
+        nv = v - h / dh
+        if nv >= v * (1.0 - 1e-14):
+            break
+        v = nv
+    v *= 1.0 - 1e-10
+    if lhs(v) * (v + c) > k:  # not expected; fall back to bisection
+        lo, hi = 0.0, v
+        for _ in range(80):
+            mid = 0.5 * (lo + hi)
+            if lhs(mid) * (mid + c) > k:
+                hi = mid
+            else:
+                lo = mid
+        v = lo
+    return v if v > 0.0 else 0.0
 
 
 def piece_limits(lim: AxisLimits, geom: Line | Arc, normal_axis: int) -> tuple[float, float, float]:

@@ -11,6 +11,8 @@ current state.
 
 from __future__ import annotations
 
+from math import sqrt
+
 from cnc.planner.path import Segment
 from cnc.planner.scurve import change_distance, change_phases, min_reach, reach
 
@@ -92,13 +94,9 @@ def span_phases(v0, v1, vmax, length, at, jt) -> tuple[list[tuple[float, float]]
     if change_distance(v0, hi, at, jt) + change_distance(hi, v1, at, jt) <= length or lo >= hi:
         vp = hi
     else:
-        for _ in range(64):
-            mid = 0.5 * (lo + hi)
-            if change_distance(v0, mid, at, jt) + change_distance(mid, v1, at, jt) <= length:
-                lo = mid
-            else:
-                hi = mid
-        vp = lo
+        vp = _peak_acc_limited(v0, v1, length, at, jt)
+        if not (lo <= vp <= hi):
+            vp = _peak_search(v0, v1, length, at, jt, lo, hi)
     d1 = change_distance(v0, vp, at, jt)
     d2 = change_distance(vp, v1, at, jt)
     cruise = length - d1 - d2
@@ -107,6 +105,55 @@ def span_phases(v0, v1, vmax, length, at, jt) -> tuple[list[tuple[float, float]]
         phases.append((cruise / vp, 0.0))
     phases += change_phases(vp, v1, at, jt)
     return phases, vp
+
+
+def _peak_acc_limited(v0: float, v1: float, length: float, a: float, j: float) -> float:
+    """Peak speed when both changes reach the acceleration limit (closed form), else -1.
+
+    (vp^2 - v0^2)/(2a) + (vp^2 - v1^2)/(2a) + a/(2j) (2 vp + v0 + v1) = length.
+    """
+    aj = a * a / j
+    qa = 1.0 / a
+    qb = a / j
+    qc = -(v0 * v0 + v1 * v1) / (2.0 * a) + 0.5 * qb * (v0 + v1) - length
+    disc = qb * qb - 4.0 * qa * qc
+    if disc < 0.0:
+        return -1.0
+    vp = (-qb + sqrt(disc)) / (2.0 * qa)
+    if vp - v0 < aj or vp - v1 < aj:
+        return -1.0
+    # the closed form may land a rounding step past the length: nudge down if so
+    while change_distance(v0, vp, a, j) + change_distance(vp, v1, a, j) > length and vp > 0:
+        vp *= 1.0 - 1e-15
+    return vp
+
+
+def _peak_search(v0, v1, length, at, jt, lo, hi) -> float:
+    """Largest vp in [lo, hi] with both changes fitting `length` (Illinois regula falsi;
+    the returned side always fits)."""
+    flo = change_distance(v0, lo, at, jt) + change_distance(lo, v1, at, jt) - length
+    fhi = change_distance(v0, hi, at, jt) + change_distance(hi, v1, at, jt) - length
+    side = 0
+    for _ in range(100):
+        if hi - lo <= 1e-12 * hi:
+            break
+        x = hi - fhi * (hi - lo) / (fhi - flo) if fhi != flo else 0.5 * (lo + hi)
+        if not lo < x < hi:
+            x = 0.5 * (lo + hi)
+        fx = change_distance(v0, x, at, jt) + change_distance(x, v1, at, jt) - length
+        if fx <= 0.0:
+            lo, flo = x, fx
+            if side == -1:
+                fhi *= 0.5
+            side = -1
+        else:
+            hi, fhi = x, fx
+            if side == 1:
+                flo *= 0.5
+            side = 1
+        if fx == 0.0:
+            break
+    return lo
 
 
 def partition(
@@ -194,7 +241,7 @@ def solve(parts: list[list], v_start: float) -> tuple[list[Span], bool]:
         v1 = reach(v, length, at, jt)
         if v1 > vb[i + 1]:
             v1 = vb[i + 1]
-        if v > v1 and change_distance(v, v1, at, jt) > length:
+        if v > v1 and change_distance(v, v1, at, jt) > length * (1.0 + 1e-12) + 1e-12:
             v1 = min_reach(v, length, at, jt)
             ok = False
         phases, _vp = span_phases(v, v1, p[2], length, at, jt)
