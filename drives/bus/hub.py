@@ -266,6 +266,7 @@ class CanHub:
                 self.clocked.append(participant)
 
     def remove_clocked(self, participant: Clocked) -> None:
+        """Stop ticking `participant`."""
         with self._lock:
             if participant in self.clocked:
                 self.clocked.remove(participant)
@@ -321,7 +322,7 @@ class CanHub:
 
     def corrupt(
         self, can_id: int | None = None, *, count: int | None = 1, sender: SimBus | None = None
-    ):
+    ) -> FrameFault:
         """Destroy the next matching frames: receivers get an error frame instead."""
         fault = FrameFault("corrupt", can_id, sender, count)
         self.faults.append(fault)
@@ -334,7 +335,7 @@ class CanHub:
         *,
         count: int | None = 1,
         sender: SimBus | None = None,
-    ):
+    ) -> FrameFault:
         """Hold matching frames back by `delay_s` of hub time before they compete again."""
         fault = FrameFault("delay", can_id, sender, count, delay_s)
         self.faults.append(fault)
@@ -362,6 +363,7 @@ class CanHub:
         return babbler.sent if babbler else 0
 
     def clear_faults(self) -> None:
+        """Remove every injected frame fault and silence the babbler (bus-off stays)."""
         self.faults.clear()
         self._babbler = None
 
@@ -547,6 +549,7 @@ class CanHub:
         self._thread.start()
 
     def stop(self) -> None:
+        """Realtime: stop the delivery thread (frames still queued stay queued)."""
         if self._thread is None:
             return
         with self._lock:
