@@ -118,3 +118,12 @@ def test_plan_run_on_canonical_commands():
     assert len(seen) == round(rep["cycle_time_s"] / 0.002)
     # the dwell holds the machine for 0.1 s = 50 cycles at the end point
     assert sum(1 for s in seen if s.pose == (-10.0, -10.0, 0.0)) >= 50
+
+
+def test_demo_runs_the_sample_program(capsys):
+    from cnc.demo import run_demo
+
+    assert run_demo() == 0
+    out = capsys.readouterr().out
+    assert "interpreter -> planner -> interpolator" in out
+    assert "final machine position X-120.0000, Y-100.0000, Z-5.0000" in out
