@@ -314,7 +314,7 @@ class CanHub:
     # ----------------------------------------------------------------- faults
     def drop(
         self, can_id: int | None = None, *, count: int | None = 1, sender: SimBus | None = None
-    ):
+    ) -> FrameFault:
         """Lose the next `count` matching frames (None = all until cleared)."""
         fault = FrameFault("drop", can_id, sender, count)
         self.faults.append(fault)
