@@ -226,6 +226,12 @@ class Drive402:
     def on_nmt_state(self, state: str) -> None:
         self.nmt_state = state
 
+    def on_nmt_reset(self, scope: str) -> None:
+        """Optional hook of the CiA 301 slave: 'node' reboots the drive (`power_on_reset`),
+        'communication' leaves the profile application untouched."""
+        if scope == "node":
+            self.power_on_reset()
+
     def on_communication_fault(self, error_code: int) -> None:
         """Apply the abort connection option code 0x6007 (CiA 402): 0 no action, 1 fault
         (0x603F = error_code, no EMCY of ours: the 301 layer already sent it), 2 disable
@@ -668,6 +674,9 @@ class Drive402:
         if mode == PP and st == State.OPERATION_ENABLED and not self._pp_moving:
             near = abs(p.theta_meas - self._pp_target) <= self._od[(0x6067, 0)] * self.rad_per_unit
             self._window_timer = self._window_timer + h if near else 0.0
+        elif mode == PV and st == State.OPERATION_ENABLED:
+            near = abs(p.vel_meas - self._pv_target()) <= self._od[(0x606D, 0)] * self._rpu
+            self._window_timer = self._window_timer + h if near else 0.0
         # switches
         new_inputs = p.switch_inputs()
         rising = new_inputs & ~inputs
@@ -819,9 +828,8 @@ class Drive402:
             rpu = self.rad_per_unit
             if abs(p.vel_meas) <= self._od[(0x606F, 0)] * rpu:
                 sw |= SW_OMS12
-            halted = self._power.last_controlword & CW_HALT
-            target = 0.0 if halted else self._od[(0x60FF, 0)] * rpu
-            if abs(p.vel_meas - target) <= self._od[(0x606D, 0)] * rpu:
+            near = abs(p.vel_meas - self._pv_target()) <= self._od[(0x606D, 0)] * rpu
+            if near and self._window_timer >= self._od[(0x606E, 0)] * 1e-3 - 1e-12:
                 sw |= SW_TARGET_REACHED
         elif mode == HOMING:
             status = self._hm_status
@@ -829,6 +837,13 @@ class Drive402:
                 status = HM.HomingStatus.ERROR_STOPPED
             sw |= status.value
         return sw
+
+    def _pv_target(self) -> float:
+        """The velocity PV is heading for (rad/s): 0x60FF clamped by 0x607F, 0 while halted."""
+        if self._power.last_controlword & CW_HALT:
+            return 0.0
+        vmax = self._od[(0x607F, 0)] * self._rpu
+        return max(-vmax, min(vmax, self._od[(0x60FF, 0)] * self._rpu))
 
     def _pp_reached(self) -> bool:
         if self._pp_moving:

@@ -76,3 +76,17 @@ def test_power_on_reset_loses_the_incremental_position_not_the_table():
     assert d.read_object(0x6064, 0) == 0
     assert d.read_object(0x607C, 0) == 4321  # the constructor's objects are the defaults
     assert d.plant.table_x == table
+
+
+def test_nmt_reset_node_reboots_the_drive_reset_communication_does_not():
+    d = Drive402(objects={0x6060: 8})
+    d.advance(0.002)
+    for cw in (0x06, 0x0F):
+        d.write_object(0x6040, 0, cw)
+    d.write_object(0x6065, 0, 1234)
+    d.on_nmt_reset("communication")
+    assert d.state_name == "OPERATION ENABLED" and d.read_object(0x6065, 0) == 1234
+    d.on_nmt_reset("node")
+    assert d.state_name == "NOT READY TO SWITCH ON"
+    assert d.read_object(0x6065, 0) == 60_000  # power-on default
+    assert d.read_object(0x6060, 0) == 8  # the constructor's objects count as defaults
