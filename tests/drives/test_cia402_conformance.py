@@ -299,3 +299,33 @@ def test_full_enable_sequence_like_basenode402():
         seen.append(d.read_object(0x6041, 0))
         d.advance(T)
     assert seen == [0x0231, 0x0233, 0x0237]
+
+
+@pytest.mark.parametrize("option", [1, 2, 3, 4])
+def test_halt_option_code_605D_stops_without_leaving_operation_enabled(option):
+    d = make(OE, x605D=option, x6060=3)
+    d.write_object(0x60FF, 0, 50_000)  # profile velocity, 50 mm/s
+    for _ in range(100):
+        d.advance(T)
+    d.write_object(0x6040, 0, 0x010F)  # halt
+    for _ in range(100):
+        d.advance(T)
+    assert d.state == OE
+    sw = d.read_object(0x6041, 0)
+    assert sw & 0x6F == 0x27
+    assert sw & 0x0400  # target reached: halted at standstill
+    assert abs(d.read_object(0x606C, 0)) < 1_000
+    assert d.take_emcy() == []
+    d.write_object(0x6040, 0, 0x000F)  # release: PV runs up again
+    for _ in range(100):
+        d.advance(T)
+    assert d.read_object(0x606C, 0) == pytest.approx(50_000, rel=0.02)
+
+
+@pytest.mark.parametrize("state", list(S), ids=lambda s: s.name)
+def test_statusword_and_0x603F_of_each_state_at_rest(state):
+    d = make(state)
+    expected = SW[state] | BASE | (0x0400 if state == S.QUICK_STOP_ACTIVE else 0)
+    assert d.read_object(0x6041, 0) == expected
+    assert d.read_object(0x603F, 0) == (0x8130 if state in (FRA, F) else 0)
+    assert d.error_register == (0x11 if state in (FRA, F) else 0)
