@@ -17,8 +17,9 @@ from cnc.errors import NcError
 
 # A word is an address letter and a signed number; whitespace has no meaning inside a block
 # (DIN 66025 space/TAB formats), so the fast path squeezes it out first.
-_FAST_BLOCK = re.compile(r"(?:[A-Z][+-]?(?:\d+\.?\d*|\.\d+))*")
-_WORD = re.compile(r"([A-Z])([+-]?(?:\d+\.?\d*|\.\d+))")
+# One pass: a word, or any other single character (which makes the block malformed); the
+# number is checked by float(), so "1.2.3" fails there and goes to the diagnosis.
+_TOKEN = re.compile(r"([A-Z])([-+]?[0-9.]+)|(.)", re.S)
 _SQUEEZE = str.maketrans("", "", " \t\r\n\v\f\x00\x7f")
 _MACRO_WORDS = ("GOTO", "WHILE", "IF", "THEN", "DO", "END", "EQ", "NE", "GT", "GE", "LT", "LE")
 
@@ -185,7 +186,10 @@ def _g_code_slow(num: str) -> int | None:
     """G numbers with unusual leading zeros (G0001); None when not a valid G number."""
     if num[0] in "+-" or len(num) > 12:
         return None
-    v = float(num) * 10.0
+    try:
+        v = float(num) * 10.0
+    except ValueError:
+        return None
     r = round(v)
     return r if abs(v - r) < 1e-6 and r < 10000 else None
 
@@ -253,16 +257,43 @@ def _parse_marked(
 def _words(
     blk: Block, squeezed: str, text: str, line: int, file: str, least_increment: bool
 ) -> Block:
-    if not _FAST_BLOCK.fullmatch(squeezed):
-        squeezed = squeezed.translate(_SQUEEZE)  # other control characters
-        if not _FAST_BLOCK.fullmatch(squeezed):
+    pairs = _TOKEN.findall(squeezed)
+    if not _fill(blk, pairs, text, line, file):
+        cleaned = squeezed.translate(_SQUEEZE)  # other control characters (CR, VT, NUL...)
+        if cleaned == squeezed:
             raise _diagnose(text, line, file)
-    pairs = _WORD.findall(squeezed)
+        blk.words.clear()
+        blk.g.clear()
+        blk.m.clear()
+        pairs = _TOKEN.findall(cleaned)
+        if not _fill(blk, pairs, text, line, file):
+            raise _diagnose(text, line, file)
     words = blk.words
-    ng = 0
-    for letter, num in pairs:
+    if len(words) + len(blk.g) + len(blk.m) != len(pairs):
+        seen: set[str] = set()
+        for letter, _, _ in pairs:
+            if letter in seen and letter not in _GMO:
+                raise NcError(
+                    f"address {letter} appears twice in the block",
+                    line,
+                    find_col(text, letter, 2),
+                    file,
+                )
+            seen.add(letter)
+    if least_increment:
+        nopoint = {letter for letter, num, _ in pairs if "." not in num and letter not in _GMO}
+        if nopoint:
+            blk.nopoint = nopoint
+    return blk
+
+
+def _fill(blk: Block, pairs: list[tuple[str, str, str]], text: str, line: int, file: str) -> bool:
+    """Store the words of one block; False when the block holds anything but words."""
+    words = blk.words
+    for letter, num, junk in pairs:
+        if junk:
+            return False
         if letter in _GMO:
-            ng += 1
             if letter == "G":
                 code = _G_CODE.get(num)
                 if code is None:
@@ -283,7 +314,10 @@ def _words(
                     "program number O must start the block", line, find_col(text, "O"), file
                 )
         else:
-            v = words[letter] = float(num)
+            try:
+                v = words[letter] = float(num)
+            except ValueError:
+                return False  # "1.2.3", ".": the diagnosis says where
             if not -1e9 < v < 1e9:
                 raise NcError(
                     f"number {num} after address {letter} is out of range (|value| < 1e9)",
@@ -291,22 +325,7 @@ def _words(
                     find_col(text, letter),
                     file,
                 )
-    if len(words) + ng != len(pairs):
-        seen: set[str] = set()
-        for letter, _ in pairs:
-            if letter in seen and letter not in _GMO:
-                raise NcError(
-                    f"address {letter} appears twice in the block",
-                    line,
-                    find_col(text, letter, 2),
-                    file,
-                )
-            seen.add(letter)
-    if least_increment:
-        nopoint = {letter for letter, num in pairs if "." not in num and letter not in _GMO}
-        if nopoint:
-            blk.nopoint = nopoint
-    return blk
+    return True
 
 
 _GMO = frozenset("GMO")
