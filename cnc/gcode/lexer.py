@@ -1,9 +1,10 @@
 """Block lexer for the ISO 6983 / DIN 66025 / Fanuc word-address format.
 
 One call of `parse_line` turns one source line into one `Block` (or None for a blank or
-comment-only line). The hot path is two precompiled regular expressions over the line with
-comments removed and whitespace squeezed out; only a line that fails the fast match goes
-through the character scanner, whose job is to say *where* and *why* it is wrong.
+comment-only line). The hot path is one precompiled regular expression over the line with
+comments removed and whitespace squeezed out, matching words or any stray character; only
+a line with a stray character or a number float() refuses goes through the character
+scanner, whose job is to say *where* and *why* it is wrong.
 
 Columns are 1-based positions in the original line. Comments are blanked to spaces before
 scanning, so columns found later (for an error in the interpreter) still match the source.
