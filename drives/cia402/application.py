@@ -642,6 +642,9 @@ class Drive402:
         stopped = False
         block_neg = block_pos = False
         inputs = self._inputs
+        # The position loop compares the demand and the encoder at the same instant: the
+        # start of the sub-step (the generators below move the demand to its end).
+        pos_now = d.pos
         if st in _ENERGIZED:
             if power.stop is not None:
                 ctl, stopped = self._stop_control(power.stop, h, vel_mode)
@@ -658,7 +661,7 @@ class Drive402:
             d.pos, d.vel = p.theta_meas, 0.0
         th_prev = p.theta_meas
         x_prev = p.table_x
-        fault = p.step(h, ctl, d.pos, d.vel, d.vel, self._ilim, block_neg, block_pos)
+        fault = p.step(h, ctl, pos_now, d.vel, d.vel, self._ilim, block_neg, block_pos)
         if ctl == VELOCITY:
             d.pos = p.theta_meas
         # following error monitor (position control in OPERATION ENABLED)

@@ -147,6 +147,14 @@ class PlantParams:
     def metres_per_motor_rad(self) -> float:
         return self.screw.lead / (2.0 * math.pi * self.screw.gear_ratio)
 
+    def for_substep(self, substep: float) -> PlantParams:
+        """Copy integrating at `substep` seconds, with the velocity-loop crossover lowered to
+        at most 1/(20·substep) Hz so that the discrete loops stay well damped (1 ms → 50 Hz).
+        A coarse sub-step trades loop stiffness for speed when many axes must run faster than
+        real time; the Kv following-error law still holds."""
+        bandwidth = min(self.loops.velocity_bandwidth_hz, 0.05 / substep)
+        return self.with_(loops={"substep": substep, "velocity_bandwidth_hz": bandwidth})
+
     def with_(self, **groups: dict) -> PlantParams:
         """Copy with some fields of some groups replaced: `p.with_(loops={"kv": 30})`."""
         changes = {name: replace(getattr(self, name), **vals) for name, vals in groups.items()}
