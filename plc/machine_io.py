@@ -224,7 +224,7 @@ class MachineIO:
     # --- the plant ------------------------------------------------------------------------
     def field_inputs(self) -> dict[str, bool | int]:
         st, p, f = self.state, self.params, self.faults
-        target = self._spindle_target()
+        target = self._spindle_command()
         rpm = st.spindle_rpm
         tol = max(p.at_speed_tolerance_rpm, abs(target) * 0.02)
         arm = st.arm_position
@@ -250,18 +250,22 @@ class MachineIO:
             inputs[name] = st.buttons[name]
         return inputs
 
-    def _spindle_target(self) -> float:
+    def _spindle_command(self) -> float:
+        """The speed the drive is told to reach (signed rpm; 0 when it may not turn)."""
         out, st = self._out, self.state
         if not (st.drive_ready and out["SpindleEnable"]) or out["SpindleOrient"]:
             return 0.0
         ref = min(max(int(out["SpindleSpeedRef"]), 0), self.params.spindle_max_rpm)
-        if "spindle_stall" in self.faults:
-            ref = ref // 2
         if out["SpindleFwd"] and not out["SpindleRev"]:
             return float(ref)
         if out["SpindleRev"] and not out["SpindleFwd"]:
             return float(-ref)
         return 0.0
+
+    def _spindle_target(self) -> float:
+        """The speed the spindle actually ramps to (a stalled spindle gets only half)."""
+        command = self._spindle_command()
+        return command / 2 if "spindle_stall" in self.faults else command
 
     def step(self, dt_ms: int) -> None:
         """Advance the plant by `dt_ms` with the outputs of the last scan."""
