@@ -112,6 +112,7 @@ class Drive402:
             index, sub = key if isinstance(key, tuple) else (key, 0)
             self._store(index, sub, value)
         self._update_factor()
+        self.plant.speed_limit = self._od[(0x6080, 0)] * 2.0 * math.pi / 60.0
         self._power = PowerState()
         self._mode = self._od[(0x6060, 0)]
         self._dem = Demand(self.plant.theta_meas, 0.0)
@@ -178,6 +179,10 @@ class Drive402:
                 ABORT_DEVICE_STATE, f"0x{index:04X} cannot change while the drive is enabled"
             )
         self._check(entry, value, index, subindex)
+        if index == 0x6080 and value > self.params.motor.max_speed_rpm:
+            raise ObjectAccessError(
+                ABORT_VALUE_HIGH, f"0x6080 = {value} rpm above the motor's maximum speed"
+            )
         self._od[(index, subindex)] = value
         if index == 0x6040:
             self._on_controlword(value)
@@ -185,6 +190,8 @@ class Drive402:
             self._set_mode(value)
         elif index == 0x6092:
             self._update_factor()
+        elif index == 0x6080:
+            self.plant.speed_limit = value * 2.0 * math.pi / 60.0
         elif index == 0x60FF and self._mode == PV:
             pass  # PV follows 0x60FF continuously
 

@@ -55,6 +55,7 @@ class Plant:
         self._h_cached = -1.0
         self._decay = 0.0
         self._c = self._constants()
+        self.speed_limit = m.max_speed_rpm * _TWO_PI / 60.0  # rad/s, the drive's 0x6080
         self._i2t_limit = (m.peak_current**2 - m.rated_current**2) * p.thermal.i2t_peak_time
         # injections
         self.load_force = 0.0  # N on the table, + pushes toward +x
@@ -244,6 +245,7 @@ class Plant:
                 v_cmd = kv * (pos_demand - theta_m) + kff * vel_ff
             else:
                 v_cmd = vel_demand
+            vmax = self.speed_limit
             if v_cmd > vmax:
                 v_cmd, velocity_limited = vmax, True
             elif v_cmd < -vmax:

@@ -239,3 +239,25 @@ def test_owns_only_profile_objects():
     d = Drive402()
     assert d.owns(0x6040) and d.owns(0x607D)
     assert not d.owns(0x1000) and not d.owns(0x2000)
+
+
+def test_max_motor_speed_6080_limits_and_sets_internal_limit():
+    d = enabled(3, {0x6080: 600})  # 600 rpm = 100 mm/s on a 10 mm lead
+    d.write_object(0x60FF, 0, 200_000)
+    run(d, 200)
+    assert d.read_object(0x606C, 0) == pytest.approx(100_000, rel=0.01)
+    assert sw(d) & 0x0800
+    with pytest.raises(ObjectAccessError) as exc:
+        d.write_object(0x6080, 0, 6000)  # above the motor's 5000 rpm
+    assert exc.value.abort_code == 0x06090031
+
+
+def test_torque_and_current_actual_in_per_mille_of_rated():
+    d = enabled(8)
+    d.inject("load_force", newtons=-600.0)  # pulls toward −x; the motor holds against it
+    run(d, 200)
+    torque = 600.0 * 0.010 / (2 * 3.141592653589793 * 0.9)  # F·h/(2π·η) = 1.06 N·m
+    rated = 0.45 * 2.8
+    assert d.read_object(0x6077, 0) == pytest.approx(1000 * (torque + 0.04) / rated, rel=0.03)
+    assert d.read_object(0x6078, 0) == pytest.approx(d.read_object(0x6077, 0), abs=1)
+    assert d.read_object(0x6075, 0) == 2800 and d.read_object(0x6076, 0) == 1260
