@@ -259,8 +259,14 @@ class Drive402:
     def inject(self, kind: str, **params: float) -> None:
         """Inject a physical fault; kinds are listed in `drives.cia402.faults.INJECT_KINDS`."""
         p = self.plant
+
+        def need(name: str) -> float:
+            if name not in params:
+                raise ValueError(f"inject({kind!r}) needs {name}=<number>")
+            return float(params[name])
+
         if kind == "load_force":
-            p.load_force = float(params.get("newtons", 0.0))
+            p.load_force = need("newtons")
         elif kind == "blocked":
             p.blocked = True
         elif kind == "encoder_break":
@@ -272,15 +278,15 @@ class Drive402:
         elif kind == "supply_loss":
             p.supply_on = False
         elif kind == "mains_voltage":
-            p.mains_voltage = float(params["volts"])
+            p.mains_voltage = need("volts")
         elif kind == "chopper_failure":
             p.chopper_failed = True
         elif kind == "ambient_temperature":
-            p.ambient = float(params["celsius"])
+            p.ambient = need("celsius")
         elif kind == "winding_temperature":
-            p.winding_temp = float(params["celsius"])
+            p.winding_temp = need("celsius")
         elif kind == "backlash":
-            p.backlash = float(params["metres"])
+            p.backlash = need("metres")
         else:
             raise ValueError(f"unknown fault kind {kind!r}; known: {', '.join(F.INJECT_KINDS)}")
 
@@ -373,6 +379,10 @@ class Drive402:
             if not value.is_integer():
                 raise ObjectAccessError(0x06070010, f"0x{index:04X}:{subindex} is an integer")
             return int(value)
+        if not isinstance(value, int):
+            raise ObjectAccessError(
+                0x06070010, f"0x{index:04X}:{subindex} takes an integer, not {type(value).__name__}"
+            )
         return int(value)
 
     @staticmethod

@@ -205,6 +205,8 @@ def test_mode_change_is_displayed_and_supported_modes_reported():
         (0x6064, 1, 0, 0x06090011),
         (0x6100, 0, 0, 0x06020000),
         (0x607A, 0, b"\x01\x02", 0x06070010),
+        (0x607A, 0, 1.5, 0x06070010),
+        (0x607A, 0, "12", 0x06070010),
     ],
 )
 def test_refused_writes_abort_with_the_right_code(index, sub, value, abort):

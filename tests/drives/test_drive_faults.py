@@ -308,3 +308,9 @@ def test_unknown_injection_kind_is_refused_with_the_list():
     d = Drive402()
     with pytest.raises(ValueError, match="load_force"):
         d.inject("gremlins")
+
+
+def test_injection_with_a_missing_parameter_says_which():
+    d = Drive402()
+    with pytest.raises(ValueError, match="volts"):
+        d.inject("mains_voltage")
