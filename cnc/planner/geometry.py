@@ -3,7 +3,8 @@
 A `Line` and an `Arc` (circle, helix, or the interpreter's tolerance spiral) are the only
 pieces; G64 corner blends are `Arc`s too. `point(s)` is exact at both ends (it returns the
 stored end points), so consecutive pieces join without rounding drift and the programmed
-end point of a block is reached bit for bit.
+end point of a block is reached bit for bit. Poses are (X, Y, Z); the hot path is written
+out for three axes with plain floats.
 """
 
 from __future__ import annotations
@@ -11,59 +12,54 @@ from __future__ import annotations
 from math import atan2, cos, pi, sin, sqrt, tan
 
 Vec = tuple[float, ...]
-
-
-def _sub(a: Vec, b: Vec) -> Vec:
-    return tuple(x - y for x, y in zip(a, b, strict=True))
-
-
-def _dot(a: Vec, b: Vec) -> float:
-    return sum(x * y for x, y in zip(a, b, strict=True))
-
-
-def _norm(a: Vec) -> float:
-    return sqrt(_dot(a, a))
-
-
-def _cross3(a: Vec, b: Vec) -> Vec:
-    return (a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0])
+ZERO = (0.0, 0.0, 0.0)
 
 
 class Line:
     """Straight piece from `start` to `end`."""
 
-    __slots__ = ("start", "end", "u", "length")
+    __slots__ = ("start", "end", "u", "length", "t0", "t1", "k0", "k1")
     kind = "line"
 
     def __init__(self, start: Vec, end: Vec) -> None:
         self.start = start
         self.end = end
-        d = _sub(end, start)
-        n = _norm(d)
+        dx = end[0] - start[0]
+        dy = end[1] - start[1]
+        dz = end[2] - start[2]
+        n = sqrt(dx * dx + dy * dy + dz * dz)
         self.length = n
-        self.u = tuple(x / n for x in d) if n > 0.0 else tuple(0.0 for _ in d)
+        u = (dx / n, dy / n, dz / n) if n > 0.0 else ZERO
+        self.u = self.t0 = self.t1 = u
+        self.k0 = self.k1 = ZERO
 
     def point(self, s: float) -> Vec:
         if s <= 0.0:
             return self.start
         if s >= self.length:
             return self.end
-        return tuple(p + u * s for p, u in zip(self.start, self.u, strict=True))
+        p = self.start
+        u = self.u
+        return (p[0] + u[0] * s, p[1] + u[1] * s, p[2] + u[2] * s)
 
     def tangent(self, s: float) -> Vec:
         return self.u
 
     def curvature(self, s: float) -> Vec:
         """Curvature vector d^2P/ds^2 (kappa * normal)."""
-        return tuple(0.0 for _ in self.u)
+        return ZERO
 
     def with_ends(self, start: Vec, end: Vec) -> Line:
         """The same line shortened (direction kept exactly, so trimming never bends it)."""
         ln = Line.__new__(Line)
         ln.start = start
         ln.end = end
-        ln.u = self.u
-        ln.length = _norm(_sub(end, start))
+        ln.u = ln.t0 = ln.t1 = self.u
+        ln.k0 = ln.k1 = ZERO
+        dx = end[0] - start[0]
+        dy = end[1] - start[1]
+        dz = end[2] - start[2]
+        ln.length = sqrt(dx * dx + dy * dy + dz * dz)
         return ln
 
 
@@ -71,7 +67,8 @@ class Arc:
     """Circle/helix: P(phi) = O + r(phi) (cos phi e1 + sin phi e2) + w * rise * phi / sweep.
 
     `phi` runs linearly with s from 0 to `sweep`; r(phi) is linear from r0 to r1 (r0 == r1
-    for a true circle). The rise is along `w`, the plane's normal axis.
+    for a true circle). The rise is along `w`, the plane's normal axis. `t0/t1` and
+    `k0/k1` are the unit tangent and the curvature vector at both ends.
     """
 
     __slots__ = (
@@ -86,22 +83,14 @@ class Arc:
         "sweep",
         "rise",
         "length",
+        "t0",
+        "t1",
+        "k0",
+        "k1",
     )
     kind = "arc"
 
-    def __init__(
-        self,
-        start: Vec,
-        end: Vec,
-        center: Vec,
-        e1: Vec,
-        e2: Vec,
-        w: Vec,
-        r0: float,
-        r1: float,
-        sweep: float,
-        rise: float,
-    ) -> None:
+    def __init__(self, start, end, center, e1, e2, w, r0, r1, sweep, rise) -> None:
         self.start = start
         self.end = end
         self.center = center
@@ -114,21 +103,51 @@ class Arc:
         self.rise = rise
         rm = 0.5 * (r0 + r1)
         self.length = sqrt((rm * sweep) ** 2 + rise * rise)
+        length = self.length
+        k = sweep / length
+        h = rise / length
+        dr = (r1 - r0) / length
+        # ends: phi = 0 and phi = sweep
+        cp, sp = cos(sweep), sin(sweep)
+        a0, a1, a2 = e1
+        b0, b1, b2 = e2
+        w0, w1, w2 = w
+        rk = r0 * k
+        self.t0 = (
+            rk * b0 + dr * a0 + h * w0,
+            rk * b1 + dr * a1 + h * w1,
+            rk * b2 + dr * a2 + h * w2,
+        )
+        rk = r1 * k
+        c0, c1, c2 = cp * a0 + sp * b0, cp * a1 + sp * b1, cp * a2 + sp * b2
+        d0, d1, d2 = -sp * a0 + cp * b0, -sp * a1 + cp * b1, -sp * a2 + cp * b2
+        self.t1 = (
+            rk * d0 + dr * c0 + h * w0,
+            rk * d1 + dr * c1 + h * w1,
+            rk * d2 + dr * c2 + h * w2,
+        )
+        q = -r0 * k * k
+        self.k0 = (q * a0, q * a1, q * a2)
+        q = -r1 * k * k
+        self.k1 = (q * c0, q * c1, q * c2)
 
     def point(self, s: float) -> Vec:
         if s <= 0.0:
             return self.start
-        if s >= self.length:
+        length = self.length
+        if s >= length:
             return self.end
-        f = s / self.length
+        f = s / length
         phi = self.sweep * f
         r = self.r0 + (self.r1 - self.r0) * f
         c = r * cos(phi)
         sn = r * sin(phi)
         h = self.rise * f
-        return tuple(
-            o + c * a + sn * b + h * z
-            for o, a, b, z in zip(self.center, self.e1, self.e2, self.w, strict=True)
+        o, a, b, z = self.center, self.e1, self.e2, self.w
+        return (
+            o[0] + c * a[0] + sn * b[0] + h * z[0],
+            o[1] + c * a[1] + sn * b[1] + h * z[1],
+            o[2] + c * a[2] + sn * b[2] + h * z[2],
         )
 
     def tangent(self, s: float) -> Vec:
@@ -139,9 +158,10 @@ class Arc:
         dr = (self.r1 - self.r0) / self.length
         cp, sp = cos(phi), sin(phi)
         h = self.rise / self.length
+        a, b, z = self.e1, self.e2, self.w
         return tuple(
-            r * k * (-sp * a + cp * b) + dr * (cp * a + sp * b) + h * z
-            for a, b, z in zip(self.e1, self.e2, self.w, strict=True)
+            r * k * (-sp * a[i] + cp * b[i]) + dr * (cp * a[i] + sp * b[i]) + h * z[i]
+            for i in range(3)
         )
 
     def curvature(self, s: float) -> Vec:
@@ -149,7 +169,8 @@ class Arc:
         k = self.sweep / self.length
         r = self.r0 + (self.r1 - self.r0) * s / self.length
         cp, sp = cos(phi), sin(phi)
-        return tuple(-r * k * k * (cp * a + sp * b) for a, b in zip(self.e1, self.e2, strict=True))
+        a, b = self.e1, self.e2
+        return tuple(-r * k * k * (cp * a[i] + sp * b[i]) for i in range(3))
 
     @property
     def plane_fraction(self) -> float:
@@ -166,22 +187,25 @@ def arc_from_canon(
     start: Vec, end: Vec, center: Vec, normal_axis: int, clockwise: bool, turns: int
 ) -> Arc:
     """Build the closed-form arc of a G2/G3 block (plane given by its normal axis index)."""
-    n = len(start)
-    w = tuple(1.0 if i == normal_axis else 0.0 for i in range(n))
-    rel0 = tuple(0.0 if i == normal_axis else start[i] - center[i] for i in range(n))
-    rel1 = tuple(0.0 if i == normal_axis else end[i] - center[i] for i in range(n))
-    r0 = _norm(rel0)
-    r1 = _norm(rel1)
-    e1 = tuple(x / r0 for x in rel0)
-    e2 = _cross3(w, e1)
+    k = normal_axis
+    w = tuple(1.0 if i == k else 0.0 for i in range(3))
+    rel0 = tuple(0.0 if i == k else start[i] - center[i] for i in range(3))
+    rel1 = tuple(0.0 if i == k else end[i] - center[i] for i in range(3))
+    r0 = sqrt(rel0[0] ** 2 + rel0[1] ** 2 + rel0[2] ** 2)
+    r1 = sqrt(rel1[0] ** 2 + rel1[1] ** 2 + rel1[2] ** 2)
+    e1 = (rel0[0] / r0, rel0[1] / r0, rel0[2] / r0)
+    e2 = (w[1] * e1[2] - w[2] * e1[1], w[2] * e1[0] - w[0] * e1[2], w[0] * e1[1] - w[1] * e1[0])
     if clockwise:
-        e2 = tuple(-x for x in e2)
-    ang = atan2(_dot(rel1, e2), _dot(rel1, e1))
+        e2 = (-e2[0], -e2[1], -e2[2])
+    ang = atan2(
+        rel1[0] * e2[0] + rel1[1] * e2[1] + rel1[2] * e2[2],
+        rel1[0] * e1[0] + rel1[1] * e1[1] + rel1[2] * e1[2],
+    )
     if ang <= 1e-12:
         ang += 2.0 * pi
     sweep = ang + 2.0 * pi * turns
-    rise = end[normal_axis] - start[normal_axis]
-    c = tuple(center[i] if i != normal_axis else start[i] for i in range(n))
+    rise = end[k] - start[k]
+    c = tuple(center[i] if i != k else start[i] for i in range(3))
     return Arc(start, end, c, e1, e2, w, r0, r1, sweep, rise)
 
 
@@ -193,15 +217,13 @@ def blend(
     Returns (arc, d) where d is the length trimmed from each line, or None when the lines
     are collinear (no blend needed) or reverse (no blend possible).
     """
-    c = _dot(u1, u2)
-    if c > 1.0:
-        c = 1.0
-    elif c < -1.0:
-        c = -1.0
+    a0, a1, a2 = u1
+    b0, b1, b2 = u2
+    c = a0 * b0 + a1 * b1 + a2 * b2
     # turning angle from a well-conditioned formula (acos loses digits near 0)
-    diff = _norm(_sub(u2, u1))
-    summ = _norm(tuple(a + b for a, b in zip(u1, u2, strict=True)))
-    theta = 2.0 * atan2(diff, summ)
+    dx, dy, dz = b0 - a0, b1 - a1, b2 - a2
+    sx, sy, sz = b0 + a0, b1 + a1, b2 + a2
+    theta = 2.0 * atan2(sqrt(dx * dx + dy * dy + dz * dz), sqrt(sx * sx + sy * sy + sz * sz))
     if theta < 1e-12 or theta > pi - 1e-6:
         return None
     d = tolerance / tan(0.25 * theta)
@@ -212,44 +234,45 @@ def blend(
     if d <= 1e-12:
         return None
     r = d / tan(0.5 * theta)
-    perp = tuple(b - c * a for a, b in zip(u1, u2, strict=True))
-    pn = _norm(perp)
-    n1 = tuple(x / pn for x in perp)
-    start = tuple(p - d * a for p, a in zip(corner, u1, strict=True))
-    end = tuple(p + d * b for p, b in zip(corner, u2, strict=True))
-    center = tuple(p + r * m for p, m in zip(start, n1, strict=True))
-    e1 = tuple(-x for x in n1)
-    zero = tuple(0.0 for _ in u1)
-    return Arc(start, end, center, e1, u1, zero, r, r, theta, 0.0), d
+    px, py, pz = b0 - c * a0, b1 - c * a1, b2 - c * a2
+    pn = sqrt(px * px + py * py + pz * pz)
+    n1 = (px / pn, py / pn, pz / pn)
+    x, y, z = corner
+    start = (x - d * a0, y - d * a1, z - d * a2)
+    end = (x + d * b0, y + d * b1, z + d * b2)
+    center = (start[0] + r * n1[0], start[1] + r * n1[1], start[2] + r * n1[2])
+    e1 = (-n1[0], -n1[1], -n1[2])
+    return Arc(start, end, center, e1, u1, ZERO, r, r, theta, 0.0), d
+
+
+def _dist(a: Vec, b: Vec) -> float:
+    return sqrt((a[0] - b[0]) ** 2 + (a[1] - b[1]) ** 2 + (a[2] - b[2]) ** 2)
 
 
 def distance_to_piece(p: Vec, piece: Line | Arc) -> float:
     """Distance from p to a programmed piece (used by tests and the plan report)."""
     if isinstance(piece, Line):
-        d = _sub(p, piece.start)
-        t = _dot(d, piece.u)
+        u = piece.u
+        st = piece.start
+        t = (p[0] - st[0]) * u[0] + (p[1] - st[1]) * u[1] + (p[2] - st[2]) * u[2]
         t = 0.0 if t < 0.0 else (piece.length if t > piece.length else t)
-        q = piece.point(t)
-        return _norm(_sub(p, q))
-    # arc: project onto the plane, find the angle, compare with the helix at that angle
-    rel = _sub(p, piece.center)
-    x = _dot(rel, piece.e1)
-    y = _dot(rel, piece.e2)
-    ang = atan2(y, x)
+        return _dist(p, piece.point(t))
+    # arc: the angle of p in the arc plane, then the helix point at that angle (each turn)
+    o = piece.center
+    rel = (p[0] - o[0], p[1] - o[1], p[2] - o[2])
+    e1, e2 = piece.e1, piece.e2
+    ang = atan2(
+        rel[0] * e2[0] + rel[1] * e2[1] + rel[2] * e2[2],
+        rel[0] * e1[0] + rel[1] * e1[1] + rel[2] * e1[2],
+    )
     if ang < 0.0:
         ang += 2.0 * pi
-    best = float("inf")
     sw = piece.sweep
-    k = 0
-    while True:
-        phi = ang + 2.0 * pi * k
-        if phi > sw + 2.0 * pi:
-            break
-        for cand in (phi, 0.0, sw):
-            if 0.0 <= cand <= sw:
-                q = piece.point(cand / sw * piece.length)
-                dd = _norm(_sub(p, q))
-                if dd < best:
-                    best = dd
-        k += 1
+    best = min(_dist(p, piece.start), _dist(p, piece.end))
+    phi = ang
+    while phi <= sw:
+        d = _dist(p, piece.point(phi / sw * piece.length))
+        if d < best:
+            best = d
+        phi += 2.0 * pi
     return best

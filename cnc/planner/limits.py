@@ -38,6 +38,9 @@ class AxisLimits:
     ipo: float
     window: float  # path length that 3 IPO cycles can cover at most, mm
     dv3: float  # most the path speed can change within 3 IPO cycles, mm/s
+    vtop: float = INF  # no path speed exceeds this (all axes at their velocity limit)
+    acc_c: tuple[float, ...] = ()  # continuous shares (see the module docstring)
+    jerk_c: tuple[float, ...] = ()
 
     @classmethod
     def from_params(cls, params: MachineParams, ipo: float | None = None) -> AxisLimits:
@@ -55,20 +58,30 @@ class AxisLimits:
             ipo=t,
             window=3.0 * t * sqrt(sum(v * v for v in vel)),
             dv3=3.0 * t * sqrt(sum(float(a.max_accel) ** 2 for a in axes)),
+            vtop=sqrt(sum(v * v for v in vel)),
+            acc_c=tuple(float(a.max_accel) * (1.0 - RHO_KINK_A) for a in axes),
+            jerk_c=tuple(float(a.max_jerk) * (1.0 - RHO_JUMP) for a in axes),
         )
 
 
 def line_limits(lim: AxisLimits, u: tuple[float, ...]) -> tuple[float, float, float]:
     """(speed cap, tangential accel, tangential jerk) of a line with unit direction u."""
     v = a = j = INF
-    ka = 1.0 - RHO_KINK_A
-    kj = 1.0 - RHO_JUMP
-    for i, ui in enumerate(u):
-        c = abs(ui)
+    lv, la, lj = lim.vel, lim.acc_c, lim.jerk_c
+    for i in range(3):
+        c = u[i]
+        if c < 0.0:
+            c = -c
         if c > 0.0:
-            v = min(v, lim.vel[i] / c)
-            a = min(a, ka * lim.acc[i] / c)
-            j = min(j, kj * lim.jerk[i] / c)
+            x = lv[i] / c
+            if x < v:
+                v = x
+            x = la[i] / c
+            if x < a:
+                a = x
+            x = lj[i] / c
+            if x < j:
+                j = x
     return v, a, j
 
 
@@ -126,56 +139,71 @@ def junction_cap(
     of the piece before it: a 3-cycle window covers at most 3T (v + dv3) of path around a
     junction passed at v, so the shares of all junctions inside one window sum to <= 2.
     """
+    if not (du[0] or du[1] or du[2] or dk[0] or dk[1] or dk[2]):
+        return INF
     t = lim.ipo
     c = lim.dv3
-    cap = INF
-    for i in range(len(du)):
-        dui = abs(du[i])
-        dki = abs(dk[i])
+    # one conservative constraint for all axes: each coefficient normalised by the axis'
+    # budget, then the largest of each taken (so every axis' own constraint holds)
+    alpha = beta = lose = gam = 0.0
+    k75 = 0.75 / t
+    for i in range(3):
+        dui = du[i]
+        if dui < 0.0:
+            dui = -dui
+        dki = dk[i]
+        if dki < 0.0:
+            dki = -dki
         if dui == 0.0 and dki == 0.0:
             continue
         full = 0.5 * RHO_JUMP * lim.jerk[i]
-        lose = 0.75 / t * dui * at_max if inside_span else 0.0
-        alpha = 0.75 / t * dki
-        beta = dui / (t * t)
-        v = _jerk_cap(alpha, beta, full, lose, gap, t, c)
-        if dui > 0.0:
-            # acceleration share: dui v <= 0.5 RHO_KINK_A A_i T w(v)
-            ba = 0.5 * RHO_KINK_A * lim.acc[i] * t
-            va = ba / dui
-            if gap < 3.0 * t * (va + c):
-                # dui v (v + c) = ba gap / (3T)
-                k = ba * gap / (3.0 * t * dui)
-                va = 0.5 * (-c + sqrt(c * c + 4.0 * k))
-            v = min(v, va)
-        if v < cap:
-            cap = v
+        x = k75 * dki / full
+        if x > alpha:
+            alpha = x
+        x = dui / (t * t * full)
+        if x > beta:
+            beta = x
+        if inside_span:
+            x = k75 * dui * at_max / full
+            if x > lose:
+                lose = x
+        x = dui / (0.5 * RHO_KINK_A * lim.acc[i] * t)
+        if x > gam:
+            gam = x
+    cap = _jerk_cap(alpha, beta, 1.0, lose, gap, t, c, lim.vtop)
+    if gam > 0.0:
+        # acceleration share: gam v <= w(v) = min(1, gap / (3T (v + c)))
+        va = 1.0 / gam
+        if gap < 3.0 * t * (va + c):
+            k = gap / (3.0 * t * gam)  # v (v + c) = k
+            va = 2.0 * k / (c + sqrt(c * c + 4.0 * k))
+        if va < cap:
+            cap = va
     return cap if cap > 0.0 else 0.0
 
 
-def _jerk_cap(alpha, beta, full, lose, gap, t, c) -> float:
-    """Largest v with alpha v^2 + beta v + lose <= full * min(1, gap / (3T (v + c)))."""
+def _jerk_cap(alpha, beta, full, lose, gap, t, c, vtop) -> float:
+    """Largest v <= vtop with alpha v^2 + beta v + lose <= full * min(1, gap / (3T (v + c))).
 
-    def lhs(v):
-        return alpha * v * v + beta * v + lose
-
-    def solve_w1() -> float:
-        b = full - lose
-        if b <= 0.0:
-            return 0.0
-        if alpha > 0.0:
-            return 2.0 * b / (beta + sqrt(beta * beta + 4.0 * alpha * b))
-        return b / beta
-
-    v = solve_w1()
-    if v <= 0.0 or gap >= 3.0 * t * (v + c):
+    Returns INF when even vtop (no path speed can exceed it) qualifies.
+    """
+    w = gap / (3.0 * t * (vtop + c))
+    if (alpha * vtop + beta) * vtop + lose <= full * (w if w < 1.0 else 1.0):
+        return INF
+    b = full - lose
+    if b <= 0.0:
+        return 0.0
+    if alpha > 0.0:
+        v = 2.0 * b / (beta + sqrt(beta * beta + 4.0 * alpha * b))
+    else:
+        v = b / beta
+    if gap >= 3.0 * t * (v + c):
         return v
-    # w < 1: h(v) = lhs(v) (v + c) - full gap / (3T), increasing and convex for v >= 0;
-    # Newton from above converges monotonically, staying feasible
+    # w < 1: h(v) = (alpha v^2 + beta v + lose)(v + c) - k, increasing and convex for
+    # v >= 0; Newton from an upper bound of the root converges monotonically from above
     k = full * gap / (3.0 * t)
     if lose * c >= k:
         return 0.0
-    # start Newton from the tightest upper bound of the root: each term alone <= k
     if alpha > 0.0:
         v = min(v, (k / alpha) ** (1.0 / 3.0))
         if c > 0.0:
@@ -184,21 +212,21 @@ def _jerk_cap(alpha, beta, full, lose, gap, t, c) -> float:
         v = min(v, sqrt(k / beta))
         if c > 0.0:
             v = min(v, k / (beta * c))
-    for _ in range(30):
-        h = lhs(v) * (v + c) - k
+    for _ in range(40):
+        q = (alpha * v + beta) * v + lose
+        h = q * (v + c) - k
         if h <= 0.0:
             return v
-        dh = (2.0 * alpha * v + beta) * (v + c) + lhs(v)
-        nv = v - h / dh
+        nv = v - h / ((2.0 * alpha * v + beta) * (v + c) + q)
         if nv >= v * (1.0 - 1e-14):
             break
         v = nv
     v *= 1.0 - 1e-10
-    if lhs(v) * (v + c) > k:  # not expected; fall back to bisection
+    if ((alpha * v + beta) * v + lose) * (v + c) > k:  # not expected; bisect
         lo, hi = 0.0, v
         for _ in range(80):
             mid = 0.5 * (lo + hi)
-            if lhs(mid) * (mid + c) > k:
+            if ((alpha * mid + beta) * mid + lose) * (mid + c) > k:
                 hi = mid
             else:
                 lo = mid

@@ -193,13 +193,10 @@ class Path:
 
     def _set_junction(self, a: Segment, b: Segment) -> None:
         ga, gb = a.geom, b.geom
-        ta = ga.tangent(ga.length)
-        tb = gb.tangent(0.0)
-        ka = ga.curvature(ga.length)
-        kb = gb.curvature(0.0)
-        du = tuple(y - x for x, y in zip(ta, tb, strict=True))
-        dk = tuple(y - x for x, y in zip(ka, kb, strict=True))
-        big = max(abs(x) for x in du) > KINK_SPAN_BREAK
+        ta, tb, ka, kb = ga.t1, gb.t0, ga.k1, gb.k0
+        du = (tb[0] - ta[0], tb[1] - ta[1], tb[2] - ta[2])
+        dk = (kb[0] - ka[0], kb[1] - ka[1], kb[2] - ka[2])
+        big = max(abs(du[0]), abs(du[1]), abs(du[2])) > KINK_SPAN_BREAK
         at_max = a.at if a.at > b.at else b.at
         cap = junction_cap(self.lim, du, dk, ga.length, at_max, not big)
         if (a.feed is None) != (b.feed is None) and big:
