@@ -589,3 +589,33 @@ def test_lockstep_runs_are_identical():
         return out + [sorted(p.rt.alarms)]
 
     assert trace() == trace()
+
+
+def test_with_the_input_filter_an_estop_counts_at_the_fourth_sample():
+    """RuntimeConfig(debounce_samples=4) (the GE 1050 filter): the E-stop is seen, and every
+    actuator dropped, in the scan of the 4th identical sample; a 3-scan glitch is ignored."""
+    from plc.runtime import RuntimeConfig
+
+    p = Plc()
+    p.rt, p.io = machine_plc(RuntimeConfig(debounce_samples=4))
+    p.nc = p.io.nc
+    p.run(100)  # the filter starts from all-zero inputs: the chain reads open at first
+    assert p.nc.get("EStopActive") and p.io.input("EStopChainOk")
+    p.io.press("PanelReset")  # so the power-on E-stop is reset like on a real machine
+    p.run(40)
+    p.io.release("PanelReset")
+    p.run(40)
+    p.nc.set("NcReady", True)
+    p.run(300)
+    assert not p.nc.get("EStopActive") and p.io.output("SpindleEnable")
+    p.io.press_estop()
+    p.run(30)
+    p.io.release_estop()
+    p.run(50)
+    assert not p.nc.get("EStopActive"), "a 3-sample glitch never reaches the logic"
+    p.io.press_estop()
+    for _ in range(3):
+        p.scan()
+        assert p.io.output("SpindleEnable")
+    p.scan()
+    assert p.nc.get("EStopActive") and [n for n in ACTUATORS if p.io.output(n)] == []
