@@ -106,6 +106,55 @@ def main_lines(lines: Iterable[str] | str) -> Lines:
     return enumerate(lines, 1)
 
 
+LEADER_LOOKAHEAD = 64  # lines searched for the '%' that ends a tape leader
+
+
+def skip_leader(numbered: Lines) -> Lines:
+    """Drop a tape leader: text before the program-start '%' (DIN 66025, 000 REQ-PRG-1).
+
+    Only when the first non-blank line is not a block (it does not lex) is anything read
+    ahead: up to LEADER_LOOKAHEAD lines are searched for a lone '%'. If one is found and
+    nothing before it is a block, the lines before it are dropped; otherwise every line is
+    handed on unchanged (and the bad first line gets its error as usual).
+    """
+    from cnc.errors import NcError
+    from cnc.gcode.lexer import parse_line
+
+    it = iter(numbered)
+    buffered: list[tuple[int, str]] = []
+    for item in it:
+        buffered.append(item)
+        text = item[1].strip()
+        if not text:
+            continue
+        if text.startswith("%"):
+            break
+        try:
+            is_block = parse_line(item[1], item[0]) is not None
+        except NcError:
+            is_block = False
+        if is_block:
+            break
+        # leader candidate: look for the '%' within the window
+        for nxt in it:
+            buffered.append(nxt)
+            t = nxt[1].strip()
+            if t.startswith("%") and not t.strip("% \t"):
+                buffered = buffered[-1:]  # everything before the '%' is leader
+                break
+            if len(buffered) >= LEADER_LOOKAHEAD:
+                break
+            if t:
+                try:
+                    if parse_line(nxt[1], nxt[0]) is not None:
+                        break  # a real block: there is no leader
+                except NcError:
+                    pass
+        break
+    yield from buffered
+    yield from it
+
+
 class ProgramLibrary:
     """Resolves program numbers for M98: in-file O blocks first, then the `programs` mapping."""
 

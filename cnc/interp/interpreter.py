@@ -37,7 +37,7 @@ from cnc.canon import (
 )
 from cnc.errors import NcError
 from cnc.gcode.lexer import Block, MarkedBlock, parse_line
-from cnc.gcode.source import Lines, ProgramLibrary, main_lines
+from cnc.gcode.source import Lines, ProgramLibrary, main_lines, skip_leader
 from cnc.interp.cycles import MAX_REPEAT, CannedCycles
 from cnc.interp.state import ModalState, ToolOffset
 from cnc.interp.transform import Transform
@@ -341,7 +341,7 @@ class Interpreter(CannedCycles):
         self._ended = False
         frames = self._frames
         frames.clear()
-        frames.append(_Frame(main_lines(lines), self.file, None, 1, 0))
+        frames.append(_Frame(skip_leader(main_lines(lines)), self.file, None, 1, 0))
         out = self._out
         li = self._li
         while frames and not self._ended:

@@ -148,3 +148,22 @@ def test_first_move_of_a_large_file_comes_before_the_file_is_read(tmp_path) -> N
         cmd = next(Interpreter(MILL).run(fh))
         assert isinstance(cmd, F) and cmd.line == 4
         assert fh.buffer.tell() < 100_000  # only the first buffer was read (file: 2.8 MB)
+
+
+@pytest.mark.parametrize(
+    ("prog", "ends"),
+    [
+        ("PART 4711 REV B\n\n%\nG0 X1\nM30\n%\n", [1.0]),  # leader before '%' is ignored
+        ("G0 X1\nM30\n%\n", [1.0]),  # no leader: the first line is a block
+        ("(header)\n%\nG0 X2\n", [2.0]),
+        ("%\nG0 X3\n%\nG0 X9\n", [3.0]),
+    ],
+)
+def test_tape_leader_before_percent_is_ignored(prog, ends) -> None:
+    assert xs(Interpreter(MILL).run(prog)) == ends
+
+
+def test_bad_first_line_without_percent_is_still_an_error() -> None:
+    with pytest.raises(NcError) as ei:
+        list(Interpreter(MILL).run("PART 4711\nG0 X1\n"))
+    assert ei.value.line == 1
