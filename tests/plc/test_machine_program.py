@@ -148,6 +148,16 @@ def test_coolant_and_program_stop_codes(plc, code, expected_ms):
         assert plc.io.output("CoolantMist")
 
 
+def test_m13_and_m14_spindle_with_coolant(plc):
+    plc.nc.set("SCode", 1000)
+    # the door lock (100 ms) and the ramp (to within 20 rpm: 98 ms) run after one another;
+    # the coolant pressure (400 ms) is the longer branch
+    assert plc.function("M", 13) == P.coolant_pressure_ms
+    assert plc.io.output("SpindleFwd") and plc.io.output("CoolantPump")
+    assert plc.function("M", 14) == arrival_ms(1000, -1000)
+    assert plc.io.output("SpindleRev") and plc.io.output("CoolantPump")
+
+
 def test_m9_and_m30_switch_the_coolant_off(plc):
     plc.function("M", 8)
     plc.function("M", 7)
