@@ -1,24 +1,31 @@
 """MTConnect REST endpoints over the cell's agent (`server.mtconnect.Agent`).
 
-Thin: each route hands the raw query parameters to `Agent.request`, which validates them
-the way the reference agent does and returns (status, XML). Mount with a prefix, e.g.
+Thin: each route hands the raw query parameters to the agent, which validates them the way
+the reference agent does and returns (status, XML). A request with `interval` streams:
+`multipart/mixed;boundary=...` parts, each one MTConnectStreams document, as cppagent sends
+them. Mount with a prefix, e.g.
 `app.include_router(mtconnect_router(agent), prefix="/mtconnect")`.
 """
 
 from __future__ import annotations
 
+import asyncio
+import secrets
+import time
+from collections.abc import AsyncIterator, Awaitable, Callable
+
 from fastapi import APIRouter, Request
 from fastapi.concurrency import run_in_threadpool
-from fastapi.responses import Response
+from fastapi.responses import Response, StreamingResponse
 
-from server.mtconnect.agent import XML, Agent
+from server.mtconnect.agent import XML, Agent, RestError, StreamPlan
 
 _DOC = {
     "probe": "MTConnectDevices: the device model.",
     "current": "MTConnectStreams: the newest observation of every data item "
-    "(path, at, deviceType).",
+    "(path, at, deviceType; interval streams).",
     "sample": "MTConnectStreams: observations in sequence order "
-    "(from, to, count=100, path, heartbeat=10000, deviceType).",
+    "(from, to, count=100, path, deviceType; interval and heartbeat=10000 stream).",
 }
 
 
@@ -28,6 +35,17 @@ def mtconnect_router(agent: Agent) -> APIRouter:
 
     async def serve(kind: str, device: str | None, request: Request) -> Response:
         params = dict(request.query_params)
+        try:
+            plan = agent.stream_plan(kind, device, params)
+        except RestError as exc:
+            body = agent.error_document(exc.code, exc.message)
+            return Response(content=body, status_code=exc.status, media_type=XML)
+        if plan is not None:
+            boundary = secrets.token_hex(16)
+            return StreamingResponse(
+                stream_parts(agent, plan, boundary),
+                media_type=f"multipart/mixed;boundary={boundary}",
+            )
         status, body = await run_in_threadpool(agent.request, kind, device, params)
         return Response(content=body, status_code=status, media_type=XML)
 
@@ -67,3 +85,50 @@ def mtconnect_router(agent: Agent) -> APIRouter:
         return Response(content=body, status_code=404, media_type=XML)
 
     return router
+
+
+def part(boundary: str, body: str) -> bytes:
+    data = body.encode()
+    head = f"--{boundary}\r\nContent-type: {XML}\r\nContent-length: {len(data)}\r\n\r\n"
+    return head.encode() + data + b"\r\n"
+
+
+async def stream_parts(
+    agent: Agent,
+    plan: StreamPlan,
+    boundary: str,
+    *,
+    sleep: Callable[[float], Awaitable[None]] = asyncio.sleep,
+    clock: Callable[[], float] = time.monotonic,
+) -> AsyncIterator[bytes]:
+    """The parts of a streamed current or sample, until the client goes away.
+
+    sample: starts at `from` (default: the next sequence, i.e. only new observations); a
+    part whenever there is new data, polled every `interval` ms; an empty document when
+    nothing arrived for `heartbeat` ms. If the buffer overtakes a slow client, the part is
+    the OUT_OF_RANGE error document and the stream ends.
+    """
+    pause = max(plan.interval_ms, 1) / 1000.0  # interval=0 means "at once", not a busy loop
+    if plan.kind == "current":
+        while True:
+            yield part(boundary, await run_in_threadpool(agent.current_for, plan.wanted))
+            await sleep(pause)
+    nxt = plan.from_ if plan.from_ is not None else agent.buffer.next_sequence
+    last_sent: float | None = None
+    while True:
+        try:
+            page = await run_in_threadpool(
+                lambda n=nxt: agent.sample_page(
+                    plan.device, count=plan.count, from_=n, wanted=plan.wanted
+                )
+            )
+        except RestError as exc:
+            yield part(boundary, agent.error_document(exc.code, exc.message))
+            return
+        now = clock()
+        if page.count or last_sent is None or (now - last_sent) * 1000 >= plan.heartbeat_ms:
+            yield part(boundary, page.xml)
+            last_sent = now
+        nxt = page.next_sequence
+        if page.end_of_buffer:
+            await sleep(pause)

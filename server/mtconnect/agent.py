@@ -319,7 +319,24 @@ class Agent:
             _check_range(interval, -1, 2**31 - 1, "interval")
             _check_range(heartbeat, 1, 2**31 - 1, "heartbeat")
             raise _streaming_unsupported()
-        wanted = self._filter(device, path, device_type)
+        return self.sample_page(
+            device, count=count, from_=from_, to=to, path=path, device_type=device_type
+        ).xml
+
+    def sample_page(
+        self,
+        device: str | None = None,
+        *,
+        count: int = DEFAULT_COUNT,
+        from_: int | None = None,
+        to: int | None = None,
+        path: str | None = None,
+        device_type: str | None = None,
+        wanted: set[str] | None = None,
+    ) -> SamplePage:
+        """One sample document and where the next one starts (the streaming loop's step)."""
+        if wanted is None:
+            wanted = self._filter(device, path, device_type)
         with self._lock:
             buf = self.buffer
             first, seq = buf.first_sequence, buf.next_sequence
@@ -331,8 +348,8 @@ class Agent:
                 _check_range(to, from_ if from_ is not None else first, seq + 1, "to")
                 lower = 0
             _check_range(count, lower, upper, "count", not_zero=True)
-            observations, end, first_out, _ = buf.observations(count, wanted, from_, to)
-        return print_streams(
+            observations, end, first_out, end_of_buffer = buf.observations(count, wanted, from_, to)
+        xml = print_streams(
             self.header(),
             self.devices,
             observations,
@@ -340,6 +357,70 @@ class Agent:
             first_sequence=first_out,
             last_sequence=seq - 1,
         )
+        return SamplePage(xml, end, len(observations), end_of_buffer)
+
+    def stream_plan(
+        self, kind: str, device: str | None, params: Mapping[str, str]
+    ) -> StreamPlan | None:
+        """For a request with `interval`: the validated streaming parameters (None when the
+        request does not stream). Raises RestError exactly where cppagent refuses."""
+        if kind not in ("current", "sample") or "interval" not in params:
+            return None
+        if kind == "current":
+            p = _current_params(params)
+            if device is not None:
+                self.device(device)
+            _check_range(p["interval"], 0, 2**31 - 1, "interval")
+            wanted = self._filter(device, p["path"], p["device_type"])
+            return StreamPlan(
+                kind, device, p["interval"], DEFAULT_HEARTBEAT_MS, DEFAULT_COUNT, None, wanted
+            )
+        p = _sample_params(params)
+        _check_range(p["interval"], -1, 2**31 - 1, "interval")
+        _check_range(p["heartbeat"], 1, 2**31 - 1, "heartbeat")
+        if device is not None:
+            self.device(device)
+        if p["from_"] is not None:
+            with self._lock:
+                first, seq = self.buffer.first_sequence, self.buffer.next_sequence
+            _check_range(p["from_"], first - 1, seq + 1, "from")
+        wanted = self._filter(device, p["path"], p["device_type"])
+        return StreamPlan(
+            kind, device, p["interval"], p["heartbeat"], p["count"], p["from_"], wanted
+        )
+
+    def current_for(self, wanted: set[str] | None) -> str:
+        """The current document for an already validated filter (streamed current)."""
+        with self._lock:
+            first, seq = self.buffer.first_sequence, self.buffer.next_sequence
+            observations = self.buffer.latest.observations(wanted)
+        return print_streams(
+            self.header(),
+            self.devices,
+            observations,
+            next_sequence=seq,
+            first_sequence=first,
+            last_sequence=seq - 1,
+        )
+
+
+@dataclass(frozen=True, slots=True)
+class SamplePage:
+    xml: str
+    next_sequence: int
+    count: int
+    end_of_buffer: bool
+
+
+@dataclass(frozen=True, slots=True)
+class StreamPlan:
+    kind: str  # current | sample
+    device: str | None
+    interval_ms: int
+    heartbeat_ms: int
+    count: int
+    from_: int | None
+    wanted: set[str] | None
 
 
 # --- helpers -------------------------------------------------------------------------------

@@ -2,6 +2,9 @@
 
 from __future__ import annotations
 
+import asyncio
+import time
+
 import pytest
 from fastapi import FastAPI
 from fastapi.testclient import TestClient
@@ -12,7 +15,7 @@ from cnc.status import AxisStatus, MachineStatus
 from server.mtconnect import AdapterConnection
 from tests.server.test_mtconnect_e2e import wait_for
 from tests.server.test_mtconnect_support import error_code, header, parse, small_agent, values
-from web_api.mtconnect import mtconnect_router
+from web_api.mtconnect import mtconnect_router, stream_parts
 
 
 @pytest.fixture
@@ -72,7 +75,11 @@ def test_sample_paging_by_next_sequence(client, agent):
         ("/mtconnect/nope/current", 404, "NO_DEVICE"),
         ("/mtconnect/current?path=//Bogus", 400, "INVALID_XPATH"),
         ("/mtconnect/m1/assets/x", 404, "INVALID_URI"),
-        ("/mtconnect/sample?interval=10", 400, "UNSUPPORTED"),
+        ("/mtconnect/sample?interval=-5", 400, "OUT_OF_RANGE"),
+        ("/mtconnect/sample?interval=10&heartbeat=0", 400, "OUT_OF_RANGE"),
+        ("/mtconnect/current?interval=0", 400, "OUT_OF_RANGE"),
+        ("/mtconnect/nope/sample?interval=10", 404, "NO_DEVICE"),
+        ("/mtconnect/sample?interval=10&path=//Bogus", 400, "INVALID_XPATH"),
     ],
 )
 def test_error_documents(client, url, status, code):
@@ -118,3 +125,132 @@ def test_http_shows_a_live_machine():
         machine.run(adapter.stop)
         agent_loop.stop()
         machine.stop()
+
+
+# --- streaming (interval) ---------------------------------------------------------------------
+
+
+class FakeTime:
+    """Clock and sleep for the stream generator: sleeping advances the clock."""
+
+    def __init__(self) -> None:
+        self.t = 0.0
+        self.hook = None
+
+    def clock(self) -> float:
+        return self.t
+
+    async def sleep(self, seconds: float) -> None:
+        self.t += seconds
+        if self.hook:
+            self.hook()
+
+
+def _body(part_bytes: bytes) -> str:
+    head, _, rest = part_bytes.partition(b"\r\n\r\n")
+    assert head.startswith(b"--b\r\nContent-type: application/xml\r\nContent-length: ")
+    length = int(head.rsplit(b" ", 1)[1])
+    assert rest[length:] == b"\r\n"
+    return rest[:length].decode()
+
+
+def test_stream_sample_sends_new_data_and_heartbeats():
+    agent = small_agent()
+    plan = agent.stream_plan(
+        "sample", "m1", {"interval": "10", "heartbeat": "100", "path": "//DataItem[@name='line']"}
+    )
+    ft = FakeTime()
+
+    async def run():
+        gen = stream_parts(agent, plan, "b", sleep=ft.sleep, clock=ft.clock)
+        first = _body(await anext(gen))  # at once: nothing new yet
+        assert values(parse("Streams", first)) == {}
+        agent.ingest_line("m1", "2026-11-21T06:00:00Z|line|5")
+        second = _body(await anext(gen))
+        assert values(parse("Streams", second)) == {"m1_line": ["5"]}
+        t_before = ft.t
+        third = _body(await anext(gen))  # nothing new: an empty heartbeat part
+        assert values(parse("Streams", third)) == {}
+        assert ft.t - t_before >= 0.1
+        ft.hook = lambda: agent.ingest_line("m1", f"2026-11-21T06:00:01Z|line|{int(ft.t * 1000)}")
+        fourth = values(parse("Streams", _body(await anext(gen))))
+        assert len(fourth["m1_line"]) == 1
+        await gen.aclose()
+
+    asyncio.run(run())
+
+
+def test_stream_ends_with_out_of_range_when_the_buffer_overtakes_the_client():
+    agent = small_agent(buffer_size=128)
+    plan = agent.stream_plan("sample", None, {"interval": "10", "from": "1", "count": "5"})
+    ft = FakeTime()
+
+    async def run():
+        gen = stream_parts(agent, plan, "b", sleep=ft.sleep, clock=ft.clock)
+        _body(await anext(gen))
+        for i in range(300):  # the client falls 300 observations behind a 128-slot buffer
+            agent.ingest_line("m1", f"2026-11-21T06:00:00Z|line|{i}")
+        last = _body(await anext(gen))
+        assert error_code(last)[0] == "OUT_OF_RANGE"
+        with pytest.raises(StopAsyncIteration):
+            await anext(gen)
+
+    asyncio.run(run())
+
+
+def test_stream_current_repeats_every_interval():
+    agent = small_agent()
+    plan = agent.stream_plan("current", "m2", {"interval": "50"})
+    ft = FakeTime()
+
+    async def run():
+        gen = stream_parts(agent, plan, "b", sleep=ft.sleep, clock=ft.clock)
+        a = values(parse("Streams", _body(await anext(gen))))
+        agent.ingest_line("m2", "2026-11-21T06:00:00Z|exec|ACTIVE")
+        b = values(parse("Streams", _body(await anext(gen))))
+        assert a["m2_exec"] == ["UNAVAILABLE"] and b["m2_exec"] == ["ACTIVE"]
+        assert ft.t == pytest.approx(0.05)
+        await gen.aclose()
+
+    asyncio.run(run())
+
+
+def test_streaming_over_real_http():
+    """multipart/mixed parts as a real client sees them, from uvicorn on a loopback port."""
+    import threading
+
+    import httpx
+    import uvicorn
+
+    agent = small_agent()
+    app = FastAPI()
+    app.include_router(mtconnect_router(agent))
+    server = uvicorn.Server(uvicorn.Config(app, host="127.0.0.1", port=0, log_level="warning"))
+    thread = threading.Thread(target=server.run, daemon=True)
+    thread.start()
+    try:
+        wait_for(lambda: server.started)
+        port = server.servers[0].sockets[0].getsockname()[1]
+        start = agent.buffer.next_sequence
+        url = f"http://127.0.0.1:{port}/m1/sample?interval=20&heartbeat=200&from={start}"
+        with httpx.stream("GET", url, timeout=5.0) as r:
+            ctype = r.headers["content-type"]
+            assert ctype.startswith("multipart/mixed;boundary=")
+            boundary = ctype.split("=", 1)[1].encode()
+            buf = b""
+            agent.ingest_line("m1", "2026-11-21T06:00:00Z|exec|ACTIVE")
+            deadline = time.monotonic() + 5.0
+            for chunk in r.iter_bytes():
+                buf += chunk
+                if buf.count(b"--" + boundary) >= 2 and b"ACTIVE" in buf:
+                    break
+                assert time.monotonic() < deadline, buf[-500:]
+        parts = [p for p in buf.split(b"--" + boundary) if p.strip()]
+        bodies = [p.partition(b"\r\n\r\n")[2].rstrip(b"\r\n").decode() for p in parts]
+        for body in bodies:
+            if body.endswith("</MTConnectStreams>"):
+                parse("Streams", body)
+        assert any(">ACTIVE<" in b for b in bodies)
+    finally:
+        server.should_exit = True
+        thread.join(5)
