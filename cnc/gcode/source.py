@@ -16,6 +16,7 @@ filled by scanning forward from where the previous search stopped:
 
 from __future__ import annotations
 
+import itertools
 import os
 import re
 from collections.abc import Iterable, Iterator, Mapping, Sequence
@@ -151,8 +152,7 @@ def skip_leader(numbered: Lines) -> Lines:
                 except NcError:
                     pass
         break
-    yield from buffered
-    yield from it
+    return itertools.chain(buffered, it)
 
 
 class ProgramLibrary:
