@@ -629,3 +629,43 @@ def test_with_the_input_filter_an_estop_counts_at_the_fourth_sample():
         assert p.io.output("SpindleEnable")
     p.scan()
     assert p.nc.get("EStopActive") and [n for n in ACTUATORS if p.io.output(n)] == []
+
+
+@pytest.mark.parametrize("abort", ["estop", "panel_reset", "nc_reset", "remote_reset"])
+@pytest.mark.parametrize(("kind", "value"), [("M", 3), ("M", 8), ("T", 12), ("M", 6)])
+def test_handshake_aborted_by_estop_or_reset_and_then_repeated(kind, value, abort):
+    p = Plc()
+    p.ready()
+    if (kind, value) == ("M", 6):
+        p.function("T", 5)
+    p.nc.set("SCode", 2000)
+    p.strobe(kind, value)
+    p.run(200)  # mid-function: door locking / ramping / pumping / indexing / orienting
+    assert not p.nc.get(kind + "Finish")
+    if abort == "estop":
+        p.io.press_estop()
+    elif abort == "panel_reset":
+        p.io.press("PanelReset")
+    elif abort == "nc_reset":
+        p.nc.set("NcResetting", True)
+    else:
+        p.rt.write_once("RemReset", True)
+    p.scan()
+    assert not p.nc.get(kind + "Finish")
+    assert [n for n in ("SpindleFwd", "CoolantPump", "CarouselGo", "SpindleOrient")
+            if p.io.output(n)] == []  # fmt: skip
+    assert p.read("ToolStep") == 0
+    p.nc.set(kind + "Strobe", False)  # the NC abandons the function
+    p.io.release_estop()
+    p.io.release("PanelReset")
+    p.nc.set("NcResetting", False)
+    p.run(50)
+    if abort == "estop":
+        assert 1001 in p.rt.alarms
+        p.io.press("PanelReset")
+        p.scan()
+        p.io.release("PanelReset")
+        p.run(300)  # the drive is ready again 200 ms after the enable
+    assert p.rt.alarms == {}
+    p.function(kind, value)  # the same function again, to its finish
+    assert p.rt.alarms == {} and p.io.state.crashes == []
