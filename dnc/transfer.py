@@ -126,10 +126,24 @@ class DncClient:
         try:
             self._sock.sendall(self._encode(data))
         except OSError as exc:
+            self._raise_machine_reason()
             raise TransferError(
                 "cut_off", f"connection lost after {self.sent} bytes: {exc}", sent=self.sent
             ) from exc
         self.sent += len(data)
+
+    def _raise_machine_reason(self) -> None:
+        """When the line drops, the machine's last words (`ERR <alarm> ...`) say why."""
+        with contextlib.suppress(OSError):
+            while select.select([self._sock], [], [], 0.2)[0]:
+                data = self._sock.recv(4096)
+                if not data:
+                    break
+                self._inbox += strip_parity(data) if self.parity else data
+        start = self._inbox.find(b"ERR ")
+        if start >= 0 and b"\n" in self._inbox[start:]:
+            self._inbox = self._inbox[start:]
+            self._reply()  # raises the refusal with its alarm number
 
     def _poll_flow(self, wait: float) -> None:
         """Read what the machine sent; track XON/XOFF; keep everything else for replies."""
@@ -141,6 +155,7 @@ class DncClient:
         except OSError as exc:
             raise TransferError("cut_off", f"connection lost: {exc}", sent=self.sent) from exc
         if not data:
+            self._raise_machine_reason()
             raise TransferError(
                 "cut_off",
                 f"the machine closed the connection after {self.sent} bytes",
