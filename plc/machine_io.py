@@ -136,8 +136,11 @@ class MachineIO:
             self.state.pockets[p.tool_in_spindle - 1] = 0
         self.faults: set[str] = set()
         self._out = {s.name: (False if s.type == "BOOL" else 0) for s in signals(PLC_TO_FIELD)}
-        self._out_index = [(s.index, s.name, s.area) for s in signals(PLC_TO_FIELD)]
-        self._in_index = [(s.index, s.name, s.area) for s in signals(FIELD_TO_PLC)]
+        # (name, index) per image area, resolved once: the I/O copy runs every scan
+        self._out_bits = [(s.name, s.index) for s in signals(PLC_TO_FIELD) if s.area == "QX"]
+        self._out_words = [(s.name, s.index) for s in signals(PLC_TO_FIELD) if s.area == "QW"]
+        self._in_bits = [(s.name, s.index) for s in signals(FIELD_TO_PLC) if s.area == "IX"]
+        self._in_words = [(s.name, s.index) for s in signals(FIELD_TO_PLC) if s.area == "IW"]
         self._inputs: dict[str, bool | int] = {}
         self._last_ms: int | None = None
 
@@ -206,17 +209,18 @@ class MachineIO:
             self.step(now_ms - self._last_ms)
         self._last_ms = now_ms
         values = self.field_inputs()
-        for index, name, area in self._in_index:
-            if area == "IX":
-                ix[index] = values[name]
-            else:
-                iw[index] = values[name]
+        for name, index in self._in_bits:
+            ix[index] = values[name]
+        for name, index in self._in_words:
+            iw[index] = values[name]
         self.nc.apply_inputs(ix, iw)
 
     def write_outputs(self, qx: list[bool], qw: list[int], now_ms: int) -> None:
         out = self._out
-        for index, name, area in self._out_index:
-            out[name] = bool(qx[index]) if area == "QX" else qw[index]
+        for name, index in self._out_bits:
+            out[name] = qx[index]
+        for name, index in self._out_words:
+            out[name] = qw[index]
         self.nc.take_outputs(qx, qw)
         if self._last_ms is None:
             self._last_ms = now_ms
