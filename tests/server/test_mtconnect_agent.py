@@ -442,3 +442,84 @@ def test_random_streams_keep_header_invariants():
         h = header(parse("Streams", doc(a, "current")[1]))
         first, last, nxt = int(h["firstSequence"]), int(h["lastSequence"]), int(h["nextSequence"])
         assert nxt == last + 1 and nxt - first <= 32 and first >= 1
+
+
+# --- structure: what the MTConnect 2.5 schemas require, checked by hand ------------------
+
+STANDARD_ELEMENTS = {
+    "AVAILABILITY": "Availability",
+    "EMERGENCY_STOP": "EmergencyStop",
+    "CONTROLLER_MODE": "ControllerMode",
+    "EXECUTION": "Execution",
+    "PROGRAM": "Program",
+    "LINE_NUMBER": "LineNumber",
+    "BLOCK": "Block",
+    "PATH_FEEDRATE": "PathFeedrate",
+    "PATH_FEEDRATE_OVERRIDE": "PathFeedrateOverride",
+    "PART_COUNT": "PartCount",
+    "POSITION": "Position",
+    "ROTARY_VELOCITY": "RotaryVelocity",
+    "ROTARY_VELOCITY_OVERRIDE": "RotaryVelocityOverride",
+    "ROTARY_MODE": "RotaryMode",
+    "LOAD": "Load",
+    "ASSET_CHANGED": "AssetChanged",
+    "ASSET_REMOVED": "AssetRemoved",
+    "x:MODE_DETAIL": "x:ModeDetail",
+}
+
+
+def test_streams_structure_matches_the_probe():
+    from cnc.faces.shdr import ShdrFormatter
+    from cnc.status import Alarm, AxisStatus, MachineStatus
+    from server.mtconnect.model import pascal
+
+    a = small_agent()
+    f = ShdrFormatter(("X", "Y", "Z"))
+    status = MachineStatus(
+        execution="ACTIVE",
+        axes={"X": AxisStatus(1.0, 1.0)},
+        alarms=(Alarm(1, "a", "NC"), Alarm(2, "b", "NC", "WARNING")),
+    )
+    for line in f.dump(status, TS):
+        a.ingest_line("m1", line)
+    probe = parse("Devices", doc(a, "probe")[1])
+    dns = "{urn:mtconnect.org:MTConnectDevices:2.5}"
+    items = {e.get("id"): e.attrib for e in probe.iter(f"{dns}DataItem")}
+    comps = {
+        e.get("id"): e.tag.removeprefix(dns)
+        for e in probe.iter()
+        if e.get("id") and not e.tag.endswith("DataItem")
+    }
+    for t, name in STANDARD_ELEMENTS.items():
+        assert pascal(t) == name
+    root = parse("Streams", doc(a, "current")[1])
+    sns = "{urn:mtconnect.org:MTConnectStreams:2.5}"
+    xns = "{urn:fmscell:MTConnectStreams:2.5}"
+    seen = set()
+    for ds in root.find(f"{sns}Streams"):
+        assert ds.tag == f"{sns}DeviceStream" and ds.get("uuid")
+        for cs in ds:
+            assert cs.tag == f"{sns}ComponentStream"
+            assert comps[cs.get("componentId")] == cs.get("component")
+            order = [g.tag.removeprefix(sns) for g in cs]
+            assert order == sorted(order, key=["Samples", "Events", "Condition"].index)
+            for group in cs:
+                for obs in group:
+                    di = items[obs.get("dataItemId")]
+                    seen.add(di["id"])
+                    assert int(obs.get("sequence")) >= 1
+                    assert obs.get("timestamp").endswith("Z")
+                    assert obs.get("name") == di["name"]
+                    assert obs.get("subType") == di.get("subType")
+                    tag = obs.tag.replace(sns, "").replace(xns, "x:")
+                    if di["category"] == "CONDITION":
+                        assert group.tag == f"{sns}Condition"
+                        assert tag in ("Normal", "Warning", "Fault", "Unavailable")
+                        assert obs.get("type") == di["type"]
+                    else:
+                        assert tag == pascal(di["type"])
+                        wrapper = "Samples" if di["category"] == "SAMPLE" else "Events"
+                        assert group.tag == f"{sns}{wrapper}"
+                        if di["category"] == "SAMPLE" and obs.text != "UNAVAILABLE":
+                            float(obs.text)
+    assert set(items) == seen  # every data item of every device has a current value
