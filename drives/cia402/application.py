@@ -557,6 +557,10 @@ class Drive402:
 
     def _on_controlword(self, cw: int) -> None:
         prev = self._power.last_controlword
+        if cw == prev and self._power.state == State.OPERATION_ENABLED:
+            return  # the same word in every RPDO while enabled: no edge, nothing to do
+        # (other states re-evaluate a repeated word: e.g. Switch on succeeds once the DC
+        # link is charged)
         self._sm(cw)
         if self._power.state != State.OPERATION_ENABLED or self._power.stop is not None:
             return

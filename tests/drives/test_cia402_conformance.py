@@ -329,3 +329,15 @@ def test_statusword_and_0x603F_of_each_state_at_rest(state):
     assert d.read_object(0x6041, 0) == expected
     assert d.read_object(0x603F, 0) == (0x8130 if state in (FRA, F) else 0)
     assert d.error_register == (0x11 if state in (FRA, F) else 0)
+
+
+def test_repeated_switch_on_succeeds_once_the_dc_link_is_charged():
+    d = make(RTSO)
+    d.inject("supply_loss")
+    d.plant.vdc = 100.0
+    d.write_object(0x6040, 0, 0x07)
+    assert d.state == RTSO
+    d.clear_injection("supply_loss")
+    d.advance(T)  # the rectifier recharges the link
+    d.write_object(0x6040, 0, 0x07)  # the master repeats the same word (cyclic RPDO)
+    assert d.state == SO
