@@ -131,9 +131,10 @@ def shdr_timestamp(timestamp: float | str) -> str:
 def escape(value: str) -> str:
     """One SHDR token. Free text with `|`, quotes or backslashes is quoted the way the
     reference agent's tokenizer reads it back: `"` ... `"` with `\\` before each of them.
-    Line breaks would end the record, so they become spaces."""
+    Line breaks would end the record, so they become spaces; surrounding blanks go."""
     if "\n" in value or "\r" in value:
         value = value.replace("\r\n", " ").replace("\n", " ").replace("\r", " ")
+    value = value.strip()  # SHDR trims tokens; trimming here keeps quoted and plain alike
     if any(c in value for c in '|"\\'):
         quoted = value.replace("\\", "\\\\").replace('"', '\\"').replace("|", "\\|")
         return f'"{quoted}"'

@@ -6,6 +6,8 @@ import socket
 import time
 
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from cnc.faces.loop_thread import LoopThread
 from cnc.faces.shdr import ShdrAdapter, ShdrFormatter, escape, shdr_items, shdr_timestamp
@@ -127,6 +129,12 @@ def test_escaping_of_pipe_in_alarm_text_round_trips():
 def test_escape_is_read_back_by_the_agent_tokenizer(text):
     tokens = tokenize(f"{TS}|program|{escape(text)}|line|5")
     assert tokens == [TS, "program", text.strip(), "line", "5"]
+
+
+@settings(max_examples=300, deadline=None)
+@given(st.text(st.characters(blacklist_categories=("Cc", "Cs", "Zl", "Zp")), max_size=60))
+def test_any_text_survives_escape_and_tokenize(text):
+    assert tokenize(f"{TS}|block|{escape(text)}|line|7") == [TS, "block", text.strip(), "line", "7"]
 
 
 def test_line_breaks_in_text_cannot_split_a_record():
