@@ -2,12 +2,13 @@
 
 from server.mtconnect.agent import Agent, RestError
 from server.mtconnect.buffer import DEFAULT_BUFFER_SIZE, CircularBuffer, Observation
-from server.mtconnect.client import AdapterConnection, connect_cell
+from server.mtconnect.client import AdapterConnection, AgentConnections, connect_cell
 from server.mtconnect.model import DataItem, Device, build_device, devices_from_cell
 
 __all__ = [
     "DEFAULT_BUFFER_SIZE",
     "AdapterConnection",
+    "AgentConnections",
     "Agent",
     "CircularBuffer",
     "DataItem",

@@ -181,3 +181,59 @@ async def connect_cell(
         conn.start()
         out.append(conn)
     return out
+
+
+class AgentConnections:
+    """The agent's adapter connections on their own event-loop thread: the shell the cell
+    server starts and stops. `endpoints` maps device name -> (host, port)."""
+
+    def __init__(self, agent: Agent, endpoints: dict[str, tuple[str, int]], **kwargs) -> None:
+        for name in endpoints:
+            agent.device(name)
+        self.agent = agent
+        self.endpoints = dict(endpoints)
+        self.kwargs = kwargs
+        self.connections: dict[str, AdapterConnection] = {}
+        self._thread = None
+
+    @classmethod
+    def for_cell(
+        cls, agent: Agent, cell, ports: dict[str, int] | None = None, **kwargs
+    ) -> AgentConnections:
+        """Endpoints from a `CellConfig` (machines whose SHDR face is on); `ports` overrides
+        configured ports (a machine bound to port 0 reports its real one)."""
+        endpoints = {}
+        for name, machine in cell.machines.items():
+            port = (ports or {}).get(name, machine.ports.shdr)
+            if port:
+                endpoints[name] = (machine.ports.host, port)
+        return cls(agent, endpoints, **kwargs)
+
+    def start(self) -> AgentConnections:
+        from cnc.faces.loop_thread import LoopThread
+
+        if self._thread is not None:
+            return self
+        self._thread = LoopThread("mtconnect-agent").start()
+
+        async def go() -> None:
+            for name, (host, port) in self.endpoints.items():
+                conn = AdapterConnection(self.agent, name, host, port, **self.kwargs)
+                conn.start()
+                self.connections[name] = conn
+
+        self._thread.run(go)
+        return self
+
+    def stop(self) -> None:
+        thread, self._thread = self._thread, None
+        if thread is None:
+            return
+
+        async def halt() -> None:
+            for conn in self.connections.values():
+                await conn.stop()
+
+        thread.run(halt)
+        thread.stop()
+        self.connections.clear()

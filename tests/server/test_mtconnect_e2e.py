@@ -202,3 +202,29 @@ def test_unknown_device_refused_at_construction(agent):
 
 def _fields(s: MachineStatus) -> dict:
     return {name: getattr(s, name) for name in s.__dataclass_fields__}
+
+
+def test_agent_connections_for_a_cell(machine_loop):
+    """The cell server's shell: one agent, the default cell's machines, real adapters."""
+    from cnc.config import default_cell_config
+    from server.mtconnect import AgentConnections
+
+    cell = default_cell_config()
+    agent = Agent.from_cell(cell)
+    adapters = {}
+    for name, machine in cell.machines.items():
+        adapters[name] = ShdrAdapter(list(machine.axes), heartbeat_ms=HB_MS)
+        machine_loop.run(adapters[name].start)
+        adapters[name].publish(MachineStatus(execution="ACTIVE", part_count=len(name)), TS)
+    ports = {n: a.bound_port for n, a in adapters.items()}
+    conns = AgentConnections.for_cell(agent, cell, ports=ports, reconnect_interval_s=0.05).start()
+    try:
+        for name in cell.machines:
+            wait_for(lambda n=name: agent.value(n, "part_count") == str(len(n)))
+            assert agent.value(name, "exec") == "ACTIVE"
+        assert set(conns.connections) == set(cell.machines)
+    finally:
+        conns.stop()
+        for a in adapters.values():
+            machine_loop.run(a.stop)
+    assert conns.connections == {}
