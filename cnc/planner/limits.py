@@ -135,9 +135,12 @@ def junction_cap(
     Passing the junction at speed v adds to the sampled jerk of axis i at most
     0.75/T * |dk_i| v^2 (acceleration step) + |du_i| v / T^2 (velocity step), and to the
     sampled acceleration at most |du_i| v / T. A junction may use the share
-    w = min(1, gap / (3T (v + dv3))) of half the junction budget, `gap` being the length
-    of the piece before it: a 3-cycle window covers at most 3T (v + dv3) of path around a
-    junction passed at v, so the shares of all junctions inside one window sum to <= 2.
+    w = min(1, gap / (3T (v + dv3))) of a quarter of the junction budget, `gap` being the
+    length of one of its two pieces (the caller passes the longer one, counting only
+    what can never be trimmed away): a 3-cycle window covers at most 3T (v + dv3) of path
+    around a junction passed at v; the pieces between its first and last junction lie
+    inside it and each is the gap of at most two junctions, so with the two outermost
+    junctions the shares of one window sum to <= 4 quarters.
     """
     if not (du[0] or du[1] or du[2] or dk[0] or dk[1] or dk[2]):
         return INF
@@ -156,7 +159,7 @@ def junction_cap(
             dki = -dki
         if dui == 0.0 and dki == 0.0:
             continue
-        full = 0.5 * RHO_JUMP * lim.jerk[i]
+        full = 0.25 * RHO_JUMP * lim.jerk[i]
         x = k75 * dki / full
         if x > alpha:
             alpha = x
@@ -167,7 +170,7 @@ def junction_cap(
             x = k75 * dui * at_max / full
             if x > lose:
                 lose = x
-        x = dui / (0.5 * RHO_KINK_A * lim.acc[i] * t)
+        x = dui / (0.25 * RHO_KINK_A * lim.acc[i] * t)
         if x > gam:
             gam = x
     cap = _jerk_cap(alpha, beta, 1.0, lose, gap, t, c, lim.vtop)

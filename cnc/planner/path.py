@@ -198,7 +198,10 @@ class Path:
         dk = (kb[0] - ka[0], kb[1] - ka[1], kb[2] - ka[2])
         big = max(abs(du[0]), abs(du[1]), abs(du[2])) > KINK_SPAN_BREAK
         at_max = a.at if a.at > b.at else b.at
-        cap = junction_cap(self.lim, du, dk, ga.length, at_max, not big)
+        # b may still lose up to half its programmed length at its end (next blend)
+        after = gb.length - 0.5 * b.orig_len if isinstance(gb, Line) else gb.length
+        gap = ga.length if ga.length > after else after
+        cap = junction_cap(self.lim, du, dk, gap, at_max, not big)
         if (a.feed is None) != (b.feed is None) and big:
             cap = 0.0  # a corner between a rapid and a feed move is an exact stop
         a.jcap_end = cap

@@ -85,7 +85,7 @@ def programs(draw):
             cmds.append(StraightTraverse(line, end, g9))
         else:
             cmds.append(StraightFeed(line, end, draw(feed), g9))
-        if g9:
+        if g9 and end != pos:  # G9 on a move that goes nowhere is a no-op
             exact_ends.append(end)
         pos = end
     return cmds, tol, exact_ends, pos
