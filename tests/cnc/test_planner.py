@@ -309,3 +309,36 @@ def test_small_segment_circle_runs_at_95_percent_of_what_curvature_allows(radius
     # several 0.01 mm segments are consumed per IPO cycle: no L/T cap
     assert max(third) * params.ipo_cycle_s > 10 * 0.01
     assert_within_limits(params, samples, start)
+
+
+def test_single_block_switched_on_while_running_stops_at_a_reachable_block_end():
+    cmds = [
+        SetPathMode(0, PathMode.CONTINUOUS, 0.05),
+        StraightFeed(1, (-30.0, 0.0, 0.0), 6000.0),
+        StraightFeed(2, (-30.0, -30.0, 0.0), 6000.0),
+        StraightFeed(3, (0.0, -30.0, 0.0), 6000.0),
+        StraightFeed(4, (0.0, -60.0, 0.0), 6000.0),
+    ]
+    m = Motion(P)
+    for c in cmds:
+        m.push(c)
+    m.end_of_program()
+    samples = drive(m, 150)  # well into block 1, at speed
+    m.set_single_block(True)
+    stops = []
+    for _ in range(40000):
+        s = m.step()
+        samples.append(s)
+        if m.holding:
+            stops.append(s)
+            assert drive(m, 5)[-1].pose == s.pose
+            m.resume()
+        if m.idle:
+            break
+    assert len(stops) >= 2 and all(s.velocity == 0.0 for s in stops)
+    # every stop is a block end: on a blended corner the end of its blend (within P)
+    corners = [(-30.0, 0.0, 0.0), (-30.0, -30.0, 0.0), (0.0, -30.0, 0.0), (0.0, -60.0, 0.0)]
+    for s in stops:
+        assert min(math.dist(s.pose, c) for c in corners) < 0.2
+    assert samples[-1].pose == (0.0, -60.0, 0.0)
+    assert_within_limits(P, samples, ORIGIN)
