@@ -20,6 +20,16 @@ _LAZY = {
     "BusOverloadError": "drives.bus",
     "BusLoadWarning": "drives.bus",
     "CanopenSlave": "drives.cia301",
+    "Drive402": "drives.cia402",
+    "PlantParams": "drives.plant",
+    "VirtualDrive": "drives.virtual_drive",
+    "AxisGroup": "drives.master",
+    "AxisConfig": "drives.master",
+    "AxisFeedback": "drives.master",
+    "AxisFault": "drives.master",
+    "LineGroup": "drives.master",
+    "FaultInjector": "drives.faults",
+    "FAULT_KINDS": "drives.faults",
 }
 
 __all__ = ["EDS_PATH", *_LAZY]
