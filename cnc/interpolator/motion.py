@@ -306,13 +306,14 @@ class Motion:
             lead.stop = True
         return lead
 
-    def _stop_limits(self, k: int, s0: float, dist: float) -> tuple[float, float]:
+    def _stop_limits(self, k: int, s0: float, dist: float, v0: float) -> tuple[float, float]:
         segs = self.path.segs
         at = jt = float("inf")
         while k < len(segs):
             g = segs[k]
-            at = min(at, g.at)
-            jt = min(jt, g.jt)
+            gat, gjt = g.limits_at(v0)
+            at = min(at, gat)
+            jt = min(jt, gjt)
             if g.s1 >= s0 + dist:
                 break
             k += 1
@@ -322,19 +323,17 @@ class Motion:
         if v0 == 0.0:
             return []
         segs = self.path.segs
-        g = segs[k]
-        at, jt = g.at, g.jt
+        at, jt = segs[k].limits_at(v0)
         dist = change_distance(v0, 0.0, at, jt)
         for _ in range(4):
-            at, jt = self._stop_limits(k, s0, dist)
+            at, jt = self._stop_limits(k, s0, dist, v0)
             dist = change_distance(v0, 0.0, at, jt)
         extra = 0.0
         for _ in range(60):
             stop_s = s0 + dist * (1.0 + 1e-9) + extra + 1e-9
-            parts = partition(segs, k, s0, max(fo, 1.0), max(ro, 1.0), False, stop_s)
-            for p in parts:  # a hold only ever slows down
-                if p[2] > v0:
-                    p[2] = v0
+            # a hold only ever slows down: caps clamped to the current speed
+            parts = partition(segs, k, s0, max(fo, 1.0), max(ro, 1.0), False, stop_s, v0)
+            for p in parts:
                 if p[6] > v0:
                     p[6] = v0
             spans, ok = solve(parts, v0)

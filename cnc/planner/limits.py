@@ -85,12 +85,15 @@ def line_limits(lim: AxisLimits, u: tuple[float, ...]) -> tuple[float, float, fl
     return v, a, j
 
 
-def arc_limits(lim: AxisLimits, arc: Arc, normal_axis: int) -> tuple[float, float, float]:
+def arc_limits(
+    lim: AxisLimits, arc: Arc, normal_axis: int, vmax: float = INF
+) -> tuple[float, float, float]:
     """(speed cap, tangential accel, tangential jerk) of an arc or helix.
 
     In-plane speed is c*sdot (c = cos of the helix angle). The in-plane acceleration
     vector is (c*sddot, c^2 sdot^2 / r) and the jerk vector (c*s''' - c^3 sdot^3/r^2,
-    3 c^2 sdot sddot / r); any axis sees at most their length.
+    3 c^2 sdot sddot / r); any axis sees at most their length. With `vmax` below the
+    arc's own cap the tangential limits are those left over at vmax (larger).
     """
     # axis i sees at most |e_i| of an in-plane vector, |e_i| = sqrt(e1_i^2 + e2_i^2)
     ap = jp = vp = INF
@@ -104,10 +107,14 @@ def arc_limits(lim: AxisLimits, arc: Arc, normal_axis: int) -> tuple[float, floa
     c = arc.plane_fraction
     sa = arc.rise_fraction
     v = min(vp / c, sqrt(RHO_ARC_A * ap * r) / c, (RHO_ARC_J * jp * r * r) ** (1.0 / 3.0) / c)
+    if vmax < v:
+        v = vmax
     an_ = lim.acc[normal_axis] * (1.0 - RHO_KINK_A)
     jn_ = lim.jerk[normal_axis] * (1.0 - RHO_JUMP)
     if sa > 0.0:
         v = min(v, lim.vel[normal_axis] / sa)
+    if v <= 0.0:  # blocked (zero override): whatever tangential limits, no motion
+        return 0.0, ap / c, Q_TANGENT * jp / c
     an = c * c * v * v / r
     at = sqrt(max(ap * ap - an * an, 0.0)) / c
     # in-plane jerk: (c*s3 - c^3 sdot^3/r^2) along the tangent, 3 c^2 sdot sddot / r along

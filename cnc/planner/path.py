@@ -13,7 +13,7 @@ from cnc.canon import ArcFeed, PathMode, SetPathMode, StraightFeed, StraightTrav
 from cnc.errors import NcError
 from cnc.params import MachineParams
 from cnc.planner.geometry import Line, arc_from_canon, blend
-from cnc.planner.limits import AxisLimits, junction_cap, piece_limits
+from cnc.planner.limits import AxisLimits, arc_limits, junction_cap, piece_limits
 
 KINK_SPAN_BREAK = 1e-9  # tangent jumps above this end a velocity span (a = 0 there)
 
@@ -40,6 +40,10 @@ class Segment:
         "exact",
         "tolerance",
         "orig_len",
+        "lim_v",
+        "lim_at",
+        "lim_jt",
+        "lim",
     )
 
     def __init__(self, geom, line, block, feed, normal_axis, lim, exact, tolerance):
@@ -59,6 +63,18 @@ class Segment:
         self.exact = exact
         self.tolerance = tolerance
         self.orig_len = geom.length
+        self.lim = lim
+        self.lim_v = -1.0
+        self.lim_at = self.lim_jt = 0.0
+
+    def limits_at(self, v: float) -> tuple[float, float]:
+        """Tangential (accel, jerk) valid up to path speed v (arcs allow more when slower)."""
+        if v >= self.vphys or self.geom.kind != "arc":
+            return self.at, self.jt
+        if v != self.lim_v:
+            _v, self.lim_at, self.lim_jt = arc_limits(self.lim, self.geom, self.normal_axis, v)
+            self.lim_v = v
+        return self.lim_at, self.lim_jt
 
     def vcap(self, feed_ovr: float, rapid_ovr: float) -> float:
         if self.feed is None:

@@ -164,6 +164,7 @@ def partition(
     rapid_ovr: float,
     single_block: bool,
     stop_s: float | None,
+    vclamp: float = float("inf"),
 ) -> list[list]:
     """Cut the path from s_start to the next stop into spans.
 
@@ -177,27 +178,32 @@ def partition(
         a = s_start if s_start > g.s0 else g.s0
         b = g.s1
         vc = g.vcap(feed_ovr, rapid_ovr)
+        if vc > vclamp:
+            vc = vclamp
+        gat, gjt = g.limits_at(vc) if vc < g.vphys else (g.at, g.jt)
         stop_here = False
         if stop_s is not None and stop_s <= b:
             b = stop_s
             stop_here = True
         if cur is None:
-            cur = [a, b, vc, vc, g.at, g.jt, 0.0, False]
+            cur = [a, b, vc, vc, gat, gjt, 0.0, False]
         else:
             cur[1] = b
             if vc < cur[2]:
                 cur[2] = vc
             if vc > cur[3]:
                 cur[3] = vc
-            if g.at < cur[4]:
-                cur[4] = g.at
-            if g.jt < cur[5]:
-                cur[5] = g.jt
+            if gat < cur[4]:
+                cur[4] = gat
+            if gjt < cur[5]:
+                cur[5] = gjt
         if stop_here or g.stop_end or k == n - 1 or (single_block and g.block_last):
             cur[7] = True
             out.append(cur)
             return out
         vn = segs[k + 1].vcap(feed_ovr, rapid_ovr)
+        if vn > vclamp:
+            vn = vclamp
         jc = g.jcap_end
         lo = cur[2] if cur[2] < vn else vn
         hi = cur[3] if cur[3] > vn else vn
