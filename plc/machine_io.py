@@ -16,6 +16,7 @@ actions are methods (`open_door`, `press_estop`, `press`).
 
 from __future__ import annotations
 
+import os
 from dataclasses import dataclass, field
 
 from plc.image import ImageSize
@@ -392,7 +393,9 @@ def _pressure(on: bool, on_ms: int, dt_ms: int, delay_ms: int) -> tuple[int, boo
     return on_ms, on_ms >= delay_ms
 
 
-PROGRAM_PATH = __file__.rsplit("/", 1)[0] + "/programs/machine_tool.ld"
+PROGRAM_PATH = os.path.join(
+    os.path.dirname(os.path.abspath(__file__)), "programs", "machine_tool.ld"
+)
 
 
 def machine_plc(config=None, params: MachineParams | None = None, program_path: str | None = None):

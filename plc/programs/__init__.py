@@ -1,0 +1,1 @@
+"""The standard PLC programs shipped with fmscell (ladder text, `*.ld`)."""
