@@ -6,6 +6,8 @@ Prints one JSON object:
   look-ahead plan (spans, backward/forward passes, S-curves) per segment window, for a
   generated path of short G1 segments and arcs, look-ahead depth 200. This is the
   planner's work per segment when every segment is planned once.
+* `segments_per_cpu_s`: the same per second of this process's CPU time (the figure to
+  compare when the machine is shared).
 * `push_segments_per_s`, `plan_segments_per_s`: the two parts on their own.
 * `pipeline_segments_per_s`: the whole streaming loop (push, re-plan, IPO sampling at
   2 ms) in segments per wall-clock second, re-planning whenever new blocks arrive.
@@ -60,14 +62,17 @@ def bench_push_plan(n: int) -> dict:
     cmds = generated_path(n)
     m = Motion(params, start=(-100.0, -100.0, -10.0))
     t0 = time.perf_counter()
+    c0 = time.process_time()
     for c in cmds:
         m.push(c)
     t_push = time.perf_counter() - t0
+    c_push = time.process_time() - c0
     segs = m.path.segs
     # plan every window of DEPTH blocks once, as the look-ahead would see it
     windows = 0
     planned = 0
     t0 = time.perf_counter()
+    c0 = time.process_time()
     k = 0
     while k < len(segs):
         window = segs[k : k + DEPTH]
@@ -77,14 +82,17 @@ def bench_push_plan(n: int) -> dict:
         windows += 1
         k += DEPTH // 2
     t_plan = time.perf_counter() - t0
+    c_plan = time.process_time() - c0
     seg_count = len(segs)
     per_seg = t_push / seg_count + t_plan / planned
+    per_seg_cpu = c_push / seg_count + c_plan / planned
     return {
         "segments": seg_count,
         "blocks": n,
         "push_segments_per_s": seg_count / t_push,
         "plan_segments_per_s": planned / t_plan,
         "segments_per_s": 1.0 / per_seg,
+        "segments_per_cpu_s": 1.0 / per_seg_cpu,
     }
 
 

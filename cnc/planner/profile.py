@@ -129,13 +129,16 @@ def _peak_acc_limited(v0: float, v1: float, length: float, a: float, j: float) -
 
 
 def _peak_search(v0, v1, length, at, jt, lo, hi) -> float:
-    """Largest vp in [lo, hi] with both changes fitting `length` (Illinois regula falsi;
-    the returned side always fits)."""
+    """Largest vp in [lo, hi] with both changes fitting `length` (Illinois regula falsi).
+
+    The returned side always fits; whatever length is left is cruised at vp, so the
+    profile covers `length` exactly and a 1e-6 shortfall only costs that much speed.
+    """
     flo = change_distance(v0, lo, at, jt) + change_distance(lo, v1, at, jt) - length
     fhi = change_distance(v0, hi, at, jt) + change_distance(hi, v1, at, jt) - length
     side = 0
     for _ in range(100):
-        if hi - lo <= 1e-12 * hi:
+        if hi - lo <= 1e-12 * hi or -flo <= 1e-6 * length:
             break
         x = hi - fhi * (hi - lo) / (fhi - flo) if fhi != flo else 0.5 * (lo + hi)
         if not lo < x < hi:
