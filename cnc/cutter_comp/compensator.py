@@ -306,9 +306,11 @@ class CutterCompensation:
                 shape = clash.Arc.of(seg.start, seg.end, seg.center, seg.ccw, True)
             staged = _Staged(seg, own, shape, None if shape is None else clash.bbox(shape))
             if shape is not None:
+                # A trimmed element keeps exactly r from its own programmed element by
+                # construction; a corner arc need not (an arc after it may curl back).
+                skip = own if seg.role == "contour" else -1
                 for idx, prog, pshape, pbox in self._window:
-                    # An element's own offset keeps exactly r from it by construction.
-                    if idx >= own - self._lookahead and idx != own:
+                    if idx >= own - self._lookahead and idx != skip:
                         self._interfere(staged, prog, pshape, pbox)
             self._queue.append(staged)
 

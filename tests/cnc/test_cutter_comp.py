@@ -733,3 +733,20 @@ def test_g40_then_same_g41_before_any_move_keeps_the_contour():
     cc.start("left", 1.0)
     out += cc.push(L((10, 0), (10, 10), 3)) + cc.flush()
     assert [o.end for o in out] == [(0.0, 1.0), (9.0, 1.0), (9.0, 10.0)]
+
+
+def test_corner_arc_checked_against_a_curling_arc_after_it():
+    # Found by the sampled-oracle soak: a ccw arc about (3,1) from the origin, then a cw arc
+    # (R=2) that turns almost all the way round (-6 rad). With G42 r=1 the outside corner arc
+    # about their junction passes 0.008 from the second arc itself: a gouge.
+    c1 = (3.0, 1.0)
+    r1 = math.dist((0, 0), c1)
+    a = math.atan2(-1.0, -3.0) + 4.5
+    p1 = (c1[0] + r1 * math.cos(a), c1[1] + r1 * math.sin(a))
+    c2 = (p1[0], p1[1] - 2.0)
+    b = math.atan2(p1[1] - c2[1], p1[0] - c2[0]) - 6.0
+    p2 = (c2[0] + 2 * math.cos(b), c2[1] + 2 * math.sin(b))
+    segs = [L((-20, -20), (0, 0), 1), A((0, 0), p1, c1, True, 2), A(p1, p2, c2, False, 3)]
+    with pytest.raises(NcError) as e:
+        run("right", 1.0, segs, cancel=L(p2, (-20, -20), 4))
+    assert e.value.line == 3 and "line 3" in e.value.message
