@@ -43,7 +43,8 @@ class _Deviation:
         if not self.pieces:
             return
         j0 = max(self.j - 1, 0)
-        reach = travel + 2.0
+        # scanning too few pieces can only over-estimate the deviation, never hide it
+        reach = travel + 0.5
         base = self.cum[j0] - self.pieces[j0].length
         best = math.inf
         bj = self.j
@@ -52,7 +53,7 @@ class _Deviation:
             d = distance_to_piece(pose, self.pieces[k])
             if d < best:
                 best, bj = d, k
-            if self.cum[k] - base > reach and k > self.j:
+            if (self.cum[k] - base > reach and k > self.j + 1) or k > j0 + 2000:
                 break
             k += 1
         self.j = bj

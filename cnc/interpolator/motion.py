@@ -59,6 +59,8 @@ class Motion:
         if start is None:
             start = (0.0, 0.0, 0.0)
         self._pose = tuple(float(x) for x in start)
+        if len(self._pose) != 3:
+            raise NcError(f"the planner moves X Y Z poses; got a start pose of {len(start)} axes")
         self.path = Path(params, self.lim, self._pose)
         self.single_block = False
         self._feed_ovr = 1.0
