@@ -209,7 +209,8 @@ def plan_cmd(
         from cnc.interp import Interpreter
 
         try:
-            text = file.read_text(encoding="latin-1")
+            # streamed line by line: memory does not grow with the program's size
+            fh = open(file, encoding="latin-1", newline=None)  # noqa: SIM115 - closed below
         except OSError as e:
             raise NcError(f"cannot read program: {e.strerror}", file=str(file)) from e
         interp = Interpreter(params, file=str(file))
@@ -228,8 +229,9 @@ def plan_cmd(
                     )
 
             ipo = None if ipo_ms is None else ipo_ms / 1000.0
-            report = plan_run(params, interp.run(text), start, ipo, on_sample)
+            report = plan_run(params, interp.run(fh), start, ipo, on_sample)
         finally:
+            fh.close()
             if out is not None:
                 out.close()
         st = interp.state
