@@ -27,7 +27,7 @@ _LAZY = {
     "AxisConfig": "drives.master",
     "AxisFeedback": "drives.master",
     "AxisFault": "drives.master",
-    "LineGroup": "drives.master",
+    "AxisError": "drives.master",
     "FaultInjector": "drives.faults",
     "FAULT_KINDS": "drives.faults",
 }
