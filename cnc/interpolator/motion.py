@@ -109,7 +109,10 @@ class Motion:
 
     def end_of_program(self) -> None:
         """No more commands will come: the path end is final."""
-        self._eop = True
+        if not self._eop:
+            self._eop = True
+            self.path.finish()
+            self._dirty = True
 
     # -- operator -----------------------------------------------------------------------
     def set_feed_override(self, f: float) -> None:

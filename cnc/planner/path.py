@@ -159,13 +159,31 @@ class Path:
     def add_sync(self, cmd) -> None:
         if self.segs:
             self.segs[-1].sync_after.append(cmd)
+            self._finalised(len(self.segs) - 1)
         else:
             self.head_sync.append(cmd)
+
+    def finish(self) -> None:
+        """End of program: the last segment keeps its length."""
+        if self.segs:
+            self._finalised(len(self.segs) - 1)
+
+    def _finalised(self, i: int) -> None:
+        """Segment i's length is final: its start junction may now count it as its gap."""
+        if i <= 0:
+            return
+        before, seg = self.segs[i - 1], self.segs[i]
+        if before.exact or before.sync_after or not isinstance(seg.geom, Line):
+            return
+        if before.s1 != seg.s0:
+            return
+        self._set_junction(before, seg, True)
 
     def _join(self, prev: Segment, seg: Segment, protect_s: float) -> None:
         """Decide the junction prev -> seg: blend, pass at a capped speed, or stop."""
         seg.s0 = prev.s1
         if prev.exact or prev.sync_after:
+            self._finalised(len(self.segs) - 1)
             return  # prev.stop_end stays True: exact stop or sync point
         pg, sg = prev.geom, seg.geom
         if (
@@ -173,11 +191,13 @@ class Path:
             and isinstance(sg, Line)
             and (prev.feed is None) == (seg.feed is None)
         ):
-            # each line end may use half of the programmed line; never reshape what the
-            # executor has committed to
-            avail1 = min(0.5 * prev.orig_len, pg.length, prev.s1 - max(protect_s, prev.s0))
-            avail2 = 0.5 * sg.length
-            res = blend(pg.end, pg.u, sg.u, prev.tolerance, avail1, avail2) if avail1 > 0 else None
+            # the blend may use what is left of prev (never what the executor has committed
+            # to) and of seg: all of it when prev's rest is at most 3/4 of seg (so chains of
+            # short lines become chains of arcs with no leftover line between them), else
+            # half, the other half being kept for seg's own end
+            rest = min(pg.length, prev.s1 - max(protect_s, prev.s0))
+            avail2 = rest if rest <= 0.75 * sg.length else 0.5 * sg.length
+            res = blend(pg.end, pg.u, sg.u, prev.tolerance, rest, avail2) if rest > 0 else None
             if res is not None:
                 arc, d = res
                 lim = self.lim
@@ -192,30 +212,32 @@ class Path:
                     before = self.segs[-1] if self.segs else None
                     bseg.s0 = prev.s0
                     if before is not None and not before.stop_end:
-                        self._set_junction(before, bseg)
+                        self._set_junction(before, bseg, True)
                 else:
                     prev.geom = pg.with_ends(pg.start, arc.start)
                     prev.s1 = prev.s0 + prev.geom.length
                     prev.block_last = False
                     bseg.s0 = prev.s1
-                    self._set_junction(prev, bseg)
+                    self._finalised(len(self.segs) - 1)
+                    self._set_junction(prev, bseg, True)
                 bseg.s1 = bseg.s0 + arc.length
                 self.segs.append(bseg)
                 seg.geom = sg.with_ends(arc.end, sg.end)
                 seg.s0 = bseg.s1
-                self._set_junction(bseg, seg)
+                self._set_junction(bseg, seg, False)
                 return
-        self._set_junction(prev, seg)
+        self._finalised(len(self.segs) - 1)
+        self._set_junction(prev, seg, False)
 
-    def _set_junction(self, a: Segment, b: Segment) -> None:
+    def _set_junction(self, a: Segment, b: Segment, b_final: bool) -> None:
         ga, gb = a.geom, b.geom
         ta, tb, ka, kb = ga.t1, gb.t0, ga.k1, gb.k0
         du = (tb[0] - ta[0], tb[1] - ta[1], tb[2] - ta[2])
         dk = (kb[0] - ka[0], kb[1] - ka[1], kb[2] - ka[2])
         big = max(abs(du[0]), abs(du[1]), abs(du[2])) > KINK_SPAN_BREAK
         at_max = a.at if a.at > b.at else b.at
-        # b may still lose up to half its programmed length at its end (next blend)
-        after = gb.length - 0.5 * b.orig_len if isinstance(gb, Line) else gb.length
+        # a line that is still the last piece may yet be used up by the next blend
+        after = gb.length if b_final or not isinstance(gb, Line) else 0.0
         gap = ga.length if ga.length > after else after
         cap = junction_cap(self.lim, du, dk, gap, at_max, not big)
         if (a.feed is None) != (b.feed is None) and big:

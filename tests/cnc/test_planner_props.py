@@ -168,3 +168,44 @@ def test_operator_events_never_break_the_limits(prog, evs):
     assert_within_limits(params, samples, start)
     assert max_deviation(samples, programmed_pieces(cmds, start)) <= tol + 1e-9
     assert samples[-1].pose == final
+
+
+@st.composite
+def polylines(draw):
+    """CAM-like chains of short lines (rounded to 0.1 um), bending at random."""
+    n = draw(st.integers(min_value=3, max_value=40))
+    tol = draw(st.sampled_from([0.001, 0.005, 0.02]))
+    step = draw(st.sampled_from([0.01, 0.05, 0.2, 1.0]))
+    pos = (0.0, 0.0, 0.0)
+    ang = draw(st.floats(min_value=0.0, max_value=6.28))
+    cmds = [SetPathMode(1, PathMode.CONTINUOUS, tol)]
+    for i in range(n):
+        ang += draw(st.floats(min_value=-0.6, max_value=0.6))
+        ln = step * draw(st.floats(min_value=0.3, max_value=1.7))
+        dz = draw(st.sampled_from([0.0, 0.0, -0.2 * step]))
+        end = tuple(
+            round(v, 4)
+            for v in (pos[0] + ln * math.cos(ang), pos[1] + ln * math.sin(ang), pos[2] + dz)
+        )
+        if end == pos:
+            continue
+        cmds.append(StraightFeed(i + 2, end, draw(feed)))
+        pos = end
+    return cmds, tol, pos
+
+
+@settings(
+    max_examples=int(__import__("os").environ.get("PLANNER_EXAMPLES", "25")),
+    deadline=None,
+    suppress_health_check=[HealthCheck.too_slow],
+    derandomize=not __import__("os").environ.get("PLANNER_RANDOM"),
+)
+@given(polylines(), st.sampled_from([0.0005, 0.002, 0.008]))
+def test_short_segment_chains_respect_limits_and_tolerance(prog, ipo):
+    cmds, tol, final = prog
+    params = MachineParams(ipo_cycle_s=ipo)
+    start = (0.0, 0.0, 0.0)
+    samples, _ = run(params, cmds, start)
+    assert_within_limits(params, samples, start, ipo)
+    assert max_deviation(samples, programmed_pieces(cmds, start)) <= tol + 1e-9
+    assert samples[-1].pose == final
