@@ -175,8 +175,8 @@ class Path:
         before, seg = self.segs[i - 1], self.segs[i]
         if before.exact or before.sync_after or not isinstance(seg.geom, Line):
             return
-        if before.s1 != seg.s0:
-            return
+        if before.s1 != seg.s0 or seg.geom.length <= before.geom.length:
+            return  # not joined, or the gap (the longer piece) does not change
         self._set_junction(before, seg, True)
 
     def _join(self, prev: Segment, seg: Segment, protect_s: float) -> None:
