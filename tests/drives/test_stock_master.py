@@ -1,0 +1,126 @@
+"""The Python contract: an unchanged stock `canopen.BaseNode402` master drives a VirtualDrive
+served in realtime on python-can's `virtual` interface.
+
+Realtime on purpose: BaseNode402 waits on the wall clock (0.2-0.8 s per step). Every wait
+here is the stock library's own, bounded by its timeouts; the event timer 0x1800:05 makes the
+statusword TPDO periodic (10 ms) as canopen 2.4.1 expects once it has seen two of them.
+"""
+
+from __future__ import annotations
+
+import time
+
+import can
+import canopen
+import pytest
+
+from drives import EDS_PATH, VirtualDrive
+
+CHANNEL = "fmscell-stock-master"
+NODE = 2
+
+
+@pytest.fixture
+def stock():
+    drive_bus = can.Bus(interface="virtual", channel=CHANNEL)
+    vd = VirtualDrive(
+        NODE,
+        drive_bus,
+        switches={"initial_position": 0.016},  # 6 mm above the dog's edge
+        objects={(0x6099, 1): 40_000, (0x6099, 2): 4_000, 0x609A: 1_000_000},
+    ).start()
+    network = canopen.Network()
+    node = canopen.BaseNode402(NODE, EDS_PATH)
+    network.add_node(node)
+    network.connect(interface="virtual", channel=CHANNEL)
+    yield network, node, vd
+    network.disconnect()
+    vd.stop()
+    drive_bus.shutdown()
+
+
+def _boot_and_enable(network, node):
+    node.nmt.send_command(0x81)  # reset node
+    node.nmt.wait_for_bootup(timeout=2.0)
+    node.sdo[0x1017].raw = 50
+    # Stock reconfiguration: RPDO2 (controlword + mode) off, so that op_mode goes by SDO (the
+    # default layout would send a stale controlword with every mode change); TPDOs also
+    # every 10 ms (event timer).
+    node.pdo.read()
+    node.rpdo[2].enabled = False
+    node.rpdo.save()
+    for n in (1, 2):
+        node.tpdo[n].event_timer = 10
+    node.tpdo.save()
+    node.setup_402_state_machine()
+    node.nmt.state = "OPERATIONAL"
+    assert node.nmt.wait_for_heartbeat(timeout=1.0) == "OPERATIONAL"
+    node.tpdo[1].wait_for_reception(timeout=1.0)
+    node.state = "SWITCH ON DISABLED"
+    node.state = "OPERATION ENABLED"
+    assert node.state == "OPERATION ENABLED"
+
+
+def test_stock_master_boots_enables_homes_moves_and_follows(stock):
+    network, node, vd = stock
+    _boot_and_enable(network, node)
+    assert vd.state_name == "OPERATION ENABLED"
+
+    # homing with dog and creep: method 21 (negative home switch, final approach positive)
+    node.sdo[0x6098].raw = 21
+    node.sdo[0x607C].raw = 0
+    assert node.homing(timeout=10.0) is True
+    assert vd.drive.homed
+    assert vd.table_position_m - vd.position_actual * 1e-6 == pytest.approx(0.010, abs=5e-6)
+
+    # modes: switch and read back through the stock op_mode property
+    node.op_mode = "PROFILED VELOCITY"
+    assert node.op_mode == "PROFILED VELOCITY"
+    assert vd.drive.mode_display == 3
+    assert vd.state_name == "OPERATION ENABLED"  # the mode change did not disturb the state
+
+    # profile position: a relative-free absolute move of 5 mm
+    node.op_mode = "PROFILED POSITION"
+    assert node.op_mode == "PROFILED POSITION"
+    node.sdo[0x6081].raw = 50_000  # 50 mm/s
+    node.rpdo_pointers[0x607A].raw = 5_000  # RPDO1 carries controlword + target
+    node.controlword = 0x0F
+    node.controlword = 0x1F  # new set-point
+    deadline = time.monotonic() + 3.0
+    while not node.statusword & 0x1000:  # set-point acknowledge
+        assert time.monotonic() < deadline, f"no set-point acknowledge: 0x{node.statusword:04X}"
+        node.check_statusword(timeout=0.5)
+    node.controlword = 0x0F  # release the set-point bit: handshake done
+    tpdo = node.tpdo[1]
+    while not (node.statusword & 0x0400 and abs(tpdo["Position actual value"].raw - 5_000) < 10):
+        assert time.monotonic() < deadline, f"PP move not done: 0x{node.statusword:04X}"
+        node.check_statusword(timeout=0.5)
+    assert node.state == "OPERATION ENABLED"
+
+    # cyclic synchronous position: SYNC + RPDO targets from the master, TPDO positions back
+    node.op_mode = "CYCLIC SYNCHRONOUS POSITION"
+    assert node.op_mode == "CYCLIC SYNCHRONOUS POSITION"
+    node.sdo[0x60C2][1].raw = 5  # 5 ms interpolation period
+    node.rpdo[1].trans_type = 1
+    node.rpdo.save()
+    node.tpdo[1].trans_type = 1
+    node.tpdo[1].event_timer = 0
+    node.tpdo.save()
+    seen = []
+    node.tpdo[1].add_callback(lambda m: seen.append(m["Position actual value"].raw))
+    rpdo = node.rpdo[1]
+    rpdo["Controlword"].raw = 0x0F
+    start = 5_000
+    next_t = time.perf_counter()
+    for k in range(1, 201):  # 1 s at 5 ms: 10 mm/s ramp from 5 mm
+        rpdo["Target position"].raw = start + 50 * k
+        rpdo.transmit()
+        network.sync.transmit()
+        next_t += 0.005
+        time.sleep(max(0.0, next_t - time.perf_counter()))  # the master's cycle pacing
+    node.tpdo[1].wait_for_reception(timeout=0.5)
+    assert len(seen) >= 150  # one TPDO per SYNC (a few may still be in flight)
+    assert seen[-1] > seen[len(seen) // 2] > start  # it follows the ramp
+    # Kv lag: 10 mm/s / 16.67 1/s = 0.6 mm behind the last target, within a cycle or two
+    assert start + 50 * 200 - seen[-1] == pytest.approx(600, abs=150)
+    assert node.state == "OPERATION ENABLED"
