@@ -9,7 +9,11 @@ PLC; the stock server (ModbusTcpServer + ModbusDeviceContext over ModbusSequenti
 coils 9216 / di 1024 / ir 1024 / hr 2048 like our default map) has no scan.
 
 Prints one JSON object. Targets: >= 15k req/s on one connection, >= 30k req/s on eight.
-Usage: bench_modbus.py [--seconds 10] [--client-procs 2] [--switch-interval 0.0005]
+Usage: bench_modbus.py [--seconds 10] [--client-procs 2] [--switch-interval 0.0005] [--floor]
+
+--floor adds a trivial asyncio responder (fixed answer, no Modbus) to the same alternation:
+the ceiling of any asyncio server on the box at that moment, to tell a slow face from a busy
+box.
 """
 
 from __future__ import annotations
@@ -105,6 +109,31 @@ def serve_pymodbus(ready, stop, switch_interval: float) -> None:
         while not stop.is_set():
             await asyncio.sleep(0.05)
         await server.shutdown()
+
+    asyncio.run(main())
+
+
+def serve_floor(ready, stop, switch_interval: float) -> None:
+    """Reference, not a Modbus server: an asyncio protocol that answers every segment with a
+    fixed 29-byte FC03 response. The ceiling any asyncio server can reach on this box now."""
+    import asyncio
+
+    sys.setswitchinterval(switch_interval)
+    answer = struct.pack(">HHHBBB", 1, 0, 23, 1, 3, 20) + bytes(20)
+
+    class Echo(asyncio.Protocol):
+        def connection_made(self, transport) -> None:
+            self.transport = transport
+
+        def data_received(self, data: bytes) -> None:
+            self.transport.write(answer)
+
+    async def main() -> None:
+        server = await asyncio.get_running_loop().create_server(Echo, "127.0.0.1", 0)
+        ready.put(server.sockets[0].getsockname()[1])
+        while not stop.is_set():
+            await asyncio.sleep(0.05)
+        server.close()
 
     asyncio.run(main())
 
@@ -241,11 +270,22 @@ def main() -> None:
         default=0.0005,
         help="sys.setswitchinterval in both server processes (the anchor's scan-thread advice)",
     )
+    ap.add_argument(
+        "--floor",
+        action="store_true",
+        help="also measure a trivial asyncio responder (the box's asyncio ceiling right now)",
+    )
     args = ap.parse_args()
     load_before = os.getloadavg()[0]
     ours_srv, ours_ready, ours_stop, ours_port = start_server(serve_ours, args.switch_interval)
     peer_srv, _, peer_stop, peer_port = start_server(serve_pymodbus, args.switch_interval)
     ports = {"ours": ours_port, "pymodbus": peer_port}
+    extra = []
+    if args.floor:
+        floor_srv, _, floor_stop, ports["asyncio_floor"] = start_server(
+            serve_floor, args.switch_interval
+        )
+        extra.append((floor_srv, floor_stop))
     try:
         one = measure(ports, 1, 1, args.seconds)
         eight = measure(ports, 8, args.client_procs, args.seconds)
@@ -254,6 +294,8 @@ def main() -> None:
         lateness = ours_ready.get(timeout=20)
         stop_server(ours_srv, ours_stop)
         stop_server(peer_srv, peer_stop)
+        for srv, stop in extra:
+            stop_server(srv, stop)
     for run in (one, eight):
         windows = run["ours"]["windows"]
         run["ours"]["scan_lateness"] = _lateness_stats(
@@ -263,6 +305,14 @@ def main() -> None:
             del r["windows"]
     o1, o8 = one["ours"]["req_per_s"], eight["ours"]["req_per_s"]
     p1, p8 = one["pymodbus"]["req_per_s"], eight["pymodbus"]["req_per_s"]
+    floor = (
+        {
+            "asyncio_floor_1conn_req_s": one["asyncio_floor"]["req_per_s"],
+            "asyncio_floor_8conn_req_s": eight["asyncio_floor"]["req_per_s"],
+        }
+        if args.floor
+        else {}
+    )
     print(
         json.dumps(
             {
@@ -282,6 +332,7 @@ def main() -> None:
                 "target_8conn_req_s": TARGET_8,
                 "meets_target_1conn": o1 >= TARGET_1,
                 "meets_target_8conn": o8 >= TARGET_8,
+                **floor,
                 "ours_detail": {"1conn": one["ours"], "8conn": eight["ours"]},
                 "pymodbus_detail": {"1conn": one["pymodbus"], "8conn": eight["pymodbus"]},
                 "peer": "pymodbus 3.16.1 ModbusTcpServer + ModbusDeviceContext "
