@@ -36,7 +36,7 @@ DEPTH = 200
 
 def generated_path(n: int) -> list:
     """CAM-like path: 0.1 mm G1 segments along a slowly bending curve (the turn per
-    segment varies smoothly), sinking slowly in Z, with a radius-2 arc every 50 blocks."""
+    segment varies smoothly), sinking slowly in Z, with a tangent radius-2 helix quarter every 50 blocks."""
     cmds = [SetPathMode(0, PathMode.CONTINUOUS, 0.01)]
     x, y, z = -100.0, -100.0, -10.0
     ang = 0.0
@@ -46,7 +46,9 @@ def generated_path(n: int) -> list:
             cx, cy = x - 2.0 * math.sin(ang), y + 2.0 * math.cos(ang)
             ang += math.pi / 2
             x, y = cx + 2.0 * math.sin(ang), cy - 2.0 * math.cos(ang)
-            cmds.append(ArcFeed(i, (x, y, z), (cx, cy, z), Plane.XY, False, 6000.0))
+            z0 = z
+            z -= 0.005 * math.pi  # same slope as the lines: the helix joins them tangentially
+            cmds.append(ArcFeed(i, (x, y, z), (cx, cy, z0), Plane.XY, False, 6000.0))
             continue
         step = 0.1
         ang += 0.02 * math.sin(i * 0.01)
