@@ -9,6 +9,8 @@ is then an exact stop.
 
 from __future__ import annotations
 
+from math import isfinite
+
 from cnc.canon import ArcFeed, PathMode, SetPathMode, StraightFeed, StraightTraverse
 from cnc.errors import NcError
 from cnc.params import MachineParams
@@ -114,6 +116,8 @@ class Path:
         end = tuple(float(x) for x in cmd.end)
         if len(end) != len(start):
             raise NcError(f"pose has {len(end)} axes, machine has {len(start)}", cmd.line)
+        if not all(isfinite(x) for x in end):
+            raise NcError(f"end point {end} is not a finite position", cmd.line)
         exact = self.mode is PathMode.EXACT_STOP or cmd.exact_stop
         if isinstance(cmd, StraightTraverse):
             geom = Line(start, end)
@@ -126,6 +130,8 @@ class Path:
         elif isinstance(cmd, ArcFeed):
             normal = cmd.plane.value
             center = tuple(float(x) for x in cmd.center)
+            if not all(isfinite(x) for x in center):
+                raise NcError(f"arc centre {center} is not a finite position", cmd.line)
             r0 = _plane_dist(start, center, normal)
             r1 = _plane_dist(end, center, normal)
             if r0 <= 1e-9 or r1 <= 1e-9:
@@ -153,6 +159,8 @@ class Path:
     def _feed(self, cmd) -> float:
         if not cmd.feed or cmd.feed <= 0.0:
             raise NcError("feed move without a feed rate (F)", cmd.line)
+        if not isfinite(cmd.feed):
+            raise NcError(f"feed rate {cmd.feed} is not finite", cmd.line)
         f = cmd.feed / 60.0
         return f if f < self.max_feed else self.max_feed
 

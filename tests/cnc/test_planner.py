@@ -342,3 +342,20 @@ def test_single_block_switched_on_while_running_stops_at_a_reachable_block_end()
         assert min(math.dist(s.pose, c) for c in corners) < 0.2
     assert samples[-1].pose == (0.0, -60.0, 0.0)
     assert_within_limits(P, samples, ORIGIN)
+
+
+@pytest.mark.parametrize(
+    "cmd",
+    [
+        StraightFeed(5, (math.nan, 0.0, 0.0), 1000.0),
+        StraightFeed(5, (-1.0, 0.0, 0.0), math.inf),
+        StraightTraverse(5, (-1.0, math.inf, 0.0)),
+        ArcFeed(5, (-2.0, 0.0, 0.0), (-1.0, math.nan, 0.0), Plane.XY, True, 1000.0),
+        ArcFeed(5, (-2.0, 0.0, 0.0), (0.0, 0.0, 0.0), Plane.XY, True, 1000.0),  # radius 0
+    ],
+)
+def test_bad_motion_commands_are_nc_errors_with_the_line(cmd):
+    m = Motion(P)
+    with pytest.raises(NcError) as e:
+        m.push(cmd)
+    assert e.value.line == 5
