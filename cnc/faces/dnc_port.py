@@ -211,7 +211,9 @@ class DncPort:
                     self._error(exc)
                     await conn.reply(f"ERR {exc.alarm} {exc.text}")
                     if exc.alarm in FATAL_TO_CONNECTION:
-                        return  # the stream is mid-tape: resynchronising is the host's job
+                        # The stream is mid-tape: resynchronising is the host's job.
+                        await conn.linger()
+                        return
         except (ConnectionError, asyncio.IncompleteReadError):
             pass
         except asyncio.CancelledError:
@@ -445,6 +447,20 @@ class _Conn:
         data = (text + "\n").encode("ascii", "replace")
         self.writer.write(add_parity(data) if self.parity else data)
         await self.writer.drain()
+
+    async def linger(self, limit_s: float = 1.0) -> None:
+        """Half-close, then discard what the peer still sends until it closes too.
+
+        Closing a socket with unread data makes TCP send a reset, and a reset can destroy
+        the ERR reply in flight: the host would see "connection reset" instead of the
+        alarm that explains it.
+        """
+        with contextlib.suppress(Exception):
+            self.writer.write_eof()
+            deadline = time.monotonic() + limit_s
+            while time.monotonic() < deadline:
+                if not await asyncio.wait_for(self.reader.read(65536), deadline - time.monotonic()):
+                    break
 
     async def send_control(self, code: int) -> None:
         data = bytes([code])

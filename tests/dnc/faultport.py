@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import contextlib
 import socket
+import struct
 import threading
 import time
 from dataclasses import dataclass
@@ -54,29 +55,33 @@ class FaultPort:
             self._threads.append(t)
 
     def _pump(self, client: socket.socket, upstream: socket.socket, fault: Fault) -> None:
-        done = threading.Event()
-
-        def down() -> None:  # machine -> client
+        def down() -> None:  # machine -> client; a half-close passes through as one
             with contextlib.suppress(OSError):
-                while not done.is_set():
+                while True:
                     data = upstream.recv(4096)
                     if not data:
+                        client.shutdown(socket.SHUT_WR)
                         break
                     client.sendall(data)
-            done.set()
 
-        threading.Thread(target=down, daemon=True).start()
+        downstream = threading.Thread(target=down, daemon=True)
+        downstream.start()
         seen = 0
         try:
-            while not done.is_set():
+            while True:
                 data = client.recv(4096)
                 if not data:
                     break
                 if seen <= fault.at < seen + len(data):
                     cut = fault.at - seen
-                    if fault.kind == "drop":
+                    if fault.kind == "drop":  # the cable is pulled: no goodbyes either way
                         upstream.sendall(data[:cut])
-                        break
+                        for sock in (client, upstream):
+                            sock.setsockopt(
+                                socket.SOL_SOCKET, socket.SO_LINGER, struct.pack("ii", 1, 0)
+                            )
+                            sock.close()
+                        return
                     if fault.kind == "corrupt":
                         data = data[:cut] + bytes([data[cut] ^ 0x02]) + data[cut + 1 :]
                     elif fault.kind == "xoff_hold":
@@ -91,7 +96,9 @@ class FaultPort:
         except OSError:
             pass
         finally:
-            done.set()
+            with contextlib.suppress(OSError):
+                upstream.shutdown(socket.SHUT_WR)
+            downstream.join(5)
             for s in (client, upstream):
                 with contextlib.suppress(OSError):
                     s.shutdown(socket.SHUT_RDWR)
