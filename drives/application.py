@@ -63,8 +63,14 @@ class DriveApplication(Protocol):
         """NMT state changed: 'INITIALISING', 'PRE-OPERATIONAL', 'OPERATIONAL', 'STOPPED'."""
 
     def on_communication_fault(self, error_code: int) -> None:
-        """The 301 layer detected a fault (0x8130 heartbeat lost, 0x8110 overrun, 0x8140
-        bus-off recovered, 0x8210 PDO length): react per 0x6007 abort connection option code."""
+        """The 301 layer detected a fault: 0x8130 heartbeat or life guarding lost, 0x8110 CAN
+        overrun, 0x8140 recovered from bus-off, 0x8100 SYNC time-out, 0x8210/0x8220 RPDO
+        shorter/longer than mapped, 0x8240 SYNC length, 0x8250 RPDO deadline. React per the
+        0x6007 abort connection option code (the slave has already sent the EMCY)."""
+
+    # Optional: `on_nmt_reset(scope)` with scope "node" or "communication". The slave calls
+    # it, when defined, to tell the two NMT resets apart (on_nmt_state sees INITIALISING for
+    # both); a drive maps "node" to its power-on reset.
 
     def take_emcy(self) -> list[EmcyRequest]:
         """EMCYs raised since the last call, oldest first."""

@@ -79,6 +79,13 @@ def run(
     duration_s: float = typer.Option(
         0.0, "--duration-s", help="Stop after this long (0 = until ^C)"
     ),
+    machine_io: bool = typer.Option(
+        False,
+        "--machine-io",
+        help="Wire the simulated machine (spindle, coolant, tool changer, door, E-stop chain, "
+        "air, lube) as the I/O, for the machine-tool program; also opens the remote panel "
+        "allow-list unless --writable is given",
+    ),
 ) -> None:
     """Run a program standalone in realtime with its Modbus TCP face until interrupted."""
     import signal
@@ -98,7 +105,14 @@ def run(
         raise typer.Exit(1) from None
     config = RuntimeConfig(period_ms=period_ms, watchdog_ms=watchdog_ms, debounce_samples=debounce)
     store = FileRetainStore(retain) if retain else None
-    runtime = Runtime(program, config, retain_store=store)
+    io = None
+    if machine_io:
+        from plc.machine_io import MachineIO
+        from plc.remote_panel import WRITABLE
+
+        io = MachineIO()
+        writable = writable or WRITABLE
+    runtime = Runtime(program, config, retain_store=store, io=io)
     from plc.modbus import AllowListError, ModbusFace
 
     try:
