@@ -178,6 +178,10 @@ class AxisGroup:
         Write 0x1006 = IPO cycle so a drive faults (0x8100) when SYNC stops for 1.5 cycles.
     bitrate:
         For the load plan of buses that are not simulated (a hub knows its own).
+    paced:
+        Lockstep only: pace each `cycle()` to the wall clock (absolute deadlines) and count
+        a cycle late when it finishes after the next slot: a deterministic core run in
+        real time from one thread.
     """
 
     def __init__(
@@ -194,6 +198,7 @@ class AxisGroup:
         bitrate: int = 1_000_000,
         eds_path: str = EDS_PATH,
         boot_timeout_s: float = 2.0,
+        paced: bool = False,
     ) -> None:
         bus_list = list(buses) if isinstance(buses, list | tuple) else [buses]
         if not bus_list:
@@ -213,6 +218,9 @@ class AxisGroup:
         if len(kinds) > 1:
             raise ValueError("axis group: cannot mix lockstep hubs with realtime buses")
         self.lockstep = kinds.pop()
+        if paced and not self.lockstep:
+            raise ValueError("axis group: paced=True is for lockstep hubs (realtime is paced)")
+        self.paced = paced
         self.ipo_cycle_s = ipo_cycle_s
         self.heartbeat_ms = heartbeat_ms
         self.heartbeat_timeout_factor = heartbeat_timeout_factor
@@ -544,7 +552,7 @@ class AxisGroup:
                 if not math.isfinite(mm):
                     raise ValueError(f"axis {name}: target {mm!r} is not a finite number")
                 axis.target = round(mm * axis.cfg.units_per_mm)
-        if not self.lockstep:
+        if self.paced or not self.lockstep:
             self._pace()
         with self._cond:
             self.cycle_count += 1
@@ -557,7 +565,7 @@ class AxisGroup:
                     axis.target = axis.pos  # hold: only an enabled axis follows targets
                 send(_frame(axis.rpdo_cob, pack(axis.cw, axis.target)))
         self._heartbeat()
-        if not self.lockstep:
+        if self.paced or not self.lockstep:
             self._sync_sent_at = time.perf_counter()
         for line in self._lines:
             line.bus.send(_frame(0x080, b""))
@@ -569,6 +577,12 @@ class AxisGroup:
             for hub in self._hubs:
                 hub.advance(self.ipo_cycle_s)
             self.time += self.ipo_cycle_s
+            if self.paced:
+                done = time.perf_counter()
+                self.stats.cycles += 1
+                self.stats.tpdo_latency_s.append(done - self._sync_sent_at)
+                if done > self._slot + self.ipo_cycle_s:
+                    self.stats.late_cycles += 1
         else:
             self._await_tpdos(n)
             self.time = time.perf_counter() - self._t0
