@@ -212,9 +212,23 @@ class Motion:
             return self._spans[self._si].s1
         return self._s
 
+    def _in_coast(self) -> bool:
+        """Inside the constant-speed cycles around a junction: its sampling window must
+        see no path acceleration, so no re-plan may start here."""
+        if self._si >= len(self._spans):
+            return False
+        sp = self._spans[self._si]
+        if self._v == 0.0:
+            return False
+        return self._t < sp.coast_in_t or (
+            sp.coast_out_t > 0.0 and self._t > sp.dur - sp.coast_out_t
+        )
+
     def _maybe_replan(self) -> None:
         if self._sb_wait or (self._hold and self._v == 0.0 and not self._spans):
             self._urgent = False
+            return
+        if self._in_coast():
             return
         if (
             self._urgent
@@ -253,7 +267,8 @@ class Motion:
             elif self.single_block:
                 spans = self._plan_single_block(k, s0, v0, fo, ro)
             else:
-                spans, _ok = solve(partition(segs, k, s0, fo, ro, False, None), v0)
+                parts = partition(segs, k, s0, fo, ro, False, None, ipo=self.ipo)
+                spans, _ok = solve(parts, v0, self.ipo)
         self._spans = ([lead] if lead is not None else []) + spans
         self._si = 0
         self._t = 0.0
@@ -337,11 +352,11 @@ class Motion:
         for _ in range(60):
             stop_s = s0 + dist * (1.0 + 1e-9) + extra + 1e-9
             # a hold only ever slows down: caps clamped to the current speed
-            parts = partition(segs, k, s0, max(fo, 1.0), max(ro, 1.0), False, stop_s, v0)
+            parts = partition(segs, k, s0, max(fo, 1.0), max(ro, 1.0), False, stop_s, v0, self.ipo)
             for p in parts:
                 if p[6] > v0:
                     p[6] = v0
-            spans, ok = solve(parts, v0)
+            spans, ok = solve(parts, v0, self.ipo)
             if ok:
                 return spans
             extra = extra * 2.0 + 0.05 * dist + 1e-6
@@ -356,8 +371,8 @@ class Motion:
                 kk += 1
             if kk >= len(segs):
                 kk = len(segs) - 1
-            parts = partition(segs, k, s0, fo, ro, False, segs[kk].s1)
-            spans, ok = solve(parts, v0)
+            parts = partition(segs, k, s0, fo, ro, False, segs[kk].s1, ipo=self.ipo)
+            spans, ok = solve(parts, v0, self.ipo)
             if ok:
                 break
             kk += 1
@@ -407,7 +422,9 @@ class Motion:
                 if getattr(sp, "single_block_stop", False):
                     self._sb_wait = True
                 return
-            if self._dirty:
+            if self._dirty and not (
+                self._si < len(self._spans) and self._spans[self._si].coast_in_t > 0.0
+            ):
                 self._replan()
 
     def _arrived(self) -> None:

@@ -192,6 +192,87 @@ def junction_cap(
     return cap if cap > 0.0 else 0.0
 
 
+def coast_cap(
+    lim: AxisLimits,
+    du: tuple[float, ...],
+    dk: tuple[float, ...],
+    kacc: tuple[float, ...],
+    kjerk: tuple[float, ...],
+) -> float:
+    """Highest speed for a junction passed in a *coast*: 3 IPO cycles of constant path
+    speed on both sides (no path acceleration or jerk), so within its sampling window the
+    only continuous terms are the centripetal ones of the two pieces (kacc_i v^2 and
+    kjerk_i v^3, per axis). The junction may then use the continuous budget
+    ((1 - RHO_JUMP) J, (1 - RHO_KINK_A) A); the junction shares stay for the junctions
+    inside spans that may fall in the same window.
+    """
+    t = lim.ipo
+    k75 = 0.75 / t
+    a3 = a2 = a1 = 0.0  # normalised jerk coefficients of v^3, v^2, v
+    b2 = b1 = 0.0  # normalised acceleration coefficients of v^2, v
+    for i in range(3):
+        dui = abs(du[i])
+        dki = abs(dk[i])
+        bj = (1.0 - RHO_JUMP) * lim.jerk[i]
+        ba = (1.0 - RHO_KINK_A) * lim.acc[i]
+        x = kjerk[i] / bj
+        if x > a3:
+            a3 = x
+        x = k75 * dki / bj
+        if x > a2:
+            a2 = x
+        x = dui / (t * t * bj)
+        if x > a1:
+            a1 = x
+        x = kacc[i] / ba
+        if x > b2:
+            b2 = x
+        x = dui / (t * ba)
+        if x > b1:
+            b1 = x
+    v = lim.vtop
+    # acceleration: b2 v^2 + b1 v <= 1
+    if b2 > 0.0:
+        v = min(v, 2.0 / (b1 + sqrt(b1 * b1 + 4.0 * b2)))
+    elif b1 > 0.0:
+        v = min(v, 1.0 / b1)
+    # jerk: a3 v^3 + a2 v^2 + a1 v <= 1, Newton from an upper bound (convex, increasing)
+    if a3 > 0.0:
+        v = min(v, a3 ** (-1.0 / 3.0))
+    if a2 > 0.0:
+        v = min(v, a2**-0.5)
+    if a1 > 0.0:
+        v = min(v, 1.0 / a1)
+    for _ in range(40):
+        h = ((a3 * v + a2) * v + a1) * v - 1.0
+        if h <= 0.0:
+            return v
+        nv = v - h / ((3.0 * a3 * v + 2.0 * a2) * v + a1)
+        if nv >= v * (1.0 - 1e-14):
+            break
+        v = nv
+    v *= 1.0 - 1e-10
+    while v > 0.0 and ((a3 * v + a2) * v + a1) * v > 1.0:
+        v *= 0.5
+    return v
+
+
+def centripetal(lim: AxisLimits, geom) -> tuple[tuple[float, ...], tuple[float, ...]]:
+    """Per-axis (accel / v^2, jerk / v^3) of constant-speed motion on a piece."""
+    if not isinstance(geom, Arc):
+        return (0.0, 0.0, 0.0), (0.0, 0.0, 0.0)
+    c = geom.plane_fraction
+    r = min(geom.r0, geom.r1)
+    e1, e2 = geom.e1, geom.e2
+    ka = []
+    kj = []
+    for i in range(3):
+        e = sqrt(e1[i] * e1[i] + e2[i] * e2[i])
+        ka.append(e * c * c / r)
+        kj.append(e * c * c * c / (r * r))
+    return tuple(ka), tuple(kj)
+
+
 def _jerk_cap(alpha, beta, full, lose, gap, t, c, vtop) -> float:
     """Largest v <= vtop with alpha v^2 + beta v + lose <= full * min(1, gap / (3T (v + c))).
 

@@ -15,7 +15,14 @@ from cnc.canon import ArcFeed, PathMode, SetPathMode, StraightFeed, StraightTrav
 from cnc.errors import NcError
 from cnc.params import MachineParams
 from cnc.planner.geometry import Line, arc_from_canon, blend
-from cnc.planner.limits import AxisLimits, arc_limits, junction_cap, piece_limits
+from cnc.planner.limits import (
+    AxisLimits,
+    arc_limits,
+    centripetal,
+    coast_cap,
+    junction_cap,
+    piece_limits,
+)
 
 KINK_SPAN_BREAK = 1e-9  # tangent jumps above this end a velocity span (a = 0 there)
 
@@ -37,6 +44,8 @@ class Segment:
         "normal_axis",
         "stop_end",
         "jcap_end",
+        "jcoast_end",
+        "jump_end",
         "break_end",
         "sync_after",
         "exact",
@@ -60,6 +69,8 @@ class Segment:
         self.vphys, self.at, self.jt = piece_limits(lim, geom, normal_axis)
         self.stop_end = True  # until the next piece is known
         self.jcap_end = 0.0
+        self.jcoast_end = 0.0
+        self.jump_end = True
         self.break_end = True
         self.sync_after: list = []
         self.exact = exact
@@ -250,7 +261,21 @@ class Path:
         cap = junction_cap(self.lim, du, dk, gap, at_max, not big)
         if (a.feed is None) != (b.feed is None) and big:
             cap = 0.0  # a corner between a rapid and a feed move is an exact stop
+        jump = bool(du[0] or du[1] or du[2] or dk[0] or dk[1] or dk[2])
+        coast = 0.0
+        if jump and cap > 0.0:
+            ka1, kj1 = centripetal(self.lim, ga)
+            ka2, kj2 = centripetal(self.lim, gb)
+            coast = coast_cap(
+                self.lim,
+                du,
+                dk,
+                tuple(max(x, y) for x, y in zip(ka1, ka2, strict=True)),
+                tuple(max(x, y) for x, y in zip(kj1, kj2, strict=True)),
+            )
         a.jcap_end = cap
+        a.jcoast_end = coast
+        a.jump_end = jump
         a.break_end = big
         a.stop_end = cap <= 0.0
 

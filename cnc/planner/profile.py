@@ -33,6 +33,8 @@ class Span:
         "vmax",
         "jerk_limit",
         "single_block_stop",
+        "coast_in_t",
+        "coast_out_t",
     )
 
     def __init__(self, s0, s1, phases, dur, v0, v1, stop, vmax, jerk_limit=0.0):
@@ -46,6 +48,8 @@ class Span:
         self.vmax = vmax
         self.jerk_limit = jerk_limit
         self.single_block_stop = False
+        self.coast_in_t = 0.0  # leading/trailing constant-speed time around a junction
+        self.coast_out_t = 0.0
 
     def state(self, t: float, hint: int = 0) -> tuple[float, float, float, int]:
         """(s, v, a, phase index) at time t into the span; s is absolute and clamped."""
@@ -168,10 +172,15 @@ def partition(
     single_block: bool,
     stop_s: float | None,
     vclamp: float = float("inf"),
+    ipo: float = 0.0,
 ) -> list[list]:
     """Cut the path from s_start to the next stop into spans.
 
-    Each item: [s0, s1, vmax, vmax_hi, at, jt, end_cap, stop].
+    Each item: [s0, s1, vmax, vmax_hi, at, jt, end_cap, stop, coast_cap, coast_in,
+    coast_out]. A boundary at a junction with a tangent or curvature jump is passed in a
+    coast (3 IPO cycles of constant speed each side) when that allows a higher speed than
+    the junction's share inside a span; each coast may use at most half of a span that
+    has a coast at both ends (all of it otherwise), so the spans always hold them.
     """
     out: list[list] = []
     cur = None
@@ -189,7 +198,7 @@ def partition(
             b = stop_s
             stop_here = True
         if cur is None:
-            cur = [a, b, vc, vc, gat, gjt, 0.0, False]
+            cur = [a, b, vc, vc, gat, gjt, 0.0, False, 0.0, False, False]
         else:
             cur[1] = b
             if vc < cur[2]:
@@ -203,7 +212,8 @@ def partition(
         if stop_here or g.stop_end or k == n - 1 or (single_block and g.block_last):
             cur[7] = True
             out.append(cur)
-            return out
+            cur = None
+            break
         vn = segs[k + 1].vcap(feed_ovr, rapid_ovr)
         if vn > vclamp:
             vn = vclamp
@@ -212,16 +222,39 @@ def partition(
         hi = cur[3] if cur[3] > vn else vn
         if g.break_end or jc < lo or lo < SPAN_RATIO * hi:
             cur[6] = jc if jc < lo else lo
+            if g.jump_end and ipo > 0.0:
+                jco = g.jcoast_end
+                cur[8] = jco if jco < lo else lo
             out.append(cur)
             cur = None
         k += 1
     if cur is not None:
         cur[7] = True
         out.append(cur)
+    if ipo > 0.0:
+        _coasts(out, ipo)
     return out
 
 
-def solve(parts: list[list], v_start: float) -> tuple[list[Span], bool]:
+def _coasts(parts: list[list], ipo: float) -> None:
+    """Decide which span boundaries are passed in a coast, and at what speed."""
+    n = len(parts)
+    cand = [p[8] > p[6] for p in parts]
+    t3 = 3.0 * ipo
+    for i in range(n - 1):
+        if not cand[i]:
+            continue
+        left, right = parts[i], parts[i + 1]
+        room_l = (left[1] - left[0]) * (0.5 if i > 0 and cand[i - 1] else 1.0)
+        room_r = (right[1] - right[0]) * (0.5 if cand[i + 1] and not right[7] else 1.0)
+        v = min(left[8], room_l / t3, room_r / t3)
+        if v > left[6]:
+            left[6] = v
+            left[10] = True
+            right[9] = True
+
+
+def solve(parts: list[list], v_start: float, ipo: float = 0.0) -> tuple[list[Span], bool]:
     """Backward and forward passes over the spans, then one S-curve per span.
 
     The flag is False when the start speed is too high to meet a later cap (the plan then
@@ -231,11 +264,20 @@ def solve(parts: list[list], v_start: float) -> tuple[list[Span], bool]:
     ok = True
     if n == 0:
         return [], ok
+    t3 = 3.0 * ipo
+    eff = []
+    for i, p in enumerate(parts):
+        length = p[1] - p[0]
+        if p[9] and i > 0:
+            length -= t3 * parts[i - 1][6]
+        if p[10]:
+            length -= t3 * p[6]
+        eff.append(length if length > 0.0 else 0.0)
     vb = [0.0] * (n + 1)
     vb[n] = 0.0 if parts[-1][7] else parts[-1][6]
     for i in range(n - 1, -1, -1):
         p = parts[i]
-        v = reach(vb[i + 1], p[1] - p[0], p[4], p[5])
+        v = reach(vb[i + 1], eff[i], p[4], p[5])
         if v > p[2]:
             v = p[2]
         if i > 0 and v > parts[i - 1][6]:
@@ -245,18 +287,29 @@ def solve(parts: list[list], v_start: float) -> tuple[list[Span], bool]:
     v = v_start
     for i in range(n):
         p = parts[i]
-        length = p[1] - p[0]
         at, jt = p[4], p[5]
+        length = eff[i]
         v1 = reach(v, length, at, jt)
         if v1 > vb[i + 1]:
             v1 = vb[i + 1]
         if v > v1 and change_distance(v, v1, at, jt) > length * (1.0 + 1e-12) + 1e-12:
             v1 = min_reach(v, length, at, jt)
             ok = False
-        phases, _vp = span_phases(v, v1, p[2], length, at, jt)
+        # the coasts actually run at v and v1 (<= the caps reserved above)
+        cin = t3 if p[9] and v > 0.0 else 0.0
+        cout = t3 if p[10] and v1 > 0.0 else 0.0
+        middle = p[1] - p[0] - cin * v - cout * v1
+        phases, _vp = span_phases(v, v1, p[2], middle if middle > 0.0 else 0.0, at, jt)
+        if cin:
+            phases.insert(0, (cin, 0.0))
+        if cout:
+            phases.append((cout, 0.0))
         rows, dur, _s, _v, _a = integrate(phases, v)
         if not rows:
             rows = [(0.0, 0.0, 0.0, v, 0.0, 0.0)]
-        spans.append(Span(p[0], p[1], rows, dur, v, v1, p[7] and i == n - 1, p[2], jt))
+        sp = Span(p[0], p[1], rows, dur, v, v1, p[7] and i == n - 1, p[2], jt)
+        sp.coast_in_t = cin
+        sp.coast_out_t = cout
+        spans.append(sp)
         v = v1
     return spans, ok
