@@ -437,3 +437,26 @@ def test_realtime_group_on_a_realtime_hub():
     finally:
         g.close()
         hub.close()
+
+
+def test_realtime_group_on_python_can_virtual_bus():
+    channel = "fmscell-test-group-virtual"
+    drive_bus = can.Bus(interface="virtual", channel=channel)
+    master_bus = can.Bus(interface="virtual", channel=channel)
+    vd = VirtualDrive(3, drive_bus, substep=1e-3).start()
+    g = AxisGroup(master_bus, [AxisConfig("Z", 3)], ipo_cycle_s=0.004)
+    try:
+        g.boot()
+        g.configure()
+        g.enable(timeout_s=2.0)
+        assert vd.state_name == "OPERATION ENABLED"
+        z0 = g.position_mm("Z")
+        for i in range(100):
+            fb = g.cycle({"Z": z0 + 0.01 * i})
+        assert fb.state["Z"] == "OPERATION ENABLED"
+        assert g.position_mm("Z") > z0 + 0.3  # it followed the ramp (about 1 mm long)
+    finally:
+        g.close()
+        vd.stop()
+        master_bus.shutdown()
+        drive_bus.shutdown()
