@@ -78,8 +78,8 @@ def bench_push_plan(n: int) -> dict:
     k = 0
     while k < len(segs):
         window = segs[k : k + DEPTH]
-        parts = partition(window, 0, window[0].s0, 1.0, 1.0, False, None)
-        spans, _ok = solve(parts, 0.0)
+        parts = partition(window, 0, window[0].s0, 1.0, 1.0, False, None, ipo=params.ipo_cycle_s)
+        spans, _ok = solve(parts, 0.0, params.ipo_cycle_s)
         planned += len(window)
         windows += 1
         k += DEPTH // 2
