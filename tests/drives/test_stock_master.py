@@ -3,7 +3,9 @@ served in realtime on python-can's `virtual` interface.
 
 Realtime on purpose: BaseNode402 waits on the wall clock (0.2-0.8 s per step). Every wait
 here is the stock library's own, bounded by its timeouts; the event timer 0x1800:05 makes the
-statusword TPDO periodic (10 ms) as canopen 2.4.1 expects once it has seen two of them.
+statusword TPDO periodic (50 ms) as canopen 2.4.1 expects once it has seen two of them.
+(`homing()` reads the status right after one TPDO wait: a timer TPDO already in flight
+when the start bit goes out would show the old status; a longer timer makes that rare.)
 """
 
 from __future__ import annotations
@@ -45,12 +47,12 @@ def _boot_and_enable(network, node):
     node.sdo[0x1017].raw = 50
     # Stock reconfiguration: RPDO2 (controlword + mode) off, so that op_mode goes by SDO (the
     # default layout would send a stale controlword with every mode change); TPDOs also
-    # every 10 ms (event timer).
+    # every 50 ms (event timer).
     node.pdo.read()
     node.rpdo[2].enabled = False
     node.rpdo.save()
     for n in (1, 2):
-        node.tpdo[n].event_timer = 10
+        node.tpdo[n].event_timer = 50
     node.tpdo.save()
     node.setup_402_state_machine()
     node.nmt.state = "OPERATIONAL"
