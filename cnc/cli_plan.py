@@ -22,43 +22,41 @@ INCH_MM = 25.4
 
 
 class _Deviation:
-    """Distance of each sample from the programmed (unblended) path, searched near the
-    piece last matched: motion runs forward along the path, so a short forward scan
-    suffices."""
+    """Distance of each sample from the programmed (unblended) path.
+
+    Motion blocks are numbered in push order as the planner numbers them, so a sample
+    of block k is compared with the programmed moves k-1, k and k+1 (a G64 blend belongs
+    to block k and deviates from k and k+1). Moves behind are dropped: memory stays
+    bounded by the look-ahead.
+    """
 
     def __init__(self) -> None:
-        self.pieces: list = []
-        self.cum: list[float] = []
-        self.j = 0
+        self.pieces: dict[int, object] = {}
+        self.count = 0
+        self.low = 1
         self.worst = 0.0
 
     def add(self, piece) -> None:
-        total = self.cum[-1] if self.cum else 0.0
-        self.pieces.append(piece)
-        self.cum.append(total + piece.length)
+        self.count += 1
+        self.pieces[self.count] = piece
 
-    def sample(self, pose, travel: float) -> None:
+    def sample(self, pose, block: int) -> None:
         from cnc.planner.geometry import distance_to_piece
 
-        if not self.pieces:
+        if block <= 0:
             return
-        j0 = max(self.j - 1, 0)
-        # scanning too few pieces can only over-estimate the deviation, never hide it
-        reach = travel + 0.5
-        base = self.cum[j0] - self.pieces[j0].length
         best = math.inf
-        bj = self.j
-        k = j0
-        while k < len(self.pieces):
-            d = distance_to_piece(pose, self.pieces[k])
-            if d < best:
-                best, bj = d, k
-            if (self.cum[k] - base > reach and k > self.j + 1) or k > j0 + 2000:
-                break
-            k += 1
-        self.j = bj
-        if best > self.worst:
+        for k in (block - 1, block, block + 1):
+            g = self.pieces.get(k)
+            if g is not None:
+                d = distance_to_piece(pose, g)
+                if d < best:
+                    best = d
+        if best != math.inf and best > self.worst:
             self.worst = best
+        while self.low < block - 1:
+            self.pieces.pop(self.low, None)
+            self.low += 1
 
 
 def plan_run(
@@ -119,7 +117,7 @@ def plan_run(
                     )
                 else:
                     piece = Line(pos, end)
-                if piece.length > 0.0:
+                if piece.length > 1e-12:  # the planner drops shorter moves too
                     dev.add(piece)
                     if isinstance(cmd, StraightTraverse):
                         rapid_len += piece.length
@@ -156,7 +154,7 @@ def plan_run(
                 jmax[i] = abs(j)
             v1[i] = v
             a1[i] = a
-        dev.sample(p, s.velocity * t)
+        dev.sample(p, motion.block)
         prev = list(p)
         if on_sample is not None:
             on_sample(s)

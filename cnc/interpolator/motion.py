@@ -79,6 +79,7 @@ class Motion:
         self._kdone = 0  # first segment not yet finished
         self._blocks_done = 0
         self._line = 0
+        self._last_block = 0
         self._sync_queue: list = []
         self._waiting = None
         self._dirty = False
@@ -183,6 +184,20 @@ class Motion:
     @property
     def pose(self) -> tuple[float, ...]:
         return self._pose
+
+    @property
+    def block(self) -> int:
+        """Number (1, 2, ... in push order) of the motion block under the current position;
+        0 before the first. Moves shorter than 1e-12 mm are dropped and not numbered."""
+        segs = self.path.segs
+        if self._kp < len(segs) and self._s > 0.0:
+            return segs[self._kp].block
+        return self._last_block
+
+    @property
+    def path_position(self) -> float:
+        """Path length travelled since the start, mm."""
+        return self._s
 
     # -- the IPO cycle ------------------------------------------------------------------
     def step(self) -> Sample:
@@ -447,6 +462,7 @@ class Motion:
             kd += 1
         if kp < n:
             g = segs[kp]
+            self._last_block = g.block
             # at a piece end take the stored end point: s0 + length - s0 may round short
             self._pose = g.geom.end if s >= g.s1 else g.geom.point(s - g.s0)
             self._line = g.line

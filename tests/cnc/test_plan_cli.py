@@ -127,3 +127,33 @@ def test_demo_runs_the_sample_program(capsys):
     out = capsys.readouterr().out
     assert "interpreter -> planner -> interpolator" in out
     assert "final machine position X-120.0000, Y-100.0000, Z-5.0000" in out
+
+
+REPEATS = """%
+O0001
+G21 G90 G17 G64 P0.01
+G0 X-20 Y-20 Z-5
+M98 P200 L3
+G0 Z0
+M30
+O200
+G1 X-40 Y-20 F3000
+G1 Y-40
+G1 X-20
+G1 Y-20
+M99
+%
+"""
+
+
+def test_deviation_is_measured_against_the_block_being_run(tmp_path):
+    # the same square three times: a nearest-piece search could match a later pass
+    p = tmp_path / "rep.nc"
+    p.write_text(REPEATS)
+    res = invoke(p, "--json")
+    assert res.exit_code == 0, res.output
+    rep = json.loads(res.output)
+    assert rep["moves"] == 14
+    assert 0.0 < rep["max_path_deviation_mm"] <= 0.01 + 1e-9
+    assert rep["path_length_mm"] == pytest.approx(3 * 80.0, rel=1e-12)
+    assert rep["final_position"] == {"X": -20.0, "Y": -20.0, "Z": 0.0}
