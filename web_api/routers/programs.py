@@ -1,0 +1,256 @@
+"""Programs: upload (JSON or a multipart file), list and search, one program with history."""
+
+from __future__ import annotations
+
+import dataclasses
+from pathlib import PurePath
+from typing import Annotated, Any
+
+from fastapi import APIRouter, Depends, Path, Query, Request
+from fastapi.concurrency import run_in_threadpool
+from fastapi.exceptions import RequestValidationError
+from fastapi.responses import JSONResponse
+from pydantic import BaseModel, ValidationError
+from starlette.datastructures import UploadFile
+
+from dnc.tape import read_header
+from web_api.problems import ApiProblem, problem_doc
+from web_api.routers import Services, decode_cursor, get_services, next_link
+from web_api.routers.auth import Programmer, Viewer
+from web_api.schemas import (
+    DbId,
+    MachineKind,
+    Name,
+    Program,
+    ProgramCreate,
+    ProgramCreated,
+    ProgramDetail,
+    ProgramPage,
+    Revision,
+    RevisionCreate,
+    Tag,
+)
+
+router = APIRouter(tags=["programs"], responses=problem_doc(400, 401, 403, 422, 503))
+Svc = Annotated[Services, Depends(get_services)]
+FORM_FIELDS = ("number", "name", "machine_kind", "description", "tags", "comment")
+
+
+def upload_body(json_model: type[BaseModel], form_fields: dict[str, Any]) -> dict:
+    """OpenAPI requestBody for a route taking JSON or a multipart file upload."""
+    return {
+        "requestBody": {
+            "required": True,
+            "content": {
+                "application/json": {
+                    "schema": {"$ref": f"#/components/schemas/{json_model.__name__}"}
+                },
+                "multipart/form-data": {
+                    "schema": {
+                        "type": "object",
+                        "required": ["file"],
+                        "properties": {
+                            "file": {"type": "string", "format": "binary"},
+                            **form_fields,
+                        },
+                    }
+                },
+            },
+        }
+    }
+
+
+def program_out(info) -> Program:
+    return Program.model_validate(dataclasses.asdict(info))
+
+
+def revision_out(info) -> Revision:
+    return Revision.model_validate(dataclasses.asdict(info))
+
+
+def _invalid(errors: list, prefix: tuple = ("body",)) -> RequestValidationError:
+    return RequestValidationError([{**e, "loc": prefix + tuple(e.get("loc", ()))} for e in errors])
+
+
+async def read_upload(
+    request: Request, model: type[BaseModel], services: Services
+) -> tuple[BaseModel, str | bytes, str | None]:
+    """The validated fields, the program text (str from JSON, bytes from a file) and the
+    file name. JSON and multipart bodies get the same validation and the same problems."""
+    ctype = request.headers.get("content-type", "").split(";")[0].strip().lower()
+    if ctype == "application/json" or ctype.endswith("+json"):
+        try:
+            fields = model.model_validate_json(await request.body())
+        except ValidationError as exc:
+            raise _invalid(exc.errors()) from None
+        text = fields.text
+        if len(text.encode("utf-8", "surrogatepass")) > services.settings.upload_limit_bytes:
+            raise _too_large(len(text.encode("utf-8", "surrogatepass")), services)
+        return fields, text, None
+    if ctype == "multipart/form-data":
+        form = await request.form(max_files=1, max_fields=len(FORM_FIELDS) + 1)
+        upload = form.get("file")
+        if not isinstance(upload, UploadFile):
+            raise _invalid(
+                [{"type": "missing", "loc": ("file",), "msg": "a file part named 'file'"}]
+            )
+        limit = services.settings.upload_limit_bytes
+        data = await upload.read(limit + 1)
+        if len(data) > limit:
+            raise _too_large(len(data), services, at_least=True)
+        values: dict[str, Any] = {
+            k: form[k] for k in FORM_FIELDS if k in model.model_fields and k in form
+        }
+        if "tags" in values:
+            values["tags"] = [t.strip() for t in str(values["tags"]).split(",") if t.strip()]
+        if "number" in model.model_fields:
+            _fill_from_header(values, data, upload.filename)
+        try:
+            fields = model.model_validate({**values, "text": ""})
+        except ValidationError as exc:
+            raise _invalid(exc.errors()) from None
+        return fields, data, upload.filename
+    raise ApiProblem(
+        415,
+        "unsupported-media-type",
+        f"send application/json or multipart/form-data, not {ctype or 'no content type'!r}",
+    )
+
+
+def _fill_from_header(values: dict, data: bytes, filename: str | None) -> None:
+    """A file upload may leave number and name out: the tape's O block supplies them."""
+    header = read_header(data[:4096].decode("utf-8", "replace"))
+    if "number" not in values and header.number is not None:
+        values["number"] = header.number
+    if "name" not in values:
+        stem = PurePath(filename or "").stem
+        values["name"] = header.title or stem or f"O{values.get('number', 0):04d}"
+
+
+def _too_large(size: int, services: Services, at_least: bool = False) -> ApiProblem:
+    limit = services.settings.upload_limit_bytes
+    amount = f"at least {size}" if at_least else str(size)
+    return ApiProblem(
+        413,
+        "upload-too-large",
+        f"program of {amount} bytes exceeds the upload limit of {limit} bytes "
+        "(configure upload_limit_bytes, or drip-feed the program from a file)",
+        limit=limit,
+    )
+
+
+@router.post(
+    "/api/programs",
+    status_code=201,
+    response_model=ProgramCreated,
+    summary="Upload a new program (its first revision is a draft, NC-checked)",
+    responses=problem_doc(409, 413, 415),
+    openapi_extra=upload_body(
+        ProgramCreate,
+        {
+            "number": {"type": "integer", "minimum": 1, "maximum": 99999},
+            "name": {"type": "string", "maxLength": 200},
+            "machine_kind": {"type": "string", "pattern": "^[A-Za-z0-9_.-]+$"},
+            "description": {"type": "string", "maxLength": 4000},
+            "tags": {"type": "string", "description": "comma-separated"},
+            "comment": {"type": "string", "maxLength": 2000},
+        },
+    ),
+)
+async def create_program(request: Request, services: Svc, principal: Programmer) -> JSONResponse:
+    fields, text, filename = await read_upload(request, ProgramCreate, services)
+    comment = fields.comment or (f"uploaded as {filename}" if filename else "")
+    program, revision = await run_in_threadpool(
+        lambda: services.library.create_program(
+            number=fields.number,
+            name=fields.name,
+            text=text,
+            machine_kind=fields.machine_kind,
+            description=fields.description,
+            tags=fields.tags,
+            author=principal.user,
+            comment=comment,
+        )
+    )
+    body = ProgramCreated(program=program_out(program), revision=revision_out(revision))
+    return JSONResponse(
+        body.model_dump(mode="json"),
+        status_code=201,
+        headers={"Location": f"/api/programs/{program.id}"},
+    )
+
+
+@router.get(
+    "/api/programs",
+    response_model=ProgramPage,
+    summary="List and search programs (cursor pagination; Link header to the next page)",
+)
+def list_programs(
+    request: Request,
+    services: Svc,
+    _: Viewer,
+    q: Annotated[Name | None, Query(description="name contains, or O number")] = None,
+    number: Annotated[int | None, Query(ge=1, le=99999)] = None,
+    tag: Annotated[Tag | None, Query()] = None,
+    text: Annotated[Name | None, Query(description="text in any revision")] = None,
+    machine_kind: Annotated[MachineKind | None, Query()] = None,
+    cursor: Annotated[str | None, Query(max_length=64)] = None,
+    limit: Annotated[int, Query(ge=1, le=500)] = 50,
+) -> JSONResponse:
+    if cursor:
+        decode_cursor("p", cursor)  # refuse foreign cursors before the database sees them
+    page = services.library.search(
+        query=q or None,
+        number=number,
+        tag=tag,
+        text=text or None,
+        machine_kind=machine_kind,
+        limit=min(limit, services.settings.page_limit_max),
+        cursor=cursor or None,
+    )
+    body = ProgramPage(items=[program_out(p) for p in page.items], next_cursor=page.next_cursor)
+    return JSONResponse(body.model_dump(mode="json"), headers=next_link(request, page.next_cursor))
+
+
+@router.get(
+    "/api/programs/{program_id}",
+    response_model=ProgramDetail,
+    summary="One program with its revisions and linked tools, fixtures and material",
+    responses=problem_doc(404),
+)
+def get_program(program_id: Annotated[DbId, Path()], services: Svc, _: Viewer) -> ProgramDetail:
+    lib = services.library
+    program = program_out(lib.get_program(program_id))
+    return ProgramDetail(
+        **program.model_dump(),
+        revisions=[revision_out(r) for r in lib.revisions(program_id)],
+        resources=lib.resources(program_id),
+    )
+
+
+@router.post(
+    "/api/programs/{program_id}/revisions",
+    status_code=201,
+    response_model=Revision,
+    summary="Add a revision (a draft, NC-checked) to a program",
+    responses=problem_doc(404, 409, 413, 415),
+    openapi_extra=upload_body(RevisionCreate, {"comment": {"type": "string", "maxLength": 2000}}),
+)
+async def add_revision(
+    program_id: Annotated[DbId, Path()],
+    request: Request,
+    services: Svc,
+    principal: Programmer,
+) -> JSONResponse:
+    fields, text, filename = await read_upload(request, RevisionCreate, services)
+    comment = fields.comment or (f"uploaded as {filename}" if filename else "")
+    revision = await run_in_threadpool(
+        lambda: services.library.add_revision(
+            program_id, text, author=principal.user, comment=comment
+        )
+    )
+    return JSONResponse(
+        revision_out(revision).model_dump(mode="json"),
+        status_code=201,
+        headers={"Location": f"/api/revisions/{revision.id}"},
+    )

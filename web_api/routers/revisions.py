@@ -1,0 +1,79 @@
+"""Revisions: read, text, release (the approver is the key's user) and diff."""
+
+from __future__ import annotations
+
+from typing import Annotated
+
+from fastapi import APIRouter, Depends, Path, Query
+from fastapi.responses import PlainTextResponse, Response
+
+from web_api.problems import problem_doc
+from web_api.routers import Services, get_services
+from web_api.routers.auth import Programmer, Viewer
+from web_api.routers.programs import revision_out
+from web_api.schemas import DbId, ReleaseRequest, Revision
+
+router = APIRouter(tags=["revisions"], responses=problem_doc(400, 401, 403, 404, 422, 503))
+Svc = Annotated[Services, Depends(get_services)]
+RevisionId = Annotated[DbId, Path()]
+
+
+@router.get("/api/revisions/{revision_id}", response_model=Revision, summary="One revision")
+def get_revision(revision_id: RevisionId, services: Svc, _: Viewer) -> Revision:
+    return revision_out(services.library.get_revision(revision_id))
+
+
+@router.get(
+    "/api/revisions/{revision_id}/text",
+    response_class=PlainTextResponse,
+    summary="The revision's program text (its ETag is the sha256 of the text)",
+    responses={200: {"content": {"text/plain": {"schema": {"type": "string"}}}}},
+)
+def revision_text(revision_id: RevisionId, services: Svc, _: Viewer) -> Response:
+    lib = services.library
+    info = lib.get_revision(revision_id)
+    return PlainTextResponse(
+        lib.revision_text(revision_id),
+        headers={
+            "ETag": f'"{info.sha256}"',
+            "Content-Disposition": f'inline; filename="rev{revision_id}.nc"',
+        },
+    )
+
+
+@router.post(
+    "/api/revisions/{revision_id}/release",
+    response_model=Revision,
+    summary="Release a draft (needs a passed NC check and an approval comment)",
+    responses=problem_doc(409),
+)
+def release(
+    revision_id: RevisionId, body: ReleaseRequest, services: Svc, principal: Programmer
+) -> Revision:
+    info = services.library.release(revision_id, approver=principal.user, comment=body.comment)
+    return revision_out(info)
+
+
+@router.get(
+    "/api/revisions/{a}/diff/{b}",
+    response_class=PlainTextResponse,
+    summary="Unified diff from revision a to revision b",
+    responses={200: {"content": {"text/x-diff": {"schema": {"type": "string"}}}}},
+)
+def diff(
+    a: RevisionId,
+    b: RevisionId,
+    services: Svc,
+    _: Viewer,
+    ignore_numbers: Annotated[bool, Query(description="ignore N block numbers")] = False,
+    ignore_whitespace: bool = False,
+    ignore_comments: Annotated[bool, Query(description="ignore (...) and ; comments")] = False,
+) -> Response:
+    text = services.library.diff(
+        a,
+        b,
+        ignore_numbers=ignore_numbers,
+        ignore_whitespace=ignore_whitespace,
+        ignore_comments=ignore_comments,
+    )
+    return Response(text, media_type="text/x-diff; charset=utf-8")

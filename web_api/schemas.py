@@ -1,0 +1,226 @@
+"""Request and response bodies of the REST API (pydantic models; the OpenAPI schemas).
+
+Strings that end up in database columns refuse control characters (NUL would break
+PostgreSQL, and names with line breaks break logs and tapes); integers that end up in
+INTEGER columns are bounded to 32 bits, so a request can never fail inside the database.
+"""
+
+from __future__ import annotations
+
+from datetime import datetime
+from typing import Annotated, Any, Literal
+
+from pydantic import AwareDatetime, BaseModel, ConfigDict, Field, StringConstraints
+
+DbId = Annotated[int, Field(ge=1, le=2**31 - 1)]
+Name = Annotated[str, StringConstraints(pattern=r"^[^\x00-\x1f\x7f]*$", max_length=200)]
+Text = Annotated[str, StringConstraints(pattern=r"^[^\x00]*$", max_length=4000)]
+Tag = Annotated[
+    str, StringConstraints(pattern=r"^[^\x00-\x1f\x7f,]+$", min_length=1, max_length=64)
+]
+MachineKind = Annotated[
+    str, StringConstraints(pattern=r"^[A-Za-z0-9_.-]+$", min_length=1, max_length=32)
+]
+MachineName = Annotated[
+    str, StringConstraints(pattern=r"^[A-Za-z0-9_.:-]+$", min_length=1, max_length=64)
+]
+Comment = Annotated[str, StringConstraints(pattern=r"^[^\x00]*$", max_length=2000)]
+
+
+class _In(BaseModel):
+    model_config = ConfigDict(extra="forbid")
+
+
+class ProgramCreate(_In):
+    """A new program with its first revision (JSON form of the upload)."""
+
+    number: int = Field(ge=1, le=99999, description="O number", examples=[1001])
+    name: Annotated[Name, Field(min_length=1)]
+    text: str = Field(description="the part program (ISO 6983 text)")
+    machine_kind: MachineKind = "mill"
+    description: Text = ""
+    tags: list[Tag] = Field(default_factory=list, max_length=32)
+    comment: Comment = ""
+
+
+class RevisionCreate(_In):
+    text: str = Field(description="the part program (ISO 6983 text)")
+    comment: Comment = ""
+
+
+class ReleaseRequest(_In):
+    comment: Annotated[Comment, Field(min_length=1, description="approval comment")]
+
+
+class DispatchRequest(_In):
+    revision_id: DbId
+    machine: MachineName
+    mode: Literal["memory", "drip_feed"] = "memory"
+    start: bool = False
+
+
+class JobCreate(_In):
+    revision_id: DbId
+    quantity: int = Field(ge=1, le=1_000_000)
+    due_at: AwareDatetime | None = None
+    priority: int = Field(default=0, ge=-1000, le=1000)
+    machine_group: MachineName | None = None
+    cycle_time_s: float = Field(default=60.0, gt=0, le=1e7, allow_inf_nan=False)
+
+
+class CheckError(BaseModel):
+    line: int | None = None
+    col: int | None = None
+    message: str
+
+
+class Program(BaseModel):
+    id: int
+    number: int
+    name: str
+    machine_kind: str
+    description: str
+    tags: list[str]
+    created_at: datetime
+    released_revision_id: int | None
+    latest_revision_id: int | None
+
+
+class Revision(BaseModel):
+    id: int
+    program_id: int
+    seq: int
+    sha256: str
+    size: int
+    lines: int
+    author: str
+    comment: str
+    source: str
+    status: Literal["draft", "released", "obsolete"]
+    created_at: datetime
+    status_changed_at: datetime | None
+    approved_by: str | None
+    approval_comment: str | None
+    check_ok: bool
+    check_errors: list[CheckError]
+
+
+class ProgramCreated(BaseModel):
+    program: Program
+    revision: Revision
+
+
+class Resource(BaseModel):
+    id: int
+    kind: str
+    code: str
+    description: str
+    data: dict[str, Any]
+
+
+class ProgramDetail(Program):
+    revisions: list[Revision]
+    resources: list[Resource]
+
+
+class ProgramPage(BaseModel):
+    items: list[Program]
+    next_cursor: str | None
+
+
+class Dispatch(BaseModel):
+    id: int
+    idempotency_key: str
+    revision_id: int
+    machine: str
+    mode: str
+    start: bool
+    state: Literal["pending", "transferring", "verifying", "done", "failed"]
+    attempts: int
+    bytes_sent: int
+    verified: bool | None
+    error: str | None
+    requested_by: str
+    created_at: datetime
+    updated_at: datetime
+
+
+class DispatchPage(BaseModel):
+    items: list[Dispatch]
+    next_cursor: str | None
+
+
+class Job(BaseModel):
+    id: int
+    revision_id: int
+    quantity: int
+    done: int
+    priority: int
+    due_at: datetime | None
+    machine_kind: str
+    machine_group: str | None
+    cycle_time_s: float
+    status: Literal["queued", "running", "interrupted", "completed", "cancelled"]
+    created_at: datetime
+    updated_at: datetime
+
+
+class Allocation(BaseModel):
+    id: int
+    machine: str
+    status: str
+    dispatch_id: int | None
+    reason: str | None
+
+
+class Decision(BaseModel):
+    at: datetime
+    rule: str
+    action: str
+    job_id: int | None
+    machine: str | None
+    reason: str | None
+
+
+class JobDetail(Job):
+    allocations: list[Allocation]
+    decisions: list[Decision]
+
+
+class JobPage(BaseModel):
+    items: list[Job]
+    next_cursor: str | None
+
+
+class Machine(BaseModel):
+    name: str
+    kind: str
+    dnc_address: str
+    modbus_address: str
+    status_address: str
+    memory_bytes: int
+    dnc_profile: dict[str, Any]
+    status: dict[str, Any] | None = Field(
+        default=None, description="live status from the cell, when the cell provides it"
+    )
+
+
+class Health(BaseModel):
+    status: Literal["ok"]
+    database: Literal["ok"]
+    insecure_open: bool
+    faults_enabled: bool
+
+
+class WhoAmI(BaseModel):
+    user: str
+    role: Literal["viewer", "operator", "programmer", "admin"]
+
+
+class EventMessage(BaseModel):
+    """One outbox event as sent on the WebSocket (the SSE `data` carries the same JSON)."""
+
+    event_id: int
+    at: datetime
+    topic: str
+    model_config = ConfigDict(extra="allow")

@@ -1,0 +1,106 @@
+"""The REST API's settings: API keys with roles, the insecure-open demo mode, limits.
+
+Roles are ordered: viewer < operator < programmer < admin. Viewers read; dispatches, jobs
+and machine commands need an operator; uploads and releases need a programmer; fault
+injection needs an admin. A key is configured either in clear (`key`) or as its sha256
+(`key_sha256`), so a configuration file need not hold usable secrets.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import hmac
+from collections.abc import Mapping
+from enum import IntEnum
+from typing import Any
+
+from pydantic import BaseModel, ConfigDict, Field, model_validator
+
+
+class Role(IntEnum):
+    viewer = 1
+    operator = 2
+    programmer = 3
+    admin = 4
+
+
+class ApiKey(BaseModel):
+    """One configured key: who uses it and what they may do."""
+
+    model_config = ConfigDict(extra="forbid", frozen=True)
+
+    user: str = Field(min_length=1, max_length=64)
+    role: Role
+    key: str | None = Field(default=None, min_length=16)
+    key_sha256: str | None = Field(default=None, pattern=r"^[0-9a-f]{64}$")
+
+    @model_validator(mode="before")
+    @classmethod
+    def _role_by_name(cls, data: Any) -> Any:
+        if isinstance(data, Mapping) and isinstance(data.get("role"), str):
+            name = data["role"].lower()
+            if name not in Role.__members__:
+                raise ValueError(
+                    f"role must be one of {', '.join(Role.__members__)}, got {data['role']!r}"
+                )
+            data = {**data, "role": Role[name]}
+        return data
+
+    @model_validator(mode="after")
+    def _one_secret(self) -> ApiKey:
+        if (self.key is None) == (self.key_sha256 is None):
+            raise ValueError(f"api key of {self.user!r}: give exactly one of key, key_sha256")
+        return self
+
+    def digest(self) -> str:
+        return self.key_sha256 or hashlib.sha256(self.key.encode()).hexdigest()
+
+
+class Principal(BaseModel):
+    """Who is calling: the key's user and role (or the anonymous admin of insecure-open)."""
+
+    user: str
+    role: Role
+
+
+class ApiSettings(BaseModel):
+    """Settings of the REST API (the `host.api` section of the cell configuration)."""
+
+    model_config = ConfigDict(extra="forbid", frozen=True)
+
+    api_keys: tuple[ApiKey, ...] = ()
+    insecure_open: bool = Field(
+        default=False,
+        description="demo mode: no key needed, every caller is an admin named 'anonymous'",
+    )
+    upload_limit_bytes: int = Field(default=16 * 1024 * 1024, ge=1)
+    events_poll_s: float = Field(default=0.25, gt=0, le=10)
+    events_keepalive_s: float = Field(default=15.0, ge=0, le=300)
+    page_limit_max: int = Field(default=500, ge=1, le=10_000)
+    problem_base: str = "https://fmscell.dev/problems/"
+
+    @model_validator(mode="after")
+    def _unique_keys(self) -> ApiSettings:
+        digests = [k.digest() for k in self.api_keys]
+        if len(set(digests)) != len(digests):
+            raise ValueError("two api_keys entries have the same key")
+        return self
+
+    @property
+    def request_body_limit(self) -> int:
+        """Largest request body read at all: JSON escaping and multipart framing need room."""
+        return 2 * self.upload_limit_bytes + 64 * 1024
+
+    def authenticate(self, presented: str) -> Principal | None:
+        """The principal owning `presented`, compared in constant time; None if unknown."""
+        digest = hashlib.sha256(presented.encode("utf-8", "surrogatepass")).hexdigest()
+        found = None
+        for k in self.api_keys:
+            if hmac.compare_digest(digest, k.digest()):
+                found = Principal(user=k.user, role=k.role)
+        return found
+
+    @classmethod
+    def from_mapping(cls, data: Mapping[str, Any] | None) -> ApiSettings:
+        """Settings from the configuration file's mapping (a ValidationError names the key)."""
+        return cls.model_validate(dict(data or {}))
