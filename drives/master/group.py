@@ -780,7 +780,12 @@ class AxisGroup:
 
     def fault_reset(self, axes: Iterable[str] | None = None, timeout_s: float = 0.1) -> None:
         """Fault reset edge (0x00 then 0x80) for faulted axes; AxisError if one stays in FAULT."""
-        chosen = [a for a in self._select(axes) if a.sw & power.SW_FAULT or a.active]
+        selected = self._select(axes)
+        with self._cond:  # faults of drives that are not in FAULT (e.g. a heartbeat) just clear
+            for axis in selected:
+                if not axis.sw & power.SW_FAULT:
+                    axis.active.clear()
+        chosen = [a for a in selected if a.sw & power.SW_FAULT]
         if not chosen:
             return
         for axis in chosen:

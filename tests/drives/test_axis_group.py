@@ -460,3 +460,15 @@ def test_realtime_group_on_python_can_virtual_bus():
         vd.stop()
         master_bus.shutdown()
         drive_bus.shutdown()
+
+
+def test_fault_reset_leaves_healthy_axes_enabled(rig):
+    g = rig.up().group
+    rig.hub.drop(0x702, count=None)
+    for _ in range(200):
+        g.cycle()
+    assert [f.axis for f in g.faults] == ["Y"]  # heartbeat lost, drive itself fine
+    rig.hub.clear_faults()
+    g.fault_reset()
+    assert g.faults == []
+    assert {g.state(a) for a in g.axis_names} == {"OPERATION ENABLED"}
