@@ -1,0 +1,193 @@
+"""`fmscell nc simulate FILE`: a part program on a complete simulated machine, in lockstep."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import typer
+
+from cnc.cli import nc_app
+
+SETTLE_S = 1.0  # after the end: let the axes settle onto the last setpoint (bounded)
+
+
+def simulate(
+    text: str,
+    config,
+    name: str,
+    *,
+    ideal: bool = False,
+    faults=(),
+    trace=None,
+    candump=None,
+    controller_factory=None,
+    max_s: float = 3600.0,
+) -> dict:
+    """Home, cycle start, run to the end or to an alarm; the result as plain data.
+
+    Raises `MemoryFull` (drip-feed suggested) and `FaultSpecError` before anything runs.
+    """
+    from cnc.machine import Machine
+
+    m = Machine(
+        config,
+        name,
+        ideal=ideal,
+        faults=faults,
+        trace=trace,
+        candump=candump,
+        controller_factory=controller_factory,
+    )
+    try:
+        number = m.load_program(text)
+        m.step(m.plc_every * 5)  # PLC ready, lubrication started, drives enabled
+        m.command("mode", mode="REF")
+        m.command("home")
+        m.run_until(lambda mm: _homed(mm) or mm.alarms, 120.0)
+        if m.alarms:
+            return _result(m, "alarm", 0.0, 0)
+        m.command("mode", mode="AUTO")
+        m.command("select_program", number=number)
+        m.command("cycle_start")
+        t0 = m.t
+        lines: list[int] = []
+
+        def done(mm) -> bool:
+            if not lines or lines[-1] != mm.status.line:
+                lines.append(mm.status.line)
+            return (
+                bool(mm.alarms)
+                or mm.status.execution in ("PROGRAM_COMPLETED", "READY")
+                and mm.t > t0 + 0.05
+            )
+
+        m.run_until(done, max_s)
+        cycle_time = m.t - t0
+        if not m.alarms:
+            m.run_until(lambda mm: _settled(mm) or bool(mm.alarms), SETTLE_S)
+        blocks = len([x for x in lines if x])
+        result = (
+            "alarm"
+            if m.alarms
+            else (
+                "completed" if m.status.execution in ("PROGRAM_COMPLETED", "READY") else "timeout"
+            )
+        )
+        return _result(m, result, cycle_time, blocks)
+    finally:
+        m.close()
+
+
+def _homed(m) -> bool:
+    fb = m.axes.feedback()
+    return all(fb.homed.values()) and not fb.homing
+
+
+def _settled(m) -> bool:
+    fb = m.axes.feedback()
+    return all(
+        abs(fb.actual.get(a, 0.0) - m.last_targets.get(a, 0.0)) < 0.005 for a in m.axis_names
+    )
+
+
+def _result(m, result: str, cycle_time: float, blocks: int) -> dict:
+    fb = m.axes.feedback()
+    load = m.axes.bus_load
+    line_of = {e.data["number"]: e.data.get("line") for e in m.events.of_kind("alarm") if e.data}
+    return {
+        "result": result,
+        "alarms": [
+            {
+                "number": a.number,
+                "text": a.text,
+                "source": a.source,
+                "axis": a.axis,
+                "line": line_of.get(a.number, m.status.line),
+            }
+            for a in m.alarms
+        ],
+        "cycle_time_s": round(cycle_time, 6),
+        "final_position": {a: round(fb.actual.get(a, 0.0), 4) for a in m.axis_names},
+        "max_following_error_mm": {a: round(v, 4) for a, v in m.max_following_error.items()},
+        "max_contour_error_mm": round(m.max_contour_error, 4),
+        "bus_load": {"mean": round(load.mean * 100, 2), "peak": round(load.peak * 100, 2)}
+        if load is not None
+        else {"mean": 0.0, "peak": 0.0},
+        "blocks": blocks,
+    }
+
+
+def _config(machine: str, config_path: Path | None):
+    from cnc.config import builtin_machine, load_machine_config
+
+    if config_path is not None:
+        return load_machine_config(config_path, machine)
+    return builtin_machine(machine)
+
+
+@nc_app.command("simulate")
+def simulate_cmd(
+    file: Path = typer.Argument(..., help="part program file"),
+    machine: str = typer.Option(
+        "mill3", "--machine", help="mill3, lathe2 or a machine in --config"
+    ),
+    config: Path | None = typer.Option(None, "--config", help="cell or machine YAML"),
+    as_json: bool = typer.Option(True, "--json/--no-json", help="print one JSON object"),
+    trace: Path | None = typer.Option(None, "--trace", help="CSV: t, commanded/actual per axis"),
+    candump: Path | None = typer.Option(None, "--candump", help="CAN frames, candump log format"),
+    fault: list[str] = typer.Option([], "--fault", help="fault spec target:kind@time (repeat)"),
+    ideal: bool = typer.Option(False, "--ideal", help="ideal axes instead of CANopen drives"),
+) -> None:
+    """Run FILE on a complete simulated machine in lockstep: home, cycle start, to the end or
+    to an alarm. Prints one JSON object (result, alarms, cycle_time_s, final_position, ...)."""
+    from cnc.errors import NcError
+    from cnc.machine.faults import FaultSpecError, parse_fault_spec
+    from cnc.program_memory import MemoryFull
+
+    try:
+        cfg = _config(machine, config)
+    except (NcError, ValueError, KeyError, OSError) as err:
+        typer.echo(f"{config or machine}: {err}", err=True)
+        raise typer.Exit(2) from None
+    try:
+        specs = [parse_fault_spec(f, tuple(cfg.axes)) for f in fault]
+    except FaultSpecError as err:
+        typer.echo(f"--fault: {err}", err=True)
+        raise typer.Exit(2) from None
+    try:
+        text = file.read_text(encoding="utf-8")
+    except (OSError, UnicodeDecodeError) as err:
+        typer.echo(f"{file}: cannot read: {err}", err=True)
+        raise typer.Exit(2) from None
+    try:
+        with _open(trace) as tr, _open(candump) as cd:
+            out = simulate(text, cfg, machine, ideal=ideal, faults=specs, trace=tr, candump=cd)
+    except MemoryFull as err:
+        typer.echo(f"{file}: {err}", err=True)
+        raise typer.Exit(2) from None
+    except ImportError as err:
+        typer.echo(f"fmscell nc simulate: {err}", err=True)
+        raise typer.Exit(3) from None
+    if as_json:
+        typer.echo(json.dumps(out, sort_keys=True))
+    else:
+        for k, v in out.items():
+            typer.echo(f"{k}: {v}")
+    raise typer.Exit(0 if out["result"] == "completed" else 1)
+
+
+class _open:
+    """A text file for writing, or nothing."""
+
+    def __init__(self, path: Path | None) -> None:
+        self.path, self.f = path, None
+
+    def __enter__(self):
+        if self.path is not None:
+            self.f = open(self.path, "w", encoding="ascii", newline="\n")  # noqa: SIM115
+        return self.f
+
+    def __exit__(self, *exc) -> None:
+        if self.f is not None:
+            self.f.close()

@@ -1,0 +1,248 @@
+"""Axis layers for the machine: CiA 402 drives on a simulated CAN bus, or ideal axes.
+
+Both have the same two calls, once per IPO cycle: `feedback()` (what the NC sees this cycle)
+and `apply(outputs, dt)` (the controller's axis command, then its targets for one cycle).
+
+`CanopenAxes` is the real thing: one lockstep `CanHub` per machine, one `VirtualDrive` per
+axis, the `drives.master.AxisGroup` as the CANopen master. Machine coordinates (mm) are the
+drives' position actual 0x6064 at 1 um per unit; homing (method 19, a dog at the positive end
+of travel, search then creep) sets 0x6064 = home_mm at the dog's edge, as the NC book's
+reference point approach does. The sequences the group runs as blocking calls (enable,
+homing, fault reset, disable) advance the same virtual clock: `apply` returns how long the
+sequence took so the machine can let the PLC catch up.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+from typing import TextIO
+
+from cnc.machine.contract import AxisFeedback
+
+HOMING_METHOD = 19  # falling edge of a positive home switch (dog active above its edge)
+HOME_DOG_BEFORE_M = 0.030  # power-on position: this far below the dog (m, table coordinates)
+
+
+class IdealAxes:
+    """Axes that follow their targets exactly: no drives, no bus (for tests and quick runs)."""
+
+    def __init__(self, config) -> None:
+        self.names = tuple(config.axes)
+        self._home = {n: float(a.home_mm) for n, a in config.axes.items()}
+        mid = {n: (a.min_mm + a.max_mm) / 2.0 for n, a in config.axes.items()}
+        self.actual = dict(mid)
+        self.enabled = False
+        self.homed = dict.fromkeys(self.names, False)
+        self.bus_load = None
+        self.time = 0.0
+
+    def feedback(self) -> AxisFeedback:
+        return AxisFeedback(
+            actual=dict(self.actual),
+            following_error=dict.fromkeys(self.names, 0.0),
+            enabled=self.enabled,
+            homed=dict(self.homed),
+            homing=False,
+            faults=(),
+        )
+
+    def apply(self, outputs, dt: float) -> float:
+        cmd = outputs.axis_command
+        if cmd == "enable":
+            self.enabled = True
+        elif cmd in ("disable", "quick_stop"):
+            self.enabled = False
+        elif cmd == "home" and self.enabled:
+            for n in outputs.home_axes or self.names:
+                self.actual[n] = self._home[n]
+                self.homed[n] = True
+        if self.enabled and cmd == "none":
+            for n, mm in outputs.targets.items():
+                if n in self.actual:
+                    self.actual[n] = float(mm)
+        self.time += dt
+        return 0.0
+
+    def inject(self, spec) -> None:
+        raise ValueError(f"fault {spec}: ideal axes have no drives or bus (run without --ideal)")
+
+    def close(self) -> None:
+        pass
+
+
+class CanopenAxes:
+    """Virtual CiA 402 drives on the machine's own lockstep CAN hub, driven by an AxisGroup."""
+
+    def __init__(
+        self,
+        config,
+        name: str = "machine",
+        *,
+        candump: TextIO | None = None,
+        substep: float | None = None,
+    ) -> None:
+        from drives.bus.hub import CanHub
+        from drives.faults import FaultInjector
+        from drives.master import AxisConfig, AxisGroup
+        from drives.virtual_drive import VirtualDrive
+
+        self.names = tuple(config.axes)
+        self.ipo_s = config.ipo_cycle_ms / 1000.0
+        channel = config.can.channel or name
+        self.hub = CanHub(config.can.bitrate, mode="lockstep", channel=channel, log=candump)
+        self.drives: dict[str, VirtualDrive] = {}
+        axes = []
+        for i, (axis, a) in enumerate(config.axes.items()):
+            node = config.drives.node_id(axis, i)
+            groups = _plant_groups(a, config.drives.plant_overrides(axis))
+            kwargs = {"substep": substep} if substep is not None else {}
+            self.drives[axis] = VirtualDrive(
+                node, self.hub.endpoint(f"drive-{axis}"), name=f"{name}.{axis}", **kwargs, **groups
+            )
+            axes.append(
+                AxisConfig(
+                    axis,
+                    node,
+                    max_velocity_mm_s=a.max_velocity / 60.0,
+                    max_accel_mm_s2=a.max_accel,
+                    quick_stop_decel_mm_s2=a.max_accel,
+                    homing_method=HOMING_METHOD,
+                    home_offset_mm=a.home_mm,
+                    homing_search_mm_s=50.0,
+                    homing_creep_mm_s=5.0,
+                    homing_accel_mm_s2=min(a.max_accel, 1000.0),
+                    homing_timeout_s=60.0,
+                )
+            )
+        self.group = AxisGroup(
+            self.hub.endpoint("master"),
+            axes,
+            ipo_cycle_s=self.ipo_s,
+            master_node_id=127,
+            following_error_every=1,
+        )
+        self.injector = FaultInjector(self.drives)
+        self.group.boot()
+        self.group.configure()
+        self.homed = dict.fromkeys(self.names, False)
+        self.homing = False
+        self.enabled = False
+        self.faults: tuple = ()  # active (axis, code, text)
+        self._fb = self.group.cycle()
+        self.errors: list[str] = []  # sequences the group refused (AxisError text)
+
+    @property
+    def time(self) -> float:
+        return self.group.time
+
+    @property
+    def bus_load(self):
+        return self.hub.load
+
+    def feedback(self) -> AxisFeedback:
+        fb = self._fb
+        return AxisFeedback(
+            actual=dict(fb.position_mm),
+            following_error={n: (v or 0.0) for n, v in fb.following_error_mm.items()},
+            enabled=self.enabled and all(s == "OPERATION ENABLED" for s in fb.state.values()),
+            homed=dict(self.homed),
+            homing=self.homing,
+            faults=self.faults,
+        )
+
+    def _note_faults(self, new) -> None:
+        if not new:
+            return
+        for f in new:
+            # an incremental encoder loses its reference with a fault of its drive or node
+            if f.source in ("bootup",) or f.emcy_code in (0x7305,):
+                self.homed[f.axis] = False
+        active = [(f.axis, f.emcy_code, f.text) for f in self.group.faults]
+        self.faults = tuple(active) if active else tuple((f.axis, f.emcy_code, f.text) for f in new)
+
+    def apply(self, outputs, dt: float) -> float:
+        """Run the axis command (if any) and one IPO cycle; return extra virtual seconds a
+        blocking drive sequence took (0 for an ordinary cycle)."""
+        from drives.master import AxisError
+
+        cmd = outputs.axis_command
+        t0 = self.group.time
+        if cmd != "none":
+            try:
+                self._command(cmd, outputs.home_axes)
+            except AxisError as exc:
+                self.errors.append(str(exc))
+                self.faults = (*self.faults, ("*", 0, f"drive sequence {cmd}: {exc}"))
+            self._note_faults(self.group.take_faults())
+        targets = {n: v for n, v in outputs.targets.items() if n in self.drives}
+        for n, v in targets.items():
+            if not math.isfinite(v):
+                raise ValueError(f"axis {n}: target {v!r} is not finite")
+        self._fb = self.group.cycle(targets if self.enabled else None)
+        self._note_faults(self._fb.faults)
+        if not self.group.faults and self.faults and not self._fb.faults:
+            self.faults = ()
+        return max(0.0, self.group.time - t0 - self.ipo_s)
+
+    def _command(self, cmd: str, home_axes: tuple[str, ...]) -> None:
+        g = self.group
+        if cmd == "enable":
+            g.enable()
+            self.enabled = True
+        elif cmd == "disable":
+            self.enabled = False
+            g.disable()
+        elif cmd == "quick_stop":
+            self.enabled = False
+            g.quick_stop()
+            # an E-stop drops the incremental encoders' reference (the NC book, section 8)
+            self.homed = dict.fromkeys(self.names, False)
+        elif cmd == "fault_reset":
+            g.fault_reset()
+            self.faults = ()
+        elif cmd == "home":
+            axes = tuple(home_axes) or self.names
+            self.homing = True
+            try:
+                g.home(axes)
+            finally:
+                self.homing = False
+            for n in axes:
+                self.homed[n] = True
+
+    def inject(self, spec) -> None:
+        """Apply a drive/bus/node fault spec (`cnc.machine.faults.FaultSpec`)."""
+        self.injector.inject(spec.axis, spec.kind, **spec.params)
+
+    def clear(self, spec) -> None:
+        self.injector.clear(spec.axis, spec.kind)
+
+    def close(self) -> None:
+        self.group.close()
+        for vd in self.drives.values():
+            vd.close()
+        self.hub.close()
+
+
+def _plant_groups(axis, overrides: Mapping[str, Mapping]) -> dict[str, dict]:
+    """Plant overrides plus the switch layout that puts machine coordinates on the table.
+
+    Table coordinate 0 m is the negative end of travel (min_mm); the home dog's edge sits at
+    home_mm, active above it; limit switches 5 mm beyond each end of travel; at power-on the
+    table stands a little below the dog, so homing is short.
+    """
+    span_m = (axis.max_mm - axis.min_mm) / 1000.0
+    dog_m = (axis.home_mm - axis.min_mm) / 1000.0
+    switches = {
+        "negative_limit": -0.005,
+        "positive_limit": span_m + 0.005,
+        "home_switch": dog_m,
+        "home_switch_active_below": False,
+        "initial_position": max(0.0, dog_m - HOME_DOG_BEFORE_M),
+    }
+    groups = {g: dict(v) for g, v in overrides.items()}
+    groups["switches"] = {**switches, **groups.get("switches", {})}
+    screw = groups.setdefault("screw", {})
+    screw.setdefault("length", max(0.6, span_m + 0.1))
+    return groups

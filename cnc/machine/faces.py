@@ -1,0 +1,96 @@
+"""The machine's faces on one LoopThread: DNC port, Modbus TCP, SHDR, simulation face."""
+
+from __future__ import annotations
+
+import contextlib
+
+from cnc.faces.loop_thread import LoopThread
+
+
+class MachineFaces:
+    """Starts the faces the configuration asks for (`ports`: null = off, 0 = any free port).
+
+    `simulation`: None follows `ports.simulation`; True starts it (port 0 when the config
+    has none); False keeps it off whatever the config says.
+    """
+
+    def __init__(self, machine, *, simulation: bool | None = None) -> None:
+        self.machine = machine
+        self.loop = LoopThread(f"faces-{machine.name}")
+        self.dnc = None
+        self.modbus = None
+        self.shdr = None
+        self.simulation = None
+        self._want_sim = simulation
+
+    def start(self) -> MachineFaces:
+        from cnc.faces.dnc_port import DncPort
+        from cnc.faces.shdr import ShdrAdapter
+        from cnc.machine.simface import SimulationFace
+        from plc.modbus import ModbusFace
+        from plc.remote_panel import WRITABLE
+
+        m, ports = self.machine, self.machine.config.ports
+        ctl = m.controller
+        self.loop.start()
+        if ports.dnc is not None:
+            self.dnc = DncPort(
+                m.memory,
+                host=ports.host,
+                port=ports.dnc,
+                drip=self._drip,
+                on_alarm=lambda n, text: m.raise_face_alarm(n, text, "DNC"),
+                policy=getattr(ctl, "policy", None),
+            )
+            self.loop.run(self.dnc.start)
+        if ports.modbus is not None:
+            rt = m.plc
+            allow = m.config.plc.modbus_write_allow or WRITABLE
+            self.modbus = ModbusFace(
+                lambda: rt.snapshot,
+                rt.writes,
+                rt.image.size,
+                host=ports.host,
+                port=ports.modbus,
+                writable=allow,
+            )
+            self.loop.run(self.modbus.start)
+        if ports.shdr is not None:
+            self.shdr = ShdrAdapter(list(m.axis_names), host=ports.host, port=ports.shdr)
+            self.loop.run(self.shdr.start)
+            m.shdr = self.shdr
+        sim_port = ports.simulation
+        if self._want_sim is True and sim_port is None:
+            sim_port = 0
+        if self._want_sim is False:
+            sim_port = None
+        if sim_port is not None:
+            self.simulation = SimulationFace(m, host=ports.host, port=sim_port)
+            self.loop.run(self.simulation.start)
+        return self
+
+    def _drip(self):
+        buffer = self.machine.controller.drip_input()
+        if buffer is None:
+            from cnc.faces.dnc_port import ALARM_REFUSED, DncError
+
+            raise DncError(ALARM_REFUSED, "DRIP refused: the NC is not ready for a drip-feed")
+        return buffer
+
+    def ports(self) -> dict[str, int | None]:
+        """Bound TCP ports by face (None = off)."""
+        return {
+            "dnc": self.dnc.bound_port if self.dnc else None,
+            "modbus": self.modbus.bound_port if self.modbus else None,
+            "shdr": self.shdr.bound_port if self.shdr else None,
+            "simulation": self.simulation.bound_port if self.simulation else None,
+        }
+
+    def stop(self) -> None:
+        for face in (self.simulation, self.shdr, self.modbus, self.dnc):
+            if face is not None:
+                # a face that fails to stop must not keep the others up
+                with contextlib.suppress(Exception):
+                    self.loop.run(face.stop)
+        self.machine.shdr = None
+        self.loop.stop()

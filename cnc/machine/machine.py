@@ -1,0 +1,365 @@
+"""One complete simulated CNC machine: controller + axes (CiA 402 over CAN) + soft-PLC.
+
+Per IPO cycle (`step`): scheduled faults due now are applied, the controller takes the
+axes' feedback and the PLC's last published signals and returns targets, an axis command,
+NC->PLC signals and its status; the axis layer runs the command and one cycle (RPDOs, SYNC,
+drive plants, TPDOs); every `plc.period / ipo` cycles the PLC scans at the same virtual time.
+Nothing here reads the wall clock: in lockstep the same scenario gives the same trace and
+candump byte for byte. `cnc.machine.runner.RealtimeRunner` paces `step` to the wall clock.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import queue
+from collections import deque
+from collections.abc import Callable
+from typing import TextIO
+
+from cnc.machine.axes import CanopenAxes, IdealAxes
+from cnc.machine.contract import CycleInputs, command_refused_class, controller_class
+from cnc.machine.faults import FaultSchedule, FaultSpec, parse_fault_spec
+from cnc.machine.records import EventLog, TraceWriter
+from cnc.program_memory import ProgramMemory
+from cnc.status import Alarm, CanBusLoad, MachineStatus
+
+PANEL_BUTTONS = ("PanelCycleStart", "PanelFeedHold", "PanelReset")
+
+
+class Machine:
+    """A machine built from a `cnc.config.MachineConfig`.
+
+    Parameters
+    ----------
+    config: the machine's configuration (`builtin_machine("mill3")`, `load_machine_config`).
+    name: the machine's name (CAN channel, event texts).
+    ideal: ideal axes instead of CiA 402 drives on a CAN bus.
+    controller_factory: `(config, memory) -> controller`; default `cnc.controller.Controller`.
+    faults: fault specs (`cnc.machine.faults`) as text or `FaultSpec`, scheduled in machine time.
+    trace: a text stream for the per-cycle CSV trace (`TraceWriter`), or None.
+    candump: a text stream for the CAN frames in candump log format, or None.
+    event_log_path: JSONL file for the event log (the ring is always kept).
+    shdr_every: publish the status to the SHDR face every n IPO cycles (default: each scan).
+    epoch: SHDR timestamps are `epoch + machine time` (virtual: byte-identical streams).
+    """
+
+    def __init__(
+        self,
+        config,
+        name: str = "machine",
+        *,
+        ideal: bool = False,
+        controller_factory: Callable | None = None,
+        faults=(),
+        trace: TextIO | None = None,
+        candump: TextIO | None = None,
+        event_log_path: str | None = None,
+        event_capacity: int = 10_000,
+        shdr_every: int | None = None,
+        epoch: float = 1_800_000_000.0,
+        substep: float | None = None,
+    ) -> None:
+        from plc.machine_io import machine_plc
+        from plc.runtime import RuntimeConfig
+
+        self.config = config
+        self.name = name
+        self.ipo_s = config.ipo_cycle_ms / 1000.0
+        self.plc_period_ms = config.plc.period_ms
+        ratio = self.plc_period_ms / config.ipo_cycle_ms
+        if abs(ratio - round(ratio)) > 1e-9 or round(ratio) < 1:
+            raise ValueError(
+                f"plc.period_ms {self.plc_period_ms} is not a multiple of ipo_cycle_ms "
+                f"{config.ipo_cycle_ms}"
+            )
+        self.plc_every = round(ratio)
+        self.shdr_every = shdr_every or self.plc_every
+        self.epoch = epoch
+        self.axis_names = tuple(config.axes)
+        self.events = EventLog(event_capacity, event_log_path)
+        self.schedule = FaultSchedule(
+            [
+                f if isinstance(f, FaultSpec) else parse_fault_spec(f, self.axis_names)
+                for f in faults
+            ]
+        )
+        self.memory = ProgramMemory(config.program_memory_bytes)
+        factory = controller_factory or controller_class()
+        self.controller = factory(config, self.memory)
+        self.refused = command_refused_class()
+        self.axes = (
+            IdealAxes(config)
+            if ideal
+            else CanopenAxes(config, name, candump=candump, substep=substep)
+        )
+        program = config.plc.program
+        self.plc, self.io = machine_plc(
+            RuntimeConfig(
+                period_ms=self.plc_period_ms,
+                watchdog_ms=config.plc.watchdog_ms,
+                debounce_samples=config.plc.debounce_samples,
+            ),
+            program_path=program,
+        )
+        self.trace = TraceWriter(trace, self.axis_names) if trace is not None else None
+        self.cycle = 0
+        self.t = 0.0
+        self._sequence_s = 0.0  # virtual time spent in blocking drive sequences (homing...)
+        self._next_scan_ms = 0
+        self._release_after_scan: list[str] = []
+        self._scan_until(0.0)
+        self._plc_in = self.io.nc.outputs()
+        self._inbox: queue.SimpleQueue = queue.SimpleQueue()  # callables from face threads
+        self.face_alarms: list[Alarm] = []  # raised by faces (DNC), cleared by a reset
+        self.status: MachineStatus = getattr(self.controller, "status", None) or MachineStatus()
+        self.last_targets: dict[str, float] = {}
+        self.max_following_error = dict.fromkeys(self.axis_names, 0.0)
+        self.max_contour_error = 0.0
+        self._path: deque = deque(maxlen=512)
+        self._near = 0
+        self._alarm_keys: set = set()
+        self.shdr = None  # set by the faces
+        self.faces = None
+
+    # ------------------------------------------------------------------ the lockstep loop
+    def step(self, n_cycles: int = 1) -> MachineStatus:
+        """Run `n_cycles` IPO cycles; returns the last status."""
+        for _ in range(n_cycles):
+            self._one_cycle()
+        return self.status
+
+    def run_until(self, predicate: Callable[[Machine], bool], max_s: float) -> bool:
+        """Step until `predicate(machine)` holds (True) or `max_s` of machine time pass."""
+        end = self.t + max_s
+        while not predicate(self):
+            if self.t >= end:
+                return False
+            self._one_cycle()
+        return True
+
+    def _one_cycle(self) -> None:
+        while not self._inbox.empty():
+            self._inbox.get_nowait()()
+        for spec in self.schedule.due(self.t):
+            self.inject(spec)
+        fb = self.axes.feedback()
+        out = self.controller.cycle(CycleInputs(self.t, self._plc_in, fb))
+        nc = self.io.nc
+        for name, value in out.plc.items():
+            nc.set(name, value)
+        extra = self.axes.apply(out, self.ipo_s)
+        self.cycle += 1
+        self._sequence_s += extra
+        self.t = self.cycle * self.ipo_s + self._sequence_s
+        self._scan_until(self.t)
+        status = out.status if out.status is not None else self.status
+        self.status = status
+        self.last_targets = dict(out.targets) or self.last_targets
+        self._measure(fb)
+        if self.trace is not None:
+            self.trace.row(self.t, self.last_targets, fb.actual, status.line)
+        self._watch_alarms(status)
+        if self.cycle % self.shdr_every == 0 and self.shdr is not None:
+            self.shdr.publish(self.full_status(), self.epoch + self.t)
+
+    def _scan_until(self, t: float) -> None:
+        now_ms = t * 1000.0 + 1e-6
+        while self._next_scan_ms <= now_ms:
+            self.plc.scan(self._next_scan_ms)
+            self._next_scan_ms += self.plc_period_ms
+            self._plc_in = self.io.nc.outputs()
+            for button in self._release_after_scan:
+                self.io.release(button)
+            self._release_after_scan.clear()
+
+    def _measure(self, fb) -> None:
+        for axis, fe in fb.following_error.items():
+            if abs(fe) > self.max_following_error.get(axis, 0.0):
+                self.max_following_error[axis] = abs(fe)
+        if not fb.enabled or not self.last_targets:
+            return
+        point = tuple(self.last_targets.get(a, 0.0) for a in self.axis_names)
+        if not self._path or self._path[-1] != point:
+            self._path.append(point)
+            self._near = min(self._near, len(self._path) - 1)
+            if len(self._path) == self._path.maxlen:
+                self._near = max(0, self._near - 1)
+        actual = tuple(fb.actual.get(a, 0.0) for a in self.axis_names)
+        path = self._path
+        j = min(self._near, len(path) - 1)
+        best = _seg_dist(path, j, actual)
+        # the nearest path point moves forward along the path as the axes follow it
+        while j + 1 < len(path):
+            d = _seg_dist(path, j + 1, actual)
+            if d > best:
+                break
+            best, j = d, j + 1
+        self._near = j
+        if best > self.max_contour_error:
+            self.max_contour_error = best
+
+    def _watch_alarms(self, status: MachineStatus) -> None:
+        keys = {(a.number, a.source, a.axis) for a in status.alarms}
+        if keys == self._alarm_keys:
+            return
+        for a in status.alarms:
+            if (a.number, a.source, a.axis) not in self._alarm_keys:
+                self.events.add(
+                    self.t,
+                    "alarm",
+                    f"{a.source} {a.number}: {a.text}",
+                    {"number": a.number, "source": a.source, "axis": a.axis, "line": status.line},
+                )
+        for key in self._alarm_keys - keys:
+            self.events.add(self.t, "alarm_cleared", f"{key[1]} {key[0]}")
+        self._alarm_keys = keys
+
+    # ------------------------------------------------------------------ status
+    def full_status(self) -> MachineStatus:
+        """The controller's status plus what only the machine knows (bus load, PLC scan time,
+        alarms raised by the faces)."""
+        s = self.status
+        load = self.axes.bus_load
+        extra: dict = {}
+        if load is not None:
+            extra["can_bus_load"] = CanBusLoad(load.mean * 100.0, load.peak * 100.0)
+        if self.face_alarms:
+            extra["alarms"] = (*s.alarms, *self.face_alarms)
+        return dataclasses.replace(s, **extra)
+
+    @property
+    def alarms(self) -> tuple[Alarm, ...]:
+        return (*self.status.alarms, *self.face_alarms)
+
+    # ------------------------------------------------------------------ operator and cell
+    def command(self, name: str, **args):
+        """An operator/cell command to the controller; `CommandRefused` says why not."""
+        try:
+            result = self.controller.command(name, **args)
+        except Exception as exc:
+            if isinstance(exc, self.refused) or type(exc).__name__ == "CommandRefused":
+                self.events.add(self.t, "refused", f"{name}: {exc}", {"args": _plain(args)})
+            raise
+        self.events.add(self.t, "command", name, {"args": _plain(args)} if args else None)
+        if name in ("reset", "alarm_reset"):
+            self.face_alarms.clear()
+        return result
+
+    def load_program(self, text: str, number: int | None = None) -> int:
+        """Store a program (tape text) in memory; returns its O number.
+
+        `cnc.program_memory.MemoryFull` (its message suggests drip-feed) when it does not fit.
+        """
+        from cnc.faces.dnc_port import program_number, stored_text
+
+        lines = [ln.rstrip("\r") for ln in text.splitlines()]
+        lines = [ln for ln in lines if ln.strip() not in ("%", "")]
+        if number is None:
+            number = program_number(lines) or 1
+        self.memory.store(number, stored_text(lines))
+        self.events.add(self.t, "program_stored", f"O{number:04d}")
+        return number
+
+    def inject(self, spec: FaultSpec | str) -> None:
+        """Apply a fault now (drive, bus or PLC input); ValueError names what is wrong."""
+        if isinstance(spec, str):
+            spec = parse_fault_spec(spec, self.axis_names)
+        if spec.target == "plc":
+            self.io.inject(spec.kind)
+        else:
+            self.axes.inject(spec)
+        self.events.add(self.t, "fault_injected", str(spec))
+
+    def clear_fault(self, spec: FaultSpec | str) -> None:
+        if isinstance(spec, str):
+            spec = parse_fault_spec(spec, self.axis_names)
+        if spec.target == "plc":
+            self.io.clear(spec.kind)
+        else:
+            self.axes.clear(spec)
+        self.events.add(self.t, "fault_cleared", str(spec))
+
+    def open_door(self) -> bool:
+        """The operator pulls the guard door: False (refused) while it is locked."""
+        ok = self.io.open_door()
+        self.events.add(self.t, "operator", "door opened" if ok else "door locked: not opened")
+        return ok
+
+    def close_door(self) -> None:
+        self.io.close_door()
+        self.events.add(self.t, "operator", "door closed")
+
+    def press_estop(self) -> None:
+        self.io.press_estop()
+        self.events.add(self.t, "operator", "E-stop button pressed")
+
+    def release_estop(self) -> None:
+        self.io.release_estop()
+        self.events.add(self.t, "operator", "E-stop button released")
+
+    def press(self, button: str) -> None:
+        """A panel push-button pressed for one PLC scan."""
+        if button not in PANEL_BUTTONS:
+            raise ValueError(f"unknown panel button {button!r}; one of {', '.join(PANEL_BUTTONS)}")
+        self.io.press(button)
+        self._release_after_scan.append(button)
+        self.events.add(self.t, "operator", f"{button} pressed")
+
+    def call_soon(self, fn: Callable[[], None]) -> None:
+        """Run `fn` on the machine's thread at the start of the next cycle (faces use it)."""
+        self._inbox.put(fn)
+
+    def raise_face_alarm(self, number: int, text: str, source: str = "DNC") -> None:
+        """Thread-safe: an alarm raised by a face (DNC parity error, transfer cut off...)."""
+        alarm = Alarm(number, text, source=source, time=self.t)
+
+        def add() -> None:
+            self.face_alarms.append(alarm)
+            self.events.add(
+                self.t,
+                "alarm",
+                f"{source} {number}: {text}",
+                {"number": number, "source": source, "axis": None, "line": 0},
+            )
+
+        self.call_soon(add)
+
+    # ------------------------------------------------------------------ faces, lifetime
+    def start_faces(self, *, simulation: bool | None = None):
+        """Start the faces (DNC, Modbus, SHDR, simulation if enabled) on one LoopThread."""
+        from cnc.machine.faces import MachineFaces
+
+        self.faces = MachineFaces(self, simulation=simulation).start()
+        return self.faces
+
+    def close(self) -> None:
+        if self.faces is not None:
+            self.faces.stop()
+            self.faces = None
+        self.axes.close()
+        self.events.close()
+
+
+def _seg_dist(path, j: int, p: tuple[float, ...]) -> float:
+    """Distance from p to the path segment ending at point j (a point for j = 0)."""
+    b = path[j]
+    if j == 0:
+        return math.dist(p, b)
+    a = path[j - 1]
+    ab = [bi - ai for ai, bi in zip(a, b, strict=True)]
+    ap = [pi - ai for ai, pi in zip(a, p, strict=True)]
+    den = sum(x * x for x in ab)
+    u = (
+        0.0
+        if den == 0
+        else max(0.0, min(1.0, sum(x * y for x, y in zip(ab, ap, strict=True)) / den))
+    )
+    return math.dist(p, tuple(ai + u * x for ai, x in zip(a, ab, strict=True)))
+
+
+def _plain(args: dict) -> dict:
+    return {
+        k: (v if isinstance(v, int | float | str | bool | None) else repr(v))
+        for k, v in args.items()
+    }

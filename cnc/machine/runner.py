@@ -1,0 +1,93 @@
+"""Realtime: a machine's lockstep core paced to the wall clock, lateness measured."""
+
+from __future__ import annotations
+
+import threading
+import time
+
+
+class RealtimeRunner:
+    """Steps `machine` once per IPO cycle at absolute deadlines (`speed` x real time).
+
+    A cycle is late when its work ends after the next cycle's deadline; a whole slot missed
+    is skipped (counted) rather than run back to back. `pause()`, `resume()`, `step(n)` and
+    `speed` are the simulation face's clock control (thread-safe).
+    """
+
+    def __init__(self, machine, *, speed: float = 1.0) -> None:
+        self.machine = machine
+        self.speed = speed
+        self.cycles = 0
+        self.late_cycles = 0
+        self.skipped_slots = 0
+        self.lateness_s: list[float] = []
+        self._stop = threading.Event()
+        self._paused = threading.Event()
+        self._steps = 0
+        self._lock = threading.Lock()
+        machine.runner = self
+
+    def pause(self) -> None:
+        self._paused.set()
+
+    def resume(self) -> None:
+        self._paused.clear()
+
+    def step(self, n: int) -> None:
+        with self._lock:
+            self._steps += n
+
+    def stop(self) -> None:
+        self._stop.set()
+
+    def run(self, duration_s: float | None = None) -> dict:
+        """Run until `stop()` or `duration_s` of wall time; returns `summary()`."""
+        m = self.machine
+        start = time.perf_counter()
+        slot = start
+        while not self._stop.is_set():
+            now = time.perf_counter()
+            if duration_s is not None and now - start >= duration_s:
+                break
+            if self._paused.is_set():
+                with self._lock:
+                    n, self._steps = self._steps, 0
+                if n:
+                    m.step(n)
+                else:
+                    time.sleep(0.005)
+                slot = time.perf_counter()
+                continue
+            period = m.ipo_s / self.speed
+            slot += period
+            now = time.perf_counter()
+            if now > slot + period:
+                missed = int((now - slot) / period)
+                self.skipped_slots += missed
+                slot += missed * period
+            while (remaining := slot - time.perf_counter()) > 0:
+                time.sleep(remaining if remaining > 0.0002 else 0)
+            self.lateness_s.append(time.perf_counter() - slot)
+            if len(self.lateness_s) > 200_000:
+                del self.lateness_s[:100_000]
+            m.step(1)
+            self.cycles += 1
+            if time.perf_counter() > slot + period:
+                self.late_cycles += 1
+        return self.summary()
+
+    def summary(self) -> dict:
+        lat = sorted(self.lateness_s)
+
+        def p(q: float) -> float:
+            return lat[min(len(lat) - 1, int(q * len(lat)))] * 1e3 if lat else 0.0
+
+        return {
+            "cycles": self.cycles,
+            "late_cycles": self.late_cycles,
+            "late_fraction": self.late_cycles / self.cycles if self.cycles else 0.0,
+            "skipped_slots": self.skipped_slots,
+            "lateness_ms_p50": p(0.5),
+            "lateness_ms_p99": p(0.99),
+            "lateness_ms_max": lat[-1] * 1e3 if lat else 0.0,
+        }
