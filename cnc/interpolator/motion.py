@@ -85,7 +85,6 @@ class Motion:
         self._dirty = False
         self._urgent = False
         self._sb_wait = False
-        self._sb_seen = False
         self.replans = 0
 
     # -- feeding ------------------------------------------------------------------------

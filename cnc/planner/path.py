@@ -50,7 +50,6 @@ class Segment:
         "sync_after",
         "exact",
         "tolerance",
-        "orig_len",
         "lim_v",
         "lim_at",
         "lim_jt",
@@ -75,7 +74,6 @@ class Segment:
         self.sync_after: list = []
         self.exact = exact
         self.tolerance = tolerance
-        self.orig_len = geom.length
         self.lim = lim
         self.lim_v = -1.0
         self.lim_at = self.lim_jt = 0.0
