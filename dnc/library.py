@@ -19,7 +19,7 @@ from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any
 
-from sqlalchemy import and_, exists, func, or_, select
+from sqlalchemy import and_, column, exists, func, or_, select, table
 from sqlalchemy.exc import IntegrityError
 from sqlalchemy.orm import Session, sessionmaker
 
@@ -363,22 +363,20 @@ class Library:
                     and_(m.ProgramTag.program_id == m.Program.id, m.ProgramTag.tag == tag)
                 )
             )
-        if text:
-            like = f"%{_escape_like(text)}%"
-            stmt = stmt.where(
-                exists().where(
-                    and_(
-                        m.Revision.program_id == m.Program.id,
-                        m.Content.sha256 == m.Revision.sha256,
-                        m.Content.text.like(like, escape="\\"),
+        with transaction(self._sessions) as s:
+            if text:
+                stmt = stmt.where(
+                    exists().where(
+                        and_(
+                            m.Revision.program_id == m.Program.id,
+                            m.Revision.sha256.in_(_contents_containing(s, text)),
+                        )
                     )
                 )
-            )
-        with transaction(self._sessions) as s:
             rows = list(s.scalars(stmt))
             more = len(rows) > limit
             rows = rows[:limit]
-            items = [self._program_info(s, p) for p in rows]
+            items = self._program_infos(s, rows)
         return Page(items, _encode_cursor(rows[-1].id) if more else None)
 
     def audit(self, *, entity: str | None = None, entity_id: int | None = None) -> list[dict]:
@@ -643,35 +641,56 @@ class Library:
         return rev
 
     def _program_info(self, s: Session, prog: m.Program) -> ProgramInfo:
-        tags = tuple(
-            s.scalars(
-                select(m.ProgramTag.tag)
-                .where(m.ProgramTag.program_id == prog.id)
-                .order_by(m.ProgramTag.tag)
+        return self._program_infos(s, [prog])[0]
+
+    def _program_infos(self, s: Session, progs: list[m.Program]) -> list[ProgramInfo]:
+        """Infos for a page of programs in three queries, however long the page."""
+        ids = [p.id for p in progs]
+        tags: dict[int, list[str]] = {i: [] for i in ids}
+        for pid, tag in s.execute(
+            select(m.ProgramTag.program_id, m.ProgramTag.tag)
+            .where(m.ProgramTag.program_id.in_(ids))
+            .order_by(m.ProgramTag.tag)
+        ):
+            tags[pid].append(tag)
+        released = dict(
+            s.execute(
+                select(m.Revision.program_id, m.Revision.id).where(
+                    m.Revision.program_id.in_(ids), m.Revision.status == RELEASED
+                )
+            ).all()
+        )
+        newest = (
+            select(m.Revision.program_id, func.max(m.Revision.seq).label("seq"))
+            .where(m.Revision.program_id.in_(ids))
+            .group_by(m.Revision.program_id)
+            .subquery()
+        )
+        latest = dict(
+            s.execute(
+                select(m.Revision.program_id, m.Revision.id).join(
+                    newest,
+                    and_(
+                        m.Revision.program_id == newest.c.program_id,
+                        m.Revision.seq == newest.c.seq,
+                    ),
+                )
+            ).all()
+        )
+        return [
+            ProgramInfo(
+                p.id,
+                p.number,
+                p.name,
+                p.machine_kind,
+                p.description,
+                tuple(tags[p.id]),
+                p.created_at,
+                released.get(p.id),
+                latest.get(p.id),
             )
-        )
-        released = s.scalar(
-            select(m.Revision.id).where(
-                m.Revision.program_id == prog.id, m.Revision.status == RELEASED
-            )
-        )
-        latest = s.scalar(
-            select(m.Revision.id)
-            .where(m.Revision.program_id == prog.id)
-            .order_by(m.Revision.seq.desc())
-            .limit(1)
-        )
-        return ProgramInfo(
-            prog.id,
-            prog.number,
-            prog.name,
-            prog.machine_kind,
-            prog.description,
-            tags,
-            prog.created_at,
-            released,
-            latest,
-        )
+            for p in progs
+        ]
 
 
 def _revision_info(r: m.Revision) -> RevisionInfo:
@@ -705,6 +724,21 @@ def _machine_dict(x: m.Machine) -> dict:
         memory_bytes=x.memory_bytes,
         dnc_profile=dict(x.dnc_profile or {}),
     )
+
+
+_CONTENTS_FTS = table("contents_fts", column("sha256"), column("text"))
+
+
+def _contents_containing(s: Session, text: str):
+    """Content hashes whose text contains `text` (a subquery).
+
+    On SQLite the FTS5 trigram table answers a LIKE from its index; elsewhere the contents
+    table is searched (PostgreSQL uses its pg_trgm index when the extension is there).
+    """
+    like = f"%{_escape_like(text)}%"
+    if s.get_bind().dialect.name == "sqlite":
+        return select(_CONTENTS_FTS.c.sha256).where(_CONTENTS_FTS.c.text.like(like, escape="\\"))
+    return select(m.Content.sha256).where(m.Content.text.like(like, escape="\\"))
 
 
 def _escape_like(s: str) -> str:

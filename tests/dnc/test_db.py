@@ -20,8 +20,13 @@ PROG = "%\nO{n}\nG0 X0\nM30\n%\n"
 
 
 def test_migrated_schema_matches_the_models(engine):
+    def ours(obj, name, type_, reflected, compare_to):
+        # The full-text search table and index are kept by migration 0004, not by a model.
+        return not (name or "").startswith(("contents_fts", "ix_contents_text_trgm"))
+
     with engine.connect() as conn:
-        assert compare_metadata(MigrationContext.configure(conn), Base.metadata) == []
+        context = MigrationContext.configure(conn, opts={"include_object": ours})
+        assert compare_metadata(context, Base.metadata) == []
 
 
 def test_migrations_go_down_to_base_and_up_again(tmp_path):

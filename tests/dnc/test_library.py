@@ -241,3 +241,12 @@ def test_parity_tape_upload_gets_a_hint():
     tape = bytes(with_parity(c) for c in b"%\nO1\nG0 X1\n%\n")
     with pytest.raises(InvalidUpload, match="parity bit set"):
         decode_program(tape, limit=1000)
+
+
+@pytest.mark.parametrize(
+    "needle, found", [("X1", [1]), ("G1 X10", [1]), ("100%", [2]), ("_", []), ("Z", [])]
+)
+def test_text_search_finds_substrings_of_any_length(library, needle, found):
+    library.create_program(number=1, name="a", text=PROG.replace("O1000", "O1"))
+    library.create_program(number=2, name="b", text="%\nO2 (100% FEED)\nG0 X0\n%\n")
+    assert [p.number for p in library.search(text=needle).items] == found
