@@ -215,15 +215,16 @@ class Controller:
     def command(self, name: str, **args) -> None:
         """Operator command; raises CommandRefused(reason) when the mode/state forbids it."""
         fn = getattr(self, f"_cmd_{name}", None)
-        if fn is None:
-            raise CommandRefused(f"unknown command {name!r}")
         try:
-            fn(**args)
+            if fn is None:
+                raise CommandRefused(f"unknown command {name!r}")
+            try:
+                fn(**args)
+            except TypeError as exc:
+                raise CommandRefused(f"{name}: bad arguments ({exc})") from None
         except CommandRefused as exc:
             self._event(exc.reason)
             raise
-        except TypeError as exc:
-            raise CommandRefused(f"{name}: bad arguments ({exc})") from None
 
     def drip_input(self) -> DripBuffer | None:
         """A fresh drip-feed buffer for the DNC port's DRIP (None = refused now). The drip
@@ -643,7 +644,7 @@ class Controller:
         ex = self._execution()
         out = {
             "NcReady": True,
-            "NcInCycle": ex in IN_CYCLE,
+            "NcInCycle": ex in IN_CYCLE or self._run is not None,
             "NcResetting": self._t < self._resetting_until,
             "NcAlarm": any(a.source != "PLC" for a in self._alarms.active),
             "NcMode": _MODE_NUMBER.get(self.mode, MODE_NONE),
@@ -698,7 +699,8 @@ class Controller:
                 self._enable_sent_at is None
                 or self._t - self._enable_sent_at >= self.settings.enable_retry_s - 1e-9
             )
-            if due and not self._alarms.has(al.FOLLOWING_ERROR):
+            free = self._axis_cmd == "none"  # a fault reset or homing goes first
+            if due and free and not self._alarms.has(al.FOLLOWING_ERROR):
                 self._axis("enable")
                 self._enable_sent_at = self._t
         elif not want and self._want_enable and fb.enabled and not self._estop:

@@ -31,6 +31,7 @@ class DripLines:
         self.markers: set[int] = set()
         self._map: OrderedDict[int, int] = OrderedDict()
         self.recent: OrderedDict[int, str] = OrderedDict()
+        self.waiting = False  # the last fill found no data: the NC waits for the sender
 
     def fill(self) -> bool:
         """Take blocks from the buffer; True when a line (or the end) is ready."""
@@ -41,10 +42,10 @@ class DripLines:
             if block is None:
                 self.ended = True
                 break
-            if block.strip().startswith("%"):
-                continue  # tape start/end characters are the port's business
             self.pending.append(block)
-        return bool(self.pending) or self.ended
+        ready = bool(self.pending) or self.ended
+        self.waiting = not ready
+        return ready
 
     def __iter__(self) -> DripLines:
         return self
@@ -78,4 +79,4 @@ class DripLines:
 
     @property
     def starved(self) -> bool:
-        return not self.pending and not self.ended
+        return self.waiting
