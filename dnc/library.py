@@ -365,11 +365,11 @@ class Library:
             )
         with transaction(self._sessions) as s:
             if text:
+                # Driven from the text index: the programs whose revisions hold a match.
                 stmt = stmt.where(
-                    exists().where(
-                        and_(
-                            m.Revision.program_id == m.Program.id,
-                            m.Revision.sha256.in_(_contents_containing(s, text)),
+                    m.Program.id.in_(
+                        select(m.Revision.program_id).where(
+                            m.Revision.sha256.in_(_contents_containing(s, text))
                         )
                     )
                 )

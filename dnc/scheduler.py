@@ -130,41 +130,41 @@ def decide(
         busy_machines.add(mach.name)
         active_parts[alloc.job_id] = active_parts.get(alloc.job_id, 0) + 1
 
-    waiting = [
-        j
-        for j in jobs
-        if not j.cancelled and j.quantity - done_now[j.id] - active_parts.get(j.id, 0) > 0
-    ]
+    def remaining(job: JobState) -> int:
+        return job.quantity - done_now[job.id] - active_parts.get(job.id, 0)
+
+    waiting = [j for j in jobs if not j.cancelled and remaining(j) > 0]
     idle = sorted(
         (m for m in machines if m.state == IDLE and m.name not in busy_machines),
         key=lambda m: m.name,
     )
+    # The rule ranks the jobs once per class of machine (kind and groups) per tick; each
+    # idle machine of the class then takes the best-ranked job that still has parts left.
+    rankings: dict[tuple[str, tuple[str, ...]], list] = {}
+    by_id = {j.id: j for j in waiting}
     for mach in idle:
-        eligible = [
-            JobView(
-                j.id,
-                j.priority,
-                j.created_at,
-                j.due_at,
-                j.quantity - done_now[j.id] - active_parts.get(j.id, 0),
-                j.cycle_time_s,
+        key = (mach.kind, mach.groups)
+        if key not in rankings:
+            eligible = [
+                JobView(j.id, j.priority, j.created_at, j.due_at, remaining(j), j.cycle_time_s)
+                for j in waiting
+                if j.machine_kind == mach.kind
+                and (j.machine_group is None or j.machine_group in mach.groups)
+            ]
+            rankings[key] = rule(eligible, now) if eligible else []
+        ranking = rankings[key]
+        for rank, best in enumerate(ranking, start=1):
+            if remaining(by_id[best.job.id]) <= 0:
+                continue
+            out.actions.append(
+                Allocate(
+                    best.job.id,
+                    mach.name,
+                    mach.part_count,
+                    f"{rule_name.upper()} chose job {best.job.id} for idle {mach.name} "
+                    f"(rank {rank} of {len(ranking)} eligible): {best.reason}",
+                )
             )
-            for j in waiting
-            if j.machine_kind == mach.kind
-            and (j.machine_group is None or j.machine_group in mach.groups)
-            and j.quantity - done_now[j.id] - active_parts.get(j.id, 0) > 0
-        ]
-        if not eligible:
-            continue
-        best = rule(eligible, now)[0]
-        out.actions.append(
-            Allocate(
-                best.job.id,
-                mach.name,
-                mach.part_count,
-                f"{rule_name.upper()} chose job {best.job.id} for idle {mach.name} "
-                f"among {len(eligible)} eligible: {best.reason}",
-            )
-        )
-        active_parts[best.job.id] = active_parts.get(best.job.id, 0) + 1
+            active_parts[best.job.id] = active_parts.get(best.job.id, 0) + 1
+            break
     return out

@@ -176,5 +176,5 @@ def test_edd_rule_takes_the_earliest_due_job(sessions, cell):
     assert jobs.allocations(soon.id) and not jobs.allocations(late.id)
     reason = jobs.decisions(job_id=soon.id)[0]["reason"]
     assert reason.startswith(
-        "EDD chose job 2 for idle mill1 among 2 eligible: EDD: due 2026-11-21T09:00"
+        "EDD chose job 2 for idle mill1 (rank 1 of 2 eligible): EDD: due 2026-11-21T09:00"
     )

@@ -86,7 +86,7 @@ def test_quantity_spreads_over_every_idle_eligible_machine():
         [job(1)], [], [mach("mill1"), mach("mill2"), mach("lathe1", kind="lathe")], fifo, "fifo", T0
     )
     assert [(a.job_id, a.machine) for a in d.of(Allocate)] == [(1, "mill1"), (1, "mill2")]
-    assert "FIFO chose job 1 for idle mill1 among 1 eligible" in d.of(Allocate)[0].reason
+    assert "FIFO chose job 1 for idle mill1 (rank 1 of 1 eligible)" in d.of(Allocate)[0].reason
 
 
 def test_no_more_parts_allocated_than_remain():
