@@ -14,7 +14,10 @@ class MachineFaces:
     has none); False keeps it off whatever the config says.
     """
 
-    def __init__(self, machine, *, simulation: bool | None = None) -> None:
+    def __init__(
+        self, machine, *, simulation: bool | None = None, dnc_parity: bool = False
+    ) -> None:
+        self.dnc_parity = dnc_parity
         self.machine = machine
         self.loop = LoopThread(f"faces-{machine.name}")
         self.dnc = None
@@ -38,6 +41,7 @@ class MachineFaces:
                 m.memory,
                 host=ports.host,
                 port=ports.dnc,
+                parity=self.dnc_parity,
                 drip=self._drip,
                 on_alarm=lambda n, text: m.raise_face_alarm(n, text, "DNC"),
                 policy=getattr(ctl, "policy", None),

@@ -326,11 +326,14 @@ class Machine:
         self.call_soon(add)
 
     # ------------------------------------------------------------------ faces, lifetime
-    def start_faces(self, *, simulation: bool | None = None):
-        """Start the faces (DNC, Modbus, SHDR, simulation if enabled) on one LoopThread."""
+    def start_faces(self, *, simulation: bool | None = None, dnc_parity: bool = False):
+        """Start the faces (DNC, Modbus, SHDR, simulation if enabled) on one LoopThread.
+
+        `dnc_parity`: ISO 7-bit even parity on the DNC port (a parity error rejects the
+        program and raises alarm 2001)."""
         from cnc.machine.faces import MachineFaces
 
-        self.faces = MachineFaces(self, simulation=simulation).start()
+        self.faces = MachineFaces(self, simulation=simulation, dnc_parity=dnc_parity).start()
         return self.faces
 
     def close(self) -> None:

@@ -12,13 +12,33 @@ same tests run unchanged against the real `cnc.controller.Controller`.
 
 from __future__ import annotations
 
+import time
+
 from cnc import canon
+from cnc.faces.drip import DripBuffer
 from cnc.interp import Interpreter, ToolOffset
 from cnc.interpolator.motion import Motion
 from cnc.machine.contract import CycleOutputs
 from cnc.status import Alarm, AxisStatus, MachineStatus
 
 FE_LIMIT_MM = 40.0  # the drives lag ~60 ms without feed-forward: 30 mm at rapid
+
+
+def _drip_lines(buffer):
+    """Blocks as the DNC port delivers them. The wait is for the network (the host sending),
+    not for the simulation: in lockstep the machine cannot run ahead of its tape."""
+    deadline = time.monotonic() + 10.0
+    while time.monotonic() < deadline:
+        block = buffer.take()
+        if block is None:
+            return
+        if block is False:
+            if buffer.aborted:
+                return
+            time.sleep(0.0005)
+            continue
+        deadline = time.monotonic() + 10.0
+        yield block
 
 
 class CommandRefused(Exception):
@@ -48,6 +68,8 @@ class StandInController:
         self._line = 0
         self._t = 0.0
         self._dwell_until = None
+        self._drip = None
+        self._keep_targets = False
         self.blocks_done = 0
         self.status = MachineStatus()
 
@@ -74,7 +96,12 @@ class StandInController:
             raise CommandRefused(f"{name}: not supported by the test stand-in")
 
     def drip_input(self):
-        return None
+        """A drip-feed (BTR) buffer the next cycle start executes from (AUTO, idle only)."""
+        if self._motion is not None or self.mode != "AUTO":
+            return None
+        self._drip = DripBuffer(1024)
+        self.program = None
+        return self._drip
 
     def policy(self, op, number):
         if op == "READ" and number == self.program and self.execution == "ACTIVE":
@@ -133,7 +160,8 @@ class StandInController:
         self.homed = {a: bool(fb.homed.get(a)) for a in self.axes}
         start = self._start_req or plc.get("CycleStart")
         self._start_req = False
-        if start and self._motion is None and not self.alarms and self.program is not None:
+        ready = self.program is not None or self._drip is not None
+        if start and self._motion is None and not self.alarms and ready:
             if not all(self.homed.values()):
                 self._alarm(3020, "cycle start refused: axes not referenced", "NC")
             else:
@@ -141,7 +169,8 @@ class StandInController:
         self._hold = bool(plc.get("FeedHold"))
         if self._motion is not None:
             self._run(plc, out_plc, start)
-        else:
+        elif axis_cmd != "none" or not fb.enabled or not self._keep_targets:
+            self._keep_targets = False
             self._targets = dict(fb.actual)
         out_plc["NcInCycle"] = self._motion is not None
         out_plc["NcAlarm"] = bool(self.alarms)
@@ -165,7 +194,7 @@ class StandInController:
         return CycleOutputs(dict(self._targets), axis_cmd, (), out_plc, self.status)
 
     def _begin(self, fb):
-        text = self.memory.get(self.program)
+        text = self.memory.get(self.program) if self._drip is None else _drip_lines(self._drip)
         start = tuple(fb.actual.get(a, 0.0) for a in ("X", "Y", "Z"))
         interp = Interpreter(self.params, tools=self._tools, start=start)
         self._commands = iter(interp.run(text))
@@ -200,6 +229,7 @@ class StandInController:
             self._start_sync(s.sync, out_plc)
         if m.idle and self._commands is None and self._sync is None:
             self._motion = None
+            self._keep_targets = True  # hold the last setpoint: the axes settle onto it
             self.execution = "PROGRAM_COMPLETED"
 
     def _start_sync(self, cmd, out_plc):

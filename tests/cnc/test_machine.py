@@ -1,0 +1,201 @@
+"""The machine end to end in lockstep on CiA 402 drives over the simulated CAN bus.
+
+The controller is the clearly marked stand-in of test_machine_double.py until
+cnc.controller lands; the drives, bus, axis group, PLC program and plant are the real ones.
+"""
+
+from __future__ import annotations
+
+import io
+
+import pytest
+
+from cnc.config import builtin_machine
+from cnc.machine import Machine
+from tests.cnc.test_machine_double import StandInController
+
+SQUARE = """%
+O0010 (SQUARE WITH A TOOL CHANGE)
+N10 G21 G90 G17
+N20 T2 M6
+N30 G0 X-100 Y-100 Z-10
+N40 G1 X-150 F3000
+N50 Y-150
+N60 X-100
+N70 Y-100
+N80 G0 Z-5
+N90 M30
+%
+"""
+
+LONG = """%
+O0020 (LONG FEED MOVES, NO SPINDLE)
+N10 G21 G90 G17
+N20 G1 X-300 Y-200 F3000
+N30 X-50 Y-50
+N40 M30
+%
+"""
+
+
+def build(**kw) -> Machine:
+    return Machine(builtin_machine("mill3"), "mill3", controller_factory=StandInController, **kw)
+
+
+def homed(m: Machine) -> bool:
+    fb = m.axes.feedback()
+    return all(fb.homed.values()) and not fb.homing
+
+
+def home(m: Machine) -> None:
+    m.step(10)
+    m.command("mode", mode="REF")
+    m.command("home")
+    assert m.run_until(homed, 30.0), m.alarms
+
+
+def start(m: Machine, text: str) -> None:
+    n = m.load_program(text)
+    m.command("mode", mode="AUTO")
+    m.command("select_program", number=n)
+    m.command("cycle_start")
+
+
+def finished(m: Machine) -> bool:
+    return bool(m.alarms) or m.status.execution == "PROGRAM_COMPLETED"
+
+
+@pytest.fixture
+def machine():
+    m = build()
+    yield m
+    m.close()
+
+
+def test_homing_through_cia402_sets_the_reference_point_at_the_dog(machine):
+    home(machine)
+    fb = machine.axes.feedback()
+    for axis in "XYZ":
+        # home_mm = 0 at the dog's edge; the creep brakes a fraction of a millimetre on
+        assert -0.5 < fb.actual[axis] <= 0.0
+    assert machine.axes.group.state("X") == "OPERATION ENABLED"
+
+
+def test_program_with_m6_completes_on_canopen_drives(machine):
+    home(machine)
+    start(machine, SQUARE)
+    assert machine.run_until(finished, 30.0)
+    assert machine.alarms == ()
+    assert machine.status.execution == "PROGRAM_COMPLETED"
+    # M6 went through the PLC: strobe, the changer sequence, finish
+    assert machine.io.nc.get("ToolInSpindle") == 2
+    assert machine.io.state.tool_in_spindle == 2
+    machine.step(500)  # settle onto the last setpoint
+    fb = machine.axes.feedback()
+    assert fb.actual["X"] == pytest.approx(-100.0, abs=0.002)
+    assert fb.actual["Y"] == pytest.approx(-100.0, abs=0.002)
+    assert fb.actual["Z"] == pytest.approx(-5.0, abs=0.002)
+    assert 0 < machine.max_following_error["X"] < 40.0
+    assert machine.axes.bus_load.mean > 0.1
+
+
+def test_door_opened_mid_cycle_gives_feed_hold_and_cycle_start_resumes(machine):
+    home(machine)
+    start(machine, LONG)
+    machine.step(250)  # 0.5 s into the first move
+    assert machine.status.execution == "ACTIVE"
+    assert machine.open_door()  # no spindle: the door is not locked
+    assert machine.run_until(lambda m: m.status.execution == "FEED_HOLD", 0.05)
+    assert machine.io.nc.get("FeedHold")
+    assert 1030 in machine.plc.alarms
+    machine.step(500)  # the path decelerates along the path and stays
+    held = dict(machine.axes.feedback().actual)
+    machine.step(50)
+    assert machine.axes.feedback().actual == pytest.approx(held, abs=0.002)
+    machine.close_door()
+    machine.step(5)
+    machine.press("PanelCycleStart")
+    assert machine.run_until(lambda m: m.status.execution == "ACTIVE", 0.1)
+    assert machine.run_until(finished, 30.0)
+    assert machine.status.execution == "PROGRAM_COMPLETED"
+
+
+def test_estop_quick_stops_raises_an_alarm_and_needs_homing_again(machine):
+    home(machine)
+    start(machine, LONG)
+    machine.step(300)
+    machine.press_estop()
+    assert machine.run_until(lambda m: m.alarms, 0.05)
+    assert machine.status.emergency_stop == "TRIGGERED"
+    assert 1001 in machine.plc.alarms
+    machine.step(500)  # quick stop ramps at max_accel: < 0.2 s from 50 mm/s
+    a = dict(machine.axes.feedback().actual)
+    machine.step(10)
+    assert machine.axes.feedback().actual == pytest.approx(a, abs=1e-3)
+    assert machine.axes.group.state("X") in ("QUICK STOP ACTIVE", "SWITCH ON DISABLED")
+    fb = machine.axes.feedback()
+    assert not any(fb.homed.values()) and not fb.enabled
+    assert any(e.kind == "alarm" for e in machine.events.events)
+
+
+@pytest.mark.parametrize(
+    ("spec", "axis", "code", "bound_s"),
+    [
+        ("drive:X:encoder", "X", 0x7305, 0.01),
+        ("drive:X:overcurrent", "X", 0x2310, 0.01),
+        ("drive:Y:undervoltage", "Y", 0x3130, 0.05),
+        ("drive:Z:overtemperature", "Z", 0x4310, 0.01),
+        ("drive:Z:power_cycle", "Z", 0x0000, 0.01),
+        ("bus:bus_off:X", "X", 0x8130, 0.3 + 0.01),  # 3 x 100 ms heartbeat, + a cycle
+        ("bus:drop:Y:count=0", "Y", 0x8130, 0.3 + 0.01),
+    ],
+)
+def test_each_drive_fault_reaches_the_nc_within_its_bound(spec, axis, code, bound_s):
+    m = build(faults=[f"{spec}@0.1s"])
+    try:
+        m.run_until(lambda mm: mm.t >= 0.1, 1.0)
+        t0 = m.t
+        assert m.run_until(lambda mm: mm.axes.feedback().faults, bound_s + 0.004)
+        assert m.t - t0 <= bound_s + 0.004
+        faults = m.axes.feedback().faults
+        assert (axis, code) in [(a, c) for a, c, _ in faults]
+        m.step(2)
+        assert any(a.axis == axis for a in m.alarms)
+        assert m.events.of_kind("fault_injected")[0].text == f"{spec}@0.1s"
+    finally:
+        m.close()
+
+
+def test_following_error_fault_during_a_move_stops_that_axis_with_its_code(machine):
+    home(machine)
+    start(machine, LONG)
+    machine.step(100)
+    machine.inject("drive:Y:following_error")
+    t0 = machine.t
+    assert machine.run_until(lambda m: m.axes.feedback().faults, 1.0)
+    # a jammed table: the drive's following error (0x8611, window 0x6065 = 60 mm) or its
+    # blocked-motor monitor (0x7121, 0.25 s at the current limit), whichever trips first
+    codes = {c for a, c, _ in machine.axes.feedback().faults if a == "Y"}
+    assert codes & {0x8611, 0x7121}
+    assert machine.t - t0 < 3.0
+
+
+def _scenario() -> tuple[str, str]:
+    trace, candump = io.StringIO(), io.StringIO()
+    m = build(trace=trace, candump=candump)
+    try:
+        home(m)
+        start(m, SQUARE)
+        m.run_until(finished, 30.0)
+    finally:
+        m.close()
+    return trace.getvalue(), candump.getvalue()
+
+
+def test_lockstep_runs_are_byte_identical():
+    a = _scenario()
+    b = _scenario()
+    assert a[0].splitlines()[0] == "t,X_cmd,Y_cmd,Z_cmd,X_act,Y_act,Z_act,line"
+    assert len(a[0].splitlines()) > 1000 and len(a[1].splitlines()) > 10_000
+    assert a[0] == b[0]
+    assert a[1] == b[1]
