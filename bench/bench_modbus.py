@@ -309,6 +309,10 @@ def main() -> None:
         {
             "asyncio_floor_1conn_req_s": one["asyncio_floor"]["req_per_s"],
             "asyncio_floor_8conn_req_s": eight["asyncio_floor"]["req_per_s"],
+            "asyncio_floor_detail": {
+                "1conn": one["asyncio_floor"],
+                "8conn": eight["asyncio_floor"],
+            },
         }
         if args.floor
         else {}
