@@ -44,8 +44,11 @@ class Segment:
         "normal_axis",
         "stop_end",
         "jcap_end",
-        "jcoast_end",
+        "jcoast",
         "jump_end",
+        "jdu",
+        "jdk",
+        "next_geom",
         "break_end",
         "sync_after",
         "exact",
@@ -68,8 +71,10 @@ class Segment:
         self.vphys, self.at, self.jt = piece_limits(lim, geom, normal_axis)
         self.stop_end = True  # until the next piece is known
         self.jcap_end = 0.0
-        self.jcoast_end = 0.0
+        self.jcoast = -1.0  # coasted junction cap, computed when a span boundary needs it
         self.jump_end = True
+        self.jdu = self.jdk = (0.0, 0.0, 0.0)
+        self.next_geom = None
         self.break_end = True
         self.sync_after: list = []
         self.exact = exact
@@ -86,6 +91,21 @@ class Segment:
             _v, self.lim_at, self.lim_jt = arc_limits(self.lim, self.geom, self.normal_axis, v)
             self.lim_v = v
         return self.lim_at, self.lim_jt
+
+    @property
+    def jcoast_end(self) -> float:
+        """Cap of the end junction when passed in a coast (see limits.coast_cap)."""
+        if self.jcoast < 0.0:
+            ka1, kj1 = centripetal(self.lim, self.geom)
+            ka2, kj2 = centripetal(self.lim, self.next_geom)
+            self.jcoast = coast_cap(
+                self.lim,
+                self.jdu,
+                self.jdk,
+                tuple(max(x, y) for x, y in zip(ka1, ka2, strict=True)),
+                tuple(max(x, y) for x, y in zip(kj1, kj2, strict=True)),
+            )
+        return self.jcoast
 
     def vcap(self, feed_ovr: float, rapid_ovr: float) -> float:
         if self.feed is None:
@@ -260,19 +280,11 @@ class Path:
         if (a.feed is None) != (b.feed is None) and big:
             cap = 0.0  # a corner between a rapid and a feed move is an exact stop
         jump = bool(du[0] or du[1] or du[2] or dk[0] or dk[1] or dk[2])
-        coast = 0.0
-        if jump and cap > 0.0:
-            ka1, kj1 = centripetal(self.lim, ga)
-            ka2, kj2 = centripetal(self.lim, gb)
-            coast = coast_cap(
-                self.lim,
-                du,
-                dk,
-                tuple(max(x, y) for x, y in zip(ka1, ka2, strict=True)),
-                tuple(max(x, y) for x, y in zip(kj1, kj2, strict=True)),
-            )
         a.jcap_end = cap
-        a.jcoast_end = coast
+        a.jcoast = -1.0 if jump and cap > 0.0 else 0.0
+        a.jdu = du
+        a.jdk = dk
+        a.next_geom = gb
         a.jump_end = jump
         a.break_end = big
         a.stop_end = cap <= 0.0
