@@ -45,9 +45,14 @@ class RealPlc:
     """The machine-tool PLC program with its simulated machine, scanned in lockstep."""
 
     def __init__(self) -> None:
-        from plc.machine_io import machine_plc
+        from plc.ladder import load_file
+        from plc.machine_io import PROGRAM_PATH, MachineIO
+        from plc.runtime import Runtime, RuntimeConfig
 
-        self.rt, self.io = machine_plc()
+        # the scan clock is frozen: a busy test machine must not trip the PLC's watchdog
+        self.io = MachineIO()
+        program = load_file(PROGRAM_PATH)
+        self.rt = Runtime(program, RuntimeConfig(), io=self.io, clock_ns=lambda: 0)
         self.seen: list[tuple[str, int]] = []
         self._prev = {}
 

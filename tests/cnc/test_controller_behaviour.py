@@ -486,3 +486,52 @@ def test_same_inputs_give_identical_status_sequences():
 
     a, b = run(), run()
     assert len(a) == len(b) and a == b
+
+
+# ---- the PLC path: mode requests, reset, overrides ----------------------------------------
+
+
+def test_plc_mode_request_reset_and_overrides_take_the_same_path():
+    rig = _homed()
+    rig.plc.out["ModeSelect"] = 3
+    rig.step(5)
+    assert rig.ctl.mode == "JOG" and rig.outputs.plc["NcMode"] == 3
+    assert rig.outputs.status.controller_mode == "MANUAL"
+    rig.plc.out["ModeSelect"] = 1
+    rig.step(5)
+    assert rig.ctl.mode == "AUTO"
+    rig.plc.out.update(FeedOverride=150, RapidOverride=180)
+    _running(rig)
+    assert rig.outputs.status.feed_override == 150.0
+    assert rig.outputs.status.rapid_override == 100.0  # the NC's rapid override ends at 100
+    rig.plc.out["ModeSelect"] = 2
+    rig.step(5)
+    assert rig.ctl.mode == "AUTO"
+    assert any("PLC: mode change refused while ACTIVE" in t for _, t in rig.ctl.events)
+    rig.plc.out["NcReset"] = True
+    rig.step(5)
+    rig.plc.out["NcReset"] = False
+    rig.until(lambda: rig.ex == "READY", 2)
+    assert any("reset (PLC)" in t for _, t in rig.ctl.events)
+
+
+LATHE = """%
+O7000
+G18 G98 G0 X-100 Z-20
+G1 X-80 Z-60 F300
+G0 X-200 Z-10
+M30
+%
+"""
+
+
+def test_lathe_runs_x_z_with_x_as_diameter():
+    rig = Rig("lathe2", programs={7000: LATHE})
+    rig.home()
+    assert rig.ctl.home_order == ("X", "Z")
+    rig.run_program(7000)
+    assert rig.ex == "PROGRAM_COMPLETED"
+    assert set(rig.outputs.targets) == {"X", "Z"}
+    assert (rig.pos("X"), rig.pos("Z")) == pytest.approx((-100.0, -10.0))  # radius
+    trace_x = [s.axes["X"].commanded for s in rig.trace if s.line == 4]
+    assert max(trace_x) == pytest.approx(-40.0, abs=1e-6)  # X-80 diameter = -40 mm radius
