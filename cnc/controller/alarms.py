@@ -114,6 +114,10 @@ class AlarmList:
         self._entries = keep
         return [e.alarm for e in keep]
 
+    def nc_count(self) -> int:
+        """Active alarms raised by the NC side (not mirrors of the PLC's)."""
+        return sum(1 for e in self._entries if e.alarm.source != "PLC")
+
     def has(self, number: int) -> bool:
         return any(e.alarm.number == number for e in self._entries)
 

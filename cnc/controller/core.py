@@ -129,6 +129,7 @@ class Controller:
         self.axes = tuple(config.axes)
         self.ipo = config.ipo_cycle_ms / 1000.0
         self.home_order = self._home_order()
+        self._vmax = {a: c.max_velocity / 60.0 for a, c in config.axes.items()}
         self.acc = AdaptiveLoop()
         self._alarms = al.AlarmList()
         self._events: deque[tuple[float, str]] = deque(maxlen=EVENTS_KEPT)
@@ -154,6 +155,10 @@ class Controller:
         self._fb: AxisFeedback | None = None
         self._plc: dict = {}
         self._plc_prev: dict = {}
+        self._plc_src = None
+        self._ex = "READY"
+        self._plc_out_key = None
+        self._plc_out: dict = {}
         self._estop = False
         self._enabled = False
         self._want_enable = False
@@ -182,10 +187,12 @@ class Controller:
         self.max_following_error = dict.fromkeys(self.axes, 0.0)
         self._path_v = 0.0
         self._load = 0.0
+        self._rpm = 0.0
         self._cutting = False
         self._fo_applied = -1.0
         self._ro_applied = -1.0
         self._status = MachineStatus()
+        self._status_key = None
 
     # ================================================================ public API ===========
     @property
@@ -251,13 +258,22 @@ class Controller:
         self._t = inputs.t
         fb = inputs.axes
         self._fb = fb
-        self._plc_prev, self._plc = self._plc, dict(inputs.plc)
-        self._actual = {a: float(fb.actual.get(a, self._cmd[a])) for a in self.axes}
+        plc_src = inputs.plc
+        # between two PLC scans the PLC signals do not change: skip their edges and levels
+        plc_new = plc_src is not self._plc_src and plc_src != self._plc
+        self._plc_src = plc_src
+        if plc_new:
+            self._plc_prev, self._plc = self._plc, dict(plc_src)
+        else:
+            self._plc_prev = self._plc
+        actual = fb.actual
+        self._actual = {a: float(actual.get(a, self._cmd[a])) for a in self.axes}
         if not self._synced:
             self._cmd = dict(self._actual)
             self._synced = True
         self._supervise_axes(fb)
-        self._plc_requests()
+        if plc_new:
+            self._plc_requests()
         self._manage_enable(fb)
         self._homing_step(fb)
         if not fb.enabled or fb.homing or self._homing:
@@ -274,6 +290,7 @@ class Controller:
         self._adaptive(dt)
         self._timers(dt)
         self._prev_cmd = dict(self._cmd)
+        self._ex = self._execution()
         out_plc = self._plc_outputs()
         self._status = self._build_status()
         axis_cmd, home_axes = self._axis_cmd, self._home_axes
@@ -465,6 +482,8 @@ class Controller:
             return f"PLC alarm {self._plc.get('PlcAlarmNumber', 0)} active"
         if not self._plc.get("DoorClosed", True):
             return "door open"
+        if self._plc.get("FeedHold", False) and self._plc.get("PlcReady", True):
+            return "feed hold from the PLC is active"
         if not self._enabled:
             return "axes not enabled"
         missing = [a for a in self.home_order if not (self._ref[a] and self._fb_homed(a))]
@@ -641,16 +660,32 @@ class Controller:
         return causes
 
     def _plc_outputs(self) -> dict:
-        ex = self._execution()
+        """NC->PLC signals; the same (read-only) dict while nothing changes."""
+        hs = self._hs
+        key = (
+            self._ex in IN_CYCLE or self._run is not None,
+            self._t < self._resetting_until,
+            self._alarms.nc_count(),
+            self.mode,
+            hs["M"].phase,
+            hs["M"].code,
+            hs["S"].phase,
+            hs["S"].code,
+            hs["T"].phase,
+            hs["T"].code,
+        )
+        if key == self._plc_out_key:
+            return self._plc_out
         out = {
             "NcReady": True,
-            "NcInCycle": ex in IN_CYCLE or self._run is not None,
-            "NcResetting": self._t < self._resetting_until,
-            "NcAlarm": any(a.source != "PLC" for a in self._alarms.active),
+            "NcInCycle": key[0],
+            "NcResetting": key[1],
+            "NcAlarm": key[2] > 0,
             "NcMode": _MODE_NUMBER.get(self.mode, MODE_NONE),
         }
-        for hs in self._hs.values():
-            hs.write(out)
+        for h in hs.values():
+            h.write(out)
+        self._plc_out_key, self._plc_out = key, out
         return out
 
     # ================================================================ axes ================
@@ -743,16 +778,20 @@ class Controller:
         if not fb.enabled or fb.homing or self._homing:
             return
         s = self.settings
-        for a in self.axes:
-            fe = fb.following_error.get(a)
+        fmin, fmax = s.ferror_min_mm, s.ferror_max_mm
+        fes = fb.following_error
+        peak = self.max_following_error
+        for a, vmax in self._vmax.items():
+            fe = fes.get(a)
             if fe is None:
                 fe = prev[a] - self._actual[a]
-            fe = abs(float(fe))
-            if fe > self.max_following_error[a]:
-                self.max_following_error[a] = fe
-            vmax = self.config.axes[a].max_velocity / 60.0
+            fe = abs(fe)
+            if fe > peak[a]:
+                peak[a] = fe
+            if fe <= fmin:
+                continue
             v = abs(prev[a] - prev2[a]) / dt
-            limit = max(s.ferror_min_mm, s.ferror_max_mm * min(1.0, v / vmax))
+            limit = max(fmin, fmax * min(1.0, v / vmax))
             if fe > limit:
                 self._alarms.raise_(
                     al.FOLLOWING_ERROR,
@@ -1052,7 +1091,7 @@ class Controller:
         self._cutting = self._cutting_now()
         m = self.cutting_model
         pos = self._actual.get(m.depth_axis)
-        rpm = self._spindle_rpm_now()
+        rpm = self._rpm = self._spindle_rpm_now()
         feed = self._path_v * 60.0 if self._cutting else 0.0
         self._load = m.load(feed, rpm, pos) if self._cutting else (m.idle_load_pct if rpm else 0)
         self.acc.update(self._load, self._cutting, dt)
@@ -1062,7 +1101,7 @@ class Controller:
             self.run_time += dt
         if self._cutting:
             self.cutting_time += dt
-        if self._spindle_rpm_now() > 0.0:
+        if self._rpm > 0.0:
             self.spindle_time += dt
 
     def _execution(self) -> str:
@@ -1094,13 +1133,37 @@ class Controller:
 
     def _build_status(self) -> MachineStatus:
         run = self._run
+        key = (
+            self._ex,
+            self.mode,
+            run,
+            run.line if run is not None else 0,
+            self.selected,
+            self._path_v,
+            tuple(self._actual.values()),
+            tuple(self._cmd.values()),
+            self._rpm,
+            self._load,
+            self.spindle_override,
+            self._plc_spindle_pct(),
+            self.feed_override * self.acc.factor,
+            self.rapid_override,
+            self._alarms.raised,
+            len(self._alarms),
+            self.part_count,
+            self._estop,
+            self.acc.state(self._cutting),
+        )
+        if key == self._status_key:
+            return self._status  # nothing changed: the same snapshot (cheap when idle)
+        self._status_key = key
         prog = (
             run.name
             if run is not None
             else (f"O{self.selected:04d}" if self.selected is not None else "")
         )
         return MachineStatus(
-            execution=self._execution(),
+            execution=self._ex,
             controller_mode=_CONTROLLER_MODE[self.mode],
             mode_detail=self.mode,
             program=prog,
@@ -1108,7 +1171,7 @@ class Controller:
             block=self._block_text(run),
             path_feed_rate=self._path_v * 60.0,
             axes={a: AxisStatus(self._actual[a], self._cmd[a]) for a in self.axes},
-            spindle_speed=self._spindle_rpm_now(),
+            spindle_speed=self._rpm,
             spindle_load=self._load,
             spindle_override=self.spindle_override * self._plc_spindle_pct() / 100.0,
             feed_override=self.feed_override * self.acc.factor,
