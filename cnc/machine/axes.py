@@ -18,54 +18,60 @@ import math
 from collections.abc import Mapping
 from typing import TextIO
 
-from cnc.machine.contract import AxisFeedback
+from cnc.controller import AxisFeedback
+from cnc.controller import IdealAxes as _ControllerIdealAxes
 
 HOMING_METHOD = 19  # falling edge of a positive home switch (dog active above its edge)
+VELOCITY_FEEDFORWARD = 1.0  # unless drives.plant.loops.velocity_feedforward says otherwise
 HOME_DOG_BEFORE_M = 0.030  # power-on position: this far below the dog (m, table coordinates)
 
 
-class IdealAxes:
-    """Axes that follow their targets exactly: no drives, no bus (for tests and quick runs)."""
+# EMCY codes the ideal axes report for the drive fault kinds (what the real drive would send)
+_IDEAL_CODES = {
+    "encoder_break": 0x7305,
+    "encoder_jump": 0x7305,
+    "inverter_fault": 0x2310,
+    "supply_loss": 0x3130,
+    "mains_voltage": 0x3220,
+    "chopper_failure": 0x3210,
+    "blocked": 0x8611,
+    "load_force": 0x8611,
+    "ambient_temperature": 0x4310,
+    "winding_temperature": 0x4310,
+    "power_cycle": 0x0000,
+}
 
-    def __init__(self, config) -> None:
-        self.names = tuple(config.axes)
-        self._home = {n: float(a.home_mm) for n, a in config.axes.items()}
-        mid = {n: (a.min_mm + a.max_mm) / 2.0 for n, a in config.axes.items()}
-        self.actual = dict(mid)
-        self.enabled = False
-        self.homed = dict.fromkeys(self.names, False)
-        self.bus_load = None
-        self.time = 0.0
 
-    def feedback(self) -> AxisFeedback:
-        return AxisFeedback(
-            actual=dict(self.actual),
-            following_error=dict.fromkeys(self.names, 0.0),
-            enabled=self.enabled,
-            homed=dict(self.homed),
-            homing=False,
-            faults=(),
-        )
+class IdealAxes(_ControllerIdealAxes):
+    """The controller's ideal axes (no drives, no bus) with the machine's axis-layer extras:
+    drive faults by spec (reported with the code the real drive would send), no bus load."""
+
+    bus_load = None
+
+    def __init__(self, config, **kwargs) -> None:
+        super().__init__(config, **kwargs)
+        self.active_faults: tuple = ()
 
     def apply(self, outputs, dt: float) -> float:
-        cmd = outputs.axis_command
-        if cmd == "enable":
-            self.enabled = True
-        elif cmd in ("disable", "quick_stop"):
-            self.enabled = False
-        elif cmd == "home" and self.enabled:
-            for n in outputs.home_axes or self.names:
-                self.actual[n] = self._home[n]
-                self.homed[n] = True
-        if self.enabled and cmd == "none":
-            for n, mm in outputs.targets.items():
-                if n in self.actual:
-                    self.actual[n] = float(mm)
-        self.time += dt
+        super().apply(outputs, dt)
+        if outputs.axis_command == "fault_reset":
+            self.active_faults = ()
         return 0.0
 
     def inject(self, spec) -> None:
-        raise ValueError(f"fault {spec}: ideal axes have no drives or bus (run without --ideal)")
+        code = _IDEAL_CODES.get(spec.kind)
+        if spec.target == "bus" or code is None:
+            raise ValueError(
+                f"fault {spec}: not modelled on ideal axes (no CAN bus, no plant); run the"
+                " machine with its CANopen drives"
+            )
+        text = f"{spec.kind} (injected)"
+        lose = spec.kind in ("encoder_break", "encoder_jump", "power_cycle")
+        self.inject_fault(spec.axis, code, text, lose_reference=lose)
+        self.active_faults = (*self.active_faults, (spec.axis, code, text))
+
+    def clear(self, spec) -> None:
+        self.active_faults = tuple(f for f in self.active_faults if f[0] != spec.axis)
 
     def close(self) -> None:
         pass
@@ -128,7 +134,7 @@ class CanopenAxes:
         self.homed = dict.fromkeys(self.names, False)
         self.homing = False
         self.enabled = False
-        self.faults: tuple = ()  # active (axis, code, text)
+        self._fresh: tuple = ()  # faults reported in the last cycle (axis, code, text)
         self._fb = self.group.cycle()
         self.errors: list[str] = []  # sequences the group refused (AxisError text)
 
@@ -148,18 +154,21 @@ class CanopenAxes:
             enabled=self.enabled and all(s == "OPERATION ENABLED" for s in fb.state.values()),
             homed=dict(self.homed),
             homing=self.homing,
-            faults=self.faults,
+            faults=self._fresh,
         )
 
+    @property
+    def active_faults(self) -> tuple:
+        """Faults active on the drives now, (axis, EMCY code, text)."""
+        return tuple((f.axis, f.emcy_code, f.text) for f in self.group.faults)
+
     def _note_faults(self, new) -> None:
-        if not new:
-            return
         for f in new:
-            # an incremental encoder loses its reference with a fault of its drive or node
-            if f.source in ("bootup",) or f.emcy_code in (0x7305,):
+            # an incremental encoder loses its reference when its drive reboots or its
+            # encoder signal breaks
+            if f.source == "bootup" or f.emcy_code == 0x7305:
                 self.homed[f.axis] = False
-        active = [(f.axis, f.emcy_code, f.text) for f in self.group.faults]
-        self.faults = tuple(active) if active else tuple((f.axis, f.emcy_code, f.text) for f in new)
+            self._fresh += ((f.axis, f.emcy_code, f.text),)
 
     def apply(self, outputs, dt: float) -> float:
         """Run the axis command (if any) and one IPO cycle; return extra virtual seconds a
@@ -168,12 +177,14 @@ class CanopenAxes:
 
         cmd = outputs.axis_command
         t0 = self.group.time
+        self._fresh = ()
         if cmd != "none":
             try:
                 self._command(cmd, outputs.home_axes)
             except AxisError as exc:
                 self.errors.append(str(exc))
-                self.faults = (*self.faults, ("*", 0, f"drive sequence {cmd}: {exc}"))
+                for axis in exc.axes or self.names[:1]:
+                    self._fresh += ((axis, 0, f"drive sequence {cmd}: {exc}"),)
             self._note_faults(self.group.take_faults())
         targets = {n: v for n, v in outputs.targets.items() if n in self.drives}
         for n, v in targets.items():
@@ -181,8 +192,6 @@ class CanopenAxes:
                 raise ValueError(f"axis {n}: target {v!r} is not finite")
         self._fb = self.group.cycle(targets if self.enabled else None)
         self._note_faults(self._fb.faults)
-        if not self.group.faults and self.faults and not self._fb.faults:
-            self.faults = ()
         return max(0.0, self.group.time - t0 - self.ipo_s)
 
     def _command(self, cmd: str, home_axes: tuple[str, ...]) -> None:
@@ -200,7 +209,6 @@ class CanopenAxes:
             self.homed = dict.fromkeys(self.names, False)
         elif cmd == "fault_reset":
             g.fault_reset()
-            self.faults = ()
         elif cmd == "home":
             axes = tuple(home_axes) or self.names
             self.homing = True
@@ -243,6 +251,9 @@ def _plant_groups(axis, overrides: Mapping[str, Mapping]) -> dict[str, dict]:
     }
     groups = {g: dict(v) for g, v in overrides.items()}
     groups["switches"] = {**switches, **groups.get("switches", {})}
+    # machine-tool drives run with velocity feed-forward: the following error is then the
+    # transport delay and the acceleration lag, not v/Kv (30 mm at a 30 m/min rapid)
+    groups.setdefault("loops", {}).setdefault("velocity_feedforward", VELOCITY_FEEDFORWARD)
     screw = groups.setdefault("screw", {})
     screw.setdefault("length", max(0.6, span_m + 0.1))
     return groups

@@ -18,7 +18,7 @@ from collections.abc import Callable
 from typing import TextIO
 
 from cnc.machine.axes import CanopenAxes, IdealAxes
-from cnc.machine.contract import CycleInputs, command_refused_class, controller_class
+from cnc.machine.contract import CommandRefused, CycleInputs, controller_class
 from cnc.machine.faults import FaultSchedule, FaultSpec, parse_fault_spec
 from cnc.machine.records import EventLog, TraceWriter
 from cnc.program_memory import ProgramMemory
@@ -87,7 +87,6 @@ class Machine:
         self.memory = ProgramMemory(config.program_memory_bytes)
         factory = controller_factory or controller_class()
         self.controller = factory(config, self.memory)
-        self.refused = command_refused_class()
         self.axes = (
             IdealAxes(config)
             if ideal
@@ -148,7 +147,7 @@ class Machine:
         nc = self.io.nc
         for name, value in out.plc.items():
             nc.set(name, value)
-        extra = self.axes.apply(out, self.ipo_s)
+        extra = self.axes.apply(out, self.ipo_s) or 0.0
         self.cycle += 1
         self._sequence_s += extra
         self.t = self.cycle * self.ipo_s + self._sequence_s
@@ -156,7 +155,7 @@ class Machine:
         status = out.status if out.status is not None else self.status
         self.status = status
         self.last_targets = dict(out.targets) or self.last_targets
-        self._measure(fb)
+        self._measure(fb, status)
         if self.trace is not None:
             self.trace.row(self.t, self.last_targets, fb.actual, status.line)
         self._watch_alarms(status)
@@ -173,23 +172,27 @@ class Machine:
                 self.io.release(button)
             self._release_after_scan.clear()
 
-    def _measure(self, fb) -> None:
+    def _measure(self, fb, status: MachineStatus) -> None:
+        """Maximum following error per axis; contour error = distance of the actual position
+        from the commanded path (the polyline of setpoints) while a program is ACTIVE."""
         for axis, fe in fb.following_error.items():
             if abs(fe) > self.max_following_error.get(axis, 0.0):
                 self.max_following_error[axis] = abs(fe)
-        if not fb.enabled or not self.last_targets:
+        if status.execution != "ACTIVE" or not fb.enabled:
+            self._path.clear()
+            self._near = 0
             return
         point = tuple(self.last_targets.get(a, 0.0) for a in self.axis_names)
-        if not self._path or self._path[-1] != point:
-            self._path.append(point)
-            self._near = min(self._near, len(self._path) - 1)
-            if len(self._path) == self._path.maxlen:
+        path = self._path
+        if not path or path[-1] != point:
+            full = len(path) == path.maxlen
+            path.append(point)
+            if full:
                 self._near = max(0, self._near - 1)
         actual = tuple(fb.actual.get(a, 0.0) for a in self.axis_names)
-        path = self._path
-        j = min(self._near, len(path) - 1)
-        best = _seg_dist(path, j, actual)
-        # the nearest path point moves forward along the path as the axes follow it
+        lo, hi = max(0, self._near - 4), min(len(path), self._near + 16)
+        best, j = min((_seg_dist(path, k, actual), k) for k in range(lo, hi))
+        # the nearest point moves forward along the path as the axes follow it
         while j + 1 < len(path):
             d = _seg_dist(path, j + 1, actual)
             if d > best:
@@ -238,7 +241,7 @@ class Machine:
         try:
             result = self.controller.command(name, **args)
         except Exception as exc:
-            if isinstance(exc, self.refused) or type(exc).__name__ == "CommandRefused":
+            if isinstance(exc, CommandRefused) or type(exc).__name__ == "CommandRefused":
                 self.events.add(self.t, "refused", f"{name}: {exc}", {"args": _plain(args)})
             raise
         self.events.add(self.t, "command", name, {"args": _plain(args)} if args else None)

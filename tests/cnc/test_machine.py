@@ -1,8 +1,5 @@
-"""The machine end to end in lockstep on CiA 402 drives over the simulated CAN bus.
-
-The controller is the clearly marked stand-in of test_machine_double.py until
-cnc.controller lands; the drives, bus, axis group, PLC program and plant are the real ones.
-"""
+"""The machine end to end in lockstep: the controller, CiA 402 drives over the simulated CAN
+bus (axis group, virtual drives with their plants), the PLC with the machine-tool program."""
 
 from __future__ import annotations
 
@@ -12,7 +9,6 @@ import pytest
 
 from cnc.config import builtin_machine
 from cnc.machine import Machine
-from tests.cnc.test_machine_double import StandInController
 
 SQUARE = """%
 O0010 (SQUARE WITH A TOOL CHANGE)
@@ -39,16 +35,15 @@ N40 M30
 
 
 def build(**kw) -> Machine:
-    return Machine(builtin_machine("mill3"), "mill3", controller_factory=StandInController, **kw)
+    return Machine(builtin_machine("mill3"), "mill3", **kw)
 
 
 def homed(m: Machine) -> bool:
-    fb = m.axes.feedback()
-    return all(fb.homed.values()) and not fb.homing
+    return all(m.controller.referenced.values())
 
 
 def home(m: Machine) -> None:
-    m.step(10)
+    m.step(50)  # the PLC gives AxisEnable, the controller enables the drives
     m.command("mode", mode="REF")
     m.command("home")
     assert m.run_until(homed, 30.0), m.alarms
@@ -155,9 +150,9 @@ def test_each_drive_fault_reaches_the_nc_within_its_bound(spec, axis, code, boun
     try:
         m.run_until(lambda mm: mm.t >= 0.1, 1.0)
         t0 = m.t
-        assert m.run_until(lambda mm: mm.axes.feedback().faults, bound_s + 0.004)
+        assert m.run_until(lambda mm: mm.axes.active_faults, bound_s + 0.004)
         assert m.t - t0 <= bound_s + 0.004
-        faults = m.axes.feedback().faults
+        faults = m.axes.active_faults
         assert (axis, code) in [(a, c) for a, c, _ in faults]
         m.step(2)
         assert any(a.axis == axis for a in m.alarms)
@@ -166,18 +161,39 @@ def test_each_drive_fault_reaches_the_nc_within_its_bound(spec, axis, code, boun
         m.close()
 
 
-def test_following_error_fault_during_a_move_stops_that_axis_with_its_code(machine):
+def test_jammed_slide_trips_the_nc_following_error_supervision_first(machine):
     home(machine)
     start(machine, LONG)
     machine.step(100)
-    machine.inject("drive:Y:following_error")
+    machine.inject("drive:Y:following_error")  # the table jams (drives.faults "blocked")
     t0 = machine.t
-    assert machine.run_until(lambda m: m.axes.feedback().faults, 1.0)
-    # a jammed table: the drive's following error (0x8611, window 0x6065 = 60 mm) or its
-    # blocked-motor monitor (0x7121, 0.25 s at the current limit), whichever trips first
-    codes = {c for a, c, _ in machine.axes.feedback().faults if a == "Y"}
-    assert codes & {0x8611, 0x7121}
-    assert machine.t - t0 < 3.0
+    assert machine.run_until(lambda m: m.alarms, 0.2)
+    alarm = machine.alarms[0]
+    # the NC's limit (1..5 mm, scaled with the axis speed) is far below the drive's 60 mm
+    # window (0x6065): the NC quick-stops the axes before the drive faults
+    assert (alarm.number, alarm.source, alarm.axis) == (3010, "NC", "Y")
+    assert machine.t - t0 < 0.2
+    machine.step(200)
+    assert machine.status.execution == "STOPPED"
+    assert not machine.axes.feedback().enabled
+
+
+@pytest.mark.parametrize(
+    ("spec", "axis", "number", "source"),
+    [
+        ("drive:X:encoder", "X", 3040, "DRIVE"),
+        ("bus:bus_off:Y", "Y", 3041, "BUS"),
+    ],
+)
+def test_drive_and_bus_faults_become_controller_alarms(spec, axis, number, source):
+    m = build(faults=[f"{spec}@0.2s"])
+    try:
+        assert m.run_until(lambda mm: mm.alarms, 1.0)
+        a = m.alarms[0]
+        assert (a.number, a.source, a.axis) == (number, source, axis)
+        assert m.events.of_kind("alarm")[0].data["number"] == number
+    finally:
+        m.close()
 
 
 def _scenario() -> tuple[str, str]:
