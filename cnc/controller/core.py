@@ -569,6 +569,9 @@ class Controller:
         self._hold = False
         self._spindle_on = False
         self._jog.clear()
+        if self._drip is not None:  # an armed drip-feed is rewound: the sender is told
+            self._drip.abort("reset at the machine")
+            self._drip = None
         drive_faults = any(
             e.number in (al.DRIVE_FAULT, al.BUS_FAULT, al.FOLLOWING_ERROR, al.AXES_DISABLED)
             for e in self._alarms.active
@@ -587,6 +590,8 @@ class Controller:
         for hs in self._hs.values():
             hs.abort()
         if run is not None:
+            if isinstance(run.source, DripLines) and not run.source.ended:
+                run.source.buffer.abort(f"program {final.lower()} at the machine")
             self._event(f"{run.name} aborted ({final})")
 
     # ================================================================ PLC side ============

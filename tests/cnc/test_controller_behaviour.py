@@ -535,3 +535,18 @@ def test_lathe_runs_x_z_with_x_as_diameter():
     assert (rig.pos("X"), rig.pos("Z")) == pytest.approx((-100.0, -10.0))  # radius
     trace_x = [s.axes["X"].commanded for s in rig.trace if s.line == 4]
     assert max(trace_x) == pytest.approx(-40.0, abs=1e-6)  # X-80 diameter = -40 mm radius
+
+
+def test_reset_ends_a_drip_feed_and_tells_the_sender():
+    rig = _homed()
+    buf = rig.ctl.drip_input()
+    buf.put("G90 G0 X-10 Y-10 Z-10")
+    rig.cmd("cycle_start")
+    rig.until(lambda: rig.ex == "INTERRUPTED", 5)
+    rig.cmd("reset")
+    rig.step()
+    assert rig.ex == "READY"
+    assert buf.aborted == "program ready at the machine"
+    armed = rig.ctl.drip_input()
+    rig.cmd("reset")
+    assert armed.aborted == "reset at the machine"
