@@ -550,3 +550,82 @@ def test_reset_ends_a_drip_feed_and_tells_the_sender():
     armed = rig.ctl.drip_input()
     rig.cmd("reset")
     assert armed.aborted == "reset at the machine"
+
+
+# ---- subprograms, homing failures, spindle-at-speed interlock ------------------------------
+
+MAIN_WITH_SUB = """%
+O8000
+G90 G0 X-10 Y-10 Z-10
+M98 P8001 L2
+M30
+%
+"""
+SUB = """O8001
+G91 G1 X-5 F3000
+G90
+M99
+"""
+
+
+def test_subprogram_from_memory_runs_with_repeats():
+    rig = Rig(programs={8000: MAIN_WITH_SUB, 8001: SUB})
+    rig.home()
+    rig.run_program(8000)
+    assert rig.ex == "PROGRAM_COMPLETED", rig.ctl.alarms
+    assert rig.pos("X") == pytest.approx(-20.0)
+
+
+def test_homing_that_never_starts_raises_an_alarm():
+    rig = Rig()
+    rig.step(10)
+    real_apply = rig.axes.apply
+
+    def ignore_home(out, dt):  # an axis layer that drops the home request
+        if out.axis_command == "home":
+            out = type(out)(out.targets, "none", (), out.plc, out.status)
+        real_apply(out, dt)
+
+    rig.axes.apply = ignore_home
+    rig.cmd("mode", mode="REF")
+    rig.cmd("home")
+    rig.until(lambda: rig.ctl.alarms, 3)
+    assert rig.ctl.alarms[0].number == 3030
+    assert "did not start homing" in rig.ctl.alarms[0].text
+    rig.cmd("reset")
+    assert rig.ctl.alarms == ()
+    rig.axes.apply = real_apply
+    rig.cmd("home", axes=["X"])
+    rig.step()
+    assert rig.outputs.home_axes == ("X",)
+    rig.until(lambda: rig.ctl.referenced["X"], 3)
+    assert not rig.ctl.referenced["Y"]
+
+
+def test_estop_during_homing_aborts_it():
+    rig = Rig()
+    rig.step(10)
+    rig.cmd("mode", mode="REF")
+    rig.cmd("home")
+    rig.step(30)  # Z homed, X under way
+    rig.plc.out.update(EStopActive=True, AxisEnable=False)
+    rig.step(6)  # the next PLC scan, then the cycle that reads it
+    assert not any(rig.ctl.referenced.values())
+    with pytest.raises(CommandRefused, match="emergency stop active"):
+        rig.cmd("home")
+
+
+def test_feed_waits_for_spindle_at_speed_but_rapids_do_not():
+    rig = _homed()
+    rig.cmd("select_program", number=1000)  # S2000 M3, then G1 moves
+    rig.cmd("cycle_start")
+    rig.until(lambda: rig.outputs.status.line == 7 and rig.outputs.status.path_feed_rate > 0)
+    rig.plc.out["SpindleAtSpeed"] = False  # the spindle sags (a door stop, a stall)
+    rig.step(100)
+    assert rig.outputs.status.path_feed_rate == 0.0
+    assert rig.ex == "ACTIVE"
+    x = rig.pos("X")
+    rig.step(50)
+    assert rig.pos("X") == x
+    rig.plc.out["SpindleAtSpeed"] = True
+    rig.until(lambda: rig.ex == "PROGRAM_COMPLETED")
