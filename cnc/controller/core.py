@@ -227,7 +227,7 @@ class Controller:
                 raise CommandRefused(f"unknown command {name!r}")
             try:
                 fn(**args)
-            except TypeError as exc:
+            except (TypeError, ValueError) as exc:
                 raise CommandRefused(f"{name}: bad arguments ({exc})") from None
         except CommandRefused as exc:
             self._event(exc.reason)
@@ -878,6 +878,10 @@ class Controller:
             if isinstance(src, DripLines) and exc.file == run.name:
                 exc.line = src.real_line(exc.line)
             self._program_alarm(al.PROGRAM_ERROR, f"program error: {exc}", "NC")
+            return None
+        except Exception as exc:  # a fault in the interpreter stops the program, not the NC
+            text = f"program error: {run.name}:{run.line}: internal {type(exc).__name__}: {exc}"
+            self._program_alarm(al.PROGRAM_ERROR, text, "NC")
             return None
         if isinstance(src, DripLines):
             if isinstance(cmd, canon.Dwell) and src.is_marker(cmd.line):

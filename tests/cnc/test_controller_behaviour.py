@@ -629,3 +629,22 @@ def test_feed_waits_for_spindle_at_speed_but_rapids_do_not():
     assert rig.pos("X") == x
     rig.plc.out["SpindleAtSpeed"] = True
     rig.until(lambda: rig.ex == "PROGRAM_COMPLETED")
+
+
+@pytest.mark.parametrize(
+    "name,args",
+    [
+        ("select_program", {"number": "abc"}),
+        ("jog", {"axis": "X", "direction": "up"}),
+        ("feed_override", {"pct": "fast"}),
+        ("mode", {}),
+        ("cycle_start", {"now": True}),
+    ],
+)
+def test_malformed_commands_are_refused_not_crashes(name, args):
+    rig = _homed()
+    rig.cmd("mode", mode="JOG") if name == "jog" else None
+    with pytest.raises(CommandRefused):
+        rig.cmd(name, **args)
+    rig.step(5)
+    assert rig.ex == "READY"
