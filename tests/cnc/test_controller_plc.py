@@ -135,3 +135,40 @@ def test_panel_cycle_start_in_jog_is_refused_by_the_plc():
     rig.step(5)
     assert rig.ex == "READY"
     assert rig.plc.rt.image.mx[8] is True or rig.plc.rt.image.mx[8] == 1  # CycleStartRefused
+
+
+@pytest.mark.parametrize(
+    "machine,path,number,work_offsets,functions,final",
+    [
+        (
+            "mill3",
+            "tests/cnc/programs/pocket_mill.nc",
+            100,
+            None,
+            [("T", 1), ("M", 6), ("S", 2000), ("M", 3), ("M", 8), ("M", 9), ("M", 30)],
+            {"X": -330.0, "Y": -260.0, "Z": 0.0},
+        ),
+        (
+            "lathe2",
+            "tests/cnc/programs/lathe_shaft.nc",
+            200,
+            {1: (-150.0, 0.0, -300.0)},
+            [("T", 1), ("M", 6), ("S", 191), ("M", 3), ("S", 800), ("M", 3), ("M", 5), ("M", 30)],
+            {"X": -110.0, "Z": -250.0},
+        ),
+    ],
+)
+def test_sample_programs_run_end_to_end_through_the_real_plc(
+    machine, path, number, work_offsets, functions, final
+):
+    with open(path) as fh:
+        text = fh.read()
+    rig = Rig(machine, plc="real", programs={number: text}, work_offsets=work_offsets)
+    rig.home()
+    rig.run_program(number, 120)
+    assert rig.ex == "PROGRAM_COMPLETED", rig.ctl.alarms
+    assert rig.ctl.alarms == ()
+    assert rig.plc.seen == functions
+    assert rig.ctl.part_count == 1
+    assert {a: round(v, 6) for a, v in rig.axes.actual.items()} == pytest.approx(final)
+    assert rig.ctl.cutting_time > 0.0 and rig.ctl.spindle_time > 0.0
