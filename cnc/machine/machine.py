@@ -137,6 +137,11 @@ class Machine:
             self._one_cycle()
         return True
 
+    def service(self) -> None:
+        """Run what the faces handed over (`call_soon`) without stepping (a paused clock)."""
+        while not self._inbox.empty():
+            self._inbox.get_nowait()()
+
     def _one_cycle(self) -> None:
         while not self._inbox.empty():
             self._inbox.get_nowait()()

@@ -23,19 +23,33 @@ class RealtimeRunner:
         self.lateness_s: list[float] = []
         self._stop = threading.Event()
         self._paused = threading.Event()
+        self.paused_ack = threading.Event()  # set once the loop has stopped stepping
         self._steps = 0
+        self._stepped = 0  # cycles run by step() requests
         self._lock = threading.Lock()
         machine.runner = self
+
+    @property
+    def paused(self) -> bool:
+        return self._paused.is_set()
 
     def pause(self) -> None:
         self._paused.set()
 
     def resume(self) -> None:
         self._paused.clear()
+        self.paused_ack.clear()
 
-    def step(self, n: int) -> None:
+    def step(self, n: int) -> int:
+        """While paused: run n more cycles; returns the count to wait for (`stepped`)."""
         with self._lock:
             self._steps += n
+            return self._stepped + self._steps
+
+    @property
+    def stepped(self) -> int:
+        with self._lock:
+            return self._stepped
 
     def stop(self) -> None:
         self._stop.set()
@@ -50,12 +64,16 @@ class RealtimeRunner:
             if duration_s is not None and now - start >= duration_s:
                 break
             if self._paused.is_set():
+                self.paused_ack.set()
                 with self._lock:
                     n, self._steps = self._steps, 0
+                m.service()  # face commands are taken while paused too
                 if n:
                     m.step(n)
+                    with self._lock:
+                        self._stepped += n
                 else:
-                    time.sleep(0.005)
+                    time.sleep(0.001)
                 slot = time.perf_counter()
                 continue
             period = m.ipo_s / self.speed

@@ -35,6 +35,7 @@ class SimulationFace:
         self.host, self.port = host, port
         self.timeout_s = timeout_s
         self._server: asyncio.Server | None = None
+        self._sessions: set[asyncio.Task] = set()
 
     @property
     def bound_port(self) -> int:
@@ -49,10 +50,17 @@ class SimulationFace:
         server, self._server = self._server, None
         if server is not None:
             server.close()
+            for task in list(self._sessions):
+                task.cancel()
+            for task in list(self._sessions):
+                with contextlib.suppress(asyncio.CancelledError, Exception):
+                    await task
             with contextlib.suppress(Exception):
                 await asyncio.wait_for(server.wait_closed(), 1.0)
 
     async def _session(self, reader: asyncio.StreamReader, writer: asyncio.StreamWriter) -> None:
+        task = asyncio.current_task()
+        self._sessions.add(task)
         try:
             while True:
                 try:
@@ -76,6 +84,7 @@ class SimulationFace:
         except (ConnectionError, asyncio.CancelledError):
             pass
         finally:
+            self._sessions.discard(task)
             writer.close()
 
     async def execute(self, line: str) -> str:
@@ -86,7 +95,7 @@ class SimulationFace:
             if word == "SPECS":
                 return "OK " + " ".join(valid_specs())
             if word in ("PAUSE", "RESUME", "STEP", "SPEED"):
-                return self._clock(word, rest)
+                return await self._clock(word, rest)
             if word == "FAULT":
                 spec = parse_fault_spec(rest, m.axis_names)
                 if "@" in rest:
@@ -130,7 +139,7 @@ class SimulationFace:
             f"line={s.line} alarms={alarms}"
         )
 
-    def _clock(self, word: str, rest: str) -> str:
+    async def _clock(self, word: str, rest: str) -> str:
         runner = getattr(self.machine, "runner", None)
         if runner is None:
             return (
@@ -138,13 +147,25 @@ class SimulationFace:
             )
         if word == "PAUSE":
             runner.pause()
+            for _ in range(int(self.timeout_s / 0.001)):
+                if runner.paused_ack.is_set():
+                    return f"OK pause {self.machine.cycle}"
+                await asyncio.sleep(0.001)
+            return "ERR the runner did not pause in time"
         elif word == "RESUME":
             runner.resume()
         elif word == "STEP":
             n = int(rest or "1")
             if not 1 <= n <= 1_000_000:
                 return "ERR STEP takes 1..1000000 cycles"
-            runner.step(n)
+            if not runner.paused:
+                return "ERR STEP needs a paused clock (PAUSE first)"
+            goal = runner.step(n)
+            for _ in range(int(self.timeout_s / 0.001)):
+                if runner.stepped >= goal:
+                    return f"OK step {self.machine.cycle}"
+                await asyncio.sleep(0.001)
+            return "ERR the machine did not complete the steps in time"
         else:
             factor = float(rest)
             if not 0.01 <= factor <= 100.0:
