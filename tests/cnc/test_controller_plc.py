@@ -172,3 +172,39 @@ def test_sample_programs_run_end_to_end_through_the_real_plc(
     assert rig.ctl.part_count == 1
     assert {a: round(v, 6) for a, v in rig.axes.actual.items()} == pytest.approx(final)
     assert rig.ctl.cutting_time > 0.0 and rig.ctl.spindle_time > 0.0
+
+
+def test_panel_feed_hold_and_cycle_start_buttons():
+    rig = _rig()
+    io = rig.plc.io
+    rig.cmd("select_program", number=6000)
+    rig.cmd("cycle_start")
+    rig.until(lambda: rig.outputs.status.path_feed_rate > 1400, 10)
+    io.press("PanelFeedHold")
+    rig.step(10)
+    io.release("PanelFeedHold")
+    assert rig.ex == "FEED_HOLD"
+    rig.until(lambda: rig.outputs.status.path_feed_rate == 0.0, 2)
+    rig.step(50)
+    assert rig.ex == "FEED_HOLD"
+    io.press("PanelCycleStart")
+    rig.step(10)
+    io.release("PanelCycleStart")
+    assert rig.ex == "ACTIVE"
+    rig.until(lambda: rig.ex == "PROGRAM_COMPLETED", 30)
+    assert rig.pos("X") == pytest.approx(-300.0)
+
+
+def test_nc_reset_clears_the_plc_latched_alarm():
+    rig = _rig()
+    io = rig.plc.io
+    io.inject("air_pressure_loss")
+    rig.step(10)
+    assert any(a.number == 1040 for a in rig.ctl.alarms)
+    io.clear("air_pressure_loss")
+    rig.step(10)
+    assert any(a.number == 1040 for a in rig.ctl.alarms)  # latched in the PLC
+    rig.cmd("reset")  # NcResetting clears the PLC's latched alarms
+    rig.step(10)
+    assert rig.ctl.alarms == ()
+    assert rig.outputs.plc["NcResetting"] is False
