@@ -69,6 +69,7 @@ def create_dispatch(
     start: bool,
     requested_by: str,
     now: datetime,
+    flush: bool = True,
 ) -> tuple[m.Dispatch, bool]:
     """The dispatch for `key`, created if new. Returns (row, created).
 
@@ -108,7 +109,8 @@ def create_dispatch(
         updated_at=now,
     )
     s.add(row)
-    s.flush()
+    if flush:
+        s.flush()
     return row, True
 
 

@@ -6,7 +6,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from datetime import UTC, datetime
 
-from sqlalchemy import select
+from sqlalchemy import func, select
 from sqlalchemy.orm import Session, sessionmaker
 
 from dnc import models as m
@@ -241,37 +241,61 @@ class Scheduler:
             )
             by_job = {j.id: j for j in jobs}
             by_alloc = {a.id: a for a in allocs}
+            self._allocate(s, decisions.of(Allocate), by_job, now)
             for action in decisions.actions:
                 self._apply(s, action, by_job, by_alloc, now)
             self._settle_job_states(s, jobs, now)
         return decisions
 
-    def _apply(self, s: Session, action, by_job, by_alloc, now: datetime) -> None:
-        rule = self.rule_name
-        if isinstance(action, Allocate):
-            job = by_job[action.job_id]
-            alloc = m.Allocation(
+    def _allocate(self, s: Session, actions: list[Allocate], by_job, now: datetime) -> None:
+        """Allocations and their dispatches for a whole tick, in two flushes."""
+        if not actions:
+            return
+        made = []
+        # The n-th allocation of a job gets key job-<id>-allocation-<n>: unique, and the same
+        # again if a tick rolled back by a crash is taken up after a restart.
+        counts = dict(
+            s.execute(
+                select(m.Allocation.job_id, func.count())
+                .where(m.Allocation.job_id.in_({a.job_id for a in actions}))
+                .group_by(m.Allocation.job_id)
+            ).all()
+        )
+        with s.no_autoflush:
+            for action in actions:
+                job = by_job[action.job_id]
+                counts[job.id] = counts.get(job.id, 0) + 1
+                dispatch, _ = create_dispatch(
+                    s,
+                    key=f"job-{job.id}-allocation-{counts[job.id]}",
+                    revision_id=job.revision_id,
+                    machine=action.machine,
+                    mode="memory",
+                    start=True,
+                    requested_by="scheduler",
+                    now=now,
+                    flush=False,
+                )
+                made.append((action, job, dispatch))
+        s.flush()
+        allocations = [
+            m.Allocation(
                 job_id=job.id,
                 machine=action.machine,
                 parts_at_start=action.part_count,
                 status="dispatched",
+                dispatch_id=dispatch.id,
                 reason=action.reason,
                 created_at=now,
             )
-            s.add(alloc)
-            s.flush()
-            dispatch, _ = create_dispatch(
-                s,
-                key=f"job-{job.id}-allocation-{alloc.id}",
-                revision_id=job.revision_id,
-                machine=action.machine,
-                mode="memory",
-                start=True,
-                requested_by="scheduler",
-                now=now,
+            for action, job, dispatch in made
+        ]
+        s.add_all(allocations)
+        s.flush()
+        for (action, job, dispatch), alloc in zip(made, allocations, strict=True):
+            self._decision(
+                s, now, self.rule_name, "allocate", job.id, action.machine, action.reason
             )
-            alloc.dispatch_id = dispatch.id
-            self._decision(s, now, rule, "allocate", job.id, action.machine, action.reason)
             record(
                 s,
                 now=now,
@@ -284,7 +308,11 @@ class Scheduler:
                 dispatch_id=dispatch.id,
                 reason=action.reason,
             )
-        elif isinstance(action, Complete):
+
+    def _apply(self, s: Session, action, by_job, by_alloc, now: datetime) -> None:
+        """Completions, interruptions and running marks (allocations are made in bulk)."""
+        rule = self.rule_name
+        if isinstance(action, Complete):
             alloc, job = by_alloc[action.allocation_id], by_job[action.job_id]
             alloc.status, alloc.ended_at = "completed", now
             job.done = min(job.quantity, job.done + action.parts)
