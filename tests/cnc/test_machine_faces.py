@@ -167,9 +167,9 @@ def test_program_larger_than_memory_is_refused_with_drip_feed_suggested():
         text = big_program(200)
         with pytest.raises(MemoryFull, match="drip-feed"):
             m.load_program(text)
-        with DncClient("127.0.0.1", port(m, "dnc"), timeout_s=5) as c:
-            with pytest.raises(TransferError) as err:
-                c.send_program(text)
+        client = DncClient("127.0.0.1", port(m, "dnc"), timeout_s=5)
+        with client as c, pytest.raises(TransferError) as err:
+            c.send_program(text)
         assert "2002" in str(err.value) and "drip-feed" in str(err.value)
         m.step(1)
         assert 2002 in [a.number for a in m.alarms]
