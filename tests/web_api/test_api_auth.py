@@ -3,6 +3,8 @@
 
 from __future__ import annotations
 
+import json
+
 import pytest
 
 from tests.web_api.test_api_common import (  # noqa: F401 - fixtures
@@ -89,8 +91,6 @@ def test_role_against_endpoint_class(api, rev, role, cls):
     else:
         assert status == 403, (role, cls, status)
         assert headers["content-type"].startswith("application/problem+json")
-        import json
-
         body = json.loads(content)
         assert body["type"].endswith("/forbidden") and body["needed_role"] == lowest
         assert f"needs the {lowest} role" in body["detail"] and role in body["detail"]
