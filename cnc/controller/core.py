@@ -721,8 +721,12 @@ class Controller:
             if 0x7300 <= code <= 0x73FF and axis in self._ref:
                 self._ref[axis] = False  # encoder fault: the position is no longer known
             self._event(f"fault {axis} {code:#06x}: {text}")
-        if fb.faults and self._run is not None:
-            self._abort_now("STOPPED")
+        if fb.faults and (self._run is not None or self._jog):
+            # one axis down stops them all: the others would leave the path
+            self._axis("quick_stop")
+            self._jog.clear()
+            if self._run is not None:
+                self._abort_now("STOPPED")
         for a in self.axes:
             if not fb.homed.get(a, False) and not fb.homing:
                 self._ref[a] = False

@@ -3,7 +3,8 @@
 Each axis follows its target perfectly (lag_s = 0) or as a first-order lag with time
 constant lag_s; homing runs the axes one after the other in the order requested, each
 taking `homing_time_s`, and ends at the axis' reference point (config `home_mm`); a quick
-stop disables the axes and (incremental encoders) loses every reference. Faults can be
+stop disables the axes (and loses every reference with `quick_stop_loses_reference`; the
+controller itself drops the reference on an E-stop either way). Faults can be
 injected (`inject_fault`) and a following error can be forced (`disturb`) to exercise the
 controller's supervision. Pure: time advances only by `apply(outputs, dt)`.
 """
@@ -26,13 +27,13 @@ class IdealAxes:
         start: dict[str, float] | None = None,
         homed: bool = False,
         enabled: bool = False,
-        incremental: bool = True,
+        quick_stop_loses_reference: bool = False,
     ) -> None:
         self.config = config
         self.names = tuple(config.axes)
         self.lag_s = lag_s
         self.homing_time_s = homing_time_s
-        self.incremental = incremental
+        self.quick_stop_loses_reference = quick_stop_loses_reference
         mid = {n: (a.min_mm + a.max_mm) / 2.0 for n, a in config.axes.items()}
         self.actual = {n: float((start or mid).get(n, mid[n])) for n in self.names}
         self.target = dict(self.actual)
@@ -85,7 +86,7 @@ class IdealAxes:
         elif cmd == "quick_stop":
             self.enabled = False
             self._homing.clear()
-            if self.incremental:
+            if self.quick_stop_loses_reference:
                 self.homed = dict.fromkeys(self.names, False)
         elif cmd == "fault_reset":
             self.faulted = False

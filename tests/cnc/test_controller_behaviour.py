@@ -648,3 +648,18 @@ def test_malformed_commands_are_refused_not_crashes(name, args):
         rig.cmd(name, **args)
     rig.step(5)
     assert rig.ex == "READY"
+
+
+def test_after_a_following_error_reset_the_program_runs_again_without_homing():
+    rig = _homed()
+    _running(rig)
+    rig.until(lambda: rig.outputs.status.path_feed_rate > 1000)
+    rig.axes.disturb("X", 6.0)
+    rig.step(3)
+    assert rig.ex == "STOPPED"
+    rig.axes.disturb("X", 0.0)
+    rig.cmd("reset")
+    rig.step(5)
+    assert all(rig.ctl.referenced.values())
+    rig.cmd("cycle_start")
+    rig.until(lambda: rig.ex == "PROGRAM_COMPLETED")
