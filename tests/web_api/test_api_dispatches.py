@@ -3,6 +3,8 @@
 
 from __future__ import annotations
 
+from concurrent.futures import ThreadPoolExecutor
+
 from sqlalchemy import func, select
 
 from dnc import models as m
@@ -115,3 +117,14 @@ def test_list_newest_first_with_cursor_and_filters(api):
 
 def test_unknown_dispatch(api):
     assert_problem(api.get("/api/dispatches/77"), 404, "not-found")
+
+
+def test_concurrent_requests_with_one_key_make_one_dispatch(api):
+    rev = api.released()
+    body = {"revision_id": rev, "machine": "mill-2", "start": True}
+    with ThreadPoolExecutor(max_workers=8) as pool:
+        results = list(pool.map(lambda _: send(api, body, key="race"), range(16)))
+    statuses = sorted(r.status_code for r in results)
+    assert statuses == [200] * 15 + [202], statuses
+    assert len({r.json()["id"] for r in results}) == 1
+    assert dispatch_count(api) == 1
