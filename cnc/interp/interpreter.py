@@ -1219,6 +1219,10 @@ class Interpreter(CannedCycles):
                 out.append(p[1])
                 continue
             _, line, feed, w0, w1, off, exact, cw, turns = p
+            if seg.role == "corner":
+                # The arc around an outside corner is inserted before the next element and
+                # carries its payload; it turns once and stays at the current height.
+                w1, turns, exact = self._mach[w] - off[w], 0, False
             e = [0.0, 0.0, 0.0]
             e[u], e[v], e[w] = seg.end[0], seg.end[1], w1
             m = (e[0] + off[0], e[1] + off[1], e[2] + off[2])
