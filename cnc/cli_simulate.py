@@ -41,10 +41,13 @@ def simulate(
     )
     try:
         number = m.load_program(text)
-        m.step(m.plc_every * 5)  # PLC ready, lubrication started, drives enabled
-        m.command("mode", mode="REF")
-        m.command("home")
-        m.run_until(lambda mm: _homed(mm) or mm.alarms, 120.0)
+        # PLC ready and AxisEnable, the controller enables the drives
+        m.run_until(lambda mm: mm.axes.feedback().enabled or mm.alarms, 2.0)
+        m.step(2)  # the controller takes the enabled drives in its next cycle
+        if not m.alarms:
+            m.command("mode", mode="REF")
+            m.command("home")
+            m.run_until(lambda mm: _homed(mm) or mm.alarms, 120.0)
         if m.alarms:
             return _result(m, "alarm", 0.0, 0)
         m.command("mode", mode="AUTO")
@@ -80,8 +83,7 @@ def simulate(
 
 
 def _homed(m) -> bool:
-    fb = m.axes.feedback()
-    return all(fb.homed.values()) and not fb.homing
+    return all(m.controller.referenced.values())
 
 
 def _settled(m) -> bool:
@@ -141,6 +143,7 @@ def simulate_cmd(
 ) -> None:
     """Run FILE on a complete simulated machine in lockstep: home, cycle start, to the end or
     to an alarm. Prints one JSON object (result, alarms, cycle_time_s, final_position, ...)."""
+    from cnc.controller import CommandRefused
     from cnc.errors import NcError
     from cnc.machine.faults import FaultSpecError, parse_fault_spec
     from cnc.program_memory import MemoryFull
@@ -166,6 +169,9 @@ def simulate_cmd(
     except MemoryFull as err:
         typer.echo(f"{file}: {err}", err=True)
         raise typer.Exit(2) from None
+    except CommandRefused as err:
+        typer.echo(f"fmscell nc simulate: the machine refused: {err}", err=True)
+        raise typer.Exit(1) from None
     except ImportError as err:
         typer.echo(f"fmscell nc simulate: {err}", err=True)
         raise typer.Exit(3) from None

@@ -116,7 +116,6 @@ class Machine:
         self.max_following_error = dict.fromkeys(self.axis_names, 0.0)
         self.max_contour_error = 0.0
         self._path: deque = deque(maxlen=512)
-        self._near = 0
         self._alarm_keys: set = set()
         self.shdr = None  # set by the faces
         self.faces = None
@@ -185,25 +184,21 @@ class Machine:
                 self.max_following_error[axis] = abs(fe)
         if status.execution != "ACTIVE" or not fb.enabled:
             self._path.clear()
-            self._near = 0
             return
         point = tuple(self.last_targets.get(a, 0.0) for a in self.axis_names)
         path = self._path
         if not path or path[-1] != point:
-            full = len(path) == path.maxlen
             path.append(point)
-            if full:
-                self._near = max(0, self._near - 1)
         actual = tuple(fb.actual.get(a, 0.0) for a in self.axis_names)
-        lo, hi = max(0, self._near - 4), min(len(path), self._near + 16)
-        best, j = min((_seg_dist(path, k, actual), k) for k in range(lo, hi))
-        # the nearest point moves forward along the path as the axes follow it
-        while j + 1 < len(path):
-            d = _seg_dist(path, j + 1, actual)
+        # the axes lag behind the newest setpoint: walk back from it to the first local
+        # minimum of the distance (a path that comes back on itself is not mistaken for it)
+        j = len(path) - 1
+        best = _seg_dist(path, j, actual)
+        while j > 0:
+            d = _seg_dist(path, j - 1, actual)
             if d > best:
                 break
-            best, j = d, j + 1
-        self._near = j
+            best, j = d, j - 1
         if best > self.max_contour_error:
             self.max_contour_error = best
 
