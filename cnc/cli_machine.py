@@ -1,0 +1,75 @@
+"""`fmscell machine --config FILE --name NAME`: one machine with its faces, in its own process.
+
+The lead mounts `machine` as a command of the top-level app. The machine runs in realtime
+(paced to the wall clock) until SIGINT or SIGTERM; on start it prints one JSON line with its
+name and bound ports so a supervisor (or a cell on another host) can find its faces.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import typer
+
+
+def machine(
+    config: Path | None = typer.Option(None, "--config", help="cell or machine YAML"),
+    name: str = typer.Option("mill3", "--name", help="machine name in the cell file"),
+    simulation: bool = typer.Option(
+        False, "--simulation", help="enable the simulation face (faults, operator, clock)"
+    ),
+    ideal: bool = typer.Option(False, "--ideal", help="ideal axes instead of CANopen drives"),
+    dnc_parity: bool = typer.Option(False, "--dnc-parity", help="ISO 7-bit even parity"),
+    speed: float = typer.Option(1.0, "--speed", help="clock speed factor (1 = real time)"),
+    seconds: float | None = typer.Option(None, "--seconds", help="stop after this wall time"),
+    event_log: Path | None = typer.Option(None, "--event-log", help="JSONL event log file"),
+    candump: Path | None = typer.Option(None, "--candump", help="CAN frames, candump log"),
+) -> None:
+    """Run one machine standalone with its faces (DNC, Modbus, SHDR, simulation) until
+    SIGINT/SIGTERM."""
+    import signal
+
+    from cnc.config import builtin_machine, load_machine_config
+    from cnc.errors import NcError
+    from cnc.machine import Machine, RealtimeRunner
+
+    try:
+        cfg = load_machine_config(config, name) if config else builtin_machine(name)
+    except (NcError, ValueError, KeyError, OSError) as err:
+        typer.echo(f"{config or name}: {err}", err=True)
+        raise typer.Exit(2) from None
+    if not 0.01 <= speed <= 100.0:
+        typer.echo(f"--speed {speed}: must be 0.01..100", err=True)
+        raise typer.Exit(2)
+    dump = open(candump, "w", encoding="ascii") if candump else None  # noqa: SIM115
+    m = Machine(
+        cfg, name, ideal=ideal, candump=dump, event_log_path=str(event_log) if event_log else None
+    )
+    try:
+        try:
+            faces = m.start_faces(simulation=simulation or None, dnc_parity=dnc_parity)
+        except OSError as err:
+            typer.echo(f"{name}: cannot bind a face: {err}", err=True)
+            raise typer.Exit(2) from None
+        runner = RealtimeRunner(m, speed=speed)
+        previous = {
+            sig: signal.signal(sig, lambda *_: runner.stop())
+            for sig in (signal.SIGINT, signal.SIGTERM)
+        }
+        typer.echo(
+            json.dumps({"machine": name, "ports": faces.ports(), "ipo_cycle_ms": cfg.ipo_cycle_ms}),
+            nl=True,
+        )
+        try:
+            summary = runner.run(seconds)
+        finally:
+            for sig, handler in previous.items():
+                signal.signal(sig, handler)
+        typer.echo(
+            json.dumps({"machine": name, "stopped": True, "t": round(m.t, 3), "realtime": summary})
+        )
+    finally:
+        m.close()
+        if dump is not None:
+            dump.close()
