@@ -121,7 +121,6 @@ def problem_doc(*statuses: int) -> dict[int, dict]:
     """OpenAPI `responses` entries for the problems a route can answer with."""
     return {
         s: {
-            "model": Problem,
             "content": {PROBLEM_JSON: {"schema": {"$ref": "#/components/schemas/Problem"}}},
             "description": f"problem details ({s})",
         }
