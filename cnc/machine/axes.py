@@ -89,6 +89,7 @@ class CanopenAxes:
         substep: float | None = None,
     ) -> None:
         from drives.bus.hub import CanHub
+        from drives.bus.loadplan import BusOverloadError
         from drives.faults import FaultInjector
         from drives.master import AxisConfig, AxisGroup
         from drives.virtual_drive import VirtualDrive
@@ -121,13 +122,29 @@ class CanopenAxes:
                     homing_timeout_s=60.0,
                 )
             )
+        self.master_bus = self.hub.endpoint("master")
+        self.following_error_mapped = True
         self.group = AxisGroup(
-            self.hub.endpoint("master"),
+            self.master_bus,
             axes,
             ipo_cycle_s=self.ipo_s,
             master_node_id=127,
             following_error_every=1,
         )
+        try:
+            self.group.plan()
+        except BusOverloadError:
+            # no room for the drives' following error (TPDO2) at this SYNC rate: the NC
+            # computes it from commanded - actual; a plan that still overloads is refused
+            self.group.close()
+            self.following_error_mapped = False
+            self.group = AxisGroup(
+                self.master_bus,
+                axes,
+                ipo_cycle_s=self.ipo_s,
+                master_node_id=127,
+                following_error_every=0,
+            )
         self.injector = FaultInjector(self.drives)
         self.group.boot()
         self.group.configure()
@@ -150,7 +167,8 @@ class CanopenAxes:
         fb = self._fb
         return AxisFeedback(
             actual=dict(fb.position_mm),
-            following_error={n: (v or 0.0) for n, v in fb.following_error_mm.items()},
+            # an axis left out: the NC computes its following error from commanded - actual
+            following_error={n: v for n, v in fb.following_error_mm.items() if v is not None},
             enabled=self.enabled and all(s == "OPERATION ENABLED" for s in fb.state.values()),
             homed=dict(self.homed),
             homing=self.homing,

@@ -113,6 +113,7 @@ class Machine:
         self.face_alarms: list[Alarm] = []  # raised by faces (DNC), cleared by a reset
         self.status: MachineStatus = getattr(self.controller, "status", None) or MachineStatus()
         self.last_targets: dict[str, float] = {}
+        self._prev_targets: dict[str, float] = {}
         self.max_following_error = dict.fromkeys(self.axis_names, 0.0)
         self.max_contour_error = 0.0
         self._path: deque = deque(maxlen=512)
@@ -158,6 +159,7 @@ class Machine:
         self._scan_until(self.t)
         status = out.status if out.status is not None else self.status
         self.status = status
+        self._prev_targets = self.last_targets
         self.last_targets = dict(out.targets) or self.last_targets
         self._measure(fb, status)
         if self.trace is not None:
@@ -179,8 +181,12 @@ class Machine:
     def _measure(self, fb, status: MachineStatus) -> None:
         """Maximum following error per axis; contour error = distance of the actual position
         from the commanded path (the polyline of setpoints) while a program is ACTIVE."""
-        for axis, fe in fb.following_error.items():
-            if abs(fe) > self.max_following_error.get(axis, 0.0):
+        prev = self._prev_targets
+        for axis in self.axis_names:
+            fe = fb.following_error.get(axis)
+            if fe is None:  # not on the bus: commanded (sent last cycle) - actual
+                fe = prev.get(axis, 0.0) - fb.actual.get(axis, 0.0) if fb.enabled else 0.0
+            if abs(fe) > self.max_following_error[axis]:
                 self.max_following_error[axis] = abs(fe)
         if status.execution != "ACTIVE" or not fb.enabled:
             self._path.clear()
