@@ -7,7 +7,6 @@ is kept for load planning, where the payload is not known yet.
 
 from __future__ import annotations
 
-import re
 from functools import lru_cache
 
 CRC15_POLY = 0x4599
@@ -113,12 +112,41 @@ def _crc15_table() -> list[int]:
 
 
 _CRC_TABLE = _crc15_table()
-# Only runs of 4+ equal bits can stuff (5 with a carried stuff bit); finding just those keeps
-# the Python loop to a few iterations per frame.
-_LONG_RUNS = re.compile(r"0{4,}|1{4,}")
 
 
-@lru_cache(maxsize=4096)
+def _stuff_table(width: int) -> list[int]:
+    """Stuffing as a state machine over `width`-bit chunks.
+
+    A state is the current run: (bit << 2) | (length - 1), length 1..4 (a run of 5 is stuffed
+    at once and the stuff bit starts a run of 1 of the other value). Entry
+    `table[state << width | chunk]` is `stuff_bits << 3 | next_state`.
+    """
+    table = []
+    for state in range(8):
+        for chunk in range(1 << width):
+            run_bit, run = state >> 2, (state & 3) + 1
+            stuff = 0
+            for i in range(width - 1, -1, -1):
+                bit = (chunk >> i) & 1
+                if bit == run_bit:
+                    run += 1
+                else:
+                    run_bit, run = bit, 1
+                if run == 5:
+                    stuff += 1
+                    run_bit, run = 1 - bit, 1
+            table.append(stuff << 3 | run_bit << 2 | (run - 1))
+    return table
+
+
+_STUFF8 = _stuff_table(8)
+# The stream after SOF is 33 + 8s bits (11-bit ID) or 53 + 8s bits (29-bit ID): one leading
+# chunk of 1 or 5 bits, then whole bytes.
+_STUFF1 = _stuff_table(1)
+_STUFF5 = _stuff_table(5)
+
+
+@lru_cache(maxsize=8192)
 def frame_bits(
     can_id: int, data: bytes, extended: bool = False, remote: bool = False, dlc: int | None = None
 ) -> int:
@@ -126,8 +154,8 @@ def frame_bits(
 
     Same result as `unstuffed_bits` + `stuff_bit_count` (the readable reference, kept for
     tests) but table-driven: the CRC runs a byte at a time (leading zero bits do not change a
-    CRC with initial value 0, so the stream is left-padded to whole bytes) and stuffing is
-    counted per long run of equal bits instead of per bit.
+    CRC with initial value 0, so the stream is left-padded to whole bytes) and stuffing runs
+    a byte at a time through a run-length state machine.
     """
     if dlc is None:
         dlc = len(data)
@@ -143,26 +171,30 @@ def frame_bits(
         header = ((can_id >> 18) << 27) | (0b11 << 25) | ((can_id & 0x3FFFF) << 7)
         header |= (rtr << 6) | dlc
         header_bits = 39
+        lead, lead_table = 5, _STUFF5
     else:
         if not 0 <= can_id < 1 << 11:
             raise ValueError(f"11-bit identifier 0x{can_id:X} out of range")
         header = (can_id << 7) | (rtr << 6) | dlc  # SOF, ID 11, RTR, IDE, r0, DLC 4
         header_bits = 19
-    nbits = header_bits + 8 * len(data)
-    stream = (header << (8 * len(data))) | int.from_bytes(data, "big")
+        lead, lead_table = 1, _STUFF1
+    ndata = len(data)
+    nbits = header_bits + 8 * ndata
+    stream = (header << (8 * ndata)) | int.from_bytes(data, "big")
     crc = 0
     table = _CRC_TABLE
     for byte in stream.to_bytes((nbits + 7) // 8, "big"):
         crc = ((crc << 8) & 0x7FFF) ^ table[((crc >> 7) ^ byte) & 0xFF]
-    text = format((stream << 15) | crc, f"0{nbits + 15}b")
-    stuff = 0
-    carry_at = -1  # where a run starts that begins after a stuff bit of its own value
-    for run in _LONG_RUNS.finditer(text):
-        start, end = run.span()
-        total = end - start + (1 if start == carry_at else 0)
-        stuff += total // 5
-        if total % 5 == 0:
-            carry_at = end  # the stuff bit joins the next (adjacent, opposite) run
+    # Bits after SOF (the SOF is 0 and starts the first run: state 0).
+    rest = nbits + 14
+    body = rest - lead
+    full = (stream << 15) | crc
+    entry = lead_table[full >> body]  # SOF is 0, so state 0 needs no shift-in
+    stuff = entry >> 3
+    stuff8 = _STUFF8
+    for byte in (full & ((1 << body) - 1)).to_bytes(body >> 3, "big"):
+        entry = stuff8[(entry & 7) << 8 | byte]
+        stuff += entry >> 3
     return nbits + 15 + stuff + TRAILER_BITS
 
 
