@@ -28,6 +28,7 @@ class RealtimeRunner:
         self._stepped = 0  # cycles run by step() requests
         self._lock = threading.Lock()
         machine.runner = self
+        machine.plc.clock_ns = time.perf_counter_ns  # a real scan watchdog in realtime
 
     @property
     def paused(self) -> bool:
