@@ -4,6 +4,7 @@ bus (axis group, virtual drives with their plants), the PLC with the machine-too
 from __future__ import annotations
 
 import io
+from pathlib import Path
 
 import pytest
 
@@ -215,3 +216,27 @@ def test_lockstep_runs_are_byte_identical():
     assert len(a[0].splitlines()) > 1000 and len(a[1].splitlines()) > 10_000
     assert a[0] == b[0]
     assert a[1] == b[1]
+
+
+def test_seed_chapter_10_cam_program_with_spindle_and_coolant_on_canopen_drives(machine):
+    """000_nc_book.md ch. 10, example 2 (eccentric cam), transcribed in programs/."""
+    text = (Path(__file__).parent / "programs" / "cam_ch10.nc").read_text()
+    home(machine)
+    start(machine, text)
+    seen = {"rpm": 0.0, "coolant": False}
+
+    def watch(m: Machine) -> bool:
+        seen["rpm"] = max(seen["rpm"], m.io.state.spindle_rpm)
+        seen["coolant"] |= bool(m.io.output("CoolantPump"))
+        return finished(m)
+
+    assert machine.run_until(watch, 60.0)
+    assert machine.alarms == ()
+    assert seen["rpm"] == pytest.approx(400.0, abs=10.0)  # S400 M3 through the PLC
+    assert seen["coolant"]  # M8
+    machine.step(500)
+    fb = machine.axes.feedback()
+    # G54 X-300 Y-200 Z-300; the cam ends at X19.9 Z0, then G0 Y50
+    for axis, want in {"X": -280.1, "Y": -150.0, "Z": -300.0}.items():
+        assert fb.actual[axis] == pytest.approx(want, abs=0.005)
+    assert machine.max_contour_error < 0.05
