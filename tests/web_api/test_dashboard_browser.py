@@ -1,0 +1,290 @@
+# ruff: noqa: F811 - pytest fixtures are imported by name from test_api_common
+"""The dashboard in a real browser: Debian's Chromium driven by playwright.
+
+The app runs on a real uvicorn socket on 127.0.0.1 with a seeded SQLite library and a fake
+machines provider whose axes move on every poll (a circle, the actual position lagging the
+commanded one). The page must ask for the API key, show every machine with its state,
+positions and toolpath, list the library, upload a program through the form, release it and
+dispatch it, and show the outbox events. Screenshots go to test-output/.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import re
+import socket
+import threading
+from pathlib import Path
+from urllib.parse import urlsplit
+
+import pytest
+import uvicorn
+
+from tests.web_api.test_api_common import (  # noqa: F401 - fixtures
+    GOOD,
+    KEYS,
+    SQLITE_ONLY,
+    engine,
+    make_api,
+    pg_url,
+    sessions,
+    sqlite_template,
+)
+from tests.web_api.test_dashboard import with_dashboard
+
+CHROMIUM = Path("/usr/bin/chromium")
+CHROMIUM_ARGS = [
+    "--headless",
+    "--no-sandbox",
+    "--disable-gpu",
+    "--disable-quic",
+    "--no-first-run",
+    "--disable-background-networking",
+    "--disable-component-update",
+    "--disable-sync",
+]
+OUTPUT = Path(__file__).resolve().parents[2] / "test-output"
+
+playwright_sync = pytest.importorskip(
+    "playwright.sync_api",
+    reason="playwright is not installed (.venv/bin/pip install playwright==1.65.2)",
+)
+pytestmark = [
+    SQLITE_ONLY,
+    pytest.mark.timeout(90),
+    pytest.mark.skipif(
+        not (CHROMIUM.exists() and os.access(CHROMIUM, os.X_OK)),
+        reason="/usr/bin/chromium is missing (apt-get install -y chromium)",
+    ),
+]
+
+
+class MovingMachines:
+    """A machines provider whose mill-1 moves on a 20 mm circle, one step per poll.
+
+    Positions are a function of the poll count, not of the clock, so what the page is shown
+    depends only on how often it asked. mill-2 holds with a drive alarm; lathe-1 is idle.
+    """
+
+    def __init__(self) -> None:
+        self.polls = 0
+        self._lock = threading.Lock()
+
+    def __call__(self) -> dict:
+        with self._lock:
+            self.polls += 1
+            k = self.polls
+        angle = k * 0.15
+        lag = 0.25  # the actual position trails the command by a quarter radian
+
+        def xy(a: float) -> tuple[float, float]:
+            return -300 + 20 * math.cos(a), -200 + 20 * math.sin(a)
+
+        (cx, cy), (ax, ay) = xy(angle), xy(angle - lag)
+        mill1 = status(
+            execution="ACTIVE",
+            program="O1001",
+            line=k % 40 + 1,
+            block="G2 X-280. Y-200. I-20. J0 F800",
+            path_feed_rate=800.0,
+            axes={
+                "X": {"actual": ax, "commanded": cx},
+                "Y": {"actual": ay, "commanded": cy},
+                "Z": {"actual": -50.0, "commanded": -50.0},
+            },
+            spindle_speed=6000.0,
+            feed_override=90.0,
+            can_bus_load={"mean": 41.5, "peak": 55.0},
+            plc_scan_time_ms=0.412,
+        )
+        mill2 = status(
+            execution="FEED_HOLD",
+            alarms=[
+                {
+                    "number": 8612,
+                    "text": "following error too large",
+                    "source": "DRIVE",
+                    "severity": "FAULT",
+                    "axis": "Y",
+                    "time": 1.0,
+                }
+            ],
+            axes={a: {"actual": -10.0, "commanded": -10.0} for a in "XYZ"},
+        )
+        lathe = status(axes={"X": {"actual": 40.0, "commanded": 40.0}, "Z": {"actual": 2.0}})
+        return {"mill-1": mill1, "mill-2": mill2, "lathe-1": lathe}
+
+
+def status(**over) -> dict:
+    """A live status as the cell serves it (cnc.status.MachineStatus as a dict)."""
+    base = {
+        "availability": "AVAILABLE",
+        "execution": "READY",
+        "controller_mode": "AUTOMATIC",
+        "mode_detail": "AUTO",
+        "program": "",
+        "line": 0,
+        "block": "",
+        "path_feed_rate": 0.0,
+        "axes": {},
+        "spindle_speed": 0.0,
+        "spindle_load": 0.0,
+        "spindle_override": 100.0,
+        "feed_override": 100.0,
+        "rapid_override": 100.0,
+        "alarms": [],
+        "part_count": 3,
+        "emergency_stop": "ARMED",
+        "can_bus_load": {"mean": 12.0, "peak": 20.0},
+        "plc_scan_time_ms": 0.2,
+        "adaptive_control": "OFF",
+    }
+    return {**base, **over}
+
+
+@pytest.fixture
+def served(sessions):
+    """The app (with the dashboard) on a real socket; yields (api, base URL, provider)."""
+    provider = MovingMachines()
+    api = make_api(sessions, events_keepalive_s=0, machines_provider=provider)
+    api.released(1001)  # a released program, ready to dispatch
+    api.upload(1002, GOOD.replace("O1001", "O1002"))  # a draft
+    app = with_dashboard(api.client.app)
+    sock = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
+    sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+    sock.bind(("127.0.0.1", 0))
+    sock.listen(64)  # the browser may connect before uvicorn accepts: no start-up wait
+    config = uvicorn.Config(app, log_level="warning", lifespan="off", timeout_graceful_shutdown=3)
+    server = uvicorn.Server(config)
+    thread = threading.Thread(target=server.run, kwargs={"sockets": [sock]}, daemon=True)
+    thread.start()
+    yield api, f"http://127.0.0.1:{sock.getsockname()[1]}", provider
+    server.should_exit = True
+    thread.join(timeout=20)
+    sock.close()
+    assert not thread.is_alive(), "uvicorn did not shut down"
+
+
+@pytest.fixture
+def page(served):
+    OUTPUT.mkdir(exist_ok=True)
+    _, base, _ = served
+    with playwright_sync.sync_playwright() as pw:
+        browser = pw.chromium.launch(
+            executable_path=str(CHROMIUM), args=CHROMIUM_ARGS, headless=True
+        )
+        context = browser.new_context(viewport={"width": 1400, "height": 1000})
+        context.set_default_timeout(15_000)
+        foreign: list[str] = []
+
+        def only_our_host(route):
+            # The page must work without any network but the cell's host.
+            if urlsplit(route.request.url).netloc != urlsplit(base).netloc:
+                foreign.append(route.request.url)
+                return route.abort()
+            return route.continue_()
+
+        context.route("**/*", only_our_host)
+        pg = context.new_page()
+        errors: list[str] = []
+        pg.on("pageerror", lambda exc: errors.append(str(exc)))
+        yield pg
+        context.close()
+        browser.close()
+    assert not foreign, f"the page reached beyond the host: {foreign}"
+    assert not errors, f"JavaScript errors on the page: {errors}"
+
+
+def test_dashboard_shows_the_cell_and_drives_the_library(served, page, tmp_path):
+    api, base, provider = served
+    expect = playwright_sync.expect
+
+    page.goto(base + "/")
+    # No key yet: the API answers 401 and the page asks for one.
+    dialog = page.locator("#key-dialog")
+    expect(dialog).to_be_visible()
+    page.get_by_label("Key", exact=True).fill(KEYS["admin"])
+    page.locator("#key-save").click()
+    expect(page.locator("#whoami")).to_have_text("admin-user (admin)")
+    assert page.evaluate("localStorage.getItem('fmscell.apiKey')") == KEYS["admin"]
+
+    # Machines: one tile each, with state in words and colour class, positions and plot.
+    tiles = page.locator(".tile[data-machine]")
+    expect(tiles).to_have_count(3)
+    mill1 = page.locator('.tile[data-machine="mill-1"]')
+    mill2 = page.locator('.tile[data-machine="mill-2"]')
+    lathe = page.locator('.tile[data-machine="lathe-1"]')
+    expect(mill1).to_have_attribute("data-state", "active")
+    expect(mill1.locator(".m-state")).to_have_text("ACTIVE")
+    expect(mill1.locator(".m-mode")).to_have_text("AUTOMATIC / AUTO")
+    expect(mill1.locator(".m-program")).to_have_text("O1001")
+    expect(mill1.locator(".m-feed")).to_contain_text("800 mm/min · 90 %")
+    expect(mill1.locator(".m-spindle")).to_contain_text("6000 rpm")
+    expect(mill1.locator(".m-scan")).to_have_text("0.412 ms")
+    expect(mill1.locator(".m-bus-text")).to_contain_text("41.5 %")
+    expect(mill1.locator(".m-axes tr")).to_have_count(3)
+    expect(mill2).to_have_attribute("data-state", "alarm")
+    expect(mill2.locator(".m-alarms li")).to_contain_text("DRIVE 8612 [Y]: following error")
+    expect(lathe).to_have_attribute("data-state", "idle")
+    expect(lathe.locator(".m-plane")).to_have_text("plane Z–X")
+
+    # The toolpath grows while the provider's circle turns: the page keeps polling.
+    polls_before = provider.polls
+    # (expect() polls from the test side: the page's CSP forbids evaluating strings)
+    canvas = mill1.locator("canvas.m-plot")
+    expect(canvas).to_have_attribute("data-points", re.compile(r"^(1[3-9]|[2-9]\d|\d{3,})$"))
+    assert provider.polls > polls_before
+    x_actual = mill1.locator('.m-axes tr[data-axis="X"] td').first
+    seen = x_actual.inner_text()
+    expect(x_actual).not_to_have_text(seen)
+    # No fault injection in this cell: GET /api/fault-types is 404, so no panel.
+    expect(mill1.locator(".m-faults")).to_be_hidden()
+    page.screenshot(path=str(OUTPUT / "dashboard.png"), full_page=True)
+
+    # Library: the seeded programs, released and draft.
+    rows = page.locator("#program-rows tr[data-program]")
+    expect(rows).to_have_count(2)
+    o1001 = page.locator('#program-rows tr[data-number="1001"]')
+    expect(o1001.locator(".released")).not_to_have_text("—")
+    expect(
+        page.get_by_role("button", name=re.compile(r"Release O1002 revision \d+"))
+    ).to_be_visible()
+
+    # Upload through the form: number and name come from the tape's O block.
+    tape = tmp_path / "o1003.nc"
+    tape.write_text(GOOD.replace("O1001 (BRACKET)", "O1003 (FLANGE)"))
+    page.get_by_label("Program file").set_input_files(str(tape))
+    page.get_by_label("Tags").fill("op20,alu")
+    page.locator("#upload-form button[type=submit]").click()
+    o1003 = page.locator('#program-rows tr[data-number="1003"]')
+    expect(o1003).to_be_visible()
+    expect(o1003).to_contain_text("FLANGE")
+    stored = api.get("/api/programs?number=1003").json()["items"][0]
+    assert sorted(stored["tags"]) == ["alu", "op20"] and stored["released_revision_id"] is None
+
+    # Release it with an approval comment.
+    rev = stored["latest_revision_id"]
+    page.get_by_role("button", name=f"Release O1003 revision {rev}").click()
+    page.get_by_label(re.compile("Approval comment")).fill("proved out in the browser test")
+    page.get_by_role("button", name="Release", exact=True).click()
+    expect(o1003.locator(".released")).to_have_text(str(rev))
+    r = api.get(f"/api/revisions/{rev}").json()
+    assert r["status"] == "released" and r["approved_by"] == "admin-user"
+    assert r["approval_comment"] == "proved out in the browser test"
+
+    # Dispatch it to mill-2: the history shows it, the API has exactly one.
+    page.get_by_role("button", name=f"Dispatch O1003 revision {rev}").click()
+    page.get_by_label("Machine", exact=True).select_option("mill-2")
+    page.get_by_role("button", name="Dispatch", exact=True).click()
+    row = page.locator("#dispatch-rows tr[data-dispatch]").first
+    expect(row).to_contain_text("mill-2")
+    dispatches = api.get("/api/dispatches").json()["items"]
+    assert [(d["revision_id"], d["machine"], d["mode"]) for d in dispatches] == [
+        (rev, "mill-2", "memory")
+    ]
+
+    # The event stream reached the page (registrations, uploads, release, dispatch).
+    expect(page.locator("#event-log li").filter(has_text="revision.release")).not_to_have_count(0)
+    expect(page.locator("#live")).to_have_text("events: live")
+    page.screenshot(path=str(OUTPUT / "dashboard-after-dispatch.png"), full_page=True)
