@@ -2,9 +2,12 @@
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import typer
 
 from cnc.cli import nc_app
+from cnc.cli_machine import machine as machine_command
 from dnc.cli import dnc_app
 from drives.cli import drives_app
 from plc.cli import plc_app
@@ -22,15 +25,45 @@ app.add_typer(dnc_app, name="dnc")
 
 
 @app.command()
-def run() -> None:
-    """Start the default cell.
+def run(
+    config: Path | None = typer.Option(None, "--config", help="cell YAML (default: built-in cell)"),
+    clock: str = typer.Option("realtime", "--clock", help="realtime | fast"),
+    processes: bool = typer.Option(
+        False, "--processes", help="machines as `fmscell machine` subprocesses"
+    ),
+    host: str = typer.Option(None, "--host", help="REST/dashboard bind address"),
+    port: int = typer.Option(None, "--port", help="REST/dashboard TCP port"),
+    insecure_open: bool = typer.Option(
+        False, "--insecure-open", help="demo: no API key needed, every caller is an admin"
+    ),
+    faults: bool = typer.Option(False, "--faults", help="enable fault injection"),
+    ideal_axes: bool = typer.Option(
+        False, "--ideal-axes", help="ideal axes instead of CiA 402 drives (faster, no CAN)"
+    ),
+    database_url: str | None = typer.Option(
+        None, "--database-url", help="SQLAlchemy URL (default FMSCELL_DATABASE_URL or SQLite)"
+    ),
+) -> None:
+    """Start the cell: DNC host, the configured machines and the REST API, until SIGINT or
+    SIGTERM."""
+    from server.cell import run_cell
 
-    The cell server (host, machines, REST API) is not built yet; until it is, this runs the
-    NC kernel demo: a sample part program through interpreter, planner and interpolator.
-    """
-    from cnc.demo import run_demo
+    raise typer.Exit(
+        run_cell(
+            config=config,
+            clock=clock,
+            processes=processes,
+            host=host,
+            port=port,
+            insecure_open=insecure_open,
+            faults=faults,
+            ideal_axes=ideal_axes,
+            database_url=database_url,
+        )
+    )
 
-    raise typer.Exit(run_demo())
+
+app.command("machine")(machine_command)
 
 
 def main() -> None:

@@ -49,6 +49,7 @@ def create_app(
     machines_provider: MachinesProvider | None = None,
     faults_enabled: bool = False,
     mtconnect_agent: Any | None = None,
+    cell_control: Any | None = None,
 ) -> FastAPI:
     """The API over the given services.
 
@@ -89,6 +90,15 @@ def create_app(
         events_router,
     ):
         app.include_router(module.router)
+    # machine commands and fault injection act on the running cell (server.cell.Cell)
+    from web_api.routers import faults as faults_router
+    from web_api.routers import machine_commands as machine_commands_router
+
+    app.state.cell_control = cell_control
+    if cell_control is not None:
+        app.include_router(machine_commands_router.router)
+        if faults_enabled:
+            app.include_router(faults_router.router)
     if mtconnect_agent is not None:
         from web_api.mtconnect import mtconnect_router
 

@@ -1,0 +1,479 @@
+"""The cell: database, machines, host loops, MTConnect agent and REST API in one composition.
+
+    cell = Cell(default_cell(), clock="fast", database_url="sqlite:///cell.db").start()
+    app = cell.app(ApiSettings(insecure_open=True))   # serve with uvicorn
+    ...
+    cell.stop()
+
+`start()` migrates the database, starts the machines (in this process, or as `fmscell
+machine` subprocesses with `processes=True`), registers them in the library with their face
+addresses, connects the MTConnect agent to their SHDR streams and starts the host loops:
+scheduler tick, transfer worker (whose starter presses cycle start on the machine's Modbus
+remote panel), remote-request listeners and, when configured, the outbox publisher to MQTT.
+`stop()` ends the loops after their current database transaction, then the machines.
+See docs/cell.md.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import logging
+import os
+import tempfile
+import threading
+import time
+from pathlib import Path
+from typing import Any
+
+from server.host import Loop, MonitoringModel, make_starter
+from server.supervisor import (
+    InProcessMachine,
+    MachineLink,
+    MachineUnavailable,
+    SubprocessMachine,
+)
+
+log = logging.getLogger(__name__)
+
+CLOCKS = ("realtime", "fast")
+
+
+DEFAULT_PORTS = {
+    "mill1": {"dnc": 7001, "modbus": 5021, "shdr": 7878},
+    "mill2": {"dnc": 7003, "modbus": 5023, "shdr": 7880},
+    "lathe1": {"dnc": 7002, "modbus": 5022, "shdr": 7879},
+}
+
+
+def default_cell(*, free_ports: bool = False):
+    """The built-in cell of `fmscell run`: two identical 3-axis mills and one lathe, built
+    from the shipped machines (mill3 twice, lathe2), faces on fixed loopback ports (so a
+    restarted host finds machines that kept running) or, with `free_ports`, on any free
+    port (tests)."""
+    from cnc.config import load_cell_config
+
+    bases = {"mill1": "mill3", "mill2": "mill3", "lathe1": "lathe2"}
+    machines = {}
+    for name, base in bases.items():
+        ports = dict.fromkeys(DEFAULT_PORTS[name], 0) if free_ports else DEFAULT_PORTS[name]
+        machines[name] = {"base": base, "ports": {"host": "127.0.0.1", **ports}}
+    return load_cell_config({"machines": machines})
+
+
+class Fault:
+    """One fault injected through the API: its spec on the simulation face and its life."""
+
+    def __init__(self, fault_id: int, machine: str, request: dict, spec: str) -> None:
+        self.id, self.machine, self.request, self.spec = fault_id, machine, request, spec
+        self.state = "active"
+        self.created_at = time.time()
+        self.cleared_at: float | None = None
+
+    def as_dict(self) -> dict:
+        return {
+            "id": self.id,
+            "machine": self.machine,
+            **self.request,
+            "spec": self.spec,
+            "state": self.state,
+            "created_at": self.created_at,
+            "cleared_at": self.cleared_at,
+        }
+
+
+class Cell:
+    """One cell: see the module docstring."""
+
+    def __init__(
+        self,
+        config=None,
+        *,
+        clock: str = "realtime",
+        database_url: str | None = None,
+        processes: bool = False,
+        faults: bool = False,
+        ideal_axes: bool = False,
+        config_file: str | Path | None = None,
+        tick_s: float | None = None,
+        rule: str = "fifo",
+    ) -> None:
+        if clock not in CLOCKS:
+            raise ValueError(f"clock {clock!r}: one of {', '.join(CLOCKS)}")
+        self.config = config if config is not None else default_cell()
+        self.clock = clock
+        self.database_url = database_url or self.config.host.database_url
+        self.processes = processes
+        self.faults_enabled = faults
+        self.ideal_axes = ideal_axes
+        self.config_file = Path(config_file) if config_file else None
+        self.tick_s = tick_s if tick_s is not None else (0.05 if clock == "fast" else 0.5)
+        self.rule = rule
+        self.links: dict[str, MachineLink] = {}
+        self.machines: list[Any] = []
+        self.loops: list[Loop] = []
+        self.remote_requests: list[Any] = []
+        self.faults: dict[int, Fault] = {}
+        self._fault_lock = threading.Lock()
+        self._next_fault = 1
+        self._timers: list[threading.Timer] = []
+        self.started = False
+
+    # ------------------------------------------------------------------ lifetime
+    def start(self, ready_timeout_s: float = 120.0) -> Cell:
+        from dnc.db import make_engine, migrate, session_factory
+        from dnc.dispatch import Dispatches
+        from dnc.jobs import Jobs, Scheduler
+        from dnc.library import Library
+        from dnc.transfer_worker import RetryPolicy, TransferWorker
+        from server.mtconnect import Agent
+        from server.mtconnect.client import AgentConnections
+
+        self.engine = make_engine(self.database_url)
+        migrate(self.engine)
+        self.sessions = session_factory(self.engine)
+        self.library = Library(self.sessions)
+        self.dispatches = Dispatches(self.sessions)
+        self.jobs = Jobs(self.sessions)
+        try:
+            self._start_machines(ready_timeout_s)
+            for link in self.links.values():
+                self.library.register_machine(
+                    link.name,
+                    link.kind,
+                    dnc_address=link.address("dnc"),
+                    modbus_address=link.address("modbus"),
+                    status_address=link.address("shdr"),
+                    memory_bytes=link.memory_bytes,
+                    actor="cell",
+                )
+            self.agent = Agent.from_cell(self.config)
+            self.connections = AgentConnections(
+                self.agent, {n: (lk.host, lk.ports["shdr"]) for n, lk in self.links.items()}
+            ).start()
+            self.monitor = MonitoringModel(self.agent, self.links)
+            self._wait_connected(ready_timeout_s)
+            self.scheduler = Scheduler(self.sessions, self.monitor.views, rule=self.rule)
+            self.worker = TransferWorker(
+                self.sessions,
+                starter=make_starter(self.links, self.monitor),
+                retry=RetryPolicy(max_attempts=3, base_s=0.5, cap_s=5.0),
+            )
+            self.worker.recover()
+            self.loops = [
+                Loop("scheduler", self.scheduler.tick, self.tick_s).start(),
+                Loop("transfer-worker", self.worker.run_once, self.tick_s).start(),
+            ]
+            self._start_publisher()
+            self._start_remote_requests()
+        except BaseException:
+            self.stop()
+            raise
+        self.started = True
+        return self
+
+    def _start_machines(self, timeout_s: float) -> None:
+        fast = self.clock == "fast"
+        if self.processes:
+            config_file = self._config_file()
+            for name, mcfg in self.config.machines.items():
+                proc = SubprocessMachine(
+                    name, config_file, fast=fast, simulation=self.faults_enabled, config=mcfg
+                )
+                self.machines.append(proc)
+                self.links[name] = proc.link
+            return
+        for name, mcfg in self.config.machines.items():
+            m = InProcessMachine(
+                name, mcfg, fast=fast, simulation=self.faults_enabled, ideal=self.ideal_axes
+            )
+            self.machines.append(m)
+            self.links[name] = m.link
+            m.start()
+        for m in self.machines:
+            m.wait_ready(timeout_s)
+
+    def _config_file(self) -> Path:
+        if self.config_file is not None:
+            return self.config_file
+        import yaml
+
+        machines = {n: {"base": _base_of(m)} for n, m in self.config.machines.items()}
+        fd, path = tempfile.mkstemp(prefix="fmscell-cell-", suffix=".yaml")
+        with os.fdopen(fd, "w") as f:
+            yaml.safe_dump({"machines": machines}, f)
+        return Path(path)
+
+    def _wait_connected(self, timeout_s: float) -> None:
+        end = time.monotonic() + timeout_s
+        for name in self.links:
+            while not self.agent.state[name].connected or self.agent.value(name, "exec") in (
+                "UNAVAILABLE",
+                "",
+            ):
+                if time.monotonic() > end:
+                    raise MachineUnavailable(f"{name}: no SHDR status within {timeout_s} s")
+                time.sleep(0.02)
+
+    def _start_publisher(self) -> None:
+        target = os.environ.get("FMSCELL_MQTT")
+        if not target:
+            return
+        from dnc.outbox import MqttSink, OutboxPublisher
+
+        host, _, port = target.rpartition(":")
+        self.mqtt = MqttSink(host or "127.0.0.1", int(port or 1883), prefix="fmscell")
+        publisher = OutboxPublisher(self.sessions, self.mqtt)
+        self.loops.append(Loop("outbox-publisher", publisher.publish_pending, 0.2).start())
+
+    def _start_remote_requests(self) -> None:
+        from dnc.machine_link import RemoteRequests
+
+        for name in self.links:
+            with contextlib.suppress(Exception):
+                self.remote_requests.append(RemoteRequests(self.library, name).start())
+
+    def stop(self) -> None:
+        """Finish the host loops' current writes, then stop machines and connections."""
+        for timer in self._timers:
+            timer.cancel()
+        for loop in self.loops:
+            loop.stop()
+        for rr in self.remote_requests:
+            with contextlib.suppress(Exception):
+                rr.stop(2.0)
+        if getattr(self, "connections", None) is not None:
+            with contextlib.suppress(Exception):
+                self.connections.stop()
+        for m in self.machines:
+            with contextlib.suppress(Exception):
+                m.stop()
+        if getattr(self, "mqtt", None) is not None:
+            with contextlib.suppress(Exception):
+                self.mqtt.close()
+        if getattr(self, "engine", None) is not None:
+            self.engine.dispose()
+        self.started = False
+
+    # ------------------------------------------------------------------ the API's view
+    def app(self, settings):
+        """The FastAPI app over this cell (monitoring, commands and, if enabled, faults)."""
+        from web_api.app import create_app
+
+        return create_app(
+            settings,
+            library=self.library,
+            dispatches=self.dispatches,
+            jobs=self.jobs,
+            sessions=self.sessions,
+            machines_provider=self.monitor.all,
+            faults_enabled=self.faults_enabled,
+            mtconnect_agent=self.agent,
+            cell_control=self,
+        )
+
+    # ------------------------------------------------------------------ commands
+    def link(self, name: str) -> MachineLink:
+        from dnc.errors import NotFound
+
+        try:
+            return self.links[name]
+        except KeyError:
+            raise NotFound(f"unknown machine {name!r}") from None
+
+    def command(self, name: str, command: str, **args) -> str:
+        """A command to a machine through its faces; returns what was done.
+
+        MachineUnavailable (refused, or no face carries it) says why not."""
+        link = self.link(name)
+        if command in ("cycle_start", "feed_hold", "reset"):
+            link.panel(command)
+            return f"{command} pressed on the Modbus remote panel"
+        if command == "estop":
+            if args.get("release"):
+                link.simulation("ESTOP RELEASE")
+                return "E-stop button released (simulation face)"
+            link.simulation("ESTOP PRESS")
+            return "E-stop button pressed (simulation face)"
+        if command == "home":
+            link.panel("request_mode", 4)
+            from server.supervisor import wait_for
+
+            wait_for(
+                lambda: self.monitor.status(name)["mode"] == "MANUAL",
+                10,
+                f"{name}: REF mode",
+            )
+            link.operator("home")
+            return "mode REF requested on the Modbus remote panel; homing started at the machine"
+        if command == "select_program":
+            link.operator("select_program", number=int(args["number"]))
+            return f"program O{int(args['number']):04d} selected at the machine"
+        if command == "mode":
+            modes = {"AUTO": 1, "MDI": 2, "JOG": 3, "REF": 4}
+            link.panel("request_mode", modes[args["mode"]])
+            return f"mode {args['mode']} requested on the Modbus remote panel"
+        raise MachineUnavailable(f"unknown command {command!r}")
+
+    # ------------------------------------------------------------------ faults
+    def fault_types(self) -> list[dict]:
+        from cnc.machine.faults import DRIVE_ALIASES, PLC_ALIASES
+        from drives.faults import FAULT_KINDS
+        from plc.machine_io import FAULTS
+
+        out = []
+        for name, kind in FAULT_KINDS.items():
+            out.append(
+                {
+                    "type": name,
+                    "target": "bus:<AXIS>" if kind.target == "bus" else "drive:<AXIS>",
+                    "params": [
+                        {"name": p.name, "unit": p.unit, "default": p.default} for p in kind.params
+                    ],
+                    "description": getattr(kind, "description", "") or "",
+                }
+            )
+        for alias, (kind, _) in DRIVE_ALIASES.items():
+            out.append(
+                {"type": alias, "target": "drive:<AXIS>", "params": [], "description": f"= {kind}"}
+            )
+        for name, text in FAULTS.items():
+            out.append({"type": name, "target": "plc", "params": [], "description": str(text)})
+        for alias, kind in PLC_ALIASES.items():
+            out.append({"type": alias, "target": "plc", "params": [], "description": f"= {kind}"})
+        return out
+
+    def inject(self, name: str, request: dict) -> Fault:
+        """Inject a fault through the machine's simulation face (ValueError: bad spec)."""
+        from cnc.machine.faults import parse_fault_spec
+
+        link = self.link(name)
+        spec = fault_spec(request)
+        at = request.get("at")
+        full = f"{spec}@{at}s" if at is not None else spec
+        parse_fault_spec(full if at is not None else spec + "@0", link.axes)
+        link.simulation(f"FAULT {full}")
+        with self._fault_lock:
+            fault = Fault(self._next_fault, name, dict(request), full)
+            self._next_fault += 1
+            self.faults[fault.id] = fault
+        duration = request.get("duration")
+        if duration:
+            timer = threading.Timer(float(duration), self._expire, args=(fault.id,))
+            timer.daemon = True
+            timer.start()
+            self._timers.append(timer)
+        return fault
+
+    def _expire(self, fault_id: int) -> None:
+        with contextlib.suppress(Exception):
+            self.clear(self.faults[fault_id].machine, fault_id)
+
+    def machine_faults(self, name: str) -> list[Fault]:
+        self.link(name)
+        return [f for f in self.faults.values() if f.machine == name]
+
+    def clear(self, name: str, fault_id: int) -> Fault:
+        from dnc.errors import NotFound
+
+        fault = self.faults.get(fault_id)
+        if fault is None or fault.machine != name:
+            raise NotFound(f"no fault {fault_id} on machine {name!r}")
+        if fault.state == "active":
+            spec = fault.spec.split("@", 1)[0]
+            self.link(name).simulation(f"CLEAR {spec}@0")
+            fault.state, fault.cleared_at = "cleared", time.time()
+        return fault
+
+
+def fault_spec(request: dict) -> str:
+    """The simulation face's spec (without time) for an API fault request.
+
+    `target` is `plc`, `drive:X` (or just `X`), or `bus:X`; `params` become `:k=v,...`."""
+    kind = str(request["type"])
+    target = str(request.get("target") or "")
+    params = request.get("params") or {}
+    tail = ":" + ",".join(f"{k}={v}" for k, v in params.items()) if params else ""
+    if target.lower() == "plc":
+        if params:
+            raise ValueError("plc faults take no params")
+        return f"plc:{kind}"
+    if target.lower().startswith("bus:"):
+        return f"bus:{kind}:{target[4:].upper()}{tail}"
+    axis = target[6:] if target.lower().startswith("drive:") else target
+    if not axis:
+        raise ValueError("target must be plc, drive:<AXIS>, <AXIS> or bus:<AXIS>")
+    return f"drive:{axis.upper()}:{kind}{tail}"
+
+
+def _base_of(config) -> str:
+    return "lathe2" if config.kind == "lathe" else "mill3"
+
+
+def run_cell(
+    *,
+    config: Path | None = None,
+    clock: str = "realtime",
+    processes: bool = False,
+    host: str | None = None,
+    port: int | None = None,
+    insecure_open: bool = False,
+    faults: bool = False,
+    ideal_axes: bool = False,
+    database_url: str | None = None,
+    echo=print,
+) -> int:
+    """`fmscell run`: start the cell and serve the API until SIGINT/SIGTERM; exit status."""
+    import uvicorn
+
+    from cnc.errors import NcError
+    from web_api.settings import ApiSettings
+
+    if clock not in CLOCKS:
+        echo(f"--clock {clock!r}: one of {', '.join(CLOCKS)}")
+        return 2
+    try:
+        from cnc.config import load_cell_config
+
+        cfg = load_cell_config(config) if config else default_cell()
+        settings = ApiSettings.from_mapping(
+            {
+                **cfg.host.auth,
+                "insecure_open": insecure_open or cfg.host.auth.get("insecure_open", False),
+            }
+        )
+    except (NcError, ValueError, OSError) as err:
+        echo(f"{config or 'default cell'}: {err}")
+        return 2
+    faults = faults or os.environ.get("FMSCELL_FAULTS", "") in ("1", "true", "yes")
+    bind = host or cfg.host.bind
+    port = cfg.host.port if port is None else port
+    cell = Cell(
+        cfg,
+        clock=clock,
+        database_url=database_url,
+        processes=processes,
+        faults=faults,
+        ideal_axes=ideal_axes,
+        config_file=config,
+    )
+    try:
+        cell.start()
+    except Exception as err:  # noqa: BLE001 - one clear line, not a traceback
+        echo(f"cannot start the cell: {err}")
+        return 1
+    try:
+        server = uvicorn.Server(
+            uvicorn.Config(cell.app(settings), host=bind, port=port, log_level="warning")
+        )
+        url = f"http://{bind}:{port}"
+        echo(f"fmscell cell: {', '.join(cell.links)} ({clock} clock)")
+        echo(f"dashboard:      {url}/")
+        echo(f"API reference:  {url}/docs  (OpenAPI: {url}/openapi.json)")
+        echo(f"MTConnect:      {url}/mtconnect/probe")
+        if settings.insecure_open:
+            echo("WARNING: --insecure-open: no API key needed, every caller is an admin")
+        server.run()
+    finally:
+        cell.stop()
+        echo("fmscell cell stopped")
+    return 0

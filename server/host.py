@@ -1,0 +1,180 @@
+"""The DNC host's side of the cell: the monitoring model and the host loops.
+
+The monitoring model reads each machine's live status from the MTConnect agent (which the
+machines' SHDR streams feed), never from the machine objects: the host sees an in-process
+machine exactly as it would see one on another computer. The scheduler takes its view of
+the machines from it, the REST API shows it, the starter waits on it.
+"""
+
+from __future__ import annotations
+
+import logging
+import threading
+import time
+from collections.abc import Callable, Mapping
+
+from dnc.scheduler import ALARM, BUSY, IDLE, OFFLINE, MachineView
+from server.supervisor import MachineLink, MachineUnavailable, wait_for
+
+log = logging.getLogger(__name__)
+
+IN_CYCLE = frozenset({"ACTIVE", "INTERRUPTED", "FEED_HOLD", "OPTIONAL_STOP", "PROGRAM_STOPPED"})
+CONDITIONS = ("nc_cond", "plc_cond", "bus_cond", "dnc_cond", "servo")
+
+
+def _num(text: str) -> float | None:
+    try:
+        return float(text)
+    except (TypeError, ValueError):
+        return None
+
+
+class MonitoringModel:
+    """Each machine's live status, from the MTConnect agent's current values."""
+
+    def __init__(self, agent, links: Mapping[str, MachineLink]) -> None:
+        self.agent = agent
+        self.links = dict(links)
+
+    def status(self, name: str) -> dict:
+        a, link = self.agent, self.links[name]
+        v = lambda key: a.value(name, key)  # noqa: E731
+        spindle = "S" if "C" in link.axes else "C"
+        alarms = []
+        for key in (*CONDITIONS, *(f"{ax}servo" for ax in link.axes)):
+            got = a.latest(name, key)
+            for obs in got if isinstance(got, tuple) else ():
+                if obs.level in ("FAULT", "WARNING"):
+                    alarms.append(
+                        {
+                            "condition": key,
+                            "level": obs.level,
+                            "code": obs.native_code,
+                            "text": obs.value,
+                        }
+                    )
+        connected = a.state[name].connected
+        feed = _num(v("path_feedrate"))
+        part_count = _num(v("part_count"))
+        return {
+            "connected": connected,
+            "availability": v("avail"),
+            "emergency_stop": v("estop"),
+            "mode": v("mode"),
+            "mode_detail": v("mode_detail"),
+            "execution": v("exec"),
+            "program": v("program"),
+            "line": int(_num(v("line")) or 0),
+            "block": v("block"),
+            "actual": {ax: _num(v(f"{ax}act")) for ax in link.axes},
+            "commanded": {ax: _num(v(f"{ax}cmd")) for ax in link.axes},
+            "feed_mm_min": None if feed is None else round(feed * 60.0, 3),
+            "overrides": {
+                "feed": _num(v("feed_ovr")),
+                "rapid": _num(v("rapid_ovr")),
+                "spindle": _num(v(f"{spindle}ovr")),
+            },
+            "spindle": {
+                "speed_rpm": _num(v(f"{spindle}speed")),
+                "load_percent": _num(v(f"{spindle}load")),
+                "mode": v(f"{spindle}mode"),
+            },
+            "alarms": alarms,
+            "counters": {"part_count": None if part_count is None else int(part_count)},
+            "bus_load": {
+                "mean_percent": _num(v("bus_load")),
+                "peak_percent": _num(v("bus_load_peak")),
+            },
+            "plc": {"scan_time_ms": _num(v("plc_scan"))},
+        }
+
+    def all(self) -> dict[str, dict]:
+        return {name: self.status(name) for name in self.links}
+
+    def state(self, name: str) -> str:
+        """idle | busy | alarm | offline, as the scheduler sees the machine."""
+        s = self.status(name)
+        if not s["connected"] or s["availability"] != "AVAILABLE":
+            return OFFLINE
+        if s["execution"] in IN_CYCLE:
+            return BUSY
+        if any(x["level"] == "FAULT" for x in s["alarms"]) or s["emergency_stop"] == "TRIGGERED":
+            return ALARM
+        if s["mode"] != "AUTOMATIC":
+            return OFFLINE  # in the operator's hands (REF, JOG, MDI): not for the cell
+        return IDLE
+
+    def views(self) -> list[MachineView]:
+        out = []
+        for name, link in self.links.items():
+            count = self.status(name)["counters"]["part_count"]
+            out.append(MachineView(name, link.kind, self.state(name), count or 0))
+        return out
+
+
+def make_starter(
+    links: Mapping[str, MachineLink], monitor: MonitoringModel, timeout_s: float = 60.0
+) -> Callable[[str, int], None]:
+    """The transfer worker's cycle start: select the program at the machine, press cycle
+    start on its Modbus remote panel, and wait until the machine reports it running."""
+
+    def start(machine: str, number: int) -> None:
+        link = links[machine]
+        name = f"O{number:04d}"
+        before = monitor.status(machine)["counters"]["part_count"]
+        link.operator("select_program", number=number)
+        wait_for(
+            lambda: monitor.status(machine)["program"] == name,
+            timeout_s,
+            f"{machine}: program {name} selected",
+        )
+        link.panel("cycle_start")
+
+        def running() -> bool:
+            s = monitor.status(machine)
+            if s["execution"] in IN_CYCLE and s["program"] == name:
+                return True
+            # a very short program may have run and ended between two looks
+            return (s["counters"]["part_count"] or 0) > (before or 0)
+
+        try:
+            wait_for(running, timeout_s, f"{machine}: {name} running")
+        except MachineUnavailable:
+            panel = link.panel_status()
+            if panel.get("CycleStartRefused"):
+                raise MachineUnavailable(f"{machine}: the PLC refused cycle start") from None
+            raise
+
+    return start
+
+
+class Loop:
+    """Runs `fn` every `period_s` on its own thread until stopped; errors are logged and the
+    loop carries on (a database that is briefly down must not end the host)."""
+
+    def __init__(self, name: str, fn: Callable[[], object], period_s: float) -> None:
+        self.name, self.fn, self.period_s = name, fn, period_s
+        self._stop = threading.Event()
+        self.errors = 0
+        self.runs = 0
+        self._thread = threading.Thread(target=self._run, name=name, daemon=True)
+
+    def start(self) -> Loop:
+        self._thread.start()
+        return self
+
+    def _run(self) -> None:
+        while not self._stop.is_set():
+            t0 = time.monotonic()
+            try:
+                self.fn()
+                self.runs += 1
+            except Exception:  # noqa: BLE001 - a loop of the host never dies of one error
+                self.errors += 1
+                log.exception("%s failed", self.name)
+            self._stop.wait(max(0.0, self.period_s - (time.monotonic() - t0)))
+
+    def stop(self, timeout_s: float = 30.0) -> None:
+        """Stop after the current run (its database writes finish first)."""
+        self._stop.set()
+        self._thread.join(timeout_s)

@@ -1,0 +1,78 @@
+"""End to end over HTTP: the default cell on the fast clock, through the real faces."""
+
+from __future__ import annotations
+
+import pytest
+
+from tests.cell.conftest import MILL_FINAL, idem, poll, upload_released
+
+pytestmark = pytest.mark.timeout(120)
+
+
+def machine(api, name):
+    r = api("viewer").get(f"/api/machines/{name}")
+    assert r.status_code == 200, r.text
+    return r.json()
+
+
+def test_upload_release_dispatch_start_completes_with_final_position_and_part_count(make_cell):
+    _, api = make_cell()
+    listed = api("viewer").get("/api/machines").json()
+    assert [m["name"] for m in listed] == ["lathe1", "mill1", "mill2"]
+    assert all(m["status"]["connected"] for m in listed)
+    before = machine(api, "mill1")["status"]
+    assert before["mode"] == "AUTOMATIC" and before["execution"] == "READY"
+    assert before["counters"]["part_count"] == 0
+
+    rev = upload_released(api)
+    r = api("operator").post(
+        "/api/dispatches",
+        json={"revision_id": rev, "machine": "mill1", "mode": "memory", "start": True},
+        headers=idem(),
+    )
+    assert r.status_code == 202, r.text
+    dispatch = r.json()["id"]
+
+    status = poll(
+        lambda: (s := machine(api, "mill1")["status"])["counters"]["part_count"] == 1 and s,
+        40,
+        "mill1 part count 1",
+    )
+    assert status["program"] == "O1001"
+    for axis, want in MILL_FINAL.items():
+        assert status["actual"][axis] == pytest.approx(want, abs=0.01)
+        assert status["commanded"][axis] == pytest.approx(want, abs=0.001)
+    d = poll(
+        lambda: (
+            (x := api("viewer").get(f"/api/dispatches/{dispatch}").json())["state"] == "done" and x
+        ),
+        10,
+        "dispatch done",
+    )
+    assert d["verified"] is True and d["bytes_sent"] > 0
+    # the other mill did nothing
+    assert machine(api, "mill2")["status"]["counters"]["part_count"] == 0
+
+
+def test_job_of_four_is_spread_over_both_mills(make_cell):
+    _, api = make_cell()
+    rev = upload_released(api)
+    r = api("operator").post("/api/jobs", json={"revision_id": rev, "quantity": 4})
+    assert r.status_code == 201, r.text
+    job = r.json()["id"]
+    seen = []
+
+    def completed():
+        seen.append(api("viewer").get(f"/api/jobs/{job}").json())
+        return seen[-1]["status"] == "completed" and seen[-1]
+
+    try:
+        done = poll(completed, 90, "job of 4 completed", interval_s=0.2)
+    except AssertionError:
+        pytest.fail(f"job not completed: {seen[-1]}")
+    assert done["done"] == 4
+    machines = {a["machine"] for a in done["allocations"] if a["status"] == "completed"}
+    assert machines == {"mill1", "mill2"}, done["allocations"]
+    counts = {n: machine(api, n)["status"]["counters"]["part_count"] for n in ("mill1", "mill2")}
+    assert sum(counts.values()) == 4 and min(counts.values()) >= 1, counts
+    assert machine(api, "lathe1")["status"]["counters"]["part_count"] == 0

@@ -1,0 +1,83 @@
+"""Machine commands: cycle start, feed hold, reset, E-stop, home, program select, mode.
+
+Each travels through a face of the machine (the Modbus remote panel, the simulation face's
+E-stop button), the same way a cell controller on another computer would send it. A command
+the machine's state forbids, or that no face carries, is a 409 problem saying why.
+"""
+
+from __future__ import annotations
+
+from typing import Annotated, Any, Literal
+
+from fastapi import APIRouter, Path, Request
+from fastapi.concurrency import run_in_threadpool
+from pydantic import BaseModel, ConfigDict, Field, model_validator
+
+from web_api.problems import ApiProblem, problem_doc
+from web_api.routers.auth import Operator
+from web_api.schemas import MachineName
+
+router = APIRouter(tags=["machines"], responses=problem_doc(401, 403, 422))
+
+
+class MachineCommand(BaseModel):
+    """One command; `number` goes with select_program, `mode` with mode, `release` with
+    estop (release the E-stop button instead of pressing it)."""
+
+    model_config = ConfigDict(extra="forbid")
+
+    command: Literal["cycle_start", "feed_hold", "reset", "estop", "home", "select_program", "mode"]
+    number: int | None = Field(default=None, ge=1, le=9999, description="O number")
+    mode: Literal["AUTO", "MDI", "JOG", "REF"] | None = None
+    release: bool = False
+
+    @model_validator(mode="after")
+    def _arguments(self) -> MachineCommand:
+        if self.command == "select_program" and self.number is None:
+            raise ValueError("select_program needs number (the O number)")
+        if self.command == "mode" and self.mode is None:
+            raise ValueError("mode needs mode (AUTO, MDI, JOG or REF)")
+        return self
+
+
+class CommandAccepted(BaseModel):
+    machine: str
+    command: str
+    detail: str
+
+
+def cell_of(request: Request) -> Any:
+    cell = getattr(request.app.state, "cell_control", None)
+    if cell is None:
+        raise ApiProblem(503, "no-cell", "this API runs without a cell: no machine is connected")
+    return cell
+
+
+@router.post(
+    "/api/machines/{name}/commands",
+    response_model=CommandAccepted,
+    status_code=202,
+    summary="Send a command to a machine through its faces",
+    responses=problem_doc(404, 409, 503),
+)
+async def machine_command(
+    name: Annotated[MachineName, Path()],
+    body: MachineCommand,
+    request: Request,
+    principal: Operator,
+) -> CommandAccepted:
+    cell = cell_of(request)
+    args: dict[str, Any] = {}
+    if body.command == "select_program":
+        args["number"] = body.number
+    elif body.command == "mode":
+        args["mode"] = body.mode
+    elif body.command == "estop":
+        args["release"] = body.release
+    from server.supervisor import MachineUnavailable
+
+    try:
+        detail = await run_in_threadpool(cell.command, name, body.command, **args)
+    except MachineUnavailable as exc:
+        raise ApiProblem(409, "command-refused", str(exc), command=body.command) from None
+    return CommandAccepted(machine=name, command=body.command, detail=detail)
