@@ -140,10 +140,42 @@ def _stuff_table(width: int) -> list[int]:
 
 
 _STUFF8 = _stuff_table(8)
-# The stream after SOF is 33 + 8s bits (11-bit ID) or 53 + 8s bits (29-bit ID): one leading
-# chunk of 1 or 5 bits, then whole bytes.
+_STUFF7 = _stuff_table(7)
 _STUFF1 = _stuff_table(1)
-_STUFF5 = _stuff_table(5)
+
+
+def _header_state(can_id: int, extended: bool, remote: bool, dlc: int) -> tuple[int, int, int, int]:
+    """(CRC, stuff state, stuff bits, header bits) after the header SOF..DLC.
+
+    The header is 19 bits (11-bit ID) or 39 bits (29-bit ID); left-padded with zeros to whole
+    bytes (no effect on a CRC with initial value 0) the data bytes that follow stay byte
+    aligned, so a frame only runs its data bytes and the CRC through the tables.
+    """
+    rtr = 1 if remote else 0
+    if extended:
+        if not 0 <= can_id < 1 << 29:
+            raise ValueError(f"29-bit identifier 0x{can_id:X} out of range")
+        # SOF, base ID 11, SRR 1, IDE 1, ext ID 18, RTR, r1, r0, DLC 4
+        header = ((can_id >> 18) << 27) | (0b11 << 25) | ((can_id & 0x3FFFF) << 7)
+        header |= (rtr << 6) | dlc
+        header_bits = 39
+    else:
+        if not 0 <= can_id < 1 << 11:
+            raise ValueError(f"11-bit identifier 0x{can_id:X} out of range")
+        header = (can_id << 7) | (rtr << 6) | dlc  # SOF, ID 11, RTR, IDE, r0, DLC 4
+        header_bits = 19
+    crc = 0
+    for byte in header.to_bytes((header_bits + 7) // 8, "big"):
+        crc = ((crc << 8) & 0x7FFF) ^ _CRC_TABLE[((crc >> 7) ^ byte) & 0xFF]
+    state = stuff = 0  # the SOF (0) starts the first run
+    for i in range(header_bits - 2, -1, -1):
+        entry = _STUFF1[state << 1 | (header >> i) & 1]
+        stuff += entry >> 3
+        state = entry & 7
+    return crc, state, stuff, header_bits
+
+
+_HEADERS: dict[tuple[int, bool, bool, int], tuple[int, int, int, int]] = {}
 
 
 @lru_cache(maxsize=8192)
@@ -153,9 +185,9 @@ def frame_bits(
     """Total bits on the wire of a data or remote frame, stuff bits and intermission included.
 
     Same result as `unstuffed_bits` + `stuff_bit_count` (the readable reference, kept for
-    tests) but table-driven: the CRC runs a byte at a time (leading zero bits do not change a
-    CRC with initial value 0, so the stream is left-padded to whole bytes) and stuffing runs
-    a byte at a time through a run-length state machine.
+    tests) but table-driven: the CRC and the stuffing state after the header are cached per
+    header, then each data byte costs one CRC-table and one stuff-table lookup (stuffing is a
+    run-length state machine fed a byte at a time), and the 15 CRC bits two more.
     """
     if dlc is None:
         dlc = len(data)
@@ -163,39 +195,24 @@ def frame_bits(
         data = b""
     elif len(data) > 8 or not 0 <= dlc <= 15:
         raise ValueError(f"classic CAN frame with {len(data)} data bytes / DLC {dlc}")
-    rtr = 1 if remote else 0
-    if extended:
-        if not 0 <= can_id < 1 << 29:
-            raise ValueError(f"29-bit identifier 0x{can_id:X} out of range")
-        # SOF, base ID 11, SRR 1, IDE 1, ext ID 18, RTR, r1, r0, DLC 4
-        header = ((can_id >> 18) << 27) | (0b11 << 25) | ((can_id & 0x3FFFF) << 7)
-        header |= (rtr << 6) | dlc
-        header_bits = 39
-        lead, lead_table = 5, _STUFF5
-    else:
-        if not 0 <= can_id < 1 << 11:
-            raise ValueError(f"11-bit identifier 0x{can_id:X} out of range")
-        header = (can_id << 7) | (rtr << 6) | dlc  # SOF, ID 11, RTR, IDE, r0, DLC 4
-        header_bits = 19
-        lead, lead_table = 1, _STUFF1
-    ndata = len(data)
-    nbits = header_bits + 8 * ndata
-    stream = (header << (8 * ndata)) | int.from_bytes(data, "big")
-    crc = 0
-    table = _CRC_TABLE
-    for byte in stream.to_bytes((nbits + 7) // 8, "big"):
-        crc = ((crc << 8) & 0x7FFF) ^ table[((crc >> 7) ^ byte) & 0xFF]
-    # Bits after SOF (the SOF is 0 and starts the first run: state 0).
-    rest = nbits + 14
-    body = rest - lead
-    full = (stream << 15) | crc
-    entry = lead_table[full >> body]  # SOF is 0, so state 0 needs no shift-in
-    stuff = entry >> 3
-    stuff8 = _STUFF8
-    for byte in (full & ((1 << body) - 1)).to_bytes(body >> 3, "big"):
-        entry = stuff8[(entry & 7) << 8 | byte]
+    key = (can_id, extended, remote, dlc)
+    head = _HEADERS.get(key)
+    if head is None:
+        if len(_HEADERS) >= 4096:
+            _HEADERS.clear()  # bounded: only a babbling fuzzer sees this many headers
+        head = _HEADERS[key] = _header_state(can_id, extended, remote, dlc)
+    crc, state, stuff, header_bits = head
+    crc_table, stuff8 = _CRC_TABLE, _STUFF8
+    for byte in data:
+        crc = ((crc << 8) & 0x7FFF) ^ crc_table[((crc >> 7) ^ byte) & 0xFF]
+        entry = stuff8[state << 8 | byte]
         stuff += entry >> 3
-    return nbits + 15 + stuff + TRAILER_BITS
+        state = entry & 7
+    entry = _STUFF7[state << 7 | crc >> 8]
+    stuff += entry >> 3
+    entry = stuff8[(entry & 7) << 8 | (crc & 0xFF)]
+    stuff += entry >> 3
+    return header_bits + 8 * len(data) + 15 + stuff + TRAILER_BITS
 
 
 def nominal_bits(data_len: int, *, extended: bool = False) -> int:

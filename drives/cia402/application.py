@@ -67,6 +67,29 @@ _STRUCT = {
 }
 
 
+_KEYS = frozenset((index, sub) for index, subs in OBJECTS.items() for sub in subs)
+
+
+def _plain_write_limits() -> dict[tuple[int, int], tuple[int, int, frozenset[int] | None]]:
+    """(lo, hi, allowed) of the writable objects whose write needs no special handling."""
+    out = {}
+    for index, subs in OBJECTS.items():
+        if index in NEEDS_POWER_OFF or index in (0x6080, 0x6092):
+            continue
+        for sub, entry in subs.items():
+            if entry.writable:
+                lo, hi = TYPE_RANGE[entry.dtype]
+                if entry.low is not None:
+                    lo = max(lo, entry.low)
+                if entry.high is not None:
+                    hi = min(hi, entry.high)
+                out[(index, sub)] = (lo, hi, entry.allowed)
+    return out
+
+
+_PLAIN_WRITES = _plain_write_limits()
+
+
 class Drive402:
     """A virtual CiA 402 servo drive (profile application + physical plant).
 
@@ -165,11 +188,23 @@ class Drive402:
         return index in OBJECTS
 
     def read_object(self, index: int, subindex: int) -> int:
-        entry = self._entry(index, subindex)
-        del entry
+        if (index, subindex) not in _KEYS:
+            self._entry(index, subindex)  # raises the abort saying what is missing
         return self._value(index, subindex)
 
     def write_object(self, index: int, subindex: int, value: int | float | bytes) -> None:
+        # Fast path for what RPDOs write every cycle (controlword, targets): a plain int
+        # inside the object's limits needs none of the decoding and checking below.
+        limits = _PLAIN_WRITES.get((index, subindex))
+        if limits is not None and type(value) is int:
+            lo, hi, allowed = limits
+            if lo <= value <= hi and (allowed is None or value in allowed):
+                self._od[(index, subindex)] = value
+                if index == 0x6040:
+                    self._on_controlword(value)
+                elif index == 0x6060:
+                    self._set_mode(value)
+                return
         entry = self._entry(index, subindex)
         if not entry.writable:
             raise ObjectAccessError(ABORT_READ_ONLY, f"0x{index:04X}:{subindex} is read-only")
@@ -226,9 +261,68 @@ class Drive402:
         self._fe_window = None if window == 0xFFFFFFFF else window * rpu
         self._fe_timeout = od[(0x6066, 0)] * 1e-3
         self._ilim = self._current_limit()
-        for _ in range(n):
+        done = self._csp_substeps(h, n) if self._mode == CSP else 0
+        for _ in range(n - done):
             self._substep(h)
         self.time += dt_s
+
+    def _csp_substeps(self, h: float, n: int) -> int:
+        """`_substep` specialised for plain CSP following in OPERATION ENABLED; returns how
+        many of the n sub-steps it ran (the rest go through `_substep`).
+
+        It computes exactly what `_substep` computes there, without the per-sub-step mode
+        dispatch: no stop, no halt (CSP ignores it), no homing, no PP/PV windows. It hands
+        over as soon as a sub-step ends with a fault or a changed switch input.
+        """
+        power = self._power
+        if power.state != State.OPERATION_ENABLED or power.stop is not None or self._hm is not None:
+            return 0
+        p, d = self.plant, self._dem
+        inputs = self._inputs
+        block_neg, block_pos = bool(inputs & 1), bool(inputs & 2)
+        ilim = self._ilim
+        window = self._fe_window
+        rpc = p._rad_per_count
+        step, switch_inputs = p.step, p.switch_inputs
+        seg_t, seg_T, seg_to, seg_v = self._seg_t, self._seg_T, self._seg_to, self._seg_v
+        pos, vel = d.pos, d.vel
+        self._halt_stopped = False
+        done = 0
+        try:
+            while done < n:
+                pos_now = pos
+                if seg_t < seg_T:
+                    seg_t += h
+                    if seg_t >= seg_T:
+                        pos, vel = seg_to, seg_v
+                    else:
+                        pos += seg_v * h
+                        vel = seg_v
+                else:
+                    vel = 0.0
+                fault = step(h, POSITION, pos_now, vel, vel, ilim, block_neg, block_pos)
+                done += 1
+                if window is not None and abs(pos - p.counts * rpc) > window:
+                    self._fe_timer += h
+                    if self._fe_timer > self._fe_timeout and not fault:
+                        self._fe_latched = True
+                        fault = 0x8611
+                else:
+                    self._fe_timer = 0.0
+                new_inputs = switch_inputs()
+                if fault or new_inputs != inputs:
+                    d.pos, d.vel = pos, vel
+                    self._seg_t = seg_t
+                    self._inputs = new_inputs
+                    if new_inputs & ~inputs & 3 and not fault:
+                        fault = 0x8612
+                    if fault:
+                        self._raise_fault(fault)
+                    return done
+        finally:
+            d.pos, d.vel = pos, vel
+            self._seg_t = seg_t
+        return done
 
     def on_nmt_state(self, state: str) -> None:
         self.nmt_state = state
@@ -637,7 +731,13 @@ class Drive402:
 
     # ------------------------------------------------------------------ one sub-step
     def _stop_control(self, kind: Stop, h: float, velocity_mode: bool):
-        """Control for a running stop: (loop mode, stopped)."""
+        """Control for a running stop: (loop mode, stopped).
+
+        With `velocity_mode` the ramp is the velocity loop's command, so the motor itself
+        decelerates along it and is at standstill a few velocity-loop time constants after
+        the ramp reaches zero. Otherwise (halt in a position mode) the ramp moves the
+        position demand and the motor follows it with the Kv lag.
+        """
         d, p = self._dem, self.plant
         thr = self.params.loops.standstill_velocity
         if kind == Stop.COAST:
@@ -668,7 +768,11 @@ class Drive402:
         pos_now = d.pos
         if st in _ENERGIZED:
             if power.stop is not None:
-                ctl, stopped = self._stop_control(power.stop, h, vel_mode)
+                # Quick stop, fault reaction and disable operation ramp the motor's speed
+                # (CiA 402: decelerate on the ramp, then the transition follows at
+                # standstill). A ramp of the position demand would leave the motor to run
+                # out its v/Kv following error for ~4/Kv (250 ms at Kv 16.7) after the ramp.
+                ctl, stopped = self._stop_control(power.stop, h, True)
             elif st == State.OPERATION_ENABLED:
                 ctl = self._mode_step(h)
             else:

@@ -169,3 +169,32 @@ def test_coarse_substeps_keep_the_kv_law(substep):
         csp_cycle(d, x)
     theory = 100_000 / params.loops.kv
     assert abs(d.read_object(0x60F4, 0) - theory) / theory < 0.01
+
+
+@pytest.mark.parametrize(("substep", "settle_ms"), [(None, 2.0), (1e-3, 35.0)])
+def test_quick_stop_in_csp_ends_at_standstill_shortly_after_the_ramp(substep, settle_ms):
+    # The quick-stop ramp drives the velocity loop, so the motor itself decelerates on it;
+    # ramping the position demand instead left the motor to run out its v/Kv following
+    # error (3 mm, ~250 ms at 50 mm/s) before it fell below the standstill speed.
+    params = PlantParams().for_substep(substep) if substep else None
+    d = enabled(params=params)
+    x = 0.0
+    for _ in range(150):
+        x += 50_000 * T  # 50 mm/s
+        csp_cycle(d, x)
+    start = d.read_object(0x6064, 0)
+    d.write_object(0x6040, 0, 0x02)  # quick stop, 0x605A = 2: ramp 0x6085, then disabled
+    elapsed = 0.0
+    while d.state != State.SWITCH_ON_DISABLED:
+        d.on_sync()
+        d.advance(T)
+        elapsed += T
+        assert elapsed < 0.5
+    ramp = 50_000 / d.read_object(0x6085, 0)  # 5 ms
+    assert ramp <= elapsed <= ramp + settle_ms * 1e-3 + T
+    stopped_at = d.read_object(0x6064, 0)
+    # v²/2a = 125 µm on the ramp, plus the velocity loop's lag (a coarse loop overshoots back)
+    assert 50 <= stopped_at - start <= 250
+    for _ in range(20):
+        d.advance(T)
+    assert abs(d.read_object(0x6064, 0) - stopped_at) <= 2  # at standstill when disabled
