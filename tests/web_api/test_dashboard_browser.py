@@ -10,6 +10,7 @@ dispatch it, and show the outbox events. Screenshots go to test-output/.
 
 from __future__ import annotations
 
+import contextlib
 import math
 import os
 import re
@@ -143,14 +144,9 @@ def status(**over) -> dict:
     return {**base, **over}
 
 
-@pytest.fixture
-def served(sessions):
-    """The app (with the dashboard) on a real socket; yields (api, base URL, provider)."""
-    provider = MovingMachines()
-    api = make_api(sessions, events_keepalive_s=0, machines_provider=provider)
-    api.released(1001)  # a released program, ready to dispatch
-    api.upload(1002, GOOD.replace("O1001", "O1002"))  # a draft
-    app = with_dashboard(api.client.app)
+@contextlib.contextmanager
+def serve(app):
+    """The app on a real uvicorn socket on 127.0.0.1; yields its base URL."""
     sock = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
     sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
     sock.bind(("127.0.0.1", 0))
@@ -159,17 +155,19 @@ def served(sessions):
     server = uvicorn.Server(config)
     thread = threading.Thread(target=server.run, kwargs={"sockets": [sock]}, daemon=True)
     thread.start()
-    yield api, f"http://127.0.0.1:{sock.getsockname()[1]}", provider
-    server.should_exit = True
-    thread.join(timeout=20)
-    sock.close()
+    try:
+        yield f"http://127.0.0.1:{sock.getsockname()[1]}"
+    finally:
+        server.should_exit = True
+        thread.join(timeout=20)
+        sock.close()
     assert not thread.is_alive(), "uvicorn did not shut down"
 
 
-@pytest.fixture
-def page(served):
+@contextlib.contextmanager
+def browser_page(base: str):
+    """A Chromium page that may reach only `base`; fails on JavaScript errors."""
     OUTPUT.mkdir(exist_ok=True)
-    _, base, _ = served
     with playwright_sync.sync_playwright() as pw:
         browser = pw.chromium.launch(
             executable_path=str(CHROMIUM), args=CHROMIUM_ARGS, headless=True
@@ -189,11 +187,30 @@ def page(served):
         pg = context.new_page()
         errors: list[str] = []
         pg.on("pageerror", lambda exc: errors.append(str(exc)))
-        yield pg
-        context.close()
-        browser.close()
+        try:
+            yield pg
+        finally:
+            context.close()
+            browser.close()
     assert not foreign, f"the page reached beyond the host: {foreign}"
     assert not errors, f"JavaScript errors on the page: {errors}"
+
+
+@pytest.fixture
+def served(sessions):
+    """The app with a seeded library; yields (api, base URL, provider)."""
+    provider = MovingMachines()
+    api = make_api(sessions, events_keepalive_s=0, machines_provider=provider)
+    api.released(1001)  # a released program, ready to dispatch
+    api.upload(1002, GOOD.replace("O1001", "O1002"))  # a draft
+    with serve(with_dashboard(api.client.app)) as base:
+        yield api, base, provider
+
+
+@pytest.fixture
+def page(served):
+    with browser_page(served[1]) as pg:
+        yield pg
 
 
 def test_dashboard_shows_the_cell_and_drives_the_library(served, page, tmp_path):
@@ -288,3 +305,93 @@ def test_dashboard_shows_the_cell_and_drives_the_library(served, page, tmp_path)
     expect(page.locator("#event-log li").filter(has_text="revision.release")).not_to_have_count(0)
     expect(page.locator("#live")).to_have_text("events: live")
     page.screenshot(path=str(OUTPUT / "dashboard-after-dispatch.png"), full_page=True)
+
+
+FAULT_TYPES = [
+    {
+        "type": "encoder",
+        "target": "drive:<AXIS>",
+        "params": [{"name": "noise", "unit": "counts", "default": 4.0}],
+        "description": "encoder noise",
+    },
+    {"type": "coolant_low", "target": "plc", "params": [], "description": "coolant level low"},
+]
+
+
+class FakeFaults:
+    """The fault routes' contract (web_api/routers/faults.py) over a list, for the page."""
+
+    def __init__(self) -> None:
+        self.injected: list[dict] = []
+        self.cleared: list[int] = []
+
+    def install(self, app) -> None:
+        @app.get("/api/fault-types")
+        def fault_types() -> list[dict]:
+            return FAULT_TYPES
+
+        @app.post("/api/machines/{name}/faults", status_code=201)
+        def inject(name: str, body: dict) -> dict:
+            fault = {"id": len(self.injected) + 1, "machine": name, "state": "active", **body}
+            self.injected.append(fault)
+            return fault
+
+        @app.get("/api/machines/{name}/faults")
+        def listed(name: str) -> list[dict]:
+            return [
+                {**f, "state": "cleared" if f["id"] in self.cleared else "active"}
+                for f in self.injected
+                if f["machine"] == name
+            ]
+
+        @app.delete("/api/machines/{name}/faults/{fault_id}")
+        def clear(name: str, fault_id: int) -> dict:
+            self.cleared.append(fault_id)
+            return {"id": fault_id, "state": "cleared"}
+
+
+def test_fault_panel_offers_the_cells_fault_types_and_injects(sessions):
+    provider = MovingMachines()
+    api = make_api(sessions, insecure_open=True, machines_provider=provider)
+    faults = FakeFaults()
+    app = with_dashboard(api.client.app)
+    faults.install(app)
+    expect = playwright_sync.expect
+    with serve(app) as base, browser_page(base) as page:
+        page.goto(base + "/")
+        # insecure-open: no key asked for, the caller is the anonymous admin.
+        expect(page.locator("#whoami")).to_have_text("anonymous (admin)")
+        expect(page.locator("#key-dialog")).to_be_hidden()
+        mill1 = page.locator('.tile[data-machine="mill-1"]')
+        panel = mill1.locator(".m-faults")
+        expect(panel).to_be_visible()
+        panel.locator("summary").click()
+        expect(panel.locator(".f-type option")).to_have_count(2)
+        # The first type's target and parameter defaults are offered, on the first axis.
+        expect(panel.locator(".f-target")).to_have_value("drive:X")
+        expect(panel.locator(".f-params")).to_have_value('{"noise":4}')
+        panel.get_by_label("Duration, s").fill("2.5")
+        panel.get_by_role("button", name="Inject").click()
+        expect(panel.locator(".f-active li")).to_contain_text("#1 encoder drive:X active")
+        assert faults.injected == [
+            {
+                "id": 1,
+                "machine": "mill-1",
+                "state": "active",
+                "type": "encoder",
+                "target": "drive:X",
+                "params": {"noise": 4},
+                "duration": 2.5,
+            }
+        ]
+        page.screenshot(path=str(OUTPUT / "dashboard-faults.png"), full_page=True)
+        # A PLC fault takes no parameters; then clear the first fault.
+        panel.locator(".f-type").select_option("coolant_low")
+        expect(panel.locator(".f-target")).to_have_value("plc")
+        panel.get_by_label("Duration, s").fill("")
+        panel.get_by_role("button", name="Inject").click()
+        expect(panel.locator(".f-active li")).to_have_count(2)
+        assert faults.injected[1]["target"] == "plc" and "duration" not in faults.injected[1]
+        panel.get_by_role("button", name="Clear fault 1 on mill-1").click()
+        expect(panel.locator(".f-active li").first).to_contain_text("cleared")
+        assert faults.cleared == [1]

@@ -292,11 +292,28 @@ function fillFaultTypes(tile) {
   panel.hidden = state.faultTypes === null;
   if (state.faultTypes === null) return;
   const sel = $(".f-type", tile);
+  const chosen = sel.value;
   sel.replaceChildren(
     ...state.faultTypes.map((t) =>
       el("option", { value: t.type ?? t.name, text: t.type ?? t.name, title: t.description || "" }),
     ),
   );
+  if (chosen) sel.value = chosen;
+  sel.onchange = () => prefillFault(tile);
+  prefillFault(tile);
+}
+
+// A fault type names its target ("drive:<AXIS>", "bus:<AXIS>", "plc") and its parameters
+// with defaults: offer them, with the machine's first axis, so one click injects something.
+function prefillFault(tile) {
+  const t = (state.faultTypes || []).find((f) => (f.type ?? f.name) === $(".f-type", tile).value);
+  if (!t) return;
+  const axis = $(".m-axes tr[data-axis]", tile)?.dataset.axis || "X";
+  $(".f-target", tile).value = String(t.target || "").replace("<AXIS>", axis);
+  const params = {};
+  for (const p of t.params || []) if (p.default !== null && p.default !== undefined) params[p.name] = p.default;
+  $(".f-params", tile).value = JSON.stringify(params);
+  $(".f-type", tile).title = t.description || "";
 }
 
 async function loadFaults(machine, tile) {
