@@ -25,6 +25,7 @@ from cnc.program_memory import ProgramMemory
 from cnc.status import Alarm, CanBusLoad, MachineStatus
 
 PANEL_BUTTONS = ("PanelCycleStart", "PanelFeedHold", "PanelReset")
+_UNSET = object()
 
 
 class Machine:
@@ -117,6 +118,7 @@ class Machine:
         self.status: MachineStatus = getattr(self.controller, "status", None) or MachineStatus()
         self.last_targets: dict[str, float] = {}
         self._prev_targets: dict[str, float] = {}
+        self._nc_sent: dict[str, int | bool] = {}
         self.max_following_error = dict.fromkeys(self.axis_names, 0.0)
         self.max_contour_error = 0.0
         self._path: deque = deque(maxlen=512)
@@ -155,9 +157,11 @@ class Machine:
             self.inject(spec)
         fb = self.axes.feedback()
         out = self.controller.cycle(CycleInputs(self.t, self._plc_in, fb))
-        nc = self.io.nc
+        nc, sent = self.io.nc, self._nc_sent
         for name, value in out.plc.items():
-            nc.set(name, value)
+            if sent.get(name, _UNSET) != value:  # the signal table check is not free
+                nc.set(name, value)
+                sent[name] = value
         extra = self.axes.apply(out, self.ipo_s) or 0.0
         self.cycle += 1
         self._sequence_s += extra
@@ -215,6 +219,8 @@ class Machine:
             self.max_contour_error = best
 
     def _watch_alarms(self, status: MachineStatus) -> None:
+        if not status.alarms and not self._alarm_keys:
+            return
         keys = {(a.number, a.source, a.axis) for a in status.alarms}
         if keys == self._alarm_keys:
             return
@@ -365,15 +371,17 @@ def _seg_dist(path, j: int, p: tuple[float, ...]) -> float:
     if j == 0:
         return math.dist(p, b)
     a = path[j - 1]
-    ab = [bi - ai for ai, bi in zip(a, b, strict=True)]
-    ap = [pi - ai for ai, pi in zip(a, p, strict=True)]
-    den = sum(x * x for x in ab)
-    u = (
-        0.0
-        if den == 0
-        else max(0.0, min(1.0, sum(x * y for x, y in zip(ab, ap, strict=True)) / den))
-    )
-    return math.dist(p, tuple(ai + u * x for ai, x in zip(a, ab, strict=True)))
+    den = dot = ap2 = 0.0
+    for ai, bi, pi in zip(a, b, p, strict=True):
+        d, e = bi - ai, pi - ai
+        den += d * d
+        dot += d * e
+        ap2 += e * e
+    if den == 0.0 or dot <= 0.0:
+        return math.sqrt(ap2)
+    if dot >= den:
+        return math.dist(p, b)
+    return math.sqrt(max(0.0, ap2 - dot * dot / den))
 
 
 def _plain(args: dict) -> dict:
