@@ -248,6 +248,8 @@ class CanopenAxes:
         self.group.close()
         for vd in self.drives.values():
             vd.close()
+        for endpoint in list(self.hub.endpoints):
+            endpoint.shutdown()
         self.hub.close()
 
 

@@ -18,6 +18,7 @@ class RealtimeRunner:
         self.machine = machine
         self.speed = speed
         self.cycles = 0
+        self.error: str | None = None
         self.late_cycles = 0
         self.skipped_slots = 0
         self.lateness_s: list[float] = []
@@ -70,7 +71,8 @@ class RealtimeRunner:
                     n, self._steps = self._steps, 0
                 m.service()  # face commands are taken while paused too
                 if n:
-                    m.step(n)
+                    if not self._step_safely(n):
+                        break
                     with self._lock:
                         self._stepped += n
                 else:
@@ -89,11 +91,23 @@ class RealtimeRunner:
             self.lateness_s.append(time.perf_counter() - slot)
             if len(self.lateness_s) > 200_000:
                 del self.lateness_s[:100_000]
-            m.step(1)
+            if not self._step_safely(1):
+                break
             self.cycles += 1
             if time.perf_counter() > slot + period:
                 self.late_cycles += 1
         return self.summary()
+
+    def _step_safely(self, n: int) -> bool:
+        """Step; a failure inside the machine stops the runner with the reason kept in
+        `error` (and the event log) instead of killing the process with a traceback."""
+        try:
+            self.machine.step(n)
+        except Exception as exc:
+            self.error = f"{type(exc).__name__}: {exc}"
+            self.machine.events.add(self.machine.t, "stopped", f"machine stopped: {self.error}")
+            return False
+        return True
 
     def summary(self) -> dict:
         lat = sorted(self.lateness_s)
@@ -109,4 +123,5 @@ class RealtimeRunner:
             "lateness_ms_p50": p(0.5),
             "lateness_ms_p99": p(0.99),
             "lateness_ms_max": lat[-1] * 1e3 if lat else 0.0,
+            "error": self.error,
         }

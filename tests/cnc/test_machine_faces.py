@@ -400,3 +400,22 @@ def _read_until(s: socket.socket, marker: bytes) -> bytes:
             break
         out += chunk
     return out
+
+
+def test_realtime_runner_stops_with_the_reason_when_the_machine_fails():
+    from cnc.controller import Controller
+    from cnc.machine import RealtimeRunner
+
+    class Broken(Controller):
+        def cycle(self, inputs):
+            if inputs.t > 0.05:
+                raise RuntimeError("interpolator fell over")
+            return super().cycle(inputs)
+
+    m = Machine(config(), "mill1", ideal=True, controller_factory=Broken)
+    try:
+        summary = RealtimeRunner(m, speed=10.0).run(5.0)
+    finally:
+        m.close()
+    assert summary["error"] == "RuntimeError: interpolator fell over"
+    assert m.events.of_kind("stopped")[0].text.endswith("interpolator fell over")
