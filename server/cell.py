@@ -25,7 +25,7 @@ import time
 from pathlib import Path
 from typing import Any
 
-from server.host import Loop, MonitoringModel, make_starter
+from server.host import AlarmWatch, Loop, MonitoringModel, make_starter
 from server.supervisor import (
     InProcessMachine,
     MachineLink,
@@ -159,7 +159,9 @@ class Cell:
                 retry=RetryPolicy(max_attempts=3, base_s=0.5, cap_s=5.0),
             )
             self.worker.recover()
+            self.alarm_watch = AlarmWatch(self.sessions, self.monitor)
             self.loops = [
+                Loop("alarm-watch", self.alarm_watch.check, self.tick_s).start(),
                 Loop("scheduler", self.scheduler.tick, self.tick_s).start(),
                 Loop("transfer-worker", self.worker.run_once, self.tick_s).start(),
             ]
@@ -191,6 +193,10 @@ class Cell:
             m.start()
         for m in self.machines:
             m.wait_ready(timeout_s)
+        if fast:
+            from server.clock import FastClockGovernor
+
+            self.governor = FastClockGovernor(m.runner for m in self.machines).start()
 
     def _config_file(self) -> Path:
         if self.config_file is not None:
@@ -238,6 +244,8 @@ class Cell:
             timer.cancel()
         for loop in self.loops:
             loop.stop()
+        if getattr(self, "governor", None) is not None:
+            self.governor.stop()
         for rr in self.remote_requests:
             with contextlib.suppress(Exception):
                 rr.stop(2.0)

@@ -96,10 +96,11 @@ class MonitoringModel:
         s = self.status(name)
         if not s["connected"] or s["availability"] != "AVAILABLE":
             return OFFLINE
-        if s["execution"] in IN_CYCLE:
-            return BUSY
+        # an alarm first: a machine stopped by one may still say INTERRUPTED or FEED_HOLD
         if any(x["level"] == "FAULT" for x in s["alarms"]) or s["emergency_stop"] == "TRIGGERED":
             return ALARM
+        if s["execution"] in IN_CYCLE:
+            return BUSY
         if s["mode"] != "AUTOMATIC":
             return OFFLINE  # in the operator's hands (REF, JOG, MDI): not for the cell
         return IDLE
@@ -110,6 +111,48 @@ class MonitoringModel:
             count = self.status(name)["counters"]["part_count"]
             out.append(MachineView(name, link.kind, self.state(name), count or 0))
         return out
+
+
+class AlarmWatch:
+    """Writes each machine's alarms raised and cleared to the outbox (the event stream and
+    MQTT show them), as the monitoring model sees them change."""
+
+    def __init__(self, sessions, monitor: MonitoringModel) -> None:
+        self.sessions, self.monitor = sessions, monitor
+        self.known: dict[str, set[tuple]] = {}
+
+    def check(self) -> int:
+        from datetime import UTC, datetime
+
+        from dnc.db import transaction
+        from dnc.events import record
+
+        changes = []
+        for name in self.monitor.links:
+            alarms = self.monitor.status(name)["alarms"]
+            now = {(a["condition"], a["level"], a["code"], a["text"]) for a in alarms}
+            before = self.known.get(name, set())
+            changes += [(name, "machine.alarm", a) for a in sorted(now - before)]
+            changes += [(name, "machine.alarm_cleared", a) for a in sorted(before - now)]
+            self.known[name] = now
+        if changes:
+            at = datetime.now(UTC)
+            with transaction(self.sessions) as s:
+                for name, action, (cond, level, code, text) in changes:
+                    record(
+                        s,
+                        now=at,
+                        actor="monitor",
+                        action=action,
+                        entity="machine",
+                        entity_id=None,
+                        machine=name,
+                        condition=cond,
+                        level=level,
+                        code=code,
+                        text=text,
+                    )
+        return len(changes)
 
 
 def make_starter(

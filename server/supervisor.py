@@ -21,9 +21,7 @@ import time
 from dataclasses import dataclass, field
 from pathlib import Path
 
-FAST_SPEED = 1000.0
-"""Speed factor of the fast clock: the runner never waits, so machines run as fast as the CPU
-allows, each still stepped cycle by cycle in lockstep by its runner."""
+from server.clock import FAST_SPEED
 
 
 class MachineUnavailable(RuntimeError):

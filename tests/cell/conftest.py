@@ -123,3 +123,25 @@ def upload_released(api: Api, text: str = MILL_PROGRAM, number: int = 1001, kind
 
 def idem() -> dict:
     return {"Idempotency-Key": uuid.uuid4().hex}
+
+
+def sse_until(api: Api, predicate, timeout_s: float, role: str = "viewer") -> list[dict]:
+    """Read the event stream from the start until `predicate(event)` holds; the events read."""
+    import json
+
+    seen: list[dict] = []
+    deadline = time.monotonic() + timeout_s
+    with api(role).stream(
+        "GET", "/api/events", params={"after": 0}, timeout=httpx.Timeout(5, read=timeout_s)
+    ) as r:
+        assert r.status_code == 200, r.read()
+        for line in r.iter_lines():
+            if line.startswith("data:"):
+                seen.append(json.loads(line[5:]))
+                if predicate(seen[-1]):
+                    return seen
+            if time.monotonic() > deadline:
+                break
+    raise AssertionError(
+        f"event not seen within {timeout_s} s; saw {[e.get('action') for e in seen]}"
+    )

@@ -1,0 +1,148 @@
+"""Fault injection over HTTP: a drive fault in one mill stops its part, the part is rerouted
+to the other mill, and the alarm shows in the API, the event stream and MTConnect."""
+
+from __future__ import annotations
+
+import xml.etree.ElementTree as ET
+
+import pytest
+
+from tests.cell.conftest import KEYS, poll, sse_until, upload_released
+
+pytestmark = pytest.mark.timeout(120)
+
+LONG_PROGRAM = """%
+O1002 (E2E LONG PART)
+N10 G21 G90 G17
+N20 G0 X-40 Y-30 Z-10
+N30 G1 Z-50 F6000
+N40 G1 X-120 Y-80
+N50 G1 X-40 Y-30
+N60 G0 Z-20
+N70 M30
+%
+"""
+
+
+def status(api, name):
+    return api("viewer").get(f"/api/machines/{name}").json()["status"]
+
+
+def test_fault_in_one_mill_reroutes_its_part_and_the_alarm_is_visible_everywhere(make_cell):
+    _, api = make_cell(faults=True)
+    types = api("viewer").get("/api/fault-types").json()
+    assert {"overcurrent", "encoder_break", "air_pressure_loss"} <= {t["type"] for t in types}
+    rev = upload_released(api, LONG_PROGRAM, number=1002)
+    job = api("operator").post("/api/jobs", json={"revision_id": rev, "quantity": 2}).json()["id"]
+    poll(lambda: status(api, "mill1")["execution"] == "ACTIVE", 60, "mill1 cutting")
+    # hold the part where it is, so the fault lands mid-part however fast the clock runs
+    r = api("operator").post("/api/machines/mill1/commands", json={"command": "feed_hold"})
+    assert r.status_code == 202, r.text
+    r = api("admin").post(
+        "/api/machines/mill1/faults", json={"type": "overcurrent", "target": "drive:X"}
+    )
+    assert r.status_code == 201, r.text
+    fault = r.json()
+    assert fault["spec"] == "drive:X:overcurrent" and fault["state"] == "active"
+    assert [f["id"] for f in api("viewer").get("/api/machines/mill1/faults").json()] == [
+        fault["id"]
+    ]
+
+    alarmed = poll(lambda: (s := status(api, "mill1"))["alarms"] and s, 30, "mill1 alarm")
+    assert any(a["level"] == "FAULT" for a in alarmed["alarms"]), alarmed["alarms"]
+
+    def completed():
+        j = api("viewer").get(f"/api/jobs/{job}").json()
+        return j["status"] == "completed" and j
+
+    done = poll(completed, 90, "job completed on mill2", interval_s=0.2)
+    assert done["done"] == 2
+    by_state = {}
+    for a in done["allocations"]:
+        by_state.setdefault(a["status"], []).append(a["machine"])
+    assert by_state.get("interrupted") == ["mill1"], done["allocations"]
+    assert sorted(by_state["completed"]) == ["mill2", "mill2"], done["allocations"]
+    assert any(
+        d["action"] == "interrupt" and "mill1 raised an alarm" in d["reason"]
+        for d in done["decisions"]
+    )
+    assert status(api, "mill2")["counters"]["part_count"] == 2
+    assert status(api, "mill1")["counters"]["part_count"] == 0
+
+    events = sse_until(
+        api, lambda e: e.get("action") == "machine.alarm" and e.get("machine") == "mill1", 20
+    )
+    assert any(e.get("action") == "job.interrupt" for e in events) or sse_until(
+        api, lambda e: e.get("action") == "job.interrupt", 10
+    )
+
+    xml = api("viewer").get("/mtconnect/mill1/current").text
+    root = ET.fromstring(xml)
+    faults = [el for el in root.iter() if el.tag.endswith("Fault")]
+    assert faults, xml[:2000]
+
+    r = api("admin").delete(f"/api/machines/mill1/faults/{fault['id']}")
+    assert r.status_code == 200, r.text
+    assert r.json()["state"] == "cleared"
+    assert api("admin").delete("/api/machines/mill1/faults/999").status_code == 404
+
+
+def test_bad_fault_requests_are_problems(make_cell):
+    _, api = make_cell(faults=True)
+    r = api("admin").post("/api/machines/mill1/faults", json={"type": "nonsense", "target": "X"})
+    assert r.status_code == 422 and r.headers["content-type"].startswith("application/problem")
+    assert "nonsense" in r.json()["detail"]
+    r = api("admin").post("/api/machines/nope/faults", json={"type": "encoder", "target": "X"})
+    assert r.status_code == 404
+    r = api("admin").post("/api/machines/mill1/faults", json={"type": "encoder", "target": "Q!"})
+    assert r.status_code == 422
+
+
+def test_fault_endpoints_are_absent_when_disabled_and_the_auth_matrix_holds(make_cell):
+    _, api = make_cell(faults=False)
+    for method, path in (
+        ("get", "/api/fault-types"),
+        ("get", "/api/machines/mill1/faults"),
+        ("post", "/api/machines/mill1/faults"),
+        ("delete", "/api/machines/mill1/faults/1"),
+    ):
+        r = api("admin").request(method.upper(), path, json={"type": "encoder", "target": "X"})
+        assert r.status_code in (404, 405), (method, path, r.status_code)
+        assert r.status_code == 404 or method != "get"
+    # commands: operator and above; viewers 403; no key 401
+    cmd = {"command": "feed_hold"}
+    assert api("anonymous").post("/api/machines/mill1/commands", json=cmd).status_code == 401
+    assert api("viewer").post("/api/machines/mill1/commands", json=cmd).status_code == 403
+    for role in ("operator", "programmer", "admin"):
+        r = api(role).post("/api/machines/mill1/commands", json=cmd)
+        assert r.status_code == 202, (role, r.text)
+    assert api("viewer").get("/api/machines/mill1").status_code == 200
+    assert api("anonymous").get("/api/machines").status_code == 401
+    r = api("operator").post("/api/machines/nope/commands", json=cmd)
+    assert r.status_code == 404
+    r = api("operator").post("/api/machines/mill1/commands", json={"command": "select_program"})
+    assert r.status_code == 422
+    # E-stop has no face without the simulation face: a clear refusal, not a 5xx
+    r = api("operator").post("/api/machines/mill1/commands", json={"command": "estop"})
+    assert r.status_code == 409 and "simulation face" in r.json()["detail"]
+    assert set(KEYS) == {"viewer", "operator", "programmer", "admin"}
+
+
+def test_fault_auth_matrix(make_cell):
+    _, api = make_cell(faults=True)
+    body = {"type": "air_pressure_loss", "target": "plc", "duration": 0.5}
+    assert api("anonymous").post("/api/machines/lathe1/faults", json=body).status_code == 401
+    for role in ("viewer", "operator", "programmer"):
+        assert api(role).post("/api/machines/lathe1/faults", json=body).status_code == 403
+        assert api(role).get("/api/machines/lathe1/faults").status_code == 200
+        assert api(role).get("/api/fault-types").status_code == 200
+    r = api("admin").post("/api/machines/lathe1/faults", json=body)
+    assert r.status_code == 201, r.text
+    fid = r.json()["id"]
+    assert api("operator").delete(f"/api/machines/lathe1/faults/{fid}").status_code == 403
+    # the duration ends it without a DELETE
+    poll(
+        lambda: api("viewer").get("/api/machines/lathe1/faults").json()[0]["state"] == "cleared",
+        20,
+        "fault cleared after its duration",
+    )
