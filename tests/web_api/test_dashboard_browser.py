@@ -65,7 +65,7 @@ class MovingMachines:
     """A machines provider whose mill-1 moves on a 20 mm circle, one step per poll.
 
     Positions are a function of the poll count, not of the clock, so what the page is shown
-    depends only on how often it asked. mill-2 holds with a drive alarm; lathe-1 is idle.
+    depends only on how often it asked. mill-2 holds with a drive alarm; lathe-1 is disconnected.
     """
 
     def __init__(self) -> None:
@@ -88,58 +88,61 @@ class MovingMachines:
             program="O1001",
             line=k % 40 + 1,
             block="G2 X-280. Y-200. I-20. J0 F800",
-            path_feed_rate=800.0,
-            axes={
-                "X": {"actual": ax, "commanded": cx},
-                "Y": {"actual": ay, "commanded": cy},
-                "Z": {"actual": -50.0, "commanded": -50.0},
-            },
-            spindle_speed=6000.0,
-            feed_override=90.0,
-            can_bus_load={"mean": 41.5, "peak": 55.0},
-            plc_scan_time_ms=0.412,
+            feed_mm_min=800.0,
+            actual={"X": ax, "Y": ay, "Z": -50.0},
+            commanded={"X": cx, "Y": cy, "Z": -50.0},
+            overrides={"feed": 90.0, "rapid": 100.0, "spindle": 100.0},
+            spindle={"speed_rpm": 6000.0, "load_percent": 12.0, "mode": "SPINDLE"},
+            bus_load={"mean_percent": 41.5, "peak_percent": 55.0},
+            plc={"scan_time_ms": 0.412},
         )
         mill2 = status(
             execution="FEED_HOLD",
             alarms=[
                 {
-                    "number": 8612,
+                    "condition": "Yservo",
+                    "level": "FAULT",
+                    "code": "8612",
                     "text": "following error too large",
-                    "source": "DRIVE",
-                    "severity": "FAULT",
-                    "axis": "Y",
-                    "time": 1.0,
                 }
             ],
-            axes={a: {"actual": -10.0, "commanded": -10.0} for a in "XYZ"},
+            actual=dict.fromkeys("XYZ", -10.0),
+            commanded=dict.fromkeys("XYZ", -10.0),
         )
-        lathe = status(axes={"X": {"actual": 40.0, "commanded": 40.0}, "Z": {"actual": 2.0}})
+        # The lathe's SHDR stream is down: the agent has no values for it.
+        lathe = status(
+            connected=False,
+            availability="UNAVAILABLE",
+            execution="UNAVAILABLE",
+            actual={"X": None, "Z": None},
+            commanded={"X": None, "Z": None},
+            bus_load={"mean_percent": None, "peak_percent": None},
+            plc={"scan_time_ms": None},
+        )
         return {"mill-1": mill1, "mill-2": mill2, "lathe-1": lathe}
 
 
 def status(**over) -> dict:
-    """A live status as the cell serves it (cnc.status.MachineStatus as a dict)."""
+    """A live status as the cell serves it (server.host.MonitoringModel.status)."""
     base = {
+        "connected": True,
         "availability": "AVAILABLE",
-        "execution": "READY",
-        "controller_mode": "AUTOMATIC",
+        "emergency_stop": "ARMED",
+        "mode": "AUTOMATIC",
         "mode_detail": "AUTO",
+        "execution": "READY",
         "program": "",
         "line": 0,
         "block": "",
-        "path_feed_rate": 0.0,
-        "axes": {},
-        "spindle_speed": 0.0,
-        "spindle_load": 0.0,
-        "spindle_override": 100.0,
-        "feed_override": 100.0,
-        "rapid_override": 100.0,
+        "actual": {},
+        "commanded": {},
+        "feed_mm_min": 0.0,
+        "overrides": {"feed": 100.0, "rapid": 100.0, "spindle": 100.0},
+        "spindle": {"speed_rpm": 0.0, "load_percent": 0.0, "mode": "SPINDLE"},
         "alarms": [],
-        "part_count": 3,
-        "emergency_stop": "ARMED",
-        "can_bus_load": {"mean": 12.0, "peak": 20.0},
-        "plc_scan_time_ms": 0.2,
-        "adaptive_control": "OFF",
+        "counters": {"part_count": 3},
+        "bus_load": {"mean_percent": 12.0, "peak_percent": 20.0},
+        "plc": {"scan_time_ms": 0.2},
     }
     return {**base, **over}
 
@@ -243,7 +246,11 @@ def test_dashboard_shows_the_cell_and_drives_the_library(served, page, tmp_path)
     expect(mill1.locator(".m-axes tr")).to_have_count(3)
     expect(mill2).to_have_attribute("data-state", "alarm")
     expect(mill2.locator(".m-alarms li")).to_contain_text("DRIVE 8612 [Y]: following error")
-    expect(lathe).to_have_attribute("data-state", "idle")
+    expect(lathe).to_have_attribute("data-state", "offline")
+    expect(lathe.locator(".m-state")).to_have_text("OFFLINE")
+    expect(lathe.locator('.m-axes tr[data-axis="X"] td')).to_have_text(["—", "—", "—"])
+    expect(lathe.locator(".m-bus-text")).to_have_text("—")
+    expect(lathe.locator(".m-scan")).to_have_text("—")
     expect(lathe.locator(".m-plane")).to_have_text("plane Z–X")
 
     # The toolpath grows while the provider's circle turns: the page keeps polling.

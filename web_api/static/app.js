@@ -34,6 +34,7 @@ function el(tag, attrs = {}, ...children) {
 }
 
 function fmt(n, digits = 3) {
+  if (n === null || n === undefined || n === "") return "—"; // UNAVAILABLE, not zero
   const v = Number(n);
   return Number.isFinite(v) ? v.toFixed(digits) : "—";
 }
@@ -121,6 +122,50 @@ async function refreshWhoami() {
 
 // ------------------------------------------------------------------------------ machines
 
+// The cell serves each machine's status from its monitoring model (server/host.py:
+// MonitoringModel.status, read from the MTConnect agent); a machine's own snapshot
+// (cnc.status.MachineStatus as a dict) has other names. The tiles read one view of both.
+const CONDITION_SOURCE = { nc_cond: "NC", plc_cond: "PLC", bus_cond: "BUS", dnc_cond: "DNC" };
+
+export function statusView(s) {
+  if (!s) return null;
+  if (!("actual" in s || "overrides" in s || "connected" in s)) return s; // MachineStatus
+  const axes = {};
+  for (const ax of new Set([...Object.keys(s.actual || {}), ...Object.keys(s.commanded || {})])) {
+    axes[ax] = { actual: s.actual?.[ax], commanded: s.commanded?.[ax] };
+  }
+  return {
+    availability: s.connected === false ? "UNAVAILABLE" : s.availability,
+    emergency_stop: s.emergency_stop,
+    controller_mode: s.mode,
+    mode_detail: s.mode_detail,
+    execution: s.execution,
+    program: s.program,
+    line: s.line,
+    block: s.block,
+    path_feed_rate: s.feed_mm_min,
+    feed_override: s.overrides?.feed,
+    rapid_override: s.overrides?.rapid,
+    spindle_override: s.overrides?.spindle,
+    spindle_speed: s.spindle?.speed_rpm,
+    spindle_load: s.spindle?.load_percent,
+    axes,
+    alarms: (s.alarms || []).map((a) => {
+      const servo = /^(.*)servo$/.exec(a.condition || "");
+      return {
+        source: CONDITION_SOURCE[a.condition] || (servo ? "DRIVE" : a.condition || "NC"),
+        axis: servo && servo[1] ? servo[1] : null,
+        number: a.code,
+        text: a.text,
+        severity: a.level,
+      };
+    }),
+    part_count: s.counters?.part_count,
+    can_bus_load: s.bus_load ? { mean: s.bus_load.mean_percent, peak: s.bus_load.peak_percent } : null,
+    plc_scan_time_ms: s.plc?.scan_time_ms,
+  };
+}
+
 function machineState(s) {
   if (!s || s.availability === "UNAVAILABLE") return ["offline", "OFFLINE"];
   const faults = (s.alarms || []).filter((a) => (a.severity || "FAULT") === "FAULT");
@@ -137,7 +182,8 @@ function busLoad(s) {
   const b = s?.can_bus_load;
   if (b === undefined || b === null) return null;
   if (typeof b === "number") return { mean: b, peak: b };
-  return { mean: Number(b.mean ?? b.load ?? 0), peak: Number(b.peak ?? b.mean ?? 0) };
+  if (b.mean === null || b.mean === undefined) return null;
+  return { mean: Number(b.mean), peak: b.peak ?? null };
 }
 
 function ensureTile(m) {
@@ -174,14 +220,14 @@ function ensureTile(m) {
 function renderMachine(m) {
   const entry = ensureTile(m);
   const t = entry.el;
-  const s = m.status;
+  const s = statusView(m.status);
   const [cls, label] = machineState(s);
   t.dataset.state = cls;
   $(".m-state", t).textContent = label;
   $(".m-mode", t).textContent = s ? `${s.controller_mode ?? "—"} / ${s.mode_detail ?? "—"}` : "—";
   $(".m-exec", t).textContent = s?.execution ?? "—";
   $(".m-program", t).textContent = s?.program || "—";
-  $(".m-line", t).textContent = s ? String(s.line ?? "—") : "—";
+  $(".m-line", t).textContent = s && s.line ? String(s.line) : "—";
   $(".m-block", t).textContent = s?.block || "";
   $(".m-feed", t).textContent = s
     ? `${fmt(s.path_feed_rate, 0)} mm/min · ${fmt(s.feed_override, 0)} % (rapid ${fmt(s.rapid_override, 0)} %)`
@@ -189,8 +235,8 @@ function renderMachine(m) {
   $(".m-spindle", t).textContent = s
     ? `${fmt(s.spindle_speed, 0)} rpm · ${fmt(s.spindle_override, 0)} % · load ${fmt(s.spindle_load, 0)} %`
     : "—";
-  $(".m-parts", t).textContent = s ? String(s.part_count ?? 0) : "—";
-  $(".m-scan", t).textContent = s && s.plc_scan_time_ms !== undefined ? `${fmt(s.plc_scan_time_ms, 3)} ms` : "—";
+  $(".m-parts", t).textContent = s ? String(s.part_count ?? "—") : "—";
+  $(".m-scan", t).textContent = s && s.plc_scan_time_ms != null ? `${fmt(s.plc_scan_time_ms, 3)} ms` : "—";
 
   const axes = s?.axes || {};
   const names = Object.keys(axes);
@@ -204,7 +250,7 @@ function renderMachine(m) {
         el("th", { scope: "row", text: a }),
         el("td", { class: "num", text: fmt(x.actual) }),
         el("td", { class: "num", text: fmt(x.commanded) }),
-        el("td", { class: "num", text: fmt(Number(x.commanded) - Number(x.actual)) }),
+        el("td", { class: "num", text: x.commanded == null || x.actual == null ? "—" : fmt(x.commanded - x.actual) }),
       );
     }),
   );

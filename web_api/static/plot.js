@@ -19,6 +19,8 @@ export class ToolpathPlot {
     const a = axisStatus?.[h];
     const b = axisStatus?.[v];
     if (!a || !b) return;
+    const known = (v) => v !== null && v !== undefined && v !== "" && Number.isFinite(Number(v));
+    if (![a.actual, a.commanded, b.actual, b.commanded].every(known)) return; // UNAVAILABLE
     const add = (trace, p) => {
       const last = trace[trace.length - 1];
       if (last && last[0] === p[0] && last[1] === p[1]) return; // standing still
