@@ -147,6 +147,7 @@ def simulate_cmd(
     from cnc.errors import NcError
     from cnc.machine.faults import FaultSpecError, parse_fault_spec
     from cnc.program_memory import MemoryFull
+    from drives.bus.loadplan import BusOverloadError
 
     try:
         cfg = _config(machine, config)
@@ -172,6 +173,12 @@ def simulate_cmd(
     except CommandRefused as err:
         typer.echo(f"fmscell nc simulate: the machine refused: {err}", err=True)
         raise typer.Exit(1) from None
+    except BusOverloadError as err:
+        typer.echo(f"{config or machine}: {err}", err=True)
+        raise typer.Exit(2) from None
+    except Exception as err:  # never a traceback for the user: say what broke, exit 3
+        typer.echo(f"fmscell nc simulate: internal error: {type(err).__name__}: {err}", err=True)
+        raise typer.Exit(3) from None
     except ImportError as err:
         typer.echo(f"fmscell nc simulate: {err}", err=True)
         raise typer.Exit(3) from None

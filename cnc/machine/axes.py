@@ -122,32 +122,41 @@ class CanopenAxes:
                     homing_timeout_s=60.0,
                 )
             )
-        self.master_bus = self.hub.endpoint("master")
-        self.following_error_mapped = True
-        self.group = AxisGroup(
-            self.master_bus,
-            axes,
-            ipo_cycle_s=self.ipo_s,
-            master_node_id=127,
-            following_error_every=1,
-        )
         try:
-            self.group.plan()
-        except BusOverloadError:
-            # no room for the drives' following error (TPDO2) at this SYNC rate: the NC
-            # computes it from commanded - actual; a plan that still overloads is refused
-            self.group.close()
-            self.following_error_mapped = False
+            self.master_bus = self.hub.endpoint("master")
+            self.following_error_mapped = True
             self.group = AxisGroup(
                 self.master_bus,
                 axes,
                 ipo_cycle_s=self.ipo_s,
                 master_node_id=127,
-                following_error_every=0,
+                following_error_every=1,
             )
-        self.injector = FaultInjector(self.drives)
-        self.group.boot()
-        self.group.configure()
+            try:
+                self.group.plan()
+            except BusOverloadError:
+                # no room for the drives' following error (TPDO2) at this SYNC rate: the NC
+                # computes it from commanded - actual; a plan that still overloads is refused
+                self.group.close()
+                self.following_error_mapped = False
+                self.group = AxisGroup(
+                    self.master_bus,
+                    axes,
+                    ipo_cycle_s=self.ipo_s,
+                    master_node_id=127,
+                    following_error_every=0,
+                )
+            self.injector = FaultInjector(self.drives)
+            self.group.boot()
+            self.group.configure()
+        except Exception:
+            # a refused configuration (bus overload, a drive that does not boot) leaves
+            # nothing attached behind it
+            for vd in self.drives.values():
+                vd.close()
+            for endpoint in list(self.hub.endpoints):
+                endpoint.shutdown()
+            raise
         self.homed = dict.fromkeys(self.names, False)
         self.homing = False
         self.enabled = False

@@ -116,3 +116,11 @@ def test_bad_config_and_missing_file_are_clear_errors(tmp_path):
     assert code == 2 and "ipo_cycle_ms" in err
     code, _, err = run(str(tmp_path / "nope.nc"), "--ideal")
     assert code == 2 and "nope.nc" in err and "cannot read" in err
+
+
+def test_a_bus_that_cannot_carry_the_axes_is_refused_with_the_load_plan(tmp_path):
+    cfg = tmp_path / "fast.yaml"
+    cfg.write_text("base: mill3\nipo_cycle_ms: 0.5\n")
+    code, out, err = run(str(PROGRAMS / "pocket_mill.nc"), "--config", str(cfg))
+    assert code == 2 and out == ""
+    assert "bus configuration refused" in err and "exceeds 100 %" in err
