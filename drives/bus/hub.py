@@ -478,25 +478,28 @@ class CanHub:
         return end
 
     def _transmit(self, sender: SimBus | None, msg: can.Message, queued_at: float) -> None:
-        bits = frame_bits(
-            msg.arbitration_id,
-            bytes(msg.data),
-            msg.is_extended_id,
-            msg.is_remote_frame,
-            msg.dlc if msg.is_remote_frame else None,
-        )
-        is_sync = (
-            msg.arbitration_id == self.sync_id
-            and not msg.is_extended_id
-            and not msg.is_remote_frame
-        )
-        end = self._occupy(queued_at, bits, is_sync)
         ident = msg.arbitration_id
+        extended = msg.is_extended_id
+        if msg.is_remote_frame:
+            bits = frame_bits(ident, b"", extended, True, msg.dlc)
+            is_sync = False
+        else:
+            bits = frame_bits(ident, bytes(msg.data), extended)
+            is_sync = ident == self.sync_id and not extended
+        # `_occupy`, inlined: this runs for every frame
+        start = self._bus_free_at
+        if queued_at > start:
+            start = queued_at
+        if self.mode == "realtime":
+            start = max(start, time.time())
+        end = start + bits / self.bitrate
+        self._bus_free_at = end
+        self.load.account(start, bits, is_sync)
         kind = "pdo" if 0x180 <= ident < 0x580 else "sdo" if 0x580 <= ident < 0x680 else "other"
-        if end - queued_at > self.worst_latency_s[kind]:
-            self.worst_latency_s[kind] = end - queued_at
-        wire = _wire_message(msg, end, self.channel)
-        self._fan_out(sender, wire)
+        latency = end - queued_at
+        if latency > self.worst_latency_s[kind]:
+            self.worst_latency_s[kind] = latency
+        self._fan_out(sender, _wire_message(msg, end, self.channel))
 
     def _transmit_error(self, sender: SimBus, msg: can.Message) -> None:
         # The corrupted frame occupies the wire until the error flag, then the error frame.
@@ -533,7 +536,12 @@ class CanHub:
             accept = bus.accept_ids
             if accept is not None and ident not in accept:
                 continue
-            bus._receive(wire)
+            listeners = bus._listeners
+            if listeners:  # `bus._receive` inlined for the synchronous listeners
+                for listener in listeners:
+                    listener(wire)
+            else:
+                bus._receive(wire)
 
     # ----------------------------------------------------------------- realtime
     def start(self) -> None:

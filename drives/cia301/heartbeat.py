@@ -30,7 +30,7 @@ class HeartbeatProducer:
 
     @property
     def period_s(self) -> float:
-        return int(self.od.get(0x1017, 0)) / 1000.0 if (0x1017, 0) in self.od else 0.0
+        return int(self.od.stored(0x1017, 0, 0)) / 1000.0
 
     def _write_period(self, entry: Entry, value: int) -> None:
         self.od.set(0x1017, 0, value)

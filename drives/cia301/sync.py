@@ -24,7 +24,7 @@ class SyncConsumer:
     @property
     def overflow(self) -> int:
         """0x1019: 0 = SYNC without counter byte, else the counter runs 1..overflow."""
-        return int(self.od.get(0x1019, 0)) if (0x1019, 0) in self.od else 0
+        return int(self.od.stored(0x1019, 0, 0))
 
     def _write_overflow(self, entry: Entry, value: int) -> None:
         if value == 1 or value > 240:
@@ -40,7 +40,7 @@ class SyncConsumer:
 
     @property
     def period_s(self) -> float:
-        return int(self.od.get(0x1006, 0)) * 1e-6 if (0x1006, 0) in self.od else 0.0
+        return int(self.od.stored(0x1006, 0, 0)) * 1e-6
 
     def _write_cob_id(self, entry: Entry, value: int) -> None:
         if value & 0x40000000:

@@ -513,8 +513,9 @@ class Drive402:
             return self._mode
         if index == 0x603F:
             return self._fault_code
-        if index == 0x6064:
-            return _i32(self._to_user(p.theta_meas))
+        if index == 0x6064:  # every TPDO: `_i32(self._to_user(p.theta_meas))` inlined
+            v = round((p.counts * p._rad_per_count - self._zero) / self._rpu)
+            return v if -0x80000000 <= v <= 0x7FFFFFFF else _i32(v)
         if index == 0x6063:
             return _i32(p.counts)
         if index == 0x6062:
