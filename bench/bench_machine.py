@@ -67,6 +67,9 @@ def lockstep(ipo_ms: float, seconds: float, ideal: bool = False, substep=None) -
             "wall_s": round(wall, 3),
             "cpu_s": round(cpu, 3),
             "rtf": round(seconds / wall, 2),
+            # machine seconds per CPU second of this process: the figure that does not
+            # depend on what else the shared box runs at the same time
+            "rtf_cpu": round(seconds / cpu, 2) if cpu > 0 else None,
             "us_per_cycle": round(wall / (seconds / (ipo_ms / 1000)) * 1e6, 1),
             "execution": m.status.execution,
             "alarms": [a.number for a in m.alarms],
@@ -81,9 +84,10 @@ def _cell_worker(args):
     try:
         barrier.wait()
         end = m.t + seconds
-        t0 = time.perf_counter()
+        t0, c0 = time.perf_counter(), time.process_time()
         m.run_until(lambda x: x.t >= end or bool(x.alarms), seconds + 1.0)
-        return t0, time.perf_counter(), m.status.execution, [a.number for a in m.alarms]
+        cpu = time.process_time() - c0
+        return t0, time.perf_counter(), m.status.execution, cpu
     finally:
         m.close()
 
@@ -122,6 +126,8 @@ def cell(n: int, ipo_ms: float, seconds: float, ideal: bool = False) -> dict:
         "machine_s": seconds,
         "wall_s": round(slowest, 3),
         "rtf": round(seconds / slowest, 3),
+        "cpu_s_total": round(sum(r[3] for r in results), 3),
+        "rtf_if_2_cores_were_free": round(2 * seconds * n / sum(r[3] for r in results) / n, 3),
         "executions": sorted({r[2] for r in results}),
     }
 
