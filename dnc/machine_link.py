@@ -29,7 +29,7 @@ def client_for(library: Library, machine: str, **overrides) -> DncClient:
         parity=bool(profile.get("parity", False)),
         timeout_s=float(profile.get("timeout_s", 10.0)),
         xoff_timeout_s=float(profile.get("xoff_timeout_s", 30.0)),
-        chunk=int(profile.get("chunk", 256)),
+        chunk=int(profile.get("chunk", 1024)),
     )
 
 

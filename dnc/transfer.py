@@ -28,6 +28,7 @@ from cnc.faces.tape import (
     strip_parity,
 )
 
+_FLOW_BYTES = bytes([XON, XOFF, PUNCH_ON, PUNCH_OFF])
 LINE_ALARMS = frozenset({2001, 2004, 2007, 2010})  # parity, cut off, time-out, overrun
 _REQUEST = re.compile(r"/REQ\s*(\d{1,5})", re.I)
 
@@ -85,7 +86,7 @@ class DncClient:
         parity: bool = False,
         timeout_s: float = 10.0,
         xoff_timeout_s: float = 30.0,
-        chunk: int = 256,
+        chunk: int = 1024,
     ) -> None:
         self.host, self.port, self.parity = host, port, parity
         self.timeout_s, self.xoff_timeout_s, self.chunk = timeout_s, xoff_timeout_s, chunk
@@ -162,6 +163,13 @@ class DncClient:
                 sent=self.sent,
             )
         plain = strip_parity(data) if self.parity else data
+        if len(plain.translate(None, _FLOW_BYTES)) == len(plain):
+            # No flow or punch control in this chunk: it all goes where the last one went.
+            if self._punching:
+                self._tape += plain
+            else:
+                self._inbox += plain
+            return
         for b in plain:
             if b == XOFF:
                 self._stopped = True

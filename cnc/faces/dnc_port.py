@@ -79,10 +79,11 @@ _COMMAND_MAX = 80
 LINE_BUFFER_BYTES = 4096
 # After XOFF, bytes still arriving within this time were on the wire before the sender could
 # see the XOFF; bytes after it mean the sender ignores flow control.
-XOFF_GRACE_S = 0.1
-# A sender that honours XOFF has at most its socket buffers in flight when it sees XOFF (the
-# host client measures about 1.6 KB); ten times that means it does not honour XOFF.
-IN_FLIGHT_MAX = 16 * 1024
+XOFF_GRACE_S = 0.5
+# A sender that honours XOFF has at most the socket buffers in flight when it sees XOFF: about
+# 1.6 KB measured on an idle machine, up to ~24 KB (both kernels' buffers and the reader's) on
+# a loaded one. More than all of that together means it does not honour XOFF.
+IN_FLIGHT_MAX = 64 * 1024
 
 Policy = Callable[[str, int | None], str | None]
 """(operation, program number) -> None to allow, or the reason the machine refuses it."""
@@ -266,7 +267,9 @@ class DncPort:
         while True:
             for ev in decoder.feed(data):
                 if ev.kind == "line":
-                    await on_block(ev.text)
+                    pending = on_block(ev.text)  # a coroutine only when it may have to wait
+                    if pending is not None:
+                        await pending
                 elif ev.kind == "parity_error":
                     raise DncError(
                         ALARM_PARITY, f"parity error at byte {ev.offset}; program rejected"
@@ -295,7 +298,7 @@ class DncPort:
         lines: list[str] = []
         size = 4  # the two % lines
 
-        async def keep(block: str) -> None:
+        def keep(block: str) -> None:
             nonlocal size
             size += len(block) + 1
             if size > self.memory.capacity:
@@ -508,30 +511,44 @@ class _Conn:
             self.writer.write(payload)
             await self.writer.drain()
             return
-        stopped = False
-        for i in range(0, len(payload), 256):
-            stopped = await self._peer_flow(stopped, block=False)
-            while stopped:
-                stopped = await self._peer_flow(stopped, block=True)
-            self.writer.write(payload[i : i + 256])
-            await self.writer.drain()
-
-    async def _peer_flow(self, stopped: bool, *, block: bool) -> bool:
-        """Consume XON/XOFF the peer sent; returns whether sending must pause."""
+        may_send = asyncio.Event()
+        may_send.set()
+        watcher = asyncio.ensure_future(self._watch_flow(may_send))
         try:
-            data = await asyncio.wait_for(self.reader.read(64), 5.0 if block else 0)
-        except TimeoutError:
-            if block:
-                raise DncError(ALARM_TIMEOUT, "the receiver stayed in XOFF for 5 s") from None
-            return stopped
-        if not data:
-            raise ConnectionError("peer closed during punch")
-        for b in strip_parity(data) if self.parity else data:
-            if b == XOFF:
-                stopped = True
-            elif b == XON:
-                stopped = False
-        return stopped
+            for i in range(0, len(payload), 1024):
+                try:
+                    await asyncio.wait_for(may_send.wait(), 5.0)
+                except TimeoutError:
+                    raise DncError(ALARM_TIMEOUT, "the receiver stayed in XOFF for 5 s") from None
+                if watcher.done() and watcher.exception() is None and watcher.result():
+                    raise ConnectionError("peer closed during punch")
+                self.writer.write(payload[i : i + 1024])
+                await self.writer.drain()
+        finally:
+            watcher.cancel()
+            with contextlib.suppress(asyncio.CancelledError):
+                await watcher
+
+    async def _watch_flow(self, may_send: asyncio.Event) -> bool:
+        """While punching, follow the peer's XON/XOFF; anything else it sends is kept for
+        the next command. Returns True when the peer closed."""
+        while True:
+            data = await self.reader.read(64)
+            if not data:
+                may_send.set()
+                return True
+            rest = bytearray()
+            for b in strip_parity(data) if self.parity else data:
+                if b == XOFF:
+                    may_send.clear()
+                elif b == XON:
+                    may_send.set()
+                else:
+                    rest.append(b)
+            if rest:
+                # Kept in arrival order (parity stripped bytes are re-read as plain text
+                # only when parity is off; with parity the raw bytes are kept).
+                self._pending += bytes(rest) if not self.parity else add_parity(bytes(rest))
 
 
 def _number(arg: str) -> int:

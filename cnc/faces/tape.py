@@ -23,6 +23,10 @@ PERCENT = 0x25
 CONTROL = frozenset({DC1, DC2, DC3, DC4})
 
 _ONES = bytes(bin(i).count("1") for i in range(256))
+_ODD_MARK = bytes(_ONES[i] % 2 for i in range(256))  # 1 where a byte has odd parity
+_STRIP = bytes(i & 0x7F for i in range(256))
+# Bytes that need the byte-by-byte path inside a block: controls, NUL, CR and `%`.
+_SPECIAL = bytes([0x11, 0x12, 0x13, 0x14, 0x00, 0x0D, 0x25])
 _WITH_PARITY = bytes(((i | 0x80) if _ONES[i] % 2 else i) & 0xFF for i in range(128)) + bytes(128)
 
 
@@ -103,6 +107,50 @@ class TapeDecoder:
         return self._state == _FAILED
 
     def feed(self, data: bytes) -> list[TapeEvent]:
+        if not self.parity:
+            return self._feed_plain(data)
+        bad = data.translate(_ODD_MARK).find(1)
+        if bad < 0:
+            return self._feed_plain(data.translate(_STRIP))
+        events = self._feed_plain(data[:bad].translate(_STRIP))
+        if self._state < _DONE:
+            self._state = _FAILED
+            events.append(TapeEvent("parity_error", offset=self.offset))
+        self.offset += len(data) - bad
+        return events
+
+    def _feed_plain(self, data: bytes) -> list[TapeEvent]:
+        """Parity already checked and stripped. Whole blocks without special characters go
+        through at C speed; anything else takes the byte-by-byte path."""
+        events: list[TapeEvent] = []
+        i, n = 0, len(data)
+        while i < n:
+            if self._state >= _DONE:
+                self.offset += n - i
+                break
+            j = data.find(b"\n", i)
+            stop = j + 1 if j >= 0 else n
+            if self._state == _BODY:
+                seg = data[i : j if j >= 0 else n]
+                if (
+                    len(seg.translate(None, _SPECIAL)) == len(seg)
+                    and len(self._block) + len(seg) <= self.max_block
+                ):
+                    self._block += seg
+                    self.offset += len(seg)
+                    if j >= 0:
+                        events.append(
+                            TapeEvent("line", self._block.decode("ascii", "replace"), self.offset)
+                        )
+                        self._block.clear()
+                        self.offset += 1
+                    i = stop
+                    continue
+            events += self._feed_bytes(data[i:stop])
+            i = stop
+        return events
+
+    def _feed_bytes(self, data: bytes) -> list[TapeEvent]:
         events: list[TapeEvent] = []
         for b in data:
             pos = self.offset
@@ -110,12 +158,6 @@ class TapeDecoder:
             state = self._state
             if state >= _DONE:
                 continue
-            if self.parity:
-                if _ONES[b] % 2:
-                    self._state = _FAILED
-                    events.append(TapeEvent("parity_error", offset=pos))
-                    continue
-                b &= 0x7F
             if b in CONTROL:
                 events.append(TapeEvent("control", offset=pos, code=b))
             elif b in (NUL, CR):

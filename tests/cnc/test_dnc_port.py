@@ -180,7 +180,7 @@ def test_drip_feed_of_a_program_larger_than_memory_with_xon_xoff(machine):
 
 
 def test_sender_ignoring_xoff_gets_an_overrun_alarm(machine):
-    flood = b"DRIP\n%\n" + b"G1 X1 Y1 F100\n" * 10000  # 140 KB, and no NC takes anything
+    flood = b"DRIP\n%\n" + b"G1 X1 Y1 F100\n" * 20000  # 280 KB, and no NC takes anything
     with machine.raw() as s:
         s.settimeout(5)
         with contextlib.suppress(OSError):  # the machine closing on us is the point
