@@ -103,6 +103,9 @@ def create_app(
         from web_api.mtconnect import mtconnect_router
 
         app.include_router(mtconnect_router(mtconnect_agent), prefix="/mtconnect")
+    from web_api.dashboard import dashboard_router
+
+    app.include_router(dashboard_router())
     app.openapi = lambda: _openapi(app)
     return app
 

@@ -98,3 +98,11 @@ def test_the_dashboard_stays_out_of_the_api_document(sessions):
     app = with_dashboard(api.client.app)
     paths = TestClient(app).get("/openapi.json").json()["paths"]
     assert "/" not in paths and not any(p.startswith("/static") for p in paths)
+
+
+@SQLITE_ONLY
+def test_the_api_app_serves_the_dashboard(sessions):
+    api = make_api(sessions)
+    r = api.client.get("/")
+    assert r.status_code == 200 and "<title>fmscell" in r.text
+    assert api.client.get("/static/app.js").status_code == 200
