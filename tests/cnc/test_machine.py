@@ -253,3 +253,15 @@ def test_seed_chapter_10_cam_program_with_spindle_and_coolant_on_canopen_drives(
     for axis, want in {"X": -280.1, "Y": -150.0, "Z": -300.0}.items():
         assert fb.actual[axis] == pytest.approx(want, abs=0.005)
     assert machine.max_contour_error < 0.05
+
+
+def test_lathe_composes_two_canopen_axes_and_homes_them():
+    m = Machine(builtin_machine("lathe2"), "lathe2")
+    try:
+        assert m.axis_names == ("X", "Z")
+        assert sorted(m.axes.drives) == ["X", "Z"]
+        home(m)
+        assert all(-0.5 < v <= 0.0 for v in m.axes.feedback().actual.values())
+        assert m.axes.hub.channel == "lathe2"
+    finally:
+        m.close()
