@@ -61,6 +61,17 @@ pytestmark = [
 ]
 
 
+# Evaluated through the DevTools protocol (the page's CSP forbids eval from page scripts,
+# not this): visible form controls without a label, aria-label or aria-labelledby.
+UNNAMED_CONTROLS = """
+() => [...document.querySelectorAll("input, select, textarea, button")]
+  .filter((e) => e.offsetParent !== null && e.type !== "hidden")
+  .filter((e) => !(e.labels && e.labels.length) && !e.getAttribute("aria-label")
+    && !e.getAttribute("aria-labelledby") && !(e.tagName === "BUTTON" && e.textContent.trim()))
+  .map((e) => e.outerHTML.slice(0, 120))
+"""
+
+
 class MovingMachines:
     """A machines provider whose mill-1 moves on a 20 mm circle, one step per poll.
 
@@ -307,6 +318,20 @@ def test_dashboard_shows_the_cell_and_drives_the_library(served, page, tmp_path)
     assert [(d["revision_id"], d["machine"], d["mode"]) for d in dispatches] == [
         (rev, "mill-2", "memory")
     ]
+
+    # A job for the released revision through the job form.
+    page.get_by_label("Revision id").fill(str(rev))
+    page.get_by_label("Quantity").fill("4")
+    page.get_by_role("button", name="Create job").click()
+    job = page.locator("#job-rows tr[data-job]").first
+    expect(job).to_contain_text("0 / 4")
+    expect(job).to_have_attribute("data-status", "queued")
+    jobs = api.get("/api/jobs").json()["items"]
+    assert [(j["revision_id"], j["quantity"]) for j in jobs] == [(rev, 4)]
+
+    # Every control on the page has an accessible name.
+    unnamed = page.evaluate(UNNAMED_CONTROLS)
+    assert unnamed == [], f"controls without a label: {unnamed}"
 
     # The event stream reached the page (registrations, uploads, release, dispatch).
     expect(page.locator("#event-log li").filter(has_text="revision.release")).not_to_have_count(0)
