@@ -283,7 +283,11 @@ class Drive402:
         ilim = self._ilim
         window = self._fe_window
         rpc = p._rad_per_count
-        step, switch_inputs = p.step, p.switch_inputs
+        step = p.step
+        # `p.switch_inputs()` inlined (same comparisons on the table position)
+        sw = p.params.switches
+        neg_limit, pos_limit, home = sw.negative_limit, sw.positive_limit, sw.home_switch
+        home_below = sw.home_switch_active_below
         seg_t, seg_T, seg_to, seg_v = self._seg_t, self._seg_T, self._seg_to, self._seg_v
         pos, vel = d.pos, d.vel
         self._halt_stopped = False
@@ -309,7 +313,14 @@ class Drive402:
                         fault = 0x8611
                 else:
                     self._fe_timer = 0.0
-                new_inputs = switch_inputs()
+                x = p.table_x
+                new_inputs = 0
+                if neg_limit is not None and x <= neg_limit:
+                    new_inputs = 1
+                if pos_limit is not None and x >= pos_limit:
+                    new_inputs |= 2
+                if home is not None and (x <= home if home_below else x >= home):
+                    new_inputs |= 4
                 if fault or new_inputs != inputs:
                     d.pos, d.vel = pos, vel
                     self._seg_t = seg_t
