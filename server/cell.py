@@ -19,7 +19,6 @@ from __future__ import annotations
 import contextlib
 import logging
 import os
-import tempfile
 import threading
 import time
 from pathlib import Path
@@ -96,6 +95,7 @@ class Cell:
         config_file: str | Path | None = None,
         tick_s: float | None = None,
         rule: str = "fifo",
+        state_dir: str | Path | None = None,
     ) -> None:
         if clock not in CLOCKS:
             raise ValueError(f"clock {clock!r}: one of {', '.join(CLOCKS)}")
@@ -106,6 +106,7 @@ class Cell:
         self.faults_enabled = faults
         self.ideal_axes = ideal_axes
         self.config_file = Path(config_file) if config_file else None
+        self.state_dir = Path(state_dir) if state_dir else Path.cwd()
         self.tick_s = tick_s if tick_s is not None else (0.05 if clock == "fast" else 0.5)
         self.rule = rule
         self.links: dict[str, MachineLink] = {}
@@ -179,7 +180,14 @@ class Cell:
             config_file = self._config_file()
             for name, mcfg in self.config.machines.items():
                 proc = SubprocessMachine(
-                    name, config_file, fast=fast, simulation=self.faults_enabled, config=mcfg
+                    name,
+                    config_file,
+                    fast=fast,
+                    simulation=self.faults_enabled,
+                    config=mcfg,
+                    state_dir=self.state_dir,
+                    ideal=self.ideal_axes,
+                    timeout_s=timeout_s,
                 )
                 self.machines.append(proc)
                 self.links[name] = proc.link
@@ -203,11 +211,13 @@ class Cell:
             return self.config_file
         import yaml
 
-        machines = {n: {"base": _base_of(m)} for n, m in self.config.machines.items()}
-        fd, path = tempfile.mkstemp(prefix="fmscell-cell-", suffix=".yaml")
-        with os.fdopen(fd, "w") as f:
-            yaml.safe_dump({"machines": machines}, f)
-        return Path(path)
+        machines = {
+            n: {"base": _base_of(m), "ports": m.ports.model_dump()}
+            for n, m in self.config.machines.items()
+        }
+        path = self.state_dir / "fmscell-cell.yaml"
+        path.write_text(yaml.safe_dump({"machines": machines}))
+        return path
 
     def _wait_connected(self, timeout_s: float) -> None:
         end = time.monotonic() + timeout_s
@@ -464,12 +474,22 @@ def run_cell(
         ideal_axes=ideal_axes,
         config_file=config,
     )
+    # SIGINT/SIGTERM: uvicorn stops serving, then the cell stops its loops after their
+    # current transaction and its machines. uvicorn re-raises the signal once it has shut
+    # down; these handlers take it so the process ends through `cell.stop()`, not mid-write.
+    import signal
+
+    stop_requested: list[int] = []
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        signal.signal(sig, lambda signum, _frame: stop_requested.append(signum))
     try:
         cell.start()
     except Exception as err:  # noqa: BLE001 - one clear line, not a traceback
         echo(f"cannot start the cell: {err}")
         return 1
     try:
+        if stop_requested:
+            return 0
         server = uvicorn.Server(
             uvicorn.Config(cell.app(settings), host=bind, port=port, log_level="warning")
         )

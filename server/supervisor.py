@@ -101,33 +101,96 @@ class MachineLink:
         )
 
     # ------------------------------------------------------------------ no face yet
-    def operator(self, command: str, timeout_s: float = 10.0, **args) -> None:
-        """An operator command at the machine's own panel (select program, home).
+    def operator(self, command: str, timeout_s: float = 30.0, **args) -> None:
+        """An operator command at the machine's own panel (select program, home, mode).
 
-        The machine has no face for these yet, so only an in-process machine can take them:
-        the call is queued onto the machine's thread and its refusal comes back as an error.
-        """
-        machine = self.local
-        if machine is None:
+        The machine's standard faces carry no program select or homing, so the cell gives
+        each machine a small operator face (`OperatorFace`, loopback, one line per command)
+        that queues the command onto the machine's thread and answers with its outcome."""
+        port = self.ports.get("operator")
+        if not port:
+            raise MachineUnavailable(f"{self.name}: no operator face for {command}")
+        words = [command.upper(), *(str(v) for v in args.values())]
+        try:
+            with socket.create_connection((self.host, port), timeout=timeout_s) as sock:
+                sock.sendall(" ".join(words).encode("ascii") + b"\n")
+                answer = sock.makefile("rb").readline().decode("ascii", "replace").strip()
+        except OSError as exc:
+            raise MachineUnavailable(f"{self.name}: operator face: {exc}") from None
+        if not answer.startswith("OK"):
             raise MachineUnavailable(
-                f"{self.name}: {command} has no face on a machine in another process"
+                f"{self.name}: {answer.removeprefix('ERR').strip() or 'no answer'}"
             )
+
+
+class OperatorFace:
+    """The machine operator's panel keys the standard faces lack, on a loopback TCP port:
+
+        SELECT_PROGRAM <n> | HOME | MODE <AUTO|MDI|JOG|REF> | PING   ->  OK ... | ERR <reason>
+
+    Each command runs on the machine's thread (`call_soon`) and is answered once taken."""
+
+    def __init__(self, machine, host: str = "127.0.0.1", port: int = 0) -> None:
+        import socketserver
+
+        face = self
+
+        class Handler(socketserver.StreamRequestHandler):
+            def handle(self) -> None:
+                line = self.rfile.readline(256).decode("ascii", "replace").strip()
+                self.wfile.write((face.answer(line) + "\n").encode("ascii", "replace"))
+
+        socketserver.ThreadingTCPServer.allow_reuse_address = True
+        self.machine = machine
+        self.server = socketserver.ThreadingTCPServer((host, port), Handler)
+        self.server.daemon_threads = True
+        self.port = self.server.server_address[1]
+        self._thread = threading.Thread(
+            target=self.server.serve_forever, name=f"operator-{machine.name}", daemon=True
+        )
+
+    def start(self) -> OperatorFace:
+        self._thread.start()
+        return self
+
+    def answer(self, line: str) -> str:
+        words = line.split()
+        if not words:
+            return "ERR empty command"
+        word, rest = words[0].upper(), words[1:]
+        try:
+            if word == "PING":
+                return f"OK {self.machine.name}"
+            if word == "SELECT_PROGRAM" and len(rest) == 1 and rest[0].isdigit():
+                args = {"number": int(rest[0])}
+                name = "select_program"
+            elif word == "HOME" and not rest:
+                name, args = "home", {}
+            elif word == "MODE" and len(rest) == 1:
+                name, args = "mode", {"mode": rest[0].upper()}
+            else:
+                return f"ERR unknown or malformed command {line[:60]!r}"
+        except ValueError as exc:
+            return f"ERR {exc}"
         done = threading.Event()
         outcome: list[BaseException | None] = [None]
 
         def run() -> None:
             try:
-                machine.command(command, **args)
-            except BaseException as exc:  # noqa: BLE001 - handed back to the caller
+                self.machine.command(name, **args)
+            except BaseException as exc:  # noqa: BLE001 - answered to the client
                 outcome[0] = exc
             finally:
                 done.set()
 
-        machine.call_soon(run)
-        if not done.wait(timeout_s):
-            raise MachineUnavailable(f"{self.name}: {command} not taken within {timeout_s} s")
-        if outcome[0] is not None:
-            raise MachineUnavailable(f"{self.name}: {outcome[0]}")
+        self.machine.call_soon(run)
+        if not done.wait(20):
+            return f"ERR {name} not taken within 20 s"
+        return f"ERR {outcome[0]}" if outcome[0] is not None else f"OK {name}"
+
+    def stop(self) -> None:
+        self.server.shutdown()
+        self.server.server_close()
 
 
 def power_on(machine, *, home: bool = True, max_s: float = 60.0) -> None:
@@ -165,11 +228,12 @@ class InProcessMachine:
         self.ready = threading.Event()
         self.error: BaseException | None = None
         faces = self.machine.start_faces(simulation=simulation)
+        self.operator_face = OperatorFace(self.machine, config.ports.host).start()
         self.link = MachineLink(
             name,
             config.kind,
             config.ports.host,
-            faces.ports(),
+            {**faces.ports(), "operator": self.operator_face.port},
             tuple(config.axes),
             config.program_memory_bytes,
             local=self.machine,
@@ -199,45 +263,57 @@ class InProcessMachine:
     def stop(self) -> None:
         self.runner.stop()
         self.thread.join(10)
+        self.operator_face.stop()
         self.machine.close()
 
 
 class SubprocessMachine:
-    """One machine as `fmscell machine --config FILE --name NAME` in its own process.
+    """One machine in its own process (`python -m server.supervisor --config FILE --name
+    NAME`), or one such process that survived its host and is adopted again.
 
-    The process prints its bound ports as one JSON line; fixed ports in the configuration
-    let a restarted host find machines that kept running."""
+    The process writes its pid and bound ports to `state_dir/<NAME>.machine.json`; a host
+    that starts (or restarts after a crash) first pings the operator face named there and
+    adopts a machine that answers, so machines keep running across host restarts."""
 
     def __init__(
-        self, name: str, config_file: Path, *, fast: bool, simulation: bool, config
+        self,
+        name: str,
+        config_file: Path,
+        *,
+        fast: bool,
+        simulation: bool,
+        config,
+        state_dir: Path,
+        ideal: bool = False,
+        timeout_s: float = 60.0,
     ) -> None:
         self.name = name
-        cmd = [
-            sys.executable,
-            "-m",
-            "server.cli",
-            "machine",
-            "--config",
-            str(config_file),
-            "--name",
-            name,
-            "--speed",
-            "100" if fast else "1",
-        ]
-        if simulation:
-            cmd.append("--simulation")
-        self.proc = subprocess.Popen(
-            cmd,
-            stdout=subprocess.PIPE,
-            stderr=subprocess.PIPE,
-            text=True,
-            env={**os.environ, "PYTHONUNBUFFERED": "1"},
-        )
-        line = self.proc.stdout.readline()
-        if not line:
-            err = self.proc.stderr.read()
-            raise MachineUnavailable(f"{name}: machine process ended: {err.strip()}")
-        ports = json.loads(line)["ports"]
+        self.state_file = Path(state_dir) / f"{name}.machine.json"
+        self.proc: subprocess.Popen | None = None
+        self.adopted = False
+        ports = self._adopt(config.ports.host)
+        if ports is None:
+            cmd = [sys.executable, "-m", "server.supervisor", "--config", str(config_file)]
+            cmd += ["--name", name, "--state", str(self.state_file)]
+            cmd += ["--fast"] if fast else []
+            cmd += ["--simulation"] if simulation else []
+            cmd += ["--ideal"] if ideal else []
+            self.state_file.unlink(missing_ok=True)
+            log_file = open(Path(state_dir) / f"{name}.machine.log", "ab")  # noqa: SIM115
+            self.proc = subprocess.Popen(
+                cmd,
+                stdin=subprocess.DEVNULL,
+                stdout=log_file,
+                stderr=log_file,
+                start_new_session=True,  # a host killed by a signal leaves its machines be
+            )
+            log_file.close()
+            ports = wait_for(
+                lambda: self._read_state() or self._died(),
+                timeout_s,
+                f"{name}: machine process ready",
+                poll_s=0.05,
+            )["ports"]
         self.link = MachineLink(
             name,
             config.kind,
@@ -247,17 +323,115 @@ class SubprocessMachine:
             config.program_memory_bytes,
         )
 
+    def _read_state(self) -> dict | None:
+        try:
+            return json.loads(self.state_file.read_text())
+        except (OSError, ValueError):
+            return None
+
+    def _died(self) -> None:
+        if self.proc is not None and self.proc.poll() is not None:
+            raise MachineUnavailable(
+                f"{self.name}: machine process ended (exit {self.proc.returncode}); "
+                f"see {self.state_file.with_suffix('.log')}"
+            )
+        return None
+
+    def _adopt(self, host: str) -> dict | None:
+        state = self._read_state()
+        if not state or not state.get("ports", {}).get("operator"):
+            return None
+        link = MachineLink(self.name, "", host, state["ports"], (), 0)
+        try:
+            link_ping(link)
+        except MachineUnavailable:
+            return None
+        self.adopted, self.pid = True, state.get("pid")
+        return state["ports"]
+
     def stop(self, timeout_s: float = 10.0) -> None:
-        if self.proc.poll() is None:
+        """Stop the machine process (also one adopted from an earlier host)."""
+        import signal
+
+        pid = self.proc.pid if self.proc is not None else getattr(self, "pid", None)
+        if self.proc is not None and self.proc.poll() is None:
             self.proc.terminate()
             try:
                 self.proc.wait(timeout_s)
             except subprocess.TimeoutExpired:
                 self.proc.kill()
                 self.proc.wait(5)
-        for stream in (self.proc.stdout, self.proc.stderr):
-            with contextlib.suppress(Exception):
-                stream.close()
+        elif self.proc is None and pid:
+            with contextlib.suppress(OSError):
+                os.kill(pid, signal.SIGTERM)
+            end = time.monotonic() + timeout_s
+            while time.monotonic() < end and _alive(pid):
+                time.sleep(0.05)
+        self.state_file.unlink(missing_ok=True)
+
+
+def link_ping(link: MachineLink) -> None:
+    port = link.ports["operator"]
+    try:
+        with socket.create_connection((link.host, port), timeout=2) as sock:
+            sock.sendall(b"PING\n")
+            answer = sock.makefile("rb").readline().decode("ascii", "replace")
+    except OSError as exc:
+        raise MachineUnavailable(f"{link.name}: {exc}") from None
+    if answer.strip() != f"OK {link.name}":
+        raise MachineUnavailable(f"{link.name}: operator face answered {answer.strip()!r}")
+
+
+def _alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except OSError:
+        return False
+    return True
+
+
+def machine_main(argv: list[str] | None = None) -> int:
+    """One machine process for a cell: faces, operator face, power-on, runner until
+    SIGTERM/SIGINT; its pid and ports go to `--state` once it is ready."""
+    import argparse
+    import signal
+
+    from cnc.config import load_machine_config
+    from cnc.machine import Machine, RealtimeRunner
+
+    ap = argparse.ArgumentParser(prog="python -m server.supervisor")
+    ap.add_argument("--config", required=True)
+    ap.add_argument("--name", required=True)
+    ap.add_argument("--state", required=True)
+    ap.add_argument("--fast", action="store_true")
+    ap.add_argument("--simulation", action="store_true")
+    ap.add_argument("--ideal", action="store_true")
+    args = ap.parse_args(argv)
+    cfg = load_machine_config(args.config, args.name)
+    machine = Machine(cfg, args.name, ideal=args.ideal)
+    faces = machine.start_faces(simulation=bool(args.simulation))
+    operator = OperatorFace(machine, cfg.ports.host).start()
+    runner = RealtimeRunner(machine, speed=FAST_SPEED if args.fast else 1.0)
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        signal.signal(sig, lambda *_: runner.stop())
+    power_on(machine)
+    governor = None
+    if args.fast:
+        from server.clock import FastClockGovernor
+
+        governor = FastClockGovernor([runner]).start()
+    state = {"pid": os.getpid(), "ports": {**faces.ports(), "operator": operator.port}}
+    tmp = Path(args.state + ".tmp")
+    tmp.write_text(json.dumps(state))
+    tmp.replace(args.state)  # atomic: the host never reads half a file
+    try:
+        runner.run()
+    finally:
+        if governor is not None:
+            governor.stop()
+        operator.stop()
+        machine.close()
+    return 0
 
 
 def wait_for(predicate, timeout_s: float, what: str, poll_s: float = 0.02):
@@ -270,3 +444,7 @@ def wait_for(predicate, timeout_s: float, what: str, poll_s: float = 0.02):
         if time.monotonic() >= end:
             raise MachineUnavailable(f"{what} not seen within {timeout_s} s")
         time.sleep(poll_s)
+
+
+if __name__ == "__main__":
+    raise SystemExit(machine_main())
