@@ -1,0 +1,75 @@
+"""The speed-ups compute exactly what the readable paths compute."""
+
+from __future__ import annotations
+
+import math
+
+import pytest
+
+from drives.cia402 import Drive402, State
+from drives.plant import PlantParams
+
+T = 0.001
+
+
+def _enabled(params: PlantParams | None) -> Drive402:
+    d = Drive402(params, objects={0x6060: 8})
+    d.advance(T)
+    for cw in (0x06, 0x07, 0x0F):
+        d.write_object(0x6040, 0, cw)
+        d.on_sync()
+        d.advance(T)
+    assert d.state == State.OPERATION_ENABLED
+    return d
+
+
+def _trace(d: Drive402, targets: list[int]) -> list[tuple]:
+    out = []
+    for target in targets:
+        d.write_object(0x607A, 0, target)
+        d.on_sync()
+        d.advance(T)
+        p = d.plant
+        out.append(
+            (
+                d.state,
+                d.read_object(0x6041, 0),
+                d.read_object(0x6064, 0),
+                d.read_object(0x603F, 0),
+                p.theta,
+                p.omega,
+                p.current,
+                p.vdc,
+                p.table_x,
+            )
+        )
+    return out
+
+
+@pytest.mark.parametrize("substep", [None, 1e-3])
+@pytest.mark.parametrize(
+    "scenario",
+    [
+        "sine",  # plain following
+        "negative_limit",  # runs onto the -5 mm limit switch: fault 0x8612 mid-cycle
+        "following_error",  # a jump beyond the 0x6065 window: fault 0x8611
+    ],
+)
+def test_csp_substep_loop_equals_the_generic_substep(substep, scenario, monkeypatch):
+    params = PlantParams().for_substep(substep) if substep else None
+    fast, slow = _enabled(params), _enabled(params)
+    monkeypatch.setattr(slow, "_csp_substeps", lambda h, n: 0)  # every sub-step generic
+    x0 = fast.read_object(0x6064, 0)
+    if scenario == "sine":
+        targets = [x0 + round(10_000 * math.sin(2 * math.pi * k * T)) for k in range(400)]
+    elif scenario == "negative_limit":
+        # 200 mm down to the switch at -5 mm at 100 mm/s ends in a limit fault
+        targets = [x0 - 100 * k for k in range(2200)]
+    else:
+        targets = [x0] * 5 + [x0 + 200_000] * 50
+    a, b = _trace(fast, targets), _trace(slow, targets)
+    assert a == b
+    if scenario == "negative_limit":
+        assert fast.read_object(0x603F, 0) == 0x8612
+    if scenario == "following_error":
+        assert fast.read_object(0x603F, 0) == 0x8611
