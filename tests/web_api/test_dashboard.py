@@ -57,6 +57,7 @@ def test_the_page_is_served_at_the_root_with_a_same_origin_policy(client):
         ("api.js", "text/javascript"),
         ("plot.js", "text/javascript"),
         ("app.css", "text/css"),
+        ("favicon.svg", "image/svg+xml"),
         ("index.html", "text/html"),
     ],
 )

@@ -201,13 +201,22 @@ def browser_page(base: str):
         pg = context.new_page()
         errors: list[str] = []
         pg.on("pageerror", lambda exc: errors.append(str(exc)))
+
+        def console_error(msg):
+            # API refusals (401 before the key, 404 fault types) are answers the page
+            # handles; a failed load of anything else (a page asset) is a defect.
+            url = msg.location.get("url", "")
+            if msg.type == "error" and not urlsplit(url).path.startswith("/api/"):
+                errors.append(f"{msg.text} ({url})")
+
+        pg.on("console", console_error)
         try:
             yield pg
         finally:
             context.close()
             browser.close()
     assert not foreign, f"the page reached beyond the host: {foreign}"
-    assert not errors, f"JavaScript errors on the page: {errors}"
+    assert not errors, f"errors on the page (scripts, failed loads): {errors}"
 
 
 @pytest.fixture

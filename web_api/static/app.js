@@ -359,6 +359,10 @@ function prefillFault(tile) {
   const params = {};
   for (const p of t.params || []) if (p.default !== null && p.default !== undefined) params[p.name] = p.default;
   $(".f-params", tile).value = JSON.stringify(params);
+  // Parameters without a default must be given: name them with their units.
+  const names = (t.params || []).map((p) => `${p.name}${p.unit ? ` (${p.unit})` : ""}`);
+  $(".f-params", tile).title = names.length ? `parameters: ${names.join(", ")}` : "no parameters";
+  $(".f-params", tile).placeholder = names.length ? `{"${t.params[0].name}": …}` : "{}";
   $(".f-type", tile).title = t.description || "";
 }
 
