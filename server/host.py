@@ -156,7 +156,7 @@ class AlarmWatch:
 
 
 def make_starter(
-    links: Mapping[str, MachineLink], monitor: MonitoringModel, timeout_s: float = 60.0
+    links: Mapping[str, MachineLink], monitor: MonitoringModel, timeout_s: float = 30.0
 ) -> Callable[[str, int], None]:
     """The transfer worker's cycle start: select the program at the machine, press cycle
     start on its Modbus remote panel, and wait until the machine reports it running."""
@@ -182,11 +182,15 @@ def make_starter(
 
         try:
             wait_for(running, timeout_s, f"{machine}: {name} running")
-        except MachineUnavailable:
+        except MachineUnavailable as exc:
             panel = link.panel_status()
             if panel.get("CycleStartRefused"):
                 raise MachineUnavailable(f"{machine}: the PLC refused cycle start") from None
-            raise
+            s = monitor.status(machine)
+            raise MachineUnavailable(
+                f"{exc} (machine: {s['mode']} {s['execution']} program {s['program']!r}, "
+                f"parts {s['counters']['part_count']}, alarms {s['alarms']}; panel {panel})"
+            ) from None
 
     return start
 

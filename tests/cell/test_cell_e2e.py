@@ -16,7 +16,7 @@ def machine(api, name):
 
 
 def test_upload_release_dispatch_start_completes_with_final_position_and_part_count(make_cell):
-    _, api = make_cell()
+    _, api = make_cell(ideal_axes=False)  # the real thing: CiA 402 drives on CAN
     listed = api("viewer").get("/api/machines").json()
     assert [m["name"] for m in listed] == ["lathe1", "mill1", "mill2"]
     assert all(m["status"]["connected"] for m in listed)
@@ -39,6 +39,7 @@ def test_upload_release_dispatch_start_completes_with_final_position_and_part_co
         "mill1 part count 1",
     )
     assert status["program"] == "O1001"
+    assert status["bus_load"]["mean_percent"] > 0  # CANopen traffic, seen through SHDR
     for axis, want in MILL_FINAL.items():
         assert status["actual"][axis] == pytest.approx(want, abs=0.01)
         assert status["commanded"][axis] == pytest.approx(want, abs=0.001)
@@ -69,10 +70,64 @@ def test_job_of_four_is_spread_over_both_mills(make_cell):
     try:
         done = poll(completed, 90, "job of 4 completed", interval_s=0.2)
     except AssertionError:
-        pytest.fail(f"job not completed: {seen[-1]}")
+        dispatches = api("viewer").get("/api/dispatches").text
+        pytest.fail(f"job not completed: {seen[-1]}\ndispatches: {dispatches}")
     assert done["done"] == 4
     machines = {a["machine"] for a in done["allocations"] if a["status"] == "completed"}
     assert machines == {"mill1", "mill2"}, done["allocations"]
     counts = {n: machine(api, n)["status"]["counters"]["part_count"] for n in ("mill1", "mill2")}
     assert sum(counts.values()) == 4 and min(counts.values()) >= 1, counts
     assert machine(api, "lathe1")["status"]["counters"]["part_count"] == 0
+
+
+def test_commands_through_the_faces_select_start_and_refusals(make_cell):
+    _, api = make_cell()
+    rev = upload_released(api)
+    # a dispatch without start only loads the program
+    r = api("operator").post(
+        "/api/dispatches",
+        json={"revision_id": rev, "machine": "mill2", "start": False},
+        headers=idem(),
+    )
+    assert r.status_code == 202, r.text
+    dispatch = r.json()["id"]
+    poll(
+        lambda: api("viewer").get(f"/api/dispatches/{dispatch}").json()["state"] == "done",
+        30,
+        "program loaded",
+    )
+    op = api("operator")
+    r = op.post("/api/machines/mill2/commands", json={"command": "cycle_start"})
+    assert r.status_code == 202  # pressed; the NC refuses it (no program selected)
+    assert machine(api, "mill2")["status"]["execution"] == "READY"
+    r = op.post("/api/machines/mill2/commands", json={"command": "select_program", "number": 7})
+    assert r.status_code == 409, r.text
+    assert "O0007" in r.json()["detail"], r.json()
+    r = op.post("/api/machines/mill2/commands", json={"command": "select_program", "number": 1001})
+    assert r.status_code == 202, r.text
+    poll(lambda: machine(api, "mill2")["status"]["program"] == "O1001", 10, "O1001 selected")
+    r = op.post("/api/machines/mill2/commands", json={"command": "cycle_start"})
+    assert r.status_code == 202, r.text
+    poll(
+        lambda: machine(api, "mill2")["status"]["counters"]["part_count"] == 1,
+        30,
+        "part made by a cycle start over the API",
+    )
+    r = op.post("/api/machines/mill2/commands", json={"command": "reset"})
+    assert r.status_code == 202
+    # homing: REF mode through the Modbus panel, then the machine homes; back to AUTO
+    r = op.post("/api/machines/mill2/commands", json={"command": "home"})
+    assert r.status_code == 202, r.text
+    poll(
+        lambda: (
+            (s := machine(api, "mill2")["status"])["actual"]["X"] == pytest.approx(0, abs=1e-3)
+            and s["mode"] == "MANUAL"
+        ),
+        30,
+        "mill2 homed",
+    )
+    r = op.post("/api/machines/mill2/commands", json={"command": "mode", "mode": "AUTO"})
+    assert r.status_code == 202
+    poll(lambda: machine(api, "mill2")["status"]["mode"] == "AUTOMATIC", 10, "AUTO again")
+    r = op.post("/api/machines/mill2/commands", json={"command": "launch"})
+    assert r.status_code == 422
