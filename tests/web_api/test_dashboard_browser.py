@@ -436,3 +436,25 @@ def test_fault_panel_offers_the_cells_fault_types_and_injects(sessions):
         panel.get_by_role("button", name="Clear fault 1 on mill-1").click()
         expect(panel.locator(".f-active li").first).to_contain_text("cleared")
         assert faults.cleared == [1]
+
+
+def test_a_viewer_sees_no_fault_panel_and_is_told_which_role_a_release_needs(sessions):
+    api = make_api(sessions, machines_provider=MovingMachines())
+    draft = api.upload(1002, GOOD.replace("O1001", "O1002"))["revision"]["id"]
+    app = with_dashboard(api.client.app)
+    FakeFaults().install(app)
+    expect = playwright_sync.expect
+    with serve(app) as base, browser_page(base) as page:
+        page.add_init_script(f"localStorage.setItem('fmscell.apiKey', '{KEYS['viewer']}')")
+        page.goto(base + "/")
+        expect(page.locator("#whoami")).to_have_text("viewer-user (viewer)")
+        expect(page.locator("#key-dialog")).to_be_hidden()  # the stored key was used
+        expect(page.locator(".tile[data-machine]")).to_have_count(3)
+        # Fault types are readable by anyone, but injecting needs an admin: no panel.
+        expect(page.locator(".m-faults").first).to_be_hidden()
+        page.get_by_role("button", name=f"Release O1002 revision {draft}").click()
+        page.get_by_label(re.compile("Approval comment")).fill("not mine to release")
+        page.get_by_role("button", name="Release", exact=True).click()
+        expect(page.locator("#notice")).to_contain_text("needs the programmer role")
+        page.screenshot(path=str(OUTPUT / "dashboard-viewer.png"), full_page=True)
+    assert api.get(f"/api/revisions/{draft}").json()["status"] == "draft"

@@ -14,6 +14,7 @@ const state = {
   programs: [],
   programsSignature: "",
   faultTypes: null, // null: fault injection not offered by this cell
+  role: null, // the key's role (GET /api/whoami)
   lastEventId: 0,
   events: null,
 };
@@ -93,7 +94,7 @@ function keyDialog(reason) {
     const onClose = () => {
       if (dlg.returnValue === "save" && $("#key-input").value) {
         auth.key = $("#key-input").value.trim();
-        refreshWhoami();
+        refreshWhoami().then(loadFaultTypes);
         restartEvents();
         done(auth.key);
       } else done(null);
@@ -114,6 +115,7 @@ function keyDialog(reason) {
 async function refreshWhoami() {
   try {
     const me = await api("/api/whoami");
+    state.role = me.role;
     $("#whoami").textContent = `${me.user} (${me.role})`;
   } catch {
     $("#whoami").textContent = "not signed in";
@@ -259,6 +261,10 @@ function renderMachine(m) {
     entry.plot = new ToolpathPlot($(".m-plot", t), entry.plane);
     $(".m-plane", t).textContent = `plane ${entry.plane.join("–")}`;
   }
+  if (entry.plot && s?.program !== entry.program) {
+    entry.plot.clear(); // a new program draws a new toolpath
+    entry.program = s?.program;
+  }
   if (entry.plot) {
     entry.plot.push(axes);
     entry.plot.draw();
@@ -280,7 +286,7 @@ function renderMachine(m) {
         `${a.source || "NC"} ${a.number ?? ""}${a.axis ? ` [${a.axis}]` : ""}: ${a.text ?? ""}`),
     ),
   );
-  $(".m-faults", t).hidden = state.faultTypes === null;
+  $(".m-faults", t).hidden = !faultPanelShown();
 }
 
 async function pollMachines() {
@@ -333,9 +339,12 @@ async function loadFaultTypes() {
   for (const { el: tile } of state.machines.values()) fillFaultTypes(tile);
 }
 
+// Injecting needs an admin: other roles see no panel rather than a form that is refused.
+const faultPanelShown = () => state.faultTypes !== null && state.role === "admin";
+
 function fillFaultTypes(tile) {
   const panel = $(".m-faults", tile);
-  panel.hidden = state.faultTypes === null;
+  panel.hidden = !faultPanelShown();
   if (state.faultTypes === null) return;
   const sel = $(".f-type", tile);
   const chosen = sel.value;
