@@ -25,12 +25,13 @@ class Monitored:
 class HeartbeatProducer:
     def __init__(self, od: ObjectDictionary) -> None:
         self.od = od
+        self._store = od._store  # the dictionary's value store, read every tick
         self.elapsed_s = 0.0
         od.write_hooks[0x1017] = self._write_period
 
     @property
     def period_s(self) -> float:
-        return int(self.od.stored(0x1017, 0, 0)) / 1000.0
+        return int(self._store.get((0x1017, 0), 0)) / 1000.0
 
     def _write_period(self, entry: Entry, value: int) -> None:
         self.od.set(0x1017, 0, value)

@@ -161,12 +161,6 @@ class ObjectDictionary:
             return self.application.read_object(index, subindex)
         return self._store[(index, subindex)]
 
-    def stored(self, index: int, subindex: int, default: Value = 0) -> Value:
-        """The stored value of a communication object (no read hook, not owned by the
-        application), or `default` if the dictionary has no such entry. For the per-frame
-        paths, where `get` with its checks costs more than the work it guards."""
-        return self._store.get((index, subindex), default)
-
     def set(self, index: int, subindex: int, value: Value) -> None:
         """Store a value without checks (the services' own bookkeeping)."""
         self._store[(index, subindex)] = value

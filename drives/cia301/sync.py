@@ -11,6 +11,8 @@ SYNC_TIMEOUT_FACTOR = 1.5  # CANopenNode: SYNC lost after 1.5 x 0x1006
 class SyncConsumer:
     def __init__(self, od: ObjectDictionary, on_change) -> None:
         self.od = od
+        # the dictionary's value store (one dict for its lifetime): read every SYNC
+        self._store = od._store
         self.on_change = on_change
         self.since_sync_s = 0.0
         self.seen = False
@@ -24,7 +26,7 @@ class SyncConsumer:
     @property
     def overflow(self) -> int:
         """0x1019: 0 = SYNC without counter byte, else the counter runs 1..overflow."""
-        return int(self.od.stored(0x1019, 0, 0))
+        return int(self._store.get((0x1019, 0), 0))
 
     def _write_overflow(self, entry: Entry, value: int) -> None:
         if value == 1 or value > 240:
@@ -40,7 +42,7 @@ class SyncConsumer:
 
     @property
     def period_s(self) -> float:
-        return int(self.od.stored(0x1006, 0, 0)) * 1e-6
+        return int(self._store.get((0x1006, 0), 0)) * 1e-6
 
     def _write_cob_id(self, entry: Entry, value: int) -> None:
         if value & 0x40000000:
