@@ -246,6 +246,8 @@ def test_the_image_installs_the_healthcheck_and_the_cell_file():
     for package in ("server", "web_api", "dnc", "cnc", "plc", "drives"):
         assert f"COPY {package} ./{package}" in dockerfile, package
     assert re.search(r"^USER (?!root)", dockerfile, re.M), "the services run unprivileged"
+    ignored = (ROOT / "docker" / "Dockerfile.dockerignore").read_text().split()
+    assert {".venv", ".git", "test-output", "*.db"} <= set(ignored)
 
 
 # ------------------------------------------------------------------------------ healthcheck
