@@ -96,6 +96,11 @@ def test_bad_fault_requests_are_problems(make_cell):
     assert r.status_code == 404
     r = api("admin").post("/api/machines/mill1/faults", json={"type": "encoder", "target": "Q!"})
     assert r.status_code == 422
+    # ideal axes have no CAN bus: the machine refuses, the API says so
+    r = api("admin").post("/api/machines/mill1/faults", json={"type": "bus_off", "target": "bus:X"})
+    assert r.status_code == 409, r.text
+    assert "ideal axes" in r.json()["detail"]
+    assert api("viewer").get("/api/machines/mill1/faults").json() == []
 
 
 def test_fault_endpoints_are_absent_when_disabled_and_the_auth_matrix_holds(make_cell):
