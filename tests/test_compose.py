@@ -219,6 +219,16 @@ def test_machine_healthchecks_probe_the_configured_modbus_face(services, cell):
         assert int(test[4]) == ports.modbus
 
 
+def test_fault_injection_reaches_every_machines_simulation_face(services, cell):
+    """`--faults` on the host sends faults through each machine's simulation face, which
+    must then be on (`--simulation`) at a fixed port the host knows from the cell file."""
+    if "--faults" not in services["host"]["command"]:
+        pytest.skip("the compose cell runs without fault injection")
+    for name, s in machine_services(services).items():
+        assert "--simulation" in s["command"], name
+        assert cell.machines[name].ports.simulation, f"{name}: no fixed simulation port"
+
+
 def test_host_serves_on_the_published_port_and_checks_its_health(services, cell):
     host = services["host"]
     command = host["command"]
