@@ -445,10 +445,34 @@ def test_a_viewer_sees_no_fault_panel_and_is_told_which_role_a_release_needs(ses
     FakeFaults().install(app)
     expect = playwright_sync.expect
     with serve(app) as base, browser_page(base) as page:
-        page.add_init_script(f"localStorage.setItem('fmscell.apiKey', '{KEYS['viewer']}')")
+        refused = []
+        page.on(
+            "response",
+            lambda r: (
+                refused.append(r.url) if r.status == 401 and "/api/machines" in r.url else None
+            ),
+        )
         page.goto(base + "/")
+        # Dismissing the key dialog is final until the user opens it again: the page keeps
+        # polling (and being refused) without asking once per request.
+        expect(page.locator("#key-dialog")).to_be_visible()
+        page.get_by_role("button", name="Cancel").click()
+        expect(page.locator("#notice")).to_contain_text("No API key")
+        seen = len(refused)
+        with page.expect_response(lambda r: r.status == 401 and "/api/machines" in r.url):
+            pass
+        with page.expect_response(lambda r: r.status == 401 and "/api/machines" in r.url):
+            pass
+        assert len(refused) >= seen + 2
+        expect(page.locator("#key-dialog")).to_be_hidden()
+        page.get_by_role("button", name="API key…").click()
+        page.get_by_label("Key", exact=True).fill(KEYS["viewer"])
+        page.locator("#key-save").click()
         expect(page.locator("#whoami")).to_have_text("viewer-user (viewer)")
-        expect(page.locator("#key-dialog")).to_be_hidden()  # the stored key was used
+        # A reload signs in with the key kept in localStorage, without asking.
+        page.reload()
+        expect(page.locator("#whoami")).to_have_text("viewer-user (viewer)")
+        expect(page.locator("#key-dialog")).to_be_hidden()
         expect(page.locator(".tile[data-machine]")).to_have_count(3)
         # Fault types are readable by anyone, but injecting needs an admin: no panel.
         expect(page.locator(".m-faults").first).to_be_hidden()

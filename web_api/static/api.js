@@ -21,14 +21,20 @@ export const auth = {
   },
   // Set by the page: returns a promise of a key (or null when the user cancels).
   onUnauthenticated: null,
+  declined: false,
 };
 
 let pendingKey = null; // one dialog for every request refused at once
 
 async function askForKey(reason) {
-  if (!auth.onUnauthenticated) return null;
+  // Once the user dismissed the dialog, refused requests stay refused until they open it
+  // themselves: one dialog per dismissal, not one per request still in flight.
+  if (!auth.onUnauthenticated || auth.declined) return null;
   if (!pendingKey) {
-    pendingKey = auth.onUnauthenticated(reason).finally(() => {
+    pendingKey = auth.onUnauthenticated(reason).then((key) => {
+      auth.declined = !key;
+      return key;
+    }).finally(() => {
       pendingKey = null;
     });
   }

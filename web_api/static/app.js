@@ -95,16 +95,21 @@ function keyDialog(reason) {
     const onClose = () => {
       if (dlg.returnValue === "save" && $("#key-input").value) {
         auth.key = $("#key-input").value.trim();
+        auth.declined = false;
         refreshWhoami().then(loadFaultTypes);
         restartEvents();
         done(auth.key);
-      } else done(null);
+      } else {
+        notify("No API key: the page shows what needs none. Use “API key…” to sign in.", "warning");
+        done(null);
+      }
     };
     dlg.returnValue = "";
     dlg.addEventListener("close", onClose);
-    $("#key-cancel").onclick = () => done(null);
+    $("#key-cancel").onclick = () => dlg.close("");
     $("#key-forget").onclick = () => {
       auth.key = "";
+      auth.declined = true; // do not ask again at once: the user just said no key
       $("#whoami").textContent = "not signed in";
       done(null);
     };
