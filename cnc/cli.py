@@ -91,3 +91,6 @@ def check_cmd(
 
 # `nc plan` lives in cnc.cli_plan and registers itself on nc_app when imported.
 from cnc import cli_plan as _cli_plan  # noqa: E402,F401
+
+# `nc simulate` lives in cnc.cli_simulate and registers itself on nc_app when imported.
+from cnc import cli_simulate as _cli_simulate  # noqa: E402,F401
