@@ -190,7 +190,8 @@ class Cell:
                     timeout_s=timeout_s,
                 )
                 self.machines.append(proc)
-                self.links[name] = proc.link
+            for proc in self.machines:
+                self.links[proc.name] = proc.wait_ready()
             return
         for name, mcfg in self.config.machines.items():
             m = InProcessMachine(

@@ -308,20 +308,30 @@ class SubprocessMachine:
                 start_new_session=True,  # a host killed by a signal leaves its machines be
             )
             log_file.close()
-            ports = wait_for(
+        self._config, self._ports, self._timeout_s = config, ports, timeout_s
+        self.link: MachineLink | None = None
+
+    def wait_ready(self) -> MachineLink:
+        """Wait until the process has written its ports (machines power on in parallel)."""
+        ports = (
+            self._ports
+            or wait_for(
                 lambda: self._read_state() or self._died(),
-                timeout_s,
-                f"{name}: machine process ready",
+                self._timeout_s,
+                f"{self.name}: machine process ready",
                 poll_s=0.05,
             )["ports"]
+        )
+        config = self._config
         self.link = MachineLink(
-            name,
+            self.name,
             config.kind,
             config.ports.host,
             ports,
             tuple(config.axes),
             config.program_memory_bytes,
         )
+        return self.link
 
     def _read_state(self) -> dict | None:
         try:

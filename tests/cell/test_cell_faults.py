@@ -11,12 +11,15 @@ from tests.cell.conftest import KEYS, poll, sse_until, upload_released
 
 pytestmark = pytest.mark.timeout(120)
 
-LONG_PROGRAM = """%
-O1002 (E2E LONG PART)
+# M0 stops every part halfway (execution PROGRAM_STOPPED) until cycle start: the fault
+# lands mid-part however fast the clock runs.
+STOPPING_PROGRAM = """%
+O1002 (E2E PART WITH A PROGRAM STOP)
 N10 G21 G90 G17
 N20 G0 X-40 Y-30 Z-10
 N30 G1 Z-50 F6000
 N40 G1 X-120 Y-80
+N45 M0
 N50 G1 X-40 Y-30
 N60 G0 Z-20
 N70 M30
@@ -32,12 +35,9 @@ def test_fault_in_one_mill_reroutes_its_part_and_the_alarm_is_visible_everywhere
     _, api = make_cell(faults=True)
     types = api("viewer").get("/api/fault-types").json()
     assert {"overcurrent", "encoder_break", "air_pressure_loss"} <= {t["type"] for t in types}
-    rev = upload_released(api, LONG_PROGRAM, number=1002)
+    rev = upload_released(api, STOPPING_PROGRAM, number=1002)
     job = api("operator").post("/api/jobs", json={"revision_id": rev, "quantity": 2}).json()["id"]
-    poll(lambda: status(api, "mill1")["execution"] == "ACTIVE", 60, "mill1 cutting")
-    # hold the part where it is, so the fault lands mid-part however fast the clock runs
-    r = api("operator").post("/api/machines/mill1/commands", json={"command": "feed_hold"})
-    assert r.status_code == 202, r.text
+    poll(lambda: status(api, "mill1")["execution"] == "PROGRAM_STOPPED", 60, "mill1 at M0")
     r = api("admin").post(
         "/api/machines/mill1/faults", json={"type": "overcurrent", "target": "drive:X"}
     )
@@ -52,6 +52,12 @@ def test_fault_in_one_mill_reroutes_its_part_and_the_alarm_is_visible_everywhere
     assert any(a["level"] == "FAULT" for a in alarmed["alarms"]), alarmed["alarms"]
 
     def completed():
+        # the operator at mill2 continues each part after its M0
+        if status(api, "mill2")["execution"] == "PROGRAM_STOPPED":
+            r = api("operator").post(
+                "/api/machines/mill2/commands", json={"command": "cycle_start"}
+            )
+            assert r.status_code == 202, r.text
         j = api("viewer").get(f"/api/jobs/{job}").json()
         return j["status"] == "completed" and j
 
