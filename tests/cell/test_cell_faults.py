@@ -111,6 +111,9 @@ def test_bad_fault_requests_are_problems(make_cell):
 
 def test_fault_endpoints_are_absent_when_disabled_and_the_auth_matrix_holds(make_cell):
     _, api = make_cell(faults=False)
+    paths = api("viewer").get("/openapi.json").json()["paths"]
+    assert "/api/machines/{name}/commands" in paths
+    assert not any("fault" in p for p in paths)
     for method, path in (
         ("get", "/api/fault-types"),
         ("get", "/api/machines/mill1/faults"),
@@ -141,6 +144,14 @@ def test_fault_endpoints_are_absent_when_disabled_and_the_auth_matrix_holds(make
 
 def test_fault_auth_matrix(make_cell):
     _, api = make_cell(faults=True)
+    paths = api("viewer").get("/openapi.json").json()["paths"]
+    for path in (
+        "/api/fault-types",
+        "/api/machines/{name}/faults",
+        "/api/machines/{name}/faults/{fault_id}",
+        "/api/machines/{name}/commands",
+    ):
+        assert path in paths, sorted(paths)
     body = {"type": "air_pressure_loss", "target": "plc", "duration": 0.5}
     assert api("anonymous").post("/api/machines/lathe1/faults", json=body).status_code == 401
     for role in ("viewer", "operator", "programmer"):
