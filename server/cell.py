@@ -322,8 +322,14 @@ class Cell:
                 10,
                 f"{name}: REF mode",
             )
-            link.operator("home")
-            return "mode REF requested on the Modbus remote panel; homing started at the machine"
+            link.operator("home")  # answers once every axis is referenced
+            link.panel("request_mode", 1)
+            wait_for(
+                lambda: self.monitor.status(name)["mode"] == "AUTOMATIC",
+                10,
+                f"{name}: AUTO after homing",
+            )
+            return "mode REF on the Modbus remote panel, every axis homed, AUTO again"
         if command == "select_program":
             link.operator("select_program", number=int(args["number"]))
             return f"program O{int(args['number']):04d} selected at the machine"

@@ -186,7 +186,21 @@ class OperatorFace:
         self.machine.call_soon(run)
         if not done.wait(20):
             return f"ERR {name} not taken within 20 s"
-        return f"ERR {outcome[0]}" if outcome[0] is not None else f"OK {name}"
+        if outcome[0] is not None:
+            return f"ERR {outcome[0]}"
+        if name == "home" and not self._referenced(timeout_s=60.0):
+            return "ERR homing did not finish within 60 s"
+        return f"OK {name}"
+
+    def _referenced(self, timeout_s: float) -> bool:
+        """HOME answers once every axis is referenced, so the caller can go on to AUTO."""
+        end = time.monotonic() + timeout_s
+        ctl = self.machine.controller
+        while time.monotonic() < end:
+            if all(ctl.referenced.values()) and not getattr(ctl, "_homing", ""):
+                return True
+            time.sleep(0.01)
+        return False
 
     def stop(self) -> None:
         self.server.shutdown()

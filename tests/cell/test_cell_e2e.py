@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import pytest
 
-from tests.cell.conftest import MILL_FINAL, idem, poll, upload_released
+from tests.cell.conftest import MILL_FINAL, idem, poll, sse_until, upload_released
 
 pytestmark = pytest.mark.timeout(120)
 
@@ -115,19 +115,23 @@ def test_commands_through_the_faces_select_start_and_refusals(make_cell):
     )
     r = op.post("/api/machines/mill2/commands", json={"command": "reset"})
     assert r.status_code == 202
-    # homing: REF mode through the Modbus panel, then the machine homes; back to AUTO
+    # homing: REF mode through the Modbus panel, every axis referenced, back in AUTO
     r = op.post("/api/machines/mill2/commands", json={"command": "home"})
     assert r.status_code == 202, r.text
-    poll(
-        lambda: (
-            (s := machine(api, "mill2")["status"])["actual"]["X"] == pytest.approx(0, abs=1e-3)
-            and s["mode"] == "MANUAL"
-        ),
-        30,
-        "mill2 homed",
-    )
+    s = machine(api, "mill2")["status"]
+    assert s["mode"] == "AUTOMATIC"
+    assert s["actual"] == pytest.approx({"X": 0.0, "Y": 0.0, "Z": 0.0}, abs=1e-3)
     r = op.post("/api/machines/mill2/commands", json={"command": "mode", "mode": "AUTO"})
     assert r.status_code == 202
-    poll(lambda: machine(api, "mill2")["status"]["mode"] == "AUTOMATIC", 10, "AUTO again")
     r = op.post("/api/machines/mill2/commands", json={"command": "launch"})
     assert r.status_code == 422
+    # every command and refusal is in the event stream with who sent it
+    events = sse_until(api, lambda e: e.get("command") == "mode", 10)
+    commands = [
+        (e["action"], e["command"])
+        for e in events
+        if e.get("action", "").startswith("machine.command")
+    ]
+    assert ("machine.command_refused", "select_program") in commands
+    accepted = [c for a, c in commands if a == "machine.command"]
+    assert accepted == ["cycle_start", "select_program", "cycle_start", "reset", "home", "mode"]

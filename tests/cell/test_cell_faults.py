@@ -82,6 +82,9 @@ def test_fault_in_one_mill_reroutes_its_part_and_the_alarm_is_visible_everywhere
         api, lambda e: e.get("action") == "job.interrupt", 10
     )
 
+    injected = sse_until(api, lambda e: e.get("action") == "machine.fault_injected", 10)
+    assert injected[-1]["spec"] == "drive:X:overcurrent" and injected[-1]["machine"] == "mill1"
+
     xml = api("viewer").get("/mtconnect/mill1/current").text
     root = ET.fromstring(xml)
     faults = [el for el in root.iter() if el.tag.endswith("Fault")]

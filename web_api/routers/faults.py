@@ -82,7 +82,7 @@ async def fault_types(request: Request, _: Viewer) -> list[FaultType]:
     responses=problem_doc(404, 409, 503),
 )
 async def inject_fault(
-    name: Annotated[MachineName, Path()], body: FaultCreate, request: Request, _: Admin
+    name: Annotated[MachineName, Path()], body: FaultCreate, request: Request, principal: Admin
 ) -> Fault:
     from server.supervisor import MachineUnavailable
 
@@ -93,6 +93,14 @@ async def inject_fault(
         raise ApiProblem(409, "fault-refused", str(exc)) from None
     except ValueError as exc:
         raise _refused(exc) from None
+    await run_in_threadpool(
+        request.app.state.services.library.note_transfer,
+        name,
+        "machine.fault_injected",
+        actor=principal.user,
+        fault_id=fault.id,
+        spec=fault.spec,
+    )
     return Fault(**_defaults(fault.as_dict()))
 
 
@@ -118,7 +126,7 @@ async def clear_fault(
     name: Annotated[MachineName, Path()],
     fault_id: Annotated[int, Path(ge=1, le=2**31 - 1)],
     request: Request,
-    _: Admin,
+    principal: Admin,
 ) -> Fault:
     from server.supervisor import MachineUnavailable
 
@@ -127,4 +135,12 @@ async def clear_fault(
         fault = await run_in_threadpool(cell.clear, name, fault_id)
     except MachineUnavailable as exc:
         raise ApiProblem(409, "fault-refused", str(exc)) from None
+    await run_in_threadpool(
+        request.app.state.services.library.note_transfer,
+        name,
+        "machine.fault_cleared",
+        actor=principal.user,
+        fault_id=fault.id,
+        spec=fault.spec,
+    )
     return Fault(**_defaults(fault.as_dict()))

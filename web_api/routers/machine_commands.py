@@ -76,8 +76,28 @@ async def machine_command(
         args["release"] = body.release
     from server.supervisor import MachineUnavailable
 
+    library = request.app.state.services.library
     try:
         detail = await run_in_threadpool(cell.command, name, body.command, **args)
     except MachineUnavailable as exc:
+        await run_in_threadpool(
+            library.note_transfer,
+            name,
+            "machine.command_refused",
+            actor=principal.user,
+            command=body.command,
+            reason=str(exc),
+            **args,
+        )
         raise ApiProblem(409, "command-refused", str(exc), command=body.command) from None
+    # who did what to which machine: the audit log and the event stream
+    await run_in_threadpool(
+        library.note_transfer,
+        name,
+        "machine.command",
+        actor=principal.user,
+        command=body.command,
+        detail=detail,
+        **args,
+    )
     return CommandAccepted(machine=name, command=body.command, detail=detail)
