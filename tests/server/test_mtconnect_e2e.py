@@ -77,7 +77,9 @@ def test_agent_ingests_from_a_real_adapter(machine_loop, agent_loop, agent):
             alarms=(Alarm(7003, "door open | feed hold", "PLC", "WARNING"),),
         )
         adapter.publish(status, "2026-11-21T06:00:01.000000Z")
+        # One publish is several SHDR lines (values, then conditions): wait for the last.
         wait_for(lambda: agent.value("mill1", "part_count") == "3")
+        wait_for(lambda: agent.value("mill1", "plc_cond") == "WARNING")
         _, text = agent.request("current", "mill1", {})
         v = values(parse("Streams", text))
         assert v["mill1_exec"] == ["ACTIVE"]
