@@ -156,7 +156,10 @@ class AlarmWatch:
 
 
 def make_starter(
-    links: Mapping[str, MachineLink], monitor: MonitoringModel, timeout_s: float = 30.0
+    links: Mapping[str, MachineLink],
+    monitor: MonitoringModel,
+    timeout_s: float = 30.0,
+    repress_s: float = 5.0,
 ) -> Callable[[str, int], None]:
     """The transfer worker's cycle start: select the program at the machine, press cycle
     start on its Modbus remote panel, and wait until the machine reports it running."""
@@ -172,13 +175,31 @@ def make_starter(
             f"{machine}: program {name} selected",
         )
         link.panel("cycle_start")
+        pressed = [time.monotonic(), 1]
 
         def running() -> bool:
             s = monitor.status(machine)
             if s["execution"] in IN_CYCLE and s["program"] == name:
                 return True
             # a very short program may have run and ended between two looks
-            return (s["counters"]["part_count"] or 0) > (before or 0)
+            if (s["counters"]["part_count"] or 0) > (before or 0):
+                return True
+            # Under heavy load a remote cycle start has been seen not to be taken (the
+            # machine stays READY with the program selected and the counter unchanged). The
+            # operator's answer is to press again; the NC refuses a start while in a cycle,
+            # so a press that crosses a late start does nothing.
+            if (
+                s["execution"] == "READY"
+                and s["program"] == name
+                and time.monotonic() - pressed[0] > repress_s
+                and pressed[1] < 3
+            ):
+                log.warning(
+                    "%s: cycle start not taken after %.0f s: pressed again", machine, repress_s
+                )
+                link.panel("cycle_start")
+                pressed[0], pressed[1] = time.monotonic(), pressed[1] + 1
+            return False
 
         try:
             wait_for(running, timeout_s, f"{machine}: {name} running")

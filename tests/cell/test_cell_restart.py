@@ -103,9 +103,15 @@ def test_host_killed_mid_job_and_restarted_loses_and_duplicates_nothing(tmp_path
 
         seen_errors: list[str] = []
 
-        seen_errors: list[str] = []
-
         def mid_job():
+            try:
+                return both_cutting()
+            except httpx.TransportError as exc:  # a keep-alive connection closed under us
+                seen_errors.append(repr(exc))
+                assert host.poll() is None, (tmp_path / "host.log").read_text()[-3000:]
+                return False
+
+        def both_cutting():
             j = api("viewer").get(f"/api/jobs/{job}").json()
             if not 1 <= j["done"] < quantity - 2:
                 return False
