@@ -96,6 +96,7 @@ class Cell:
         tick_s: float | None = None,
         rule: str = "fifo",
         state_dir: str | Path | None = None,
+        attach: bool = False,
     ) -> None:
         if clock not in CLOCKS:
             raise ValueError(f"clock {clock!r}: one of {', '.join(CLOCKS)}")
@@ -103,6 +104,7 @@ class Cell:
         self.clock = clock
         self.database_url = database_url or self.config.host.database_url
         self.processes = processes
+        self.attach = attach
         self.faults_enabled = faults
         self.ideal_axes = ideal_axes
         self.config_file = Path(config_file) if config_file else None
@@ -176,6 +178,16 @@ class Cell:
 
     def _start_machines(self, timeout_s: float) -> None:
         fast = self.clock == "fast"
+        if self.attach:
+            # machines run elsewhere (their own services): connect to the configured faces
+            for name, mcfg in self.config.machines.items():
+                p = mcfg.ports
+                ports = {"dnc": p.dnc, "modbus": p.modbus, "shdr": p.shdr}
+                ports["simulation"] = p.simulation if self.faults_enabled else None
+                self.links[name] = MachineLink(
+                    name, mcfg.kind, p.host, ports, tuple(mcfg.axes), mcfg.program_memory_bytes
+                )
+            return
         if self.processes:
             config_file = self._config_file()
             for name, mcfg in self.config.machines.items():
@@ -445,6 +457,7 @@ def run_cell(
     faults: bool = False,
     ideal_axes: bool = False,
     database_url: str | None = None,
+    attach: bool = False,
     echo=print,
 ) -> int:
     """`fmscell run`: start the cell and serve the API until SIGINT/SIGTERM; exit status."""
@@ -480,6 +493,7 @@ def run_cell(
         faults=faults,
         ideal_axes=ideal_axes,
         config_file=config,
+        attach=attach,
     )
     # SIGINT/SIGTERM: uvicorn stops serving, then the cell stops its loops after their
     # current transaction and its machines. uvicorn re-raises the signal once it has shut

@@ -43,6 +43,9 @@ def run(
     database_url: str | None = typer.Option(
         None, "--database-url", help="SQLAlchemy URL (default FMSCELL_DATABASE_URL or SQLite)"
     ),
+    attach: bool = typer.Option(
+        False, "--attach", help="machines run elsewhere: connect to their configured faces"
+    ),
 ) -> None:
     """Start the cell: DNC host, the configured machines and the REST API, until SIGINT or
     SIGTERM."""
@@ -59,6 +62,7 @@ def run(
             faults=faults,
             ideal_axes=ideal_axes,
             database_url=database_url,
+            attach=attach,
         )
     )
 
