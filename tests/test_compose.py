@@ -172,16 +172,7 @@ def test_commands_are_in_exec_form(services):
     assert set(fmscell_services(services)) == set(services) - {"db"}
 
 
-ATTACH_MISSING = pytest.mark.xfail(
-    strict=True,
-    reason="`fmscell run --attach` (the host connecting to machines running in their own "
-    "containers) is not built yet; this must pass once it is",
-)
-
-
-@pytest.mark.parametrize(
-    "name", [pytest.param("host", marks=ATTACH_MISSING), "mill1", "mill2", "lathe1"]
-)
+@pytest.mark.parametrize("name", ["host", "mill1", "mill2", "lathe1"])
 def test_every_command_and_option_exists_in_the_cli(services, name):
     """The command line is parsed by the real CLI (click's parser, nothing is run): an
     unknown sub-command, an unknown option or a value of the wrong type fails here."""

@@ -135,7 +135,7 @@ class Dispatch(BaseModel):
     machine: str
     mode: str
     start: bool
-    state: Literal["pending", "transferring", "verifying", "done", "failed"]
+    state: Literal["pending", "transferring", "verifying", "starting", "done", "failed"]
     attempts: int
     bytes_sent: int
     verified: bool | None

@@ -128,3 +128,16 @@ def test_concurrent_requests_with_one_key_make_one_dispatch(api):
     assert statuses == [200] * 15 + [202], statuses
     assert len({r.json()["id"] for r in results}) == 1
     assert dispatch_count(api) == 1
+
+
+def test_a_dispatch_being_started_is_shown(api):
+    """The transfer worker's `starting` state (cycle start in progress) is part of the schema."""
+    rev = api.released()
+    body = {"revision_id": rev, "machine": "mill-1", "mode": "memory", "start": True}
+    did = send(api, body, key="starting-1").json()["id"]
+    with transaction(api.sessions) as s:
+        s.get(m.Dispatch, did).state = "starting"
+    one = api.get(f"/api/dispatches/{did}", role="operator")
+    assert one.status_code == 200 and one.json()["state"] == "starting"
+    listed = api.get("/api/dispatches?state=starting", role="operator").json()["items"]
+    assert [d["id"] for d in listed] == [did]

@@ -77,7 +77,7 @@ def list_dispatches(
     _: Viewer,
     machine: Annotated[MachineName | None, Query()] = None,
     state: Annotated[
-        str | None, Query(pattern="^(pending|transferring|verifying|done|failed)$")
+        str | None, Query(pattern="^(pending|transferring|verifying|starting|done|failed)$")
     ] = None,
     cursor: Annotated[str | None, Query(max_length=64)] = None,
     limit: Annotated[int, Query(ge=1, le=500)] = 50,
