@@ -119,12 +119,13 @@ class Runtime:
         self._force_out: tuple[tuple[Target, int], ...] = ()
         self._forces: dict[Target, int] = {}
         size = self.image.size
-        self._raw_ix = bytearray(size.ix)
+        self._raw_ix = [False] * size.ix
         self._raw_iw = [0] * size.iw
         self._debounce = (
             Debounce(self.config.debounce_samples) if self.config.debounce_samples else None
         )
         self._last_retain: dict | None = None
+        self._bits_cache: dict[str, tuple[list, bytes]] = {}
         self._next_retain_ms: int | None = None
         if retain_store is not None:
             self._restore_retain()
@@ -217,16 +218,20 @@ class Runtime:
                 del active[a.number]
 
     def _publish(self) -> Snapshot:
-        """The scan's Snapshot (same content as `ProcessImage.snapshot`)."""
-        img = self.image
+        """The scan's Snapshot (same content as `ProcessImage.snapshot`). Converting a bit
+        list to bytes is the costly part of publishing, so an unchanged bit area reuses the
+        previous scan's bytes."""
+        img, cache = self.image, self._bits_cache
+        bits = []
+        for area in ("ix", "qx", "mx"):
+            lst = getattr(img, area)
+            hit = cache.get(area)
+            if hit is None or hit[0] != lst:
+                hit = (lst[:], bytes(lst))
+                cache[area] = hit
+            bits.append(hit[1])
         return Snapshot(
-            self.scan_count,
-            bytes(img.ix),
-            bytes(img.qx),
-            bytes(img.mx),
-            tuple(img.iw),
-            tuple(img.qw),
-            tuple(img.mw),
+            self.scan_count, bits[0], bits[1], bits[2], tuple(img.iw), tuple(img.qw), tuple(img.mw)
         )
 
     def _apply_writes(self) -> None:
@@ -250,7 +255,7 @@ class Runtime:
 
     def _safe_outputs(self) -> None:
         qx = self.image.qx
-        qx[:] = bytes(len(qx))
+        qx[:] = [False] * len(qx)
         for index, value in self.config.safe_qx.items():
             qx[index] = bool(value)
         if self.config.safe_clear_qw:

@@ -22,9 +22,9 @@ class SimulatedIO:
 
     def __init__(self, size: ImageSize | None = None) -> None:
         s = size or ImageSize()
-        self.ix = bytearray(s.ix)
+        self.ix = [False] * s.ix
         self.iw = [0] * s.iw
-        self.qx = bytearray(s.qx)
+        self.qx = [False] * s.qx
         self.qw = [0] * s.qw
 
     def set_input(self, index: int, value: bool) -> None:

@@ -68,7 +68,7 @@ def test_write_coil_visible_after_one_scan(client, face_and_plc):
     assert client.read_coils(1, count=1).bits[0] is False  # queued, not yet applied
     plc.scan()
     assert client.read_coils(1, count=1).bits[0] is True
-    assert plc.image.qx[1] == 1
+    assert plc.image.qx[1] is True
 
 
 def test_write_register_echo_and_sign(client, face_and_plc):
@@ -84,7 +84,7 @@ def test_write_coils_and_registers(client, face_and_plc):
     assert not client.write_coils(8, [True, True, False, True]).isError()
     assert not client.write_registers(1024 + 10, [1, 2, 3]).isError()
     plc.scan()
-    assert list(plc.image.qx[8:12]) == [1, 1, 0, 1]
+    assert plc.image.qx[8:12] == [True, True, False, True]
     assert plc.image.mw[10:13] == [1, 2, 3]
 
 

@@ -90,7 +90,7 @@ def test_debounce_change_counts_after_four_identical_samples():
     for k in range(8, 12):
         rt.scan(k * 10)
         assert rt.read("Stop") is False
-    assert io.qx[0] == 1  # outputs reach the provider
+    assert io.qx[0] is True  # outputs reach the provider
 
 
 @pytest.mark.parametrize(
@@ -125,7 +125,7 @@ def test_forcing_inputs_before_and_outputs_after_the_logic():
     assert rt.read("Motor") is True and rt.read("Start") is True
     rt.force("%QX0.0", False)  # forced output wins over the logic
     rt.scan(10)
-    assert rt.read("Motor") is False and io.qx[0] == 0
+    assert rt.read("Motor") is False and io.qx[0] is False
     assert rt.forces == {("IX", 0): True, ("QX", 0): False}
     rt.unforce("Motor")
     rt.scan(20)
@@ -214,7 +214,7 @@ def test_watchdog_trips_on_a_slow_scan():
     clock.cost_ns = 30_000_000  # 30 ms > 25 ms
     rt.scan(20)
     assert rt.mode is Mode.FAULT
-    assert rt.read("Motor") is False and rt.read("Lamp") is True and io.qx[0] == 0
+    assert rt.read("Motor") is False and rt.read("Lamp") is True and io.qx[0] is False
     alarm = rt.alarms[ALARM_WATCHDOG]
     assert alarm.fatal and "30.000 ms" in alarm.detail and alarm.scan == 3
     clock.cost_ns = 1_000
@@ -430,4 +430,4 @@ def test_simulated_io_of_another_size_keeps_the_image_size():
     rt = make(io=io)
     io.set_input(0, True)
     rt.scan(0)
-    assert len(rt.image.ix) == 1024 and rt.read("Motor") is True and io.qx[0] == 1
+    assert len(rt.image.ix) == 1024 and rt.read("Motor") is True and io.qx[0] is True
