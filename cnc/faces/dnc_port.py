@@ -46,6 +46,7 @@ from cnc.faces.tape import (
     parity_error_at,
     strip_parity,
 )
+from cnc.faces.tcp_face import TcpFace
 from cnc.program_memory import MemoryFull, ProgramMemory
 
 log = logging.getLogger(__name__)
@@ -122,7 +123,9 @@ class DncPortStats:
     errors: dict[int, int] = field(default_factory=dict)
 
 
-class DncPort:
+class DncPort(TcpFace):
+    _what = "DNC port"
+
     def __init__(
         self,
         memory: ProgramMemory,
@@ -137,6 +140,7 @@ class DncPort:
         xoff_slack_bytes: int = 256,
         max_block: int = 4096,
     ) -> None:
+        super().__init__()
         self.memory = memory
         self.host, self.port, self.parity = host, port, parity
         self.idle_timeout_s = idle_timeout_s
@@ -146,36 +150,14 @@ class DncPort:
         self.xoff_slack = xoff_slack_bytes
         self.max_block = max_block
         self.stats = DncPortStats()
-        self._server: asyncio.Server | None = None
         self._listeners: set[asyncio.Queue[str]] = set()
         self._loop: asyncio.AbstractEventLoop | None = None
-        self._sessions: set[asyncio.Task] = set()
-
-    @property
-    def bound_port(self) -> int:
-        if self._server is None:
-            raise RuntimeError("DNC port not started")
-        return self._server.sockets[0].getsockname()[1]
 
     async def start(self) -> None:
         self._loop = asyncio.get_running_loop()
         # Small buffers make the TCP stream behave like the serial line it stands for: a
         # sender cannot run more than a few kilobytes ahead of what the machine has read.
-        self._server = await asyncio.start_server(
-            self._session, self.host, self.port, limit=LINE_BUFFER_BYTES
-        )
-
-    async def stop(self) -> None:
-        server, self._server = self._server, None
-        if server is None:
-            return
-        server.close()
-        for task in list(self._sessions):
-            task.cancel()
-        for task in list(self._sessions):
-            with contextlib.suppress(asyncio.CancelledError, Exception):
-                await task
-        await server.wait_closed()
+        await self._serve(self.host, self.port, limit=LINE_BUFFER_BYTES)
 
     def remote_request(self, number: int) -> int:
         """Ask the host for program `number` (the operator's remote request). Thread-safe.
@@ -193,8 +175,6 @@ class DncPort:
     # --------------------------------------------------------------------------- sessions
 
     async def _session(self, reader: asyncio.StreamReader, writer: asyncio.StreamWriter) -> None:
-        task = asyncio.current_task()
-        self._sessions.add(task)
         sock = writer.get_extra_info("socket")
         if sock is not None:
             sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, LINE_BUFFER_BYTES)
@@ -222,7 +202,6 @@ class DncPort:
         except Exception:  # a bug must cost one connection, never the port
             log.exception("DNC session failed")
         finally:
-            self._sessions.discard(task)
             with contextlib.suppress(Exception):
                 writer.close()
 

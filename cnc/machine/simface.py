@@ -20,47 +20,28 @@ comes once the machine has taken them.
 from __future__ import annotations
 
 import asyncio
-import contextlib
 
+from cnc.faces.tcp_face import TcpFace
 from cnc.machine.faults import FaultSpecError, parse_fault_spec, valid_specs
 
 MAX_LINE = 1024
 
 
-class SimulationFace:
+class SimulationFace(TcpFace):
+    _what = "simulation face"
+
     def __init__(
         self, machine, *, host: str = "127.0.0.1", port: int = 0, timeout_s: float = 10.0
     ) -> None:
+        super().__init__()
         self.machine = machine
         self.host, self.port = host, port
         self.timeout_s = timeout_s
-        self._server: asyncio.Server | None = None
-        self._sessions: set[asyncio.Task] = set()
-
-    @property
-    def bound_port(self) -> int:
-        if self._server is None:
-            raise RuntimeError("simulation face not started")
-        return self._server.sockets[0].getsockname()[1]
 
     async def start(self) -> None:
-        self._server = await asyncio.start_server(self._session, self.host, self.port)
-
-    async def stop(self) -> None:
-        server, self._server = self._server, None
-        if server is not None:
-            server.close()
-            for task in list(self._sessions):
-                task.cancel()
-            for task in list(self._sessions):
-                with contextlib.suppress(asyncio.CancelledError, Exception):
-                    await task
-            with contextlib.suppress(Exception):
-                await asyncio.wait_for(server.wait_closed(), 1.0)
+        await self._serve(self.host, self.port)
 
     async def _session(self, reader: asyncio.StreamReader, writer: asyncio.StreamWriter) -> None:
-        task = asyncio.current_task()
-        self._sessions.add(task)
         try:
             while True:
                 try:
@@ -84,7 +65,6 @@ class SimulationFace:
         except (ConnectionError, asyncio.CancelledError):
             pass
         finally:
-            self._sessions.discard(task)
             writer.close()
 
     async def execute(self, line: str) -> str:
