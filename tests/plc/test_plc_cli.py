@@ -7,6 +7,7 @@ import re
 import signal
 import subprocess
 import sys
+import time
 from pathlib import Path
 
 from pymodbus.client import ModbusTcpClient
@@ -87,7 +88,10 @@ def test_run_serves_the_image_over_modbus_until_interrupted():
         assert client.connect()
         try:
             assert not client.write_register(1024, 1500).isError()  # %MW0 = SetSpeed
-            for _ in range(100):  # the write is applied by a later scan
+            # The write is applied by a later scan of a real-time process: poll to a
+            # generous deadline, not a read count (100 reads can take less than one scan).
+            deadline = time.monotonic() + 10
+            while time.monotonic() < deadline:
                 rr = client.read_holding_registers(1024, count=1)
                 if not rr.isError() and rr.registers == [1500]:
                     break
