@@ -28,7 +28,14 @@ from server.mtconnect.buffer import (
     CircularBuffer,
     Observation,
 )
-from server.mtconnect.model import DataItem, Device, devices_element, devices_from_cell
+from server.mtconnect.model import (
+    AGENT_OWNED,
+    QUALIFIERS,
+    DataItem,
+    Device,
+    devices_element,
+    devices_from_cell,
+)
 from server.mtconnect.path import PathError, select
 from server.mtconnect.printer import HeaderInfo, print_error, print_probe, print_streams
 from server.mtconnect.shdr import UNAVAILABLE_VALUES, ShdrValue, parse_line
@@ -141,7 +148,7 @@ class Agent:
         """Apply one SHDR data line from `device`'s adapter; returns observations added."""
         dev = self.device(device)
         ts_token, values = parse_line(line, self._conditions[dev.name])
-        if self.ignore_timestamps or not _ISO.match(ts_token):
+        if self.ignore_timestamps or not _is_iso(ts_token):
             ts = iso_time(self.clock())
         else:
             ts = ts_token if ts_token.endswith("Z") else ts_token + "Z"
@@ -149,15 +156,27 @@ class Agent:
         with self._lock:
             for v in values:
                 di = dev.by_key.get(v.key) or self._by_id.get(v.key)
-                if di is None:
-                    unknown = self.state[dev.name].unknown_keys
-                    if v.key not in unknown:  # log each unknown key once, like cppagent
-                        unknown.add(v.key)
-                        log.warning("%s: unknown data item %r from the adapter", dev.name, v.key)
+                if di is None or di.type in AGENT_OWNED:
+                    self._warn_once(dev.name, v.key, "unknown data item %r from the adapter")
                     continue
-                if self._add(_observation(di, v, ts)) is not None:
+                obs = _observation(di, v, ts)
+                if obs.value != UNAVAILABLE and not di.accepts(obs.value):
+                    # A value the 2.5 schema rejects (a sample that is no number, a word
+                    # outside the vocabulary) would make every document invalid: the item
+                    # is UNAVAILABLE instead, and the adapter's mistake is logged once.
+                    self._warn_once(
+                        dev.name, f"{v.key}={obs.value}", "value %r is not valid for its type"
+                    )
+                    obs = _unavailable(di, ts)
+                if self._add(obs) is not None:
                     added += 1
         return added
+
+    def _warn_once(self, device: str, what: str, message: str) -> None:
+        seen = self.state[device].unknown_keys
+        if what not in seen:  # once per key (or key=value), like cppagent's unknown keys
+            seen.add(what)
+            log.warning("%s: " + message, device, what)
 
     def observe(self, device: str, key: str, value: str, timestamp: str | None = None) -> int:
         """Add one observation of a sample or event (tests, fault injection)."""
@@ -175,8 +194,8 @@ class Agent:
         added = 0
         with self._lock:
             for di in dev.by_key.values():
-                if di.type in ("ASSET_CHANGED", "ASSET_REMOVED"):
-                    continue  # agent-owned
+                if di.type in AGENT_OWNED:
+                    continue
                 if self._add(_unavailable(di, ts)) is not None:
                     added += 1
         return added
@@ -239,7 +258,9 @@ class Agent:
         if device is not None:
             return [self.device(device)]
         if device_type == "Agent":
-            return []  # this agent publishes no Agent device
+            # This agent publishes no Agent device, and a Devices document must hold at
+            # least one Device: there is nothing to answer with.
+            raise RestError("NO_DEVICE", "This agent publishes no Agent device", 404)
         return self.devices
 
     def probe(self, device: str | None = None, device_type: str | None = None) -> str:
@@ -353,7 +374,9 @@ class Agent:
             self.header(),
             self.devices,
             observations,
-            next_sequence=end,
+            # a backwards walk that reached sequence 1 points at 0, which the 2.5 schema's
+            # SequenceType (1..2^64-2) refuses: 1 says the same (nothing older is held)
+            next_sequence=max(end, 1),
             first_sequence=first_out,
             last_sequence=seq - 1,
         )
@@ -432,10 +455,23 @@ def _unavailable(di: DataItem, ts: str) -> Observation:
     return Observation(di, ts, UNAVAILABLE)
 
 
+def _is_iso(token: str) -> bool:
+    """An ISO 8601 date and time that is also a valid xs:dateTime (month 13 is not)."""
+    if not _ISO.match(token):
+        return False
+    try:
+        _dt.datetime.fromisoformat(token.removesuffix("Z"))
+    except ValueError:
+        return False
+    return True
+
+
 def _observation(di: DataItem, v: ShdrValue, ts: str) -> Observation:
     if di.category == "CONDITION":
         level = v.level if v.level in ("NORMAL", "WARNING", "FAULT") else UNAVAILABLE
-        return Observation(di, ts, v.value, 0, level, v.native_code, v.native_severity, v.qualifier)
+        # 2.5 knows only HIGH and LOW; another qualifier is dropped, the activation kept.
+        qualifier = v.qualifier.upper() if v.qualifier.upper() in QUALIFIERS else ""
+        return Observation(di, ts, v.value, 0, level, v.native_code, v.native_severity, qualifier)
     value = UNAVAILABLE if v.value.upper() in UNAVAILABLE_VALUES else v.value
     return Observation(di, ts, value)
 

@@ -14,6 +14,7 @@ disagree on a key:
 
 from __future__ import annotations
 
+import re
 import xml.etree.ElementTree as ET
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
@@ -31,11 +32,31 @@ class DataItem:
     sub_type: str | None = None
     units: str | None = None
     native_units: str | None = None
+    statistic: str | None = None  # AVERAGE, MAXIMUM: a statistic, not a subType in 2.5
 
     @property
     def element(self) -> str:
         """The observation's element name in a Streams document (POSITION -> Position)."""
         return pascal(self.type)
+
+    def accepts(self, value: str) -> bool:
+        """Whether `value` is a valid result for this data item in an MTConnectStreams 2.5
+        document: samples are xs:float, integer and float events their XML types, controlled
+        vocabularies their words. UNAVAILABLE is always valid; anything else the schema
+        would reject is refused here so that a bad adapter value cannot make an invalid
+        document."""
+        if value == "UNAVAILABLE":
+            return True
+        if self.category == "SAMPLE":
+            return _XS_FLOAT.match(value) is not None
+        kind = EVENT_VALUES.get(self.type)
+        if kind is None:
+            return True  # string events and extensions
+        if kind == "integer":
+            return _XS_INTEGER.match(value) is not None
+        if kind == "float":
+            return _XS_FLOAT.match(value) is not None
+        return value in kind
 
 
 @dataclass(slots=True)
@@ -64,6 +85,54 @@ class Device(Component):
         return [di for comp in self.walk() for di in comp.data_items]
 
 
+# The lexical spaces of xs:float and xs:integer (XML Schema part 2), as the schemas check them.
+_XS_FLOAT = re.compile(r"^(?:[+-]?(?:\d+(?:\.\d*)?|\.\d+)(?:[eE][+-]?\d+)?|[+-]?INF|NaN)$")
+_XS_INTEGER = re.compile(r"^[+-]?\d+$")
+
+# Event value types of MTConnectStreams 2.5 for the event types this agent publishes:
+# IntegerEvent, FloatEvent, or the controlled vocabulary of the event (without UNAVAILABLE,
+# which every event accepts). Event types not listed are string events.
+EVENT_VALUES: dict[str, str | frozenset[str]] = {
+    "LINE_NUMBER": "integer",
+    "PART_COUNT": "integer",
+    "PATH_FEEDRATE_OVERRIDE": "float",
+    "ROTARY_VELOCITY_OVERRIDE": "float",
+    "AVAILABILITY": frozenset({"AVAILABLE"}),
+    "EMERGENCY_STOP": frozenset({"ARMED", "TRIGGERED"}),
+    "CONTROLLER_MODE": frozenset(
+        {"AUTOMATIC", "MANUAL", "MANUAL_DATA_INPUT", "SEMI_AUTOMATIC", "EDIT", "FEED_HOLD"}
+    ),
+    "EXECUTION": frozenset(
+        {
+            "READY",
+            "ACTIVE",
+            "INTERRUPTED",
+            "FEED_HOLD",
+            "STOPPED",
+            "OPTIONAL_STOP",
+            "PROGRAM_STOPPED",
+            "PROGRAM_COMPLETED",
+            "WAIT",
+            "PROGRAM_OPTIONAL_STOP",
+        }
+    ),
+    "ROTARY_MODE": frozenset({"SPINDLE", "INDEX", "CONTOUR"}),
+}
+
+# Condition qualifiers of MTConnectStreams 2.5 (QualifierType).
+QUALIFIERS = frozenset({"HIGH", "LOW"})
+
+# Words the SHDR table uses as a subType that MTConnect 2.5 has as a DataItem `statistic`
+# (DataItemStatisticsEnum) and not in DataItemSubEnumEnum: AVERAGE is no subType at all.
+STATISTICS = frozenset({"AVERAGE", "MAXIMUM", "MINIMUM"})
+
+# Data items the agent owns (asset events): an adapter cannot write them.
+AGENT_OWNED = frozenset({"ASSET_CHANGED", "ASSET_REMOVED"})
+
+# xs:NCName, simplified to ASCII: ids and componentIds are xs:ID in the 2.5 schemas.
+_NCNAME = re.compile(r"^[A-Za-z_][A-Za-z0-9_.-]*$")
+
+
 def pascal(type_: str) -> str:
     """MTConnect element name of a data item type; `x:FOO_BAR` keeps its prefix."""
     prefix, _, name = type_.rpartition(":")
@@ -79,6 +148,11 @@ def build_device(
     description: str = "",
 ) -> Device:
     """The Device of one machine with these axes."""
+    if not _NCNAME.match(name):
+        raise ValueError(
+            f"machine name {name!r} cannot name an MTConnect device: ids are xs:ID, so the "
+            "name must start with a letter or '_' and hold only letters, digits, '_', '-', '.'"
+        )
     device = Device("Device", name, name, uuid=uuid or f"fmscell-{name}", description=description)
     axes_c = Component("Axes", f"{name}_axes", "base")
     controller = Component("Controller", f"{name}_cont", "controller")
@@ -102,15 +176,19 @@ def build_device(
 
     def add(item: ShdrItem) -> None:
         comp = by_component[item.component]
+        sub_type, statistic = item.sub_type, None
+        if item.category == "SAMPLE" and sub_type in STATISTICS:
+            sub_type, statistic = None, sub_type
         di = DataItem(
             id=f"{name}_{item.key}",
             name=item.key,
             category=item.category,
             type=item.type,
             component_id=comp.id,
-            sub_type=item.sub_type,
+            sub_type=sub_type,
             units=item.units,
             native_units=item.native_units,
+            statistic=statistic,
         )
         comp.data_items.append(di)
         device.by_key[item.key] = di
@@ -158,6 +236,8 @@ def _item_attrs(di: DataItem) -> Mapping[str, str]:
     attrs = {"category": di.category, "id": di.id, "name": di.name, "type": di.type}
     if di.sub_type:
         attrs["subType"] = di.sub_type
+    if di.statistic:
+        attrs["statistic"] = di.statistic
     if di.units:
         attrs["units"] = di.units
     if di.native_units:

@@ -12,7 +12,7 @@ from dataclasses import dataclass
 from xml.sax.saxutils import escape, quoteattr
 
 from server.mtconnect.buffer import Observation
-from server.mtconnect.model import Device, devices_element
+from server.mtconnect.model import AGENT_OWNED, Device, devices_element
 
 SCHEMA_VERSION = "2.5"
 AGENT_VERSION = "2.5.0.0"
@@ -43,15 +43,18 @@ class HeaderInfo:
     device_model_change_time: str
 
 
-def _header(h: HeaderInfo, **extra: int) -> str:
+def _header(h: HeaderInfo, *, model_change_time: bool = True, **extra: int) -> str:
+    """The Header element. MTConnectError 2.5's HeaderType has no deviceModelChangeTime
+    (Devices and Streams require it), so error documents leave it out."""
     attrs = {
         "creationTime": h.creation_time,
         "sender": h.sender,
         "instanceId": str(h.instance_id),
         "version": AGENT_VERSION,
-        "deviceModelChangeTime": h.device_model_change_time,
-        "bufferSize": str(h.buffer_size),
     }
+    if model_change_time:
+        attrs["deviceModelChangeTime"] = h.device_model_change_time
+    attrs["bufferSize"] = str(h.buffer_size)
     attrs.update({k: str(v) for k, v in extra.items()})
     return "<Header " + " ".join(f"{k}={quoteattr(v)}" for k, v in attrs.items()) + "/>"
 
@@ -78,7 +81,7 @@ def print_error(h: HeaderInfo, errors: Iterable[tuple[str, str]]) -> str:
     return (
         _declaration()
         + _root_open("Error")
-        + _header(h)
+        + _header(h, model_change_time=False)
         + f"<Errors>{items}</Errors>"
         + "</MTConnectError>"
     )
@@ -148,6 +151,10 @@ def _observation(o: Observation) -> str:
     if di.category == "CONDITION":
         tag = o.level.capitalize() or "Unavailable"
         attrs.append(f"type={quoteattr(di.type)}")
+        if tag in _ACTIVATED:
+            # Warning and Fault require conditionId in 2.5; like cppagent, the native code
+            # identifies the activation (the data item id when the adapter gave none).
+            attrs.append(f"conditionId={quoteattr(o.native_code or di.id)}")
         if o.native_code:
             attrs.append(f"nativeCode={quoteattr(o.native_code)}")
         if o.native_severity:
@@ -157,5 +164,14 @@ def _observation(o: Observation) -> str:
         if o.value:
             return f"<{tag} {' '.join(attrs)}>{escape(o.value)}</{tag}>"
         return f"<{tag} {' '.join(attrs)}/>"
+    if di.statistic:
+        attrs.append(f"statistic={quoteattr(di.statistic)}")
+    if di.type in AGENT_OWNED:
+        # AssetChanged/AssetRemoved require assetType; this agent holds no assets, so the
+        # events are only ever UNAVAILABLE, and so is their asset type (as cppagent prints).
+        attrs.append('assetType="UNAVAILABLE"')
     tag = di.element
     return f"<{tag} {' '.join(attrs)}>{escape(o.value)}</{tag}>"
+
+
+_ACTIVATED = ("Warning", "Fault")

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import random
+import xml.etree.ElementTree as ET
 
 import pytest
 from hypothesis import given, settings
@@ -15,6 +16,7 @@ from tests.server.test_mtconnect_support import (
     error_code,
     header,
     parse,
+    schema_problems,
     seqs,
     small_agent,
     values,
@@ -523,3 +525,272 @@ def test_streams_structure_matches_the_probe():
                         if di["category"] == "SAMPLE" and obs.text != "UNAVAILABLE":
                             float(obs.text)
     assert set(items) == seen  # every data item of every device has a current value
+
+
+# --- the MTConnect 2.5 schema rules, on every kind of document (docs/mtconnect.md) ---------
+
+
+def _busy_cell_agent(**kw) -> Agent:
+    """A mill and a lathe with every kind of value this agent publishes: samples with and
+    without units, every event, conditions Normal/Warning/Fault/Unavailable (with and without
+    native code and qualifier), and the lathe's adapter gone (everything UNAVAILABLE)."""
+    from cnc.faces.shdr import ShdrFormatter
+    from cnc.status import Alarm, AxisStatus, MachineStatus
+
+    kw.setdefault("clock", FakeClock())
+    a = Agent([build_device("mill", ["X", "Y", "Z"]), build_device("lathe", ["X", "Z"])], **kw)
+    for name, axes in (("mill", ("X", "Y", "Z")), ("lathe", ("X", "Z"))):
+        status = MachineStatus(
+            execution="ACTIVE",
+            mode_detail="AUTO",
+            program='O1000 <&> "x"',
+            line=120,
+            block="G01 X1 F100",
+            path_feed_rate=600.0,
+            axes={ax: AxisStatus(1.5, 1.25) for ax in axes},
+            spindle_speed=1200.0,
+            spindle_load=12.5,
+            part_count=3,
+            adaptive_control="ACTIVE",
+            alarms=(
+                Alarm(1012, "following error", "DRIVE", "FAULT", "X"),
+                Alarm(2001, "low air", "PLC", "WARNING"),
+                Alarm(3, "nc", "NC", "FAULT"),
+                Alarm(5, "dnc", "DNC", "FAULT"),
+            ),
+        )
+        for line in ShdrFormatter(axes).dump(status, TS):
+            a.ingest_line(name, line)
+    a.ingest_line("mill", f"{TS}|bus_cond|WARNING|||HIGH|bus load high")
+    a.ingest_line("mill", f"{TS}|nc_cond|NORMAL|3|||")
+    a.disconnected("lathe")
+    return a
+
+
+SCHEMA_REQUESTS = [
+    ("probe", None, {}),
+    ("probe", "mill", {}),
+    ("probe", "lathe", {}),
+    ("probe", None, {"deviceType": "Device"}),
+    ("current", None, {}),
+    ("current", "mill", {}),
+    ("current", "lathe", {}),
+    ("current", None, {"at": "30"}),
+    ("current", None, {"path": "//DataItem[@category='CONDITION']"}),
+    ("current", "mill", {"path": "//Controller"}),
+    ("sample", None, {"count": "1000"}),
+    ("sample", None, {"count": "-1000"}),  # walks back to sequence 1
+    ("sample", None, {"from": "5", "count": "20"}),
+    ("sample", None, {"from": "10", "to": "60"}),
+    ("sample", None, {"to": "40", "count": "5"}),
+    ("sample", "lathe", {"count": "500"}),
+    ("sample", None, {"path": '//Linear[@name="X"]', "count": "500"}),
+    ("sample", None, {"from": "next"}),  # an empty page
+    ("sample", None, {"from": "0"}),  # OUT_OF_RANGE
+    ("current", None, {"at": "0"}),  # OUT_OF_RANGE
+    ("current", "nope", {}),  # NO_DEVICE
+    ("probe", None, {"deviceType": "Agent"}),  # NO_DEVICE: no Agent device is published
+    ("sample", None, {"path": "//Nothing"}),  # INVALID_XPATH
+    ("sample", None, {"count": "abc"}),  # QUERY_ERROR
+    ("probe", None, {"deviceType": "Robot"}),  # INVALID_REQUEST
+    ("probe", None, {"format": "json"}),  # UNSUPPORTED
+    ("sample", None, {"interval": "100"}),  # UNSUPPORTED
+    ("assets", None, {}),  # INVALID_URI
+]
+
+
+@pytest.mark.parametrize(("kind", "device", "params"), SCHEMA_REQUESTS)
+def test_every_document_keeps_the_25_schema_rules(kind, device, params):
+    a = _BUSY_AGENT
+    if params.get("from") == "next":
+        params = {"from": str(a.buffer.next_sequence)}
+    status, text = a.request(kind, device, params)
+    assert schema_problems(text) == [], (status, text[:300])
+
+
+_BUSY_AGENT = _busy_cell_agent(buffer_size=4096)
+
+
+def test_streamed_parts_keep_the_25_schema_rules():
+    import asyncio
+
+    from web_api.mtconnect import stream_parts
+
+    a = _busy_cell_agent(buffer_size=64)
+    plan = a.stream_plan("sample", None, {"interval": "10", "heartbeat": "10", "count": "5"})
+    bodies = []
+
+    async def sleep(_):
+        a.ingest_line("mill", f"{TS}|line|{len(bodies) + 1}")
+
+    async def take(n: int):
+        gen = stream_parts(a, plan, "b", sleep=sleep, clock=lambda: 20.0 * len(bodies))
+        async for part in gen:
+            bodies.append(part.split(b"\r\n\r\n", 1)[1].rsplit(b"\r\n", 1)[0].decode())
+            if len(bodies) == n:
+                break
+        await gen.aclose()
+
+    asyncio.run(take(3))
+    assert len(bodies) == 3
+    for body in bodies:
+        assert schema_problems(body) == []
+
+
+def _first(text: str, local: str, **attrs) -> ET.Element:
+    root = ET.fromstring(text.encode())
+    for el in root.iter():
+        if el.tag.endswith("}" + local) and all(el.get(k) == v for k, v in attrs.items()):
+            return el
+    raise AssertionError(f"no {local} {attrs}")
+
+
+def test_fault_and_warning_carry_condition_id_normal_does_not():
+    text = _BUSY_AGENT.request("current", "mill", {})[1]
+    fault = _first(text, "Fault", dataItemId="mill_Xservo")
+    assert (fault.get("conditionId"), fault.get("nativeCode")) == ("1012", "1012")
+    warning = _first(text, "Warning", dataItemId="mill_bus_cond")
+    # no native code from the adapter: the data item id names the activation
+    assert warning.get("conditionId") == "mill_bus_cond" and warning.get("nativeCode") is None
+    normal = _first(text, "Normal", dataItemId="mill_Yservo")
+    assert normal.get("conditionId") is None
+    lathe = _BUSY_AGENT.request("current", "lathe", {})[1]
+    assert _first(lathe, "Unavailable", dataItemId="lathe_nc_cond").get("conditionId") is None
+
+
+@pytest.mark.parametrize("element", ["AssetChanged", "AssetRemoved"])
+def test_asset_events_carry_asset_type(element):
+    text = _BUSY_AGENT.request("current", "mill", {})[1]
+    el = _first(text, element)
+    assert (el.get("assetType"), el.text) == ("UNAVAILABLE", "UNAVAILABLE")
+
+
+@pytest.mark.parametrize(
+    ("kind", "params", "has_model_change_time"),
+    [
+        ("probe", {}, True),
+        ("current", {}, True),
+        ("sample", {}, True),
+        ("sample", {"from": "0"}, False),  # an Error document
+    ],
+)
+def test_device_model_change_time_only_outside_error_documents(kind, params, has_model_change_time):
+    text = _BUSY_AGENT.request(kind, None, params)[1]
+    head = ET.fromstring(text.encode())[0]
+    assert ("deviceModelChangeTime" in head.attrib) is has_model_change_time
+
+
+@pytest.mark.parametrize(
+    ("key", "statistic"), [("bus_load", "AVERAGE"), ("bus_load_peak", "MAXIMUM")]
+)
+def test_average_and_peak_are_statistics_not_sub_types(key, statistic):
+    probe = _BUSY_AGENT.request("probe", "mill", {})[1]
+    item = _first(probe, "DataItem", id=f"mill_{key}")
+    assert (item.get("statistic"), item.get("subType")) == (statistic, None)
+    current = _BUSY_AGENT.request("current", "mill", {})[1]
+    obs = _first(current, "CanBusLoad", dataItemId=f"mill_{key}")
+    assert (obs.get("statistic"), obs.get("subType")) == (statistic, None)
+
+
+def test_agent_device_type_is_no_device_not_an_empty_devices_element():
+    status, text = _BUSY_AGENT.request("probe", None, {"deviceType": "Agent"})
+    assert (status, error_code(text)[0]) == (404, "NO_DEVICE")
+
+
+def test_backward_walk_to_the_first_sequence_keeps_next_sequence_at_least_one():
+    a = small_agent()
+    root = parse("Streams", a.request("sample", None, {"count": f"-{a.buffer.size}"})[1])
+    assert seqs(root)[0] == 1 and header(root)["nextSequence"] == "1"
+
+
+# Adapter values the 2.5 schema would reject: the item becomes UNAVAILABLE instead of making
+# every later document invalid. (key, value)
+BAD_ADAPTER_VALUES = [
+    ("Xact", "abc"),  # a sample is xs:float
+    ("Xact", "inf"),  # xs:float spells it INF
+    ("path_feedrate", "1,5"),
+    ("bus_load", "high"),  # extension samples too
+    ("line", "12.5"),  # LineNumber is an IntegerEvent
+    ("part_count", "three"),
+    ("feed_ovr", "100%"),  # PathFeedrateOverride is a FloatEvent
+    ("exec", "RUNNING"),  # not an Execution word
+    ("mode", "AUTO"),
+    ("estop", "PRESSED"),
+    ("avail", "YES"),
+    ("Cmode", "TURNING"),
+]
+
+
+@pytest.mark.parametrize(("key", "value"), BAD_ADAPTER_VALUES)
+def test_a_value_the_schema_rejects_becomes_unavailable(key, value):
+    a = small_agent()
+    good = {"Xact": "1.5", "path_feedrate": "2", "bus_load": "3", "line": "12", "part_count": "3"}
+    good |= {"feed_ovr": "100", "exec": "ACTIVE", "mode": "AUTOMATIC", "estop": "ARMED"}
+    good |= {"avail": "AVAILABLE", "Cmode": "SPINDLE"}
+    a.ingest_line("m1", f"{TS}|{key}|{good[key]}")
+    assert a.value("m1", key) == good[key]
+    a.ingest_line("m1", f"{TS}|{key}|{value}")
+    assert a.value("m1", key) == "UNAVAILABLE"
+    assert schema_problems(a.request("current", "m1", {})[1]) == []
+
+
+@pytest.mark.parametrize(("qualifier", "kept"), [("HIGH", "HIGH"), ("low", "LOW"), ("WEIRD", None)])
+def test_condition_qualifier_is_high_or_low_or_dropped(qualifier, kept):
+    a = small_agent()
+    a.ingest_line("m1", f"{TS}|nc_cond|FAULT|9|FAULT|{qualifier}|text")
+    fault = _first(a.request("current", "m1", {})[1], "Fault")
+    assert (fault.get("qualifier"), fault.text) == (kept, "text")
+
+
+@pytest.mark.parametrize(
+    "stamp", ["2026-13-01T00:00:00Z", "2026-02-30T10:00:00.5", "2026-01-01T25:00:00"]
+)
+def test_adapter_timestamp_that_is_no_date_is_replaced(stamp):
+    a = small_agent(clock=FakeClock(0.0))
+    a.ingest_line("m1", f"{stamp}|exec|ACTIVE")
+    assert a.latest("m1", "exec").timestamp == "1970-01-01T00:00:00.000000Z"
+
+
+@pytest.mark.parametrize("name", ["1mill", "mill one", "mill:1", ""])
+def test_machine_name_that_cannot_be_an_xml_id_is_refused(name):
+    with pytest.raises(ValueError, match="xs:ID"):
+        build_device(name, ["X"])
+
+
+# The checker itself: each broken rule, put into an otherwise valid document, is reported.
+# (request, old text, new text, expected problem)
+CHECKER_CASES = [
+    (
+        ("sample", {"from": "0"}),
+        "bufferSize=",
+        'deviceModelChangeTime="2026-01-01T00:00:00Z" bufferSize=',
+        "Header may not carry deviceModelChangeTime",
+    ),
+    (("current", {}), 'conditionId="1012" ', "", "lacks conditionId"),
+    (("current", {}), ' assetType="UNAVAILABLE"', "", "lacks assetType"),
+    (("current", {}), 'statistic="AVERAGE"', 'subType="AVERAGE"', "is not a 2.5 subType"),
+    (("probe", {}), 'statistic="AVERAGE"', 'subType="AVERAGE"', "is not a 2.5 subType"),
+    (("current", {}), 'nextSequence="', 'nextSequence="-', "nextSequence='-"),
+    (("current", {}), ">ACTIVE</Execution>", ">RUNNING</Execution>", "not valid for Execution"),
+    (("current", {}), ">120</LineNumber>", ">12.5</LineNumber>", "not valid for LineNumber"),
+    (("current", {}), ">1.5000</Position>", ">abc</Position>", "not valid for Position"),
+    (("current", {}), 'qualifier="HIGH"', 'qualifier="VERY"', "not HIGH or LOW"),
+    (
+        ("sample", {"count": "abc"}),
+        'errorCode="QUERY_ERROR"',
+        'errorCode="BAD"',
+        "not a 2.5 ErrorCodeType",
+    ),
+    (("probe", {}), 'id="mill_axes"', 'id="1mill_axes"', "no NCName"),
+    (("probe", {}), 'assetCount="0"', "", "Header lacks assetCount"),
+]
+
+
+@pytest.mark.parametrize(("request_", "old", "new", "problem"), CHECKER_CASES)
+def test_the_rule_checker_reports_each_broken_rule(request_, old, new, problem):
+    kind, params = request_
+    text = _BUSY_AGENT.request(kind, "mill" if kind != "sample" else None, params)[1]
+    assert schema_problems(text) == []
+    assert old in text
+    broken = text.replace(old, new, 1)
+    assert any(problem in p for p in schema_problems(broken)), schema_problems(broken)
