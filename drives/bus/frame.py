@@ -195,16 +195,37 @@ def frame_bits(
         data = b""
     elif len(data) > 8 or not 0 <= dlc <= 15:
         raise ValueError(f"classic CAN frame with {len(data)} data bytes / DLC {dlc}")
+    return _bits_after_header(_header(can_id, extended, remote, dlc), data)
+
+
+def data_frame_bits(can_id: int, data: bytes | bytearray, extended: bool = False) -> int:
+    """`frame_bits` of a data frame (DLC = len(data) <= 8, checked by the caller), uncached.
+
+    The bus computes this for every frame; PDO payloads (positions) rarely repeat, so a cache
+    would miss and only add its own bookkeeping.
+    """
+    head = _HEADERS.get((can_id, extended, False, len(data)))
+    if head is None:
+        head = _header(can_id, extended, False, len(data))
+    return _bits_after_header(head, data)
+
+
+def _header(can_id: int, extended: bool, remote: bool, dlc: int) -> tuple[int, int, int, int]:
     key = (can_id, extended, remote, dlc)
     head = _HEADERS.get(key)
     if head is None:
         if len(_HEADERS) >= 4096:
             _HEADERS.clear()  # bounded: only a babbling fuzzer sees this many headers
         head = _HEADERS[key] = _header_state(can_id, extended, remote, dlc)
+    return head
+
+
+def _bits_after_header(head: tuple[int, int, int, int], data: bytes | bytearray) -> int:
     crc, state, stuff, header_bits = head
     crc_table, stuff8 = _CRC_TABLE, _STUFF8
     for byte in data:
-        crc = ((crc << 8) & 0x7FFF) ^ crc_table[((crc >> 7) ^ byte) & 0xFF]
+        # crc is 15 bits: crc >> 7 is already one byte
+        crc = ((crc << 8) & 0x7FFF) ^ crc_table[(crc >> 7) ^ byte]
         entry = stuff8[state << 8 | byte]
         stuff += entry >> 3
         state = entry & 7

@@ -27,7 +27,7 @@ from typing import Any, Protocol, TextIO
 import can
 
 from drives.bus.candump import CandumpWriter
-from drives.bus.frame import ERROR_FRAME_BITS, frame_bits
+from drives.bus.frame import ERROR_FRAME_BITS, data_frame_bits, frame_bits
 
 logger = logging.getLogger(__name__)
 
@@ -144,29 +144,13 @@ class _Delayed:
 _new_message = can.Message.__new__
 
 
-def _wire_message(msg: can.Message, timestamp: float, channel: str) -> can.Message:
-    """A fresh received copy of `msg`: filled slot by slot, as Message() costs ~3 us."""
-    wire = _new_message(can.Message)
-    wire.timestamp = timestamp
-    wire.arbitration_id = msg.arbitration_id
-    wire.is_extended_id = msg.is_extended_id
-    wire.is_remote_frame = msg.is_remote_frame
-    wire.is_error_frame = False
-    wire.channel = channel
-    wire.dlc = msg.dlc
-    wire.data = bytearray(msg.data)
-    wire.is_fd = False
-    wire.is_rx = True
-    wire.bitrate_switch = False
-    wire.error_state_indicator = False
-    return wire
-
-
-def _priority(msg: can.Message) -> tuple[int, int, int, int]:
-    """Arbitration order: base ID, then 11-bit before 29-bit, extension, data before remote."""
+def _priority(msg: can.Message) -> int:
+    """Arbitration order as one int (lower wins): base ID, then 11-bit before 29-bit, then
+    the extension, then data before remote. Bits: base << 20 | IDE << 19 | ext << 1 | RTR."""
+    ident = msg.arbitration_id
     if msg.is_extended_id:
-        return (msg.arbitration_id >> 18, 1, msg.arbitration_id & 0x3FFFF, int(msg.is_remote_frame))
-    return (msg.arbitration_id, 0, 0, int(msg.is_remote_frame))
+        return (ident >> 18) << 20 | 1 << 19 | (ident & 0x3FFFF) << 1 | msg.is_remote_frame
+    return ident << 20 | msg.is_remote_frame
 
 
 _HUBS: dict[str, CanHub] = {}
@@ -419,13 +403,15 @@ class CanHub:
                     winner = None
                     best = None
                     for bus in self.endpoints:
-                        if bus._tx:
-                            key = _priority(bus._tx[0][1])
+                        tx = bus._tx
+                        if tx:
+                            key = _priority(tx[0][1])
                             if best is None or key < best:
                                 best, winner = key, bus
                     babbler = self._babbler
                     if babbler is not None and (
-                        best is None or (babbler.can_id, int(babbler.extended)) < best[:2]
+                        # (can_id, IDE) before the queue head's (base ID, IDE)
+                        best is None or babbler.can_id << 1 | babbler.extended < best >> 19
                     ):
                         # The babbler only fills wire time up to now; starved frames wait.
                         if self._bus_free_at >= self.now:
@@ -484,7 +470,7 @@ class CanHub:
             bits = frame_bits(ident, b"", extended, True, msg.dlc)
             is_sync = False
         else:
-            bits = frame_bits(ident, bytes(msg.data), extended)
+            bits = data_frame_bits(ident, msg.data, extended)
             is_sync = ident == self.sync_id and not extended
         # `_occupy`, inlined: this runs for every frame
         start = self._bus_free_at
@@ -494,12 +480,32 @@ class CanHub:
             start = max(start, time.time())
         end = start + bits / self.bitrate
         self._bus_free_at = end
-        self.load.account(start, bits, is_sync)
+        load = self.load
+        if is_sync:
+            load.account(start, bits, True)
+        else:  # `BusLoadAccount.account` for a frame inside the SYNC window
+            load._window_bits += bits
+            load._window_frames += 1
+            load.total_bits += bits
+            load.total_frames += 1
         kind = "pdo" if 0x180 <= ident < 0x580 else "sdo" if 0x580 <= ident < 0x680 else "other"
         latency = end - queued_at
-        if latency > self.worst_latency_s[kind]:
-            self.worst_latency_s[kind] = latency
-        self._fan_out(sender, _wire_message(msg, end, self.channel))
+        worst = self.worst_latency_s
+        if latency > worst[kind]:
+            worst[kind] = latency
+        # A fresh received copy of `msg`, filled slot by slot: Message() costs ~3 us.
+        wire = _new_message(can.Message)
+        wire.timestamp = end
+        wire.arbitration_id = ident
+        wire.is_extended_id = extended
+        wire.is_remote_frame = msg.is_remote_frame
+        wire.is_error_frame = False
+        wire.channel = self.channel
+        wire.dlc = msg.dlc
+        wire.data = bytearray(msg.data)
+        wire.is_fd = wire.bitrate_switch = wire.error_state_indicator = False
+        wire.is_rx = True
+        self._fan_out(sender, wire)
 
     def _transmit_error(self, sender: SimBus, msg: can.Message) -> None:
         # The corrupted frame occupies the wire until the error flag, then the error frame.

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import struct
 from dataclasses import dataclass, field
+from functools import partial
 
 from drives.application import ABORT_DEVICE_STATE, ABORT_VALUE_RANGE, ObjectAccessError
 from drives.cia301.od import Entry, ObjectDictionary
@@ -59,6 +60,9 @@ class PdoChannel:
     codec: struct.Struct | None = None
     targets: list[Entry | None] = field(default_factory=list)
     length: int = 0
+    #: TPDO: one zero-argument reader per mapped object, resolved when the mapping is
+    #: compiled (sampling then costs one call per object, no per-frame dispatch)
+    readers: list = field(default_factory=list)
     # runtime
     sync_count: int = 0
     pending: bytes | None = None  # synchronous RPDO waiting for the next SYNC
@@ -165,6 +169,21 @@ class PdoService:
         channel.codec = struct.Struct("<" + "".join(formats))
         channel.targets = targets
         channel.length = channel.codec.size
+        channel.readers = [self._reader(e) for e in targets] if channel.transmit else []
+
+    def _reader(self, entry: Entry | None):
+        """A zero-argument callable returning the current value of a mapped object."""
+        if entry is None:
+            return _zero  # dummy entry: transmitted as 0
+        index, subindex = entry.index, entry.subindex
+        if entry.owned and index not in self.od.read_hooks:
+            # An application may hand out a direct reader for the objects TPDOs sample
+            # every cycle (optional, beyond the DriveApplication protocol).
+            application = self.od.application
+            factory = getattr(application, "object_reader", None)
+            reader = factory(index, subindex) if factory is not None else None
+            return reader or partial(application.read_object, index, subindex)
+        return partial(self.od.get, index, subindex)
 
     def _write_comm(self, entry: Entry, value: int) -> None:
         channel = self._by_comm[entry.index]
@@ -227,18 +246,12 @@ class PdoService:
 
     def pack(self, channel: PdoChannel) -> bytes:
         """Sample the mapped objects of a TPDO."""
-        get = self.od.get
-        read = self.od.application.read_object
-        hooks = self.od.read_hooks
-        values = [
-            0
-            if e is None
-            else read(e.index, e.subindex)
-            if e.owned and e.index not in hooks
-            else get(e.index, e.subindex)
-            for e in channel.targets
-        ]
+        values = [read() for read in channel.readers]
         try:
             return channel.codec.pack(*values)
         except struct.error:
             return channel.codec.pack(*(int(round(v)) for v in values))
+
+
+def _zero() -> int:
+    return 0

@@ -54,6 +54,7 @@ from drives.cia402.statemachine import (
 )
 from drives.cia402.statemachine import step as sm_step
 from drives.plant import OFF, POSITION, VELOCITY, Plant, PlantParams
+from drives.plant.plant import FOLLOWING_ERROR
 
 PP, PV, HOMING, CSP, CSV = 1, 3, 6, 8, 9
 _ENERGIZED = (State.OPERATION_ENABLED, State.QUICK_STOP_ACTIVE, State.FAULT_REACTION_ACTIVE)
@@ -187,6 +188,22 @@ class Drive402:
     def owns(self, index: int) -> bool:
         return index in OBJECTS
 
+    def object_reader(self, index: int, subindex: int):
+        """A direct zero-argument reader for the objects TPDOs sample every cycle, else None
+        (the PDO service then goes through `read_object`). Same values as `read_object`."""
+        if subindex == 0:
+            if index == 0x6041:
+                return self._statusword
+            if index == 0x6064:
+                return self._position_actual_value
+        return None
+
+    def _position_actual_value(self) -> int:
+        # `_i32(self._to_user(p.theta_meas))` inlined: every TPDO1 carries it
+        p = self.plant
+        v = round((p.counts * p._rad_per_count - self._zero) / self._rpu)
+        return v if -0x80000000 <= v <= 0x7FFFFFFF else _i32(v)
+
     def read_object(self, index: int, subindex: int) -> int:
         if (index, subindex) not in _KEYS:
             self._entry(index, subindex)  # raises the abort saying what is missing
@@ -271,68 +288,46 @@ class Drive402:
         many of the n sub-steps it ran (the rest go through `_substep`).
 
         It computes exactly what `_substep` computes there, without the per-sub-step mode
-        dispatch: no stop, no halt (CSP ignores it), no homing, no PP/PV windows. It hands
-        over as soon as a sub-step ends with a fault or a changed switch input.
+        dispatch: no stop, no halt (CSP ignores it), no homing, no PP/PV windows. The plant
+        runs the sub-steps in one call (`Plant.follow_ramp`: the demand ramp, the loops, the
+        following-error and switch monitors) and hands over as soon as a sub-step ends with
+        a fault or a changed switch input.
         """
         power = self._power
         if power.state != State.OPERATION_ENABLED or power.stop is not None or self._hm is not None:
             return 0
-        p, d = self.plant, self._dem
+        d = self._dem
         inputs = self._inputs
-        block_neg, block_pos = bool(inputs & 1), bool(inputs & 2)
-        ilim = self._ilim
-        window = self._fe_window
-        rpc = p._rad_per_count
-        step = p.step
-        # `p.switch_inputs()` inlined (same comparisons on the table position)
-        sw = p.params.switches
-        neg_limit, pos_limit, home = sw.negative_limit, sw.positive_limit, sw.home_switch
-        home_below = sw.home_switch_active_below
-        seg_t, seg_T, seg_to, seg_v = self._seg_t, self._seg_T, self._seg_to, self._seg_v
-        pos, vel = d.pos, d.vel
         self._halt_stopped = False
-        done = 0
-        try:
-            while done < n:
-                pos_now = pos
-                if seg_t < seg_T:
-                    seg_t += h
-                    if seg_t >= seg_T:
-                        pos, vel = seg_to, seg_v
-                    else:
-                        pos += seg_v * h
-                        vel = seg_v
-                else:
-                    vel = 0.0
-                fault = step(h, POSITION, pos_now, vel, vel, ilim, block_neg, block_pos)
-                done += 1
-                if window is not None and abs(pos - p.counts * rpc) > window:
-                    self._fe_timer += h
-                    if self._fe_timer > self._fe_timeout and not fault:
-                        self._fe_latched = True
-                        fault = 0x8611
-                else:
-                    self._fe_timer = 0.0
-                x = p.table_x
-                new_inputs = 0
-                if neg_limit is not None and x <= neg_limit:
-                    new_inputs = 1
-                if pos_limit is not None and x >= pos_limit:
-                    new_inputs |= 2
-                if home is not None and (x <= home if home_below else x >= home):
-                    new_inputs |= 4
-                if fault or new_inputs != inputs:
-                    d.pos, d.vel = pos, vel
-                    self._seg_t = seg_t
-                    self._inputs = new_inputs
-                    if new_inputs & ~inputs & 3 and not fault:
-                        fault = 0x8612
-                    if fault:
-                        self._raise_fault(fault)
-                    return done
-        finally:
-            d.pos, d.vel = pos, vel
-            self._seg_t = seg_t
+        done, fault, new_inputs, pos, vel, seg_t, fe_timer = self.plant.follow_ramp(
+            h,
+            n,
+            d.pos,
+            self._seg_t,
+            self._seg_T,
+            self._seg_to,
+            self._seg_v,
+            self._ilim,
+            bool(inputs & 1),
+            bool(inputs & 2),
+            self._fe_window,
+            self._fe_timer,
+            self._fe_timeout,
+            inputs,
+        )
+        if not done:
+            return 0
+        d.pos, d.vel = pos, vel
+        self._seg_t = seg_t
+        self._fe_timer = fe_timer
+        if fault == FOLLOWING_ERROR:
+            self._fe_latched = True
+        if fault or new_inputs != inputs:
+            self._inputs = new_inputs
+            if new_inputs & ~inputs & 3 and not fault:
+                fault = 0x8612
+            if fault:
+                self._raise_fault(fault)
         return done
 
     def on_nmt_state(self, state: str) -> None:
@@ -937,24 +932,24 @@ class Drive402:
 
     # ------------------------------------------------------------------ statusword
     def _statusword(self) -> int:
-        st = self._power.state
+        power = self._power
+        st = power.state
         p = self.plant
         sw = STATE_BITS[st] | SW_REMOTE
-        if p.voltage_present:
+        params = p.params
+        if p.vdc >= params.dc_link.voltage_present:  # `p.voltage_present`, inlined
             sw |= SW_VOLTAGE_ENABLED
-        if p.warnings:
+        th = params.thermal  # `p.warnings`, inlined
+        if p.winding_temp > th.warning or p.i2t > th.i2t_warning_fraction * p._i2t_limit:
             sw |= SW_WARNING
         if self._limit_active or p.velocity_limited:
             sw |= SW_INTERNAL_LIMIT
         mode = self._mode
         if self._fe_latched and mode in (PP, CSP, HOMING):
             sw |= SW_OMS13
-        if st == State.QUICK_STOP_ACTIVE and self._power.stop is None:
+        if st == State.QUICK_STOP_ACTIVE and power.stop is None:
             sw |= SW_TARGET_REACHED
-        if st != State.OPERATION_ENABLED:
-            return sw
-        thr = self.params.loops.standstill_velocity
-        if self._power.stop is not None:
+        if st != State.OPERATION_ENABLED or power.stop is not None:
             return sw
         if mode in (CSP, CSV):
             sw |= SW_OMS12  # drive follows the command value
@@ -973,6 +968,7 @@ class Drive402:
                 sw |= SW_TARGET_REACHED
         elif mode == HOMING:
             status = self._hm_status
+            thr = self.params.loops.standstill_velocity
             if status == HM.HomingStatus.ERROR and abs(p.vel_meas) < thr:
                 status = HM.HomingStatus.ERROR_STOPPED
             sw |= status.value

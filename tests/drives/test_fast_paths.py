@@ -41,6 +41,16 @@ def _trace(d: Drive402, targets: list[int]) -> list[tuple]:
                 p.current,
                 p.vdc,
                 p.table_x,
+                p.vel_meas,
+                p.vel_integral,
+                p.voltage,
+                p.winding_temp,
+                p.i2t,
+                p.chopper,
+                p.blocked_for,
+                p.current_limited,
+                p.velocity_limited,
+                d._fe_timer,
             )
         )
     return out
@@ -53,6 +63,9 @@ def _trace(d: Drive402, targets: list[int]) -> list[tuple]:
         "sine",  # plain following
         "negative_limit",  # runs onto the -5 mm limit switch: fault 0x8612 mid-cycle
         "following_error",  # a jump beyond the 0x6065 window: fault 0x8611
+        "loaded_backlash",  # load force, backlash, hot ambient: every term of the plant
+        "blocked",  # a blocked axis at the current limit: fault 0x7121
+        "supply_loss",  # mains lost while moving: the DC link sags, 0x3130
     ],
 )
 def test_csp_substep_loop_equals_the_generic_substep(substep, scenario, monkeypatch):
@@ -65,8 +78,19 @@ def test_csp_substep_loop_equals_the_generic_substep(substep, scenario, monkeypa
     elif scenario == "negative_limit":
         # 200 mm down to the switch at -5 mm at 100 mm/s ends in a limit fault
         targets = [x0 - 100 * k for k in range(2200)]
-    else:
+    elif scenario == "following_error":
         targets = [x0] * 5 + [x0 + 200_000] * 50
+    else:
+        for d in (fast, slow):
+            if scenario == "loaded_backlash":
+                d.inject("load_force", newtons=800.0)
+                d.inject("backlash", metres=20e-6)
+                d.inject("ambient_temperature", celsius=60.0)
+            elif scenario == "blocked":
+                d.inject("blocked")
+            else:
+                d.inject("supply_loss")
+        targets = [x0 + round(20_000 * math.sin(2 * math.pi * k * T)) for k in range(600)]
     a, b = _trace(fast, targets), _trace(slow, targets)
     assert a == b
     if scenario == "negative_limit":

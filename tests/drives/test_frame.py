@@ -8,6 +8,7 @@ import pytest
 from drives.bus.frame import (
     TRAILER_BITS,
     crc15,
+    data_frame_bits,
     frame_bits,
     nominal_bits,
     stuff_bit_count,
@@ -136,3 +137,5 @@ def test_table_driven_length_equals_the_bit_by_bit_reference():
         bits = unstuffed_bits(can_id, data, extended=extended, remote=remote, dlc=dlc)
         reference = len(bits) + stuff_bit_count(bits) + TRAILER_BITS
         assert frame_bits.__wrapped__(can_id, data, extended, remote, dlc) == reference
+        if not remote:  # the bus's uncached path for data frames
+            assert data_frame_bits(can_id, bytearray(data), extended) == reference
