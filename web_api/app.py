@@ -6,6 +6,8 @@ hands them in; the app only translates HTTP to service calls and refusals to pro
 
 from __future__ import annotations
 
+from collections.abc import AsyncIterator
+from contextlib import asynccontextmanager
 from typing import Any
 
 from fastapi import FastAPI
@@ -15,6 +17,7 @@ from sqlalchemy.orm import Session, sessionmaker
 from dnc.dispatch import Dispatches
 from dnc.jobs import Jobs
 from dnc.library import Library
+from web_api.event_hub import outbox_hub
 from web_api.problems import BodySizeLimit, Problem, install_problem_handlers
 from web_api.routers import MachinesProvider, Services
 from web_api.routers import auth as auth_router
@@ -59,7 +62,20 @@ def create_app(
     under `/mtconnect`. `faults_enabled` is reported by `/api/health`; the fault routes
     arrive with the machine endpoints.
     """
+    hub = outbox_hub(sessions, poll_s=settings.events_poll_s, capacity=settings.events_ring_size)
+
+    @asynccontextmanager
+    async def lifespan(_app: FastAPI) -> AsyncIterator[None]:
+        # The hub's reader starts with its first subscriber (so a server run without
+        # lifespan still streams); shutting down stops it and ends every open stream.
+        hub.reopen()
+        try:
+            yield
+        finally:
+            hub.close()
+
     app = FastAPI(
+        lifespan=lifespan,
         title="fmscell",
         version=API_VERSION,
         description=DESCRIPTION,
@@ -77,6 +93,7 @@ def create_app(
         machines_provider=machines_provider,
         faults_enabled=faults_enabled,
     )
+    app.state.event_hub = hub
     install_problem_handlers(app, settings.problem_base)
     app.add_middleware(BodySizeLimit, limit=settings.request_body_limit, base=settings.problem_base)
     for module in (

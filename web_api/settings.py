@@ -12,7 +12,7 @@ import hashlib
 import hmac
 from collections.abc import Mapping
 from enum import IntEnum
-from typing import Any
+from typing import Any, Literal
 
 from pydantic import BaseModel, ConfigDict, Field, model_validator
 
@@ -76,6 +76,18 @@ class ApiSettings(BaseModel):
     upload_limit_bytes: int = Field(default=16 * 1024 * 1024, ge=1)
     events_poll_s: float = Field(default=0.25, gt=0, le=10)
     events_keepalive_s: float = Field(default=15.0, ge=0, le=300)
+    events_ring_size: int = Field(
+        default=4096,
+        ge=500,
+        le=1_000_000,
+        description="newest events the event hub keeps in memory; clients further behind "
+        "read the gap from the database",
+    )
+    events_fanout: Literal["hub", "poll"] = Field(
+        default="hub",
+        description="hub: one outbox reader per process feeds every stream client; poll: "
+        "each client polls the outbox itself (the old way, kept as the benchmark's peer)",
+    )
     page_limit_max: int = Field(default=500, ge=1, le=10_000)
     problem_base: str = "https://fmscell.dev/problems/"
 

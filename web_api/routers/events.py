@@ -4,6 +4,10 @@ Each SSE event carries the outbox id as its `id`, so a reconnecting EventSource 
 `Last-Event-ID` and resumes exactly after the last event it saw (`?after=` does the same
 for the first connection). Idle streams get a keep-alive comment every
 `events_keepalive_s` so proxies do not cut them.
+
+Clients read from the app's event hub (web_api.event_hub): one reader of the outbox per
+process, however many clients watch. `events_fanout: poll` brings back the old way, each
+client polling the outbox itself, as the benchmark's peer.
 """
 
 from __future__ import annotations
@@ -13,11 +17,22 @@ from collections.abc import AsyncIterator
 from typing import Annotated
 
 import anyio
-from fastapi import APIRouter, Depends, Header, Query, WebSocket, WebSocketDisconnect
+from fastapi import (
+    APIRouter,
+    Depends,
+    FastAPI,
+    Header,
+    Query,
+    Request,
+    WebSocket,
+    WebSocketDisconnect,
+)
 from fastapi.concurrency import run_in_threadpool
 from fastapi.sse import EventSourceResponse, ServerSentEvent
 
+from dnc.errors import DncError
 from dnc.outbox import events_after
+from web_api.event_hub import HubClosed, PollingStream, Stream
 from web_api.problems import ApiProblem, problem_doc
 from web_api.routers import Services, get_services
 from web_api.routers.auth import Viewer, websocket_principal
@@ -41,15 +56,34 @@ def resume_point(last_event_id: str | None, after: int | None) -> int:
     return after or 0
 
 
+async def open_stream(app: FastAPI, cursor: int) -> Stream:
+    """A stream after `cursor` from the app's hub (or, in `poll` fan-out, its own poller).
+
+    Opening reads the database (the hub's anchor, or the first poll), so a dead database
+    is a 503 problem before the response starts, not a stream that stays silent."""
+    services: Services = app.state.services
+    settings = services.settings
+    if settings.events_fanout == "poll":
+        await run_in_threadpool(events_after, services.sessions, cursor, 1)
+        return PollingStream(
+            lambda after, limit: events_after(services.sessions, after, limit),
+            cursor,
+            settings.events_poll_s,
+            BATCH,
+        )
+    try:
+        return await run_in_threadpool(app.state.event_hub.subscribe, cursor)
+    except HubClosed:
+        raise ApiProblem(503, "shutting-down", "the server is shutting down") from None
+
+
 async def stream_start(
-    services: Annotated[Services, Depends(get_services)],
+    request: Request,
     last_event_id: Annotated[str | None, Header(alias="Last-Event-ID", max_length=40)] = None,
     after: Annotated[int | None, Query(ge=0, le=2**63 - 1)] = None,
-) -> tuple[int, list]:
-    """The resume point and the first batch, read before the response starts, so a bad
-    Last-Event-ID is a 400 problem and a dead database a 503, not a stream that just ends."""
-    cursor = resume_point(last_event_id, after)
-    return cursor, await run_in_threadpool(events_after, services.sessions, cursor, BATCH)
+) -> Stream:
+    """The resume point and the client's stream, opened before the response starts."""
+    return await open_stream(request.app, resume_point(last_event_id, after))
 
 
 @router.get(
@@ -61,63 +95,90 @@ async def stream_start(
 async def events(
     services: Annotated[Services, Depends(get_services)],
     _: Viewer,
-    start: Annotated[tuple[int, list], Depends(stream_start)],
+    stream: Annotated[Stream, Depends(stream_start)],
     api_key: Annotated[
         str | None, Query(description="for EventSource, which cannot send headers")
     ] = None,
 ) -> AsyncIterator[ServerSentEvent]:
-    cursor, pending = start
     settings = services.settings
-    yield ServerSentEvent(comment="fmscell events", retry=2000)
-    quiet_since = time.monotonic()
-    while True:
-        for event in pending:
-            yield ServerSentEvent(raw_data=event.to_json(), id=str(event.id))
-            cursor = event.id
-            quiet_since = time.monotonic()
-        if not pending:
-            if time.monotonic() - quiet_since >= settings.events_keepalive_s:
+    try:
+        yield ServerSentEvent(comment="fmscell events", retry=2000)
+        quiet_since = time.monotonic()
+        while True:
+            # Wake for events or when the keep-alive is due, never more often than a poll.
+            quiet = time.monotonic() - quiet_since
+            wait = max(settings.events_poll_s, settings.events_keepalive_s - quiet)
+            try:
+                batch = await stream.next_batch(wait)
+            except HubClosed:
+                return  # the server shuts down; the client's EventSource reconnects later
+            for event in batch:
+                yield ServerSentEvent(raw_data=event.to_json(), id=str(event.id))
+            if batch:
+                quiet_since = time.monotonic()
+            elif time.monotonic() - quiet_since >= settings.events_keepalive_s:
                 yield ServerSentEvent(comment="keep-alive")
                 quiet_since = time.monotonic()
-            await anyio.sleep(settings.events_poll_s)
-        pending = await run_in_threadpool(events_after, services.sessions, cursor, BATCH)
+    finally:
+        stream.close()
 
 
 @router.websocket("/api/events/ws")
 async def events_ws(websocket: WebSocket, after: int = 0) -> None:
     """The same events as JSON text messages; `?after=` resumes; `?api_key=` authenticates.
 
-    A refused key gets one problem+json message and close code 1008 (policy violation).
+    A refused key gets one problem+json message and close code 1008 (policy violation); a
+    database that cannot be read, one problem+json message and 1011.
     """
     services: Services = websocket.app.state.services
     await websocket.accept()
-    try:
-        websocket_principal(websocket, services.settings, Role.viewer)
-    except ApiProblem as exc:
+
+    async def refuse(exc_status: int, kind: str, detail: str, code: int) -> None:
         await websocket.send_json(
             {
-                "type": services.settings.problem_base + exc.kind,
+                "type": services.settings.problem_base + kind,
                 "title": "refused",
-                "status": exc.status,
-                "detail": exc.detail,
+                "status": exc_status,
+                "detail": detail,
                 "instance": websocket.url.path,
             }
         )
-        await websocket.close(code=1008, reason=exc.detail[:120])
-        return
-    cursor = max(0, min(after, 2**63 - 1))
+        await websocket.close(code=code, reason=detail[:120])
+
     try:
-        while True:
-            batch = await run_in_threadpool(events_after, services.sessions, cursor, BATCH)
-            for event in batch:
-                await websocket.send_text(event.to_json())
-                cursor = event.id
-            if batch:
-                continue
-            # Wait for the next poll, noticing a client that goes away meanwhile.
-            with anyio.move_on_after(services.settings.events_poll_s):
-                message = await websocket.receive()
-                if message["type"] == "websocket.disconnect":
-                    return
-    except WebSocketDisconnect:
+        websocket_principal(websocket, services.settings, Role.viewer)
+    except ApiProblem as exc:
+        await refuse(exc.status, exc.kind, exc.detail, 1008)
         return
+    try:
+        stream = await open_stream(websocket.app, max(0, min(after, 2**63 - 1)))
+    except (ApiProblem, DncError) as exc:
+        await refuse(503, getattr(exc, "kind", "database-unavailable"), str(exc), 1011)
+        return
+
+    async def send_events(done: anyio.CancelScope) -> None:
+        try:
+            while True:
+                for event in await stream.next_batch(services.settings.events_keepalive_s or 1):
+                    await websocket.send_text(event.to_json())
+        except HubClosed:
+            await websocket.close(code=1001, reason="server shutting down")
+        except (WebSocketDisconnect, RuntimeError):  # the client went away mid-send
+            pass
+        done.cancel()
+
+    async def watch_disconnect(done: anyio.CancelScope) -> None:
+        # Nothing is expected from the client; reading notices that it went away.
+        try:
+            while (await websocket.receive())["type"] != "websocket.disconnect":
+                pass
+        except (WebSocketDisconnect, RuntimeError):
+            pass
+        done.cancel()
+
+    try:
+        async with anyio.create_task_group() as tg:
+            tg.start_soon(send_events, tg.cancel_scope)
+            tg.start_soon(watch_disconnect, tg.cancel_scope)
+    finally:
+        stream.close()
