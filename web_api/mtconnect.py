@@ -19,6 +19,7 @@ from fastapi.concurrency import run_in_threadpool
 from fastapi.responses import Response, StreamingResponse
 
 from server.mtconnect.agent import XML, Agent, RestError, StreamPlan
+from server.mtconnect.printer import EXTENSION_SCHEMA_FILE
 
 _DOC = {
     "probe": "MTConnectDevices: the device model.",
@@ -30,7 +31,8 @@ _DOC = {
 
 
 def mtconnect_router(agent: Agent) -> APIRouter:
-    """An APIRouter serving /probe, /current, /sample and /{device}/probe|current|sample."""
+    """An APIRouter serving /probe, /current, /sample and /{device}/probe|current|sample,
+    and the extension schema the Streams documents name (schemas/fmscellStreams_2.5.xsd)."""
     router = APIRouter(tags=["mtconnect"])
 
     async def serve(kind: str, device: str | None, request: Request) -> Response:
@@ -76,6 +78,24 @@ def mtconnect_router(agent: Agent) -> APIRouter:
             description=_DOC[kind],
             response_class=Response,
         )
+
+    def schema(name: str, request: Request) -> Response:
+        if name != EXTENSION_SCHEMA_FILE:
+            body = agent.error_document(
+                "INVALID_URI", f"Cannot find handler for: GET {request.url.path}"
+            )
+            return Response(content=body, status_code=404, media_type=XML)
+        return Response(content=agent.extension_schema(), media_type=XML)
+
+    # Streams documents name this schema by a relative location, so it is found beside
+    # both /current and /{device}/current.
+    @router.get("/schemas/{name}", summary="fmscell's MTConnect extension schema")
+    async def extension_schema(name: str, request: Request) -> Response:
+        return schema(name, request)
+
+    @router.get("/{device}/schemas/{name}", include_in_schema=False)
+    async def extension_schema_beside_device(device: str, name: str, request: Request) -> Response:
+        return schema(name, request)
 
     @router.get("/{device}/{rest:path}", include_in_schema=False)
     async def invalid_uri(device: str, rest: str, request: Request) -> Response:

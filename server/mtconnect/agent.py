@@ -37,7 +37,13 @@ from server.mtconnect.model import (
     devices_from_cell,
 )
 from server.mtconnect.path import PathError, select
-from server.mtconnect.printer import HeaderInfo, print_error, print_probe, print_streams
+from server.mtconnect.printer import (
+    HeaderInfo,
+    print_error,
+    print_extension_schema,
+    print_probe,
+    print_streams,
+)
 from server.mtconnect.shdr import UNAVAILABLE_VALUES, ShdrValue, parse_line
 
 log = logging.getLogger(__name__)
@@ -262,6 +268,10 @@ class Agent:
             # least one Device: there is nothing to answer with.
             raise RestError("NO_DEVICE", "This agent publishes no Agent device", 404)
         return self.devices
+
+    def extension_schema(self) -> str:
+        """The XSD of the x: extension elements in this agent's Streams documents."""
+        return print_extension_schema(self.devices)
 
     def probe(self, device: str | None = None, device_type: str | None = None) -> str:
         return print_probe(self.header(), self._devices_for(device, device_type))

@@ -25,12 +25,61 @@ def _ns(kind: str) -> str:
     return f"urn:mtconnect.org:MTConnect{kind}:{SCHEMA_VERSION}"
 
 
+def extension_ns(kind: str) -> str:
+    return f"urn:fmscell:MTConnect{kind}:{SCHEMA_VERSION}"
+
+
+# fmscell's extension schema for the x: observation elements of Streams documents, served
+# by the router beside the documents. Its location in schemaLocation is relative, so it
+# resolves under whatever prefix the router is mounted at (…/current and …/mill1/current).
+EXTENSION_SCHEMA_FILE = f"fmscellStreams_{SCHEMA_VERSION}.xsd"
+EXTENSION_SCHEMA_PATH = f"schemas/{EXTENSION_SCHEMA_FILE}"
+
+
 def _root_open(kind: str) -> str:
     ns = _ns(kind)
+    location = f"{ns} {_SCHEMAS}/MTConnect{kind}_{SCHEMA_VERSION}.xsd"
+    if kind == "Streams":
+        location += f" {extension_ns(kind)} {EXTENSION_SCHEMA_PATH}"
     return (
         f'<MTConnect{kind} xmlns="{ns}" xmlns:m="{ns}" xmlns:xsi="{_XSI}" '
-        f'xmlns:{EXTENSION_PREFIX}="urn:fmscell:MTConnect{kind}:{SCHEMA_VERSION}" '
-        f'xsi:schemaLocation="{ns} {_SCHEMAS}/MTConnect{kind}_{SCHEMA_VERSION}.xsd">'
+        f'xmlns:{EXTENSION_PREFIX}="{extension_ns(kind)}" '
+        f'xsi:schemaLocation="{location}">'
+    )
+
+
+# The 2.5 abstract element (and its type) an extension observation substitutes for.
+_EXTENSION_HEADS = {"SAMPLE": "CommonSample", "EVENT": "StringEvent"}
+
+
+def print_extension_schema(devices: Sequence[Device]) -> str:
+    """An XSD declaring every x: observation element the devices can emit, each in the
+    substitution group of the 2.5 element it stands for (a sample is a CommonSample, an
+    event a StringEvent), so a validating client accepts the extension elements. Conditions
+    need nothing: their element is the standard Normal/Warning/Fault/Unavailable."""
+    heads: dict[str, str] = {}
+    for device in devices:
+        for di in device.all_items:
+            prefix, _, _name = di.type.rpartition(":")
+            if prefix != EXTENSION_PREFIX or di.category not in _EXTENSION_HEADS:
+                continue
+            local = di.element.split(":", 1)[1]
+            head = _EXTENSION_HEADS[di.category]
+            if heads.setdefault(local, head) != head:
+                raise ValueError(f"extension type {di.type} is both a sample and an event")
+    ns = _ns("Streams")
+    elements = "".join(
+        f'<xs:element name="{local}" type="m:{head}Type" substitutionGroup="m:{head}"/>\n'
+        for local, head in sorted(heads.items())
+    )
+    return (
+        _declaration() + '<xs:schema xmlns:xs="http://www.w3.org/2001/XMLSchema" '
+        f'xmlns:m="{ns}" targetNamespace="{extension_ns("Streams")}" '
+        'elementFormDefault="qualified" attributeFormDefault="unqualified">\n'
+        f'<xs:import namespace="{ns}" '
+        f'schemaLocation="{_SCHEMAS}/MTConnectStreams_{SCHEMA_VERSION}.xsd"/>\n'
+        + elements
+        + "</xs:schema>\n"
     )
 
 

@@ -794,3 +794,42 @@ def test_the_rule_checker_reports_each_broken_rule(request_, old, new, problem):
     assert old in text
     broken = text.replace(old, new, 1)
     assert any(problem in p for p in schema_problems(broken)), schema_problems(broken)
+
+
+@pytest.mark.parametrize("document", ["/mtconnect/current", "/mtconnect/mill/sample"])
+def test_streams_name_the_served_extension_schema_that_declares_every_x_element(document):
+    from urllib.parse import urljoin
+
+    from fastapi import FastAPI
+    from fastapi.testclient import TestClient
+
+    from web_api.mtconnect import mtconnect_router
+
+    app = FastAPI()
+    app.include_router(mtconnect_router(_BUSY_AGENT), prefix="/mtconnect")
+    client = TestClient(app)
+    text = client.get(document, params={"count": "1000"} if "sample" in document else {}).text
+    root = ET.fromstring(text.encode())
+    pairs = root.get("{http://www.w3.org/2001/XMLSchema-instance}schemaLocation").split()
+    locations = dict(zip(pairs[::2], pairs[1::2], strict=True))
+    ext_ns = "urn:fmscell:MTConnectStreams:2.5"
+    # the location is relative: it resolves beside the document, whatever the prefix
+    r = client.get(urljoin("http://testserver" + document, locations[ext_ns]))
+    assert r.status_code == 200 and r.headers["content-type"].startswith("application/xml")
+    xs = "{http://www.w3.org/2001/XMLSchema}"
+    schema = ET.fromstring(r.content)
+    assert schema.get("targetNamespace") == ext_ns
+    declared = {e.get("name"): e.get("substitutionGroup") for e in schema.iter(f"{xs}element")}
+    heads = {"Samples": "m:CommonSample", "Events": "m:StringEvent"}
+    used = {
+        (obs.tag.split("}")[1], heads[group.tag.split("}")[1]])
+        for group in root.iter()
+        if group.tag.split("}")[1] in heads
+        for obs in group
+        if obs.tag.startswith("{" + ext_ns + "}")
+    }
+    assert used  # the busy agent emits extension samples and events
+    for local, head in used:
+        assert declared.get(local) == head, (local, declared)
+    bad = client.get("/mtconnect/schemas/other.xsd")
+    assert bad.status_code == 404 and error_code(bad.text)[0] == "INVALID_URI"
