@@ -394,6 +394,26 @@ def test_malformed_lines_never_crash_ingest(line):
     status, text = a.request("current", "m1", {})
     assert status == 200
     parse("Streams", text)
+    assert schema_problems(text) == []  # nothing an adapter sends makes a document invalid
+
+
+@settings(max_examples=150, deadline=None)
+@given(
+    key=st.sampled_from(sorted(build_device("m1", ["X", "Y", "Z"]).by_key)),
+    fields=st.lists(
+        st.one_of(
+            st.sampled_from(["1.5", "-0", "1e3", "ACTIVE", "HIGH", "low", "UNAVAILABLE", "FAULT"]),
+            st.text(alphabet='ab1.-<&>|" NORMALWARNING', max_size=8),
+        ),
+        min_size=1,
+        max_size=6,
+    ),
+    stamp=st.sampled_from([TS, "2026-13-40T99:00:00Z", "x", "2026-02-29T00:00:00"]),
+)
+def test_any_adapter_line_for_a_known_key_keeps_documents_valid(key, fields, stamp):
+    a = _FUZZ_AGENT
+    a.ingest_line("m1", "|".join([stamp, key, *fields]))
+    assert schema_problems(a.request("current", "m1", {})[1]) == []
 
 
 _FUZZ_AGENT = small_agent(buffer_size=256)
