@@ -39,9 +39,10 @@ class HeartbeatProducer:
 
     def due(self, dt_s: float) -> bool:
         """Advance by dt; True when a heartbeat is due now."""
-        period = self.period_s
-        if period <= 0:
+        period_ms = int(self._store.get((0x1017, 0), 0))  # `period_s`, inlined: every tick
+        if period_ms <= 0:
             return False
+        period = period_ms / 1000.0
         self.elapsed_s += dt_s
         if self.elapsed_s + 1e-12 >= period:
             self.elapsed_s -= period

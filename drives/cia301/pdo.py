@@ -63,6 +63,8 @@ class PdoChannel:
     #: TPDO: one zero-argument reader per mapped object, resolved when the mapping is
     #: compiled (sampling then costs one call per object, no per-frame dispatch)
     readers: list = field(default_factory=list)
+    #: RPDO: one one-argument writer per mapped object (None for a dummy entry)
+    writers: list = field(default_factory=list)
     # runtime
     sync_count: int = 0
     pending: bytes | None = None  # synchronous RPDO waiting for the next SYNC
@@ -170,6 +172,15 @@ class PdoService:
         channel.targets = targets
         channel.length = channel.codec.size
         channel.readers = [self._reader(e) for e in targets] if channel.transmit else []
+        channel.writers = [] if channel.transmit else [self._writer(e) for e in targets]
+
+    def _writer(self, entry: Entry | None):
+        """A one-argument callable storing a received value in a mapped object (None: dummy)."""
+        if entry is None:
+            return None
+        if entry.owned:
+            return partial(self.od.application.write_object, entry.index, entry.subindex)
+        return partial(self.od.set, entry.index, entry.subindex)
 
     def _reader(self, entry: Entry | None):
         """A zero-argument callable returning the current value of a mapped object."""
@@ -231,18 +242,13 @@ class PdoService:
     # ------------------------------------------------------------------ data
     def unpack(self, channel: PdoChannel, data: bytes) -> None:
         """Write received RPDO data to its mapped objects."""
-        values = channel.codec.unpack_from(data)
-        application = self.od.application
-        for entry, value in zip(channel.targets, values, strict=True):
-            if entry is None:
+        for write, value in zip(channel.writers, channel.codec.unpack_from(data), strict=True):
+            if write is None:
                 continue
-            if entry.owned:
-                try:
-                    application.write_object(entry.index, entry.subindex, value)
-                except ObjectAccessError:
-                    self.refused_writes += 1  # an RPDO has no answer channel
-            else:
-                self.od.set(entry.index, entry.subindex, value)
+            try:
+                write(value)
+            except ObjectAccessError:
+                self.refused_writes += 1  # an RPDO has no answer channel
 
     def pack(self, channel: PdoChannel) -> bytes:
         """Sample the mapped objects of a TPDO."""

@@ -30,7 +30,6 @@ from drives.cia301.nmt import (
     nmt_transition,
     pdo_allowed,
     sdo_allowed,
-    sync_allowed,
 )
 from drives.cia301.od import ObjectDictionary
 from drives.cia301.pdo import PdoChannel, PdoService
@@ -329,26 +328,30 @@ class CanopenSlave:
 
     # ------------------------------------------------------------------ SYNC and PDO
     def _on_sync(self, msg: can.Message) -> None:
-        if not sync_allowed(self.state) or msg.is_remote_frame:
+        state = self.state
+        operational = state is NmtState.OPERATIONAL
+        # `sync_allowed(state)`, inlined: every SYNC reaches every node
+        if not (operational or state is NmtState.PRE_OPERATIONAL) or msg.is_remote_frame:
             return
-        overflow = self.sync.overflow
+        sync = self.sync
+        overflow = sync.overflow
         if len(msg.data) != (1 if overflow else 0):
             self._raise_communication_error(EMCY_SYNC_LENGTH)
             return
         counter = msg.data[0] if overflow else 0
-        if self.sync.on_sync():
+        if sync.on_sync():
             self._clear_communication_error(EMCY_SYNC_TIMEOUT)
-        operational = self.state is NmtState.OPERATIONAL
+        pdo = self.pdo
         if operational:
             for channel in self._sync_rpdos:
                 if channel.pending is not None:
                     data, channel.pending = channel.pending, None
-                    self.pdo.unpack(channel, data)
+                    pdo.unpack(channel, data)
         self.application.on_sync()
         if operational:
             for channel in self._sync_tpdos:
                 if channel.trans_type == 0:
-                    data = self.pdo.pack(channel)
+                    data = pdo.pack(channel)
                     if data != channel.last_sent:
                         self._send_tpdo(channel, data)
                 else:
@@ -364,7 +367,7 @@ class CanopenSlave:
                     channel.sync_count += 1
                     if channel.sync_count >= channel.trans_type:
                         channel.sync_count = 0
-                        self._send_tpdo(channel, self.pdo.pack(channel))
+                        self._send_tpdo(channel, pdo.pack(channel))
         self._pump_application_emcy()
 
     def _send_tpdo(self, channel: PdoChannel, data: bytes) -> None:
@@ -373,7 +376,8 @@ class CanopenSlave:
             channel.since_sent = 0.0
 
     def _on_rpdo(self, channel: PdoChannel, msg: can.Message) -> None:
-        if not pdo_allowed(self.state) or msg.is_remote_frame:
+        # `pdo_allowed(self.state)`, inlined: every RPDO of every cycle
+        if self.state is not NmtState.OPERATIONAL or msg.is_remote_frame:
             return
         channel.since_rx, channel.rx_seen = 0.0, True
         if channel.timed_out:
@@ -392,7 +396,7 @@ class CanopenSlave:
             if not any(c.length_error for c in self.pdo.rpdos):
                 self._clear_communication_error(EMCY_PDO_LENGTH)
             self._clear_communication_error(EMCY_PDO_LENGTH_EXCEEDED)
-        if channel.synchronous:
+        if channel.trans_type <= 240:  # `channel.synchronous`
             channel.pending = bytes(msg.data)
         else:
             self.pdo.unpack(channel, msg.data)
@@ -412,15 +416,17 @@ class CanopenSlave:
             state = self.state
             if state is NmtState.INITIALISING:
                 return
-            self.emcy.since_sent_s += dt_s
-            if self.emcy.queue:
+            emcy = self.emcy
+            emcy.since_sent_s += dt_s
+            if emcy.queue:
                 self._flush_emcy()
             if self.heartbeat.due(dt_s):
                 self._send(0x700 + self.node_id, bytes([state.value]))
             if self.sdo.transfer is not None:
                 for response in self.sdo.advance(dt_s):
                     self._send(0x580 + self.node_id, response)
-            if self.consumer.monitored and self.consumer.advance(dt_s):
+            consumer = self.consumer
+            if consumer.monitored and consumer.advance(dt_s):
                 self._raise_communication_error(EMCY_HEARTBEAT_LOST)
             if self.sync.advance(dt_s) and state is NmtState.OPERATIONAL:
                 self._raise_communication_error(EMCY_SYNC_TIMEOUT)
@@ -430,7 +436,7 @@ class CanopenSlave:
                 self._check_rpdo_deadlines(dt_s)
             self.application.advance(dt_s)
             self._pump_application_emcy()
-            if self.state is NmtState.OPERATIONAL:
+            if self._event_tpdos and self.state is NmtState.OPERATIONAL:
                 self._send_event_tpdos(dt_s)
 
     def _check_life_guarding(self, dt_s: float) -> None:

@@ -62,8 +62,10 @@ class SyncConsumer:
 
     def advance(self, dt_s: float) -> bool:
         """True when the SYNC watchdog expires during this step."""
-        period = self.period_s
-        if not self.seen or period <= 0 or self.timed_out:
+        if not self.seen or self.timed_out:
+            return False
+        period = int(self._store.get((0x1006, 0), 0)) * 1e-6  # `period_s`: every tick
+        if period <= 0:
             return False
         self.since_sync_s += dt_s
         if self.since_sync_s > SYNC_TIMEOUT_FACTOR * period + 1e-12:

@@ -25,7 +25,7 @@ import struct
 import threading
 import time
 import warnings
-from collections.abc import Iterable, Mapping, Sequence
+from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
 
 import can
@@ -33,7 +33,7 @@ import canopen
 from canopen.sdo.exceptions import SdoError
 
 from drives import EDS_PATH
-from drives.bus.hub import CanHub, SimBus, connect_network
+from drives.bus.hub import CanHub, SimBus
 from drives.bus.loadplan import BusOverloadError, CyclicFrame, LoadPlan, plan_load
 from drives.master import power
 from drives.master.config import AxisConfig, AxisError, AxisFault, AxisFeedback
@@ -46,6 +46,7 @@ _I32 = struct.Struct("<i")
 _EMCY = struct.Struct("<HB")
 _new_message = can.Message.__new__
 _OE_MASK, _OE = 0x6F, 0x27
+_STATE_NAMES: dict[int, str] = {}  # statusword -> power state name (at most 65536 entries)
 
 
 def _frame(cob_id: int, data: bytes) -> can.Message:
@@ -126,8 +127,13 @@ class _Line:
         self.lockstep = lockstep
         self.hub: CanHub | None = bus.hub if isinstance(bus, SimBus) else None
         self.network = canopen.Network()
+        #: 11-bit COB-ID -> handler(data) for the cyclic TPDOs on a simulated line: they
+        #: skip the canopen Network's listener and subscriber lists (twice per axis per SYNC)
+        self.cyclic: dict[int, Callable[[bytearray], None]] = {}
         if isinstance(bus, SimBus):
-            connect_network(self.network, bus)  # synchronous delivery, no Notifier thread
+            # synchronous delivery, no Notifier thread (`connect_network` with a shortcut)
+            self.network.bus = bus
+            bus.add_listener(self._receive)
             self.threaded = False
         else:
             self.network.bus = bus
@@ -136,15 +142,24 @@ class _Line:
         self.axes: list[_Axis] = []
         self.channel = str(getattr(bus, "channel_info", "") or getattr(bus, "channel", index))
 
+    def _receive(self, msg: can.Message) -> None:
+        handler = self.cyclic.get(msg.arbitration_id)
+        if handler is not None and not (
+            msg.is_extended_id or msg.is_remote_frame or msg.is_error_frame
+        ):
+            handler(msg.data)
+            return
+        for listener in self.network.listeners:
+            listener.on_message_received(msg)
+
     def close(self) -> None:
         net = self.network
         if self.threaded and net.notifier is not None:
             net.notifier.stop(1.0)
             net.notifier = None
         elif isinstance(self.bus, SimBus):
-            for listener in net.listeners:
-                with contextlib.suppress(ValueError):  # already removed
-                    self.bus.remove_listener(listener.on_message_received)
+            with contextlib.suppress(ValueError):  # already removed
+                self.bus.remove_listener(self._receive)
 
 
 class AxisGroup:
@@ -235,7 +250,8 @@ class AxisGroup:
         self.time = 0.0
         self.cycle_count = 0
         self._new_faults: list[AxisFault] = []
-        self._cond = threading.Condition()
+        self._lock = threading.RLock()
+        self._cond = threading.Condition(self._lock)
         self._running = False  # after configure(): boot-ups are faults, heartbeats watched
         self._t0 = time.perf_counter()
         self._slot: float | None = None
@@ -303,6 +319,8 @@ class AxisGroup:
     # ------------------------------------------------------------------ bus callbacks
     def _subscribe(self, axis: _Axis) -> None:
         net, n = axis.line.network, axis.node_id
+        axis.line.cyclic[0x180 + n] = lambda data, a=axis: self._on_tpdo1(a, data)
+        axis.line.cyclic[0x280 + n] = lambda data, a=axis: self._on_tpdo2(a, data)
         net.subscribe(0x180 + n, lambda cob, data, ts, a=axis: self._on_tpdo1(a, data))
         net.subscribe(0x280 + n, lambda cob, data, ts, a=axis: self._on_tpdo2(a, data))
         net.subscribe(0x080 + n, lambda cob, data, ts, a=axis: self._on_emcy(a, data))
@@ -315,7 +333,7 @@ class AxisGroup:
         if len(data) < 6:
             return
         sw, pos = _TPDO1.unpack_from(data)
-        with self._cond:
+        with self._lock:  # the condition's lock, without Condition.__enter__'s Python frame
             axis.sw, axis.pos, axis.known = sw, pos, True
             axis.rx_cycle = self.cycle_count
             if not self.lockstep:
@@ -547,9 +565,10 @@ class AxisGroup:
     def begin_cycle(self, targets: Mapping[str, float] | None = None) -> None:
         """First half of `cycle`: (realtime: wait for the slot) send RPDOs and SYNC."""
         if targets:
+            axes, isfinite = self._axes, math.isfinite
             for name, mm in targets.items():
-                axis = self._axis(name)
-                if not math.isfinite(mm):
+                axis = axes.get(name) or self._axis(name)  # `_axis` raises for a wrong name
+                if not isfinite(mm):
                     raise ValueError(f"axis {name}: target {mm!r} is not a finite number")
                 axis.target = round(mm * axis.cfg.units_per_mm)
         if self.paced or not self.lockstep:
@@ -587,17 +606,26 @@ class AxisGroup:
             self._await_tpdos(n)
             self.time = time.perf_counter() - self._t0
         self._watch()
-        axes = self._axes.values()
+        position, statusword, following, state, fresh = {}, {}, {}, {}, {}
+        names = _STATE_NAMES
+        for a in self._axes.values():  # one pass fills the five maps
+            name, sw, upm, fe = a.name, a.sw, a.cfg.units_per_mm, a.fe
+            position[name] = a.pos / upm
+            statusword[name] = sw
+            following[name] = None if fe is None else fe / upm
+            text = names.get(sw)
+            if text is None:
+                text = names[sw] = power.state_name(sw)
+            state[name] = text
+            fresh[name] = a.rx_cycle == n
         feedback = AxisFeedback(
             time=self.time,
             cycle=n,
-            position_mm={a.name: a.pos / a.cfg.units_per_mm for a in axes},
-            statusword={a.name: a.sw for a in axes},
-            following_error_mm={
-                a.name: None if a.fe is None else a.fe / a.cfg.units_per_mm for a in axes
-            },
-            state={a.name: power.state_name(a.sw) for a in axes},
-            fresh={a.name: a.rx_cycle == n for a in axes},
+            position_mm=position,
+            statusword=statusword,
+            following_error_mm=following,
+            state=state,
+            fresh=fresh,
         )
         if self._new_faults:
             feedback.faults = self.take_faults()
