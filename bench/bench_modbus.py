@@ -8,6 +8,10 @@ them, so a busy neighbour on the box costs both the same. Our face runs with a 1
 PLC; the stock server (ModbusTcpServer + ModbusDeviceContext over ModbusSequentialDataBlock,
 coils 9216 / di 1024 / ir 1024 / hr 2048 like our default map) has no scan.
 
+Besides wall figures (req/s, round-trip percentiles) it reports CPU per answered request: the
+server process's user+system time over its slices (/proc, all threads, scan included) and the
+client processes' time.process_time(), so a busy box can be told from a costly server.
+
 Prints one JSON object. Targets: >= 15k req/s on one connection, >= 30k req/s on eight.
 Usage: bench_modbus.py [--seconds 10] [--client-procs 2] [--switch-interval 0.0005] [--floor]
 
@@ -158,6 +162,7 @@ def client_worker(ports: dict[str, int], connections: int, pipe) -> None:
         group = socks[name]
         count = bad = 0
         lat: list[float] = []
+        cpu0 = None
         while True:
             t0 = time.monotonic()
             for s in group:
@@ -172,11 +177,13 @@ def client_worker(ports: dict[str, int], connections: int, pipe) -> None:
                 bad += data[7] != 3
             now = time.monotonic()
             if now >= start_at:
+                if cpu0 is None:
+                    cpu0 = time.process_time()
                 if now > end_at:
                     break
                 count += len(group)
                 lat.append(now - t0)
-        pipe.send((count, lat, bad))
+        pipe.send((count, lat, bad, time.process_time() - (cpu0 or time.process_time())))
     for group in socks.values():
         for s in group:
             s.close()
@@ -188,7 +195,16 @@ def _connect(port: int) -> socket.socket:
     return s
 
 
-def measure(ports: dict[str, int], connections: int, procs: int, seconds: float) -> dict:
+def _cpu_s(pid: int) -> float:
+    """User + system CPU seconds of a process (all its threads), from /proc."""
+    with open(f"/proc/{pid}/stat") as f:
+        fields = f.read().rsplit(")", 1)[1].split()
+    return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
+
+
+def measure(
+    ports: dict[str, int], pids: dict[str, int], connections: int, procs: int, seconds: float
+) -> dict:
     """Alternate short slices between the servers so both see the same background load."""
     procs = min(procs, connections)
     per = [connections // procs + (i < connections % procs) for i in range(procs)]
@@ -200,7 +216,8 @@ def measure(ports: dict[str, int], connections: int, procs: int, seconds: float)
         pipes.append(here)
         workers.append(w)
     slices = max(1, round(seconds / SLICE_S))
-    totals = {name: [0, [], 0, []] for name in ports}  # count, latencies, bad, windows
+    # count, latencies, bad, windows, server CPU s, client CPU s
+    totals = {name: [0, [], 0, [], 0.0, 0.0] for name in ports}
     order = list(ports)
     for k in range(slices + 1):  # slice 0 is a warm-up for both, not counted
         for name in order if k % 2 else order[::-1]:
@@ -208,10 +225,15 @@ def measure(ports: dict[str, int], connections: int, procs: int, seconds: float)
             end_at = start_at + (0.3 if k == 0 else seconds / slices)
             for p in pipes:
                 p.send((name, start_at, end_at))
+            time.sleep(max(0.0, start_at - time.monotonic()))
+            cpu0 = _cpu_s(pids[name])
             results = [p.recv() for p in pipes]
+            server_cpu = _cpu_s(pids[name]) - cpu0
             if k == 0:
                 continue
             t = totals[name]
+            t[4] += server_cpu
+            t[5] += sum(r[3] for r in results)
             t[0] += sum(r[0] for r in results)
             for r in results:
                 t[1].extend(r[1])
@@ -222,11 +244,15 @@ def measure(ports: dict[str, int], connections: int, procs: int, seconds: float)
     for w in workers:
         w.join()
     out = {}
-    for name, (count, lat, bad, windows) in totals.items():
+    for name, (count, lat, bad, windows, server_cpu, client_cpu) in totals.items():
         lat.sort()
         out[name] = {
             "windows": windows,
             "req_per_s": round(count / seconds),
+            # CPU per answered request (/proc ticks of 10 ms, so +-10 ms per 1 s slice);
+            # the server figure includes its scan thread, wall-clock independent of the box
+            "server_cpu_us_per_req": round(server_cpu / count * 1e6, 1) if count else None,
+            "client_cpu_us_per_req": round(client_cpu / count * 1e6, 1) if count else None,
             "round_p50_us": round(lat[len(lat) // 2] * 1e6, 1) if lat else None,
             "round_p99_us": round(lat[int(len(lat) * 0.99)] * 1e6, 1) if lat else None,
             "bad_answers": bad,
@@ -238,7 +264,7 @@ def start_server(target, switch: float):
     ready, stop = mp.Queue(), mp.Event()
     server = mp.Process(target=target, args=(ready, stop, switch), daemon=True)
     server.start()
-    return server, ready, stop, ready.get(timeout=20)
+    return server, ready, stop, ready.get(timeout=20)  # (process, ..., port)
 
 
 def stop_server(server, stop) -> None:
@@ -280,15 +306,17 @@ def main() -> None:
     ours_srv, ours_ready, ours_stop, ours_port = start_server(serve_ours, args.switch_interval)
     peer_srv, _, peer_stop, peer_port = start_server(serve_pymodbus, args.switch_interval)
     ports = {"ours": ours_port, "pymodbus": peer_port}
+    pids = {"ours": ours_srv.pid, "pymodbus": peer_srv.pid}
     extra = []
     if args.floor:
         floor_srv, _, floor_stop, ports["asyncio_floor"] = start_server(
             serve_floor, args.switch_interval
         )
         extra.append((floor_srv, floor_stop))
+        pids["asyncio_floor"] = floor_srv.pid
     try:
-        one = measure(ports, 1, 1, args.seconds)
-        eight = measure(ports, 8, args.client_procs, args.seconds)
+        one = measure(ports, pids, 1, 1, args.seconds)
+        eight = measure(ports, pids, 8, args.client_procs, args.seconds)
     finally:
         ours_stop.set()
         lateness = ours_ready.get(timeout=20)
@@ -330,6 +358,12 @@ def main() -> None:
                 "ours_8conn_req_s": o8,
                 "pymodbus_1conn_req_s": p1,
                 "pymodbus_8conn_req_s": p8,
+                "server_cpu_us_per_req_1conn": {
+                    name: r["server_cpu_us_per_req"] for name, r in one.items()
+                },
+                "server_cpu_us_per_req_8conn": {
+                    name: r["server_cpu_us_per_req"] for name, r in eight.items()
+                },
                 "ratio_1conn": round(o1 / p1, 2) if p1 else None,
                 "ratio_8conn": round(o8 / p8, 2) if p8 else None,
                 "target_1conn_req_s": TARGET_1,

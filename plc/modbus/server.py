@@ -11,6 +11,7 @@ import asyncio
 import contextlib
 import ipaddress
 import logging
+import struct
 import threading
 import time
 from collections import deque
@@ -23,6 +24,7 @@ from plc.modbus.frame import MAX_ADU, FrameViolation, MbapDecoder, encode
 from plc.modbus.map import ModbusMap
 from plc.modbus.pdu import (
     GATEWAY_TARGET_FAILED,
+    MAX_READ_REGISTERS,
     SERVER_DEVICE_FAILURE,
     DeviceIdentity,
     PduHandler,
@@ -33,6 +35,12 @@ log = logging.getLogger("plc.modbus")
 audit = logging.getLogger("plc.modbus.write")
 
 _monotonic = time.monotonic
+
+#: Answer ADU to a register read of n registers: transaction + protocol id (4 bytes as
+#: received), length, unit, function, byte count, the registers as IEC INT.
+_READ_ANSWER = [None] + [
+    struct.Struct(f">4sHBBB{n}h").pack for n in range(1, MAX_READ_REGISTERS + 1)
+]
 
 #: Frames a connection may have waiting behind an unanswered write in ack-after-scan mode.
 _MAX_BACKLOG = 32
@@ -112,6 +120,11 @@ class ModbusFace:
         self.map = mb_map
         self.writable = writable
         self.handler = PduHandler(mb_map, writable.resolve(mb_map), identity)
+        # FC03/FC04 fast path: (first address, end, snapshot attribute) per area of the table
+        self._read_segments = {
+            fc: tuple((s.start, s.end, s.area.lower()) for s in mb_map.segments(table))
+            for fc, table in ((0x03, "hr"), (0x04, "ir"))
+        }
         self.host = host
         self.port = port
         self.unit_id = unit_id
@@ -296,6 +309,7 @@ class _Connection(asyncio.Protocol):
         self._waiting = False  # ack-after-scan: a write response is outstanding
         self._write_paused = False
         self._fast = not face.ack_after_scan
+        self._read_segments = face._read_segments
         self._loop = asyncio.get_running_loop()
 
     # -- asyncio.Protocol -------------------------------------------------------------
@@ -352,6 +366,10 @@ class _Connection(asyncio.Protocol):
             and not (data[2] or data[3])
             and (data[4] << 8 | data[5]) == n - 6
         ):
+            if n == 12 and (answer := self._read_registers_fast(data)) is not None:
+                self.stats.requests += 1
+                self.transport.write(answer)
+                return
             try:
                 response, _ = self._answer(data[6], data[7:])
             except PduSizeError as e:
@@ -380,6 +398,43 @@ class _Connection(asyncio.Protocol):
             self._update_reading()
             return
         self._serve(frames)
+
+    def _read_registers_fast(self, data: bytes) -> bytes | None:
+        """The whole answer ADU to a plain FC03/FC04 request inside one image area, or None
+        to take the general path (exceptions, area crossings, unit filter, odd values).
+
+        A polling HMI sends little else, so this skips the PDU dispatch and packs the MBAP
+        header and the registers with one precompiled struct per register count."""
+        segments = self._read_segments.get(data[7])
+        if segments is None:
+            return None
+        unit = data[6]
+        if self.unit_id is not None and unit != self.unit_id and unit != 0xFF:
+            return None
+        address = data[8] << 8 | data[9]
+        count = data[10] << 8 | data[11]
+        if not 1 <= count <= MAX_READ_REGISTERS:
+            return None
+        for start, end, attr in segments:
+            if start <= address and address + count <= end:
+                i = address - start
+                try:
+                    words = getattr(self.get_snapshot(), attr)[i : i + count]
+                    if len(words) != count:  # snapshot smaller than the map: general path
+                        return None
+                    return _READ_ANSWER[count](
+                        data[:4], 3 + 2 * count, unit, data[7], 2 * count, *words
+                    )
+                except struct.error:  # a value outside INT: the general path wraps or refuses
+                    return None
+                except Exception:  # a bug must cost one answer, never the server
+                    self.stats.internal_errors += 1
+                    self.stats.exceptions += 1
+                    log.exception("%s: internal error on PDU %s", self.peer, data[7:].hex())
+                    return encode(
+                        data[0] << 8 | data[1], unit, bytes((data[7] | 0x80, SERVER_DEVICE_FAILURE))
+                    )
+        return None
 
     # -- serving ------------------------------------------------------------------------
 
