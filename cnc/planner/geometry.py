@@ -87,6 +87,7 @@ class Arc:
         "t1",
         "k0",
         "k1",
+        "cent",
     )
     kind = "arc"
 
@@ -101,6 +102,7 @@ class Arc:
         self.r1 = r1
         self.sweep = sweep
         self.rise = rise
+        self.cent = None  # per-axis centripetal coefficients (planner.limits.centripetal)
         rm = 0.5 * (r0 + r1)
         self.length = sqrt((rm * sweep) ** 2 + rise * rise)
         length = self.length

@@ -13,7 +13,7 @@ The budget split (documented in docs/motion.md):
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from math import sqrt
 
 from cnc.params import MachineParams
@@ -41,6 +41,29 @@ class AxisLimits:
     vtop: float = INF  # no path speed exceeds this (all axes at their velocity limit)
     acc_c: tuple[float, ...] = ()  # continuous shares (see the module docstring)
     jerk_c: tuple[float, ...] = ()
+    # derived per-axis constants of junction_cap (a quarter of the junction shares), set
+    # in __post_init__: they are the same for every junction of the path
+    jerk_q: tuple[float, ...] = field(default=(), init=False)
+    jerk_qtt: tuple[float, ...] = field(default=(), init=False)  # jerk_q * T^2
+    acc_qt: tuple[float, ...] = field(default=(), init=False)  # acc share * T
+    # the same for coast_cap (the continuous budget)
+    jerk_k: tuple[float, ...] = field(default=(), init=False)
+    jerk_ktt: tuple[float, ...] = field(default=(), init=False)
+    acc_k: tuple[float, ...] = field(default=(), init=False)
+    acc_kt: tuple[float, ...] = field(default=(), init=False)
+
+    def __post_init__(self) -> None:
+        t = self.ipo
+        jq = tuple(0.25 * RHO_JUMP * j for j in self.jerk)
+        object.__setattr__(self, "jerk_q", jq)
+        object.__setattr__(self, "jerk_qtt", tuple(t * t * j for j in jq))
+        object.__setattr__(self, "acc_qt", tuple(0.25 * RHO_KINK_A * a * t for a in self.acc))
+        jk = tuple((1.0 - RHO_JUMP) * j for j in self.jerk)
+        ak = tuple((1.0 - RHO_KINK_A) * a for a in self.acc)
+        object.__setattr__(self, "jerk_k", jk)
+        object.__setattr__(self, "jerk_ktt", tuple(t * t * j for j in jk))
+        object.__setattr__(self, "acc_k", ak)
+        object.__setattr__(self, "acc_kt", tuple(t * a for a in ak))
 
     @classmethod
     def from_params(cls, params: MachineParams, ipo: float | None = None) -> AxisLimits:
@@ -95,37 +118,66 @@ def arc_limits(
     3 c^2 sdot sddot / r); any axis sees at most their length. With `vmax` below the
     arc's own cap the tangential limits are those left over at vmax (larger).
     """
-    # axis i sees at most |e_i| of an in-plane vector, |e_i| = sqrt(e1_i^2 + e2_i^2)
+    # axis i sees at most |e_i| of an in-plane vector, |e_i| = sqrt(e1_i^2 + e2_i^2).
+    # Written out with comparisons instead of min()/max() (same values): every G64
+    # blend runs this once.
     ap = jp = vp = INF
-    for i in range(len(lim.acc)):
-        e = sqrt(arc.e1[i] ** 2 + arc.e2[i] ** 2)
+    e1, e2 = arc.e1, arc.e2
+    acc, jerk, vel = lim.acc, lim.jerk, lim.vel
+    for i in range(len(acc)):
+        e = sqrt(e1[i] ** 2 + e2[i] ** 2)
         if e > 1e-12:
-            ap = min(ap, lim.acc[i] * (1.0 - RHO_KINK_A) / e)
-            jp = min(jp, lim.jerk[i] * (1.0 - RHO_JUMP) / e)
-            vp = min(vp, lim.vel[i] / e)
-    r = min(arc.r0, arc.r1)
-    c = arc.plane_fraction
-    sa = arc.rise_fraction
-    v = min(vp / c, sqrt(RHO_ARC_A * ap * r) / c, (RHO_ARC_J * jp * r * r) ** (1.0 / 3.0) / c)
+            x = acc[i] * (1.0 - RHO_KINK_A) / e
+            if x < ap:
+                ap = x
+            x = jerk[i] * (1.0 - RHO_JUMP) / e
+            if x < jp:
+                jp = x
+            x = vel[i] / e
+            if x < vp:
+                vp = x
+    r0, r1 = arc.r0, arc.r1
+    r = r1 if r1 < r0 else r0
+    length = arc.length
+    c = 0.5 * (r0 + r1) * arc.sweep / length  # Arc.plane_fraction
+    rise = arc.rise
+    sa = (rise if rise >= 0.0 else -rise) / length  # Arc.rise_fraction
+    v = vp / c
+    x = sqrt(RHO_ARC_A * ap * r) / c
+    if x < v:
+        v = x
+    x = (RHO_ARC_J * jp * r * r) ** (1.0 / 3.0) / c
+    if x < v:
+        v = x
     if vmax < v:
         v = vmax
-    an_ = lim.acc[normal_axis] * (1.0 - RHO_KINK_A)
-    jn_ = lim.jerk[normal_axis] * (1.0 - RHO_JUMP)
     if sa > 0.0:
-        v = min(v, lim.vel[normal_axis] / sa)
+        x = vel[normal_axis] / sa
+        if x < v:
+            v = x
     if v <= 0.0:  # blocked (zero override): whatever tangential limits, no motion
         return 0.0, ap / c, Q_TANGENT * jp / c
     an = c * c * v * v / r
-    at = sqrt(max(ap * ap - an * an, 0.0)) / c
+    x = ap * ap - an * an
+    at = sqrt(x if x >= 0.0 else 0.0) / c
     # in-plane jerk: (c*s3 - c^3 sdot^3/r^2) along the tangent, 3 c^2 sdot sddot / r along
     # the normal; the tangent part gets Q_TANGENT of the plane jerk, the normal the rest
     k = c * c * c * v * v * v / (r * r)
-    q = max(Q_TANGENT * jp, k)
+    q = Q_TANGENT * jp
+    if k > q:
+        q = k
     jt = (q - k) / c
-    at = min(at, sqrt(max(jp * jp - q * q, 0.0)) * r / (3.0 * c * c * v))
+    x = jp * jp - q * q
+    x = sqrt(x if x >= 0.0 else 0.0) * r / (3.0 * c * c * v)
+    if x < at:
+        at = x
     if sa > 0.0:
-        at = min(at, an_ / sa)
-        jt = min(jt, jn_ / sa)
+        x = acc[normal_axis] * (1.0 - RHO_KINK_A) / sa
+        if x < at:
+            at = x
+        x = jerk[normal_axis] * (1.0 - RHO_JUMP) / sa
+        if x < jt:
+            jt = x
     return v, at, jt
 
 
@@ -154,30 +206,63 @@ def junction_cap(
     t = lim.ipo
     c = lim.dv3
     # one conservative constraint for all axes: each coefficient normalised by the axis'
-    # budget, then the largest of each taken (so every axis' own constraint holds)
-    alpha = beta = lose = gam = 0.0
+    # budget, then the largest of each taken (so every axis' own constraint holds);
+    # written out for the three pose axes: this runs for every junction of the path
     k75 = 0.75 / t
-    for i in range(3):
-        dui = du[i]
-        if dui < 0.0:
-            dui = -dui
-        dki = dk[i]
-        if dki < 0.0:
-            dki = -dki
-        if dui == 0.0 and dki == 0.0:
-            continue
-        full = 0.25 * RHO_JUMP * lim.jerk[i]
-        x = k75 * dki / full
-        if x > alpha:
-            alpha = x
-        x = dui / (t * t * full)
+    j0, j1, j2 = lim.jerk_q
+    b0, b1, b2 = lim.jerk_qtt
+    g0, g1, g2 = lim.acc_qt
+    u0, u1, u2 = du
+    if u0 < 0.0:
+        u0 = -u0
+    if u1 < 0.0:
+        u1 = -u1
+    if u2 < 0.0:
+        u2 = -u2
+    d0, d1, d2 = dk
+    if d0 < 0.0:
+        d0 = -d0
+    if d1 < 0.0:
+        d1 = -d1
+    if d2 < 0.0:
+        d2 = -d2
+    alpha = beta = lose = gam = 0.0
+    x = k75 * d0 / j0
+    if x > alpha:
+        alpha = x
+    x = k75 * d1 / j1
+    if x > alpha:
+        alpha = x
+    x = k75 * d2 / j2
+    if x > alpha:
+        alpha = x
+    if u0 or u1 or u2:
+        x = u0 / b0
+        if x > beta:
+            beta = x
+        x = u1 / b1
+        if x > beta:
+            beta = x
+        x = u2 / b2
         if x > beta:
             beta = x
         if inside_span:
-            x = k75 * dui * at_max / full
+            x = k75 * u0 * at_max / j0
             if x > lose:
                 lose = x
-        x = dui / (0.25 * RHO_KINK_A * lim.acc[i] * t)
+            x = k75 * u1 * at_max / j1
+            if x > lose:
+                lose = x
+            x = k75 * u2 * at_max / j2
+            if x > lose:
+                lose = x
+        x = u0 / g0
+        if x > gam:
+            gam = x
+        x = u1 / g1
+        if x > gam:
+            gam = x
+        x = u2 / g2
         if x > gam:
             gam = x
     cap = _jerk_cap(alpha, beta, 1.0, lose, gap, t, c, lim.vtop)
@@ -208,41 +293,66 @@ def coast_cap(
     """
     t = lim.ipo
     k75 = 0.75 / t
+    # normalised coefficients, the largest over the three pose axes (written out: this
+    # runs for every junction a plan passes in a coast)
+    bj0, bj1, bj2 = lim.jerk_k
+    tj0, tj1, tj2 = lim.jerk_ktt
+    ba0, ba1, ba2 = lim.acc_k
+    ta0, ta1, ta2 = lim.acc_kt
+    u0, u1, u2 = du
+    if u0 < 0.0:
+        u0 = -u0
+    if u1 < 0.0:
+        u1 = -u1
+    if u2 < 0.0:
+        u2 = -u2
+    d0, d1, d2 = dk
+    if d0 < 0.0:
+        d0 = -d0
+    if d1 < 0.0:
+        d1 = -d1
+    if d2 < 0.0:
+        d2 = -d2
     a3 = a2 = a1 = 0.0  # normalised jerk coefficients of v^3, v^2, v
     b2 = b1 = 0.0  # normalised acceleration coefficients of v^2, v
-    for i in range(3):
-        dui = abs(du[i])
-        dki = abs(dk[i])
-        bj = (1.0 - RHO_JUMP) * lim.jerk[i]
-        ba = (1.0 - RHO_KINK_A) * lim.acc[i]
-        x = kjerk[i] / bj
+    for x in (kjerk[0] / bj0, kjerk[1] / bj1, kjerk[2] / bj2):
         if x > a3:
             a3 = x
-        x = k75 * dki / bj
+    for x in (k75 * d0 / bj0, k75 * d1 / bj1, k75 * d2 / bj2):
         if x > a2:
             a2 = x
-        x = dui / (t * t * bj)
+    for x in (u0 / tj0, u1 / tj1, u2 / tj2):
         if x > a1:
             a1 = x
-        x = kacc[i] / ba
+    for x in (kacc[0] / ba0, kacc[1] / ba1, kacc[2] / ba2):
         if x > b2:
             b2 = x
-        x = dui / (t * ba)
+    for x in (u0 / ta0, u1 / ta1, u2 / ta2):
         if x > b1:
             b1 = x
     v = lim.vtop
     # acceleration: b2 v^2 + b1 v <= 1
     if b2 > 0.0:
-        v = min(v, 2.0 / (b1 + sqrt(b1 * b1 + 4.0 * b2)))
+        x = 2.0 / (b1 + sqrt(b1 * b1 + 4.0 * b2))
+        if x < v:
+            v = x
     elif b1 > 0.0:
-        v = min(v, 1.0 / b1)
+        x = 1.0 / b1
+        if x < v:
+            v = x
     # jerk: a3 v^3 + a2 v^2 + a1 v <= 1, Newton from an upper bound (convex, increasing)
     if a3 > 0.0:
-        v = min(v, a3 ** (-1.0 / 3.0))
+        x = a3 ** (-1.0 / 3.0)
+        if x < v:
+            v = x
     if a2 > 0.0:
-        v = min(v, a2**-0.5)
+        x = a2**-0.5
+        if x < v:
+            v = x
     if a1 > 0.0:
-        v = min(v, 1.0 / a1)
+        x = 1.0 / a1
+        if x < v:
+            v = x
     for _ in range(40):
         h = ((a3 * v + a2) * v + a1) * v - 1.0
         if h <= 0.0:
@@ -257,10 +367,20 @@ def coast_cap(
     return v
 
 
+ZERO3 = (0.0, 0.0, 0.0)
+NO_CENTRIPETAL = (ZERO3, ZERO3)
+
+
 def centripetal(lim: AxisLimits, geom) -> tuple[tuple[float, ...], tuple[float, ...]]:
-    """Per-axis (accel / v^2, jerk / v^3) of constant-speed motion on a piece."""
-    if not isinstance(geom, Arc):
-        return (0.0, 0.0, 0.0), (0.0, 0.0, 0.0)
+    """Per-axis (accel / v^2, jerk / v^3) of constant-speed motion on a piece.
+
+    Kept on the arc once computed: each arc meets two junctions.
+    """
+    if type(geom) is not Arc:
+        return NO_CENTRIPETAL
+    got = geom.cent
+    if got is not None:
+        return got
     c = geom.plane_fraction
     r = min(geom.r0, geom.r1)
     e1, e2 = geom.e1, geom.e2
@@ -270,7 +390,8 @@ def centripetal(lim: AxisLimits, geom) -> tuple[tuple[float, ...], tuple[float, 
         e = sqrt(e1[i] * e1[i] + e2[i] * e2[i])
         ka.append(e * c * c / r)
         kj.append(e * c * c * c / (r * r))
-    return tuple(ka), tuple(kj)
+    geom.cent = got = (tuple(ka), tuple(kj))
+    return got
 
 
 def _jerk_cap(alpha, beta, full, lose, gap, t, c, vtop) -> float:
@@ -295,14 +416,23 @@ def _jerk_cap(alpha, beta, full, lose, gap, t, c, vtop) -> float:
     k = full * gap / (3.0 * t)
     if lose * c >= k:
         return 0.0
+    # upper bounds of the root (comparisons rather than min(): same values, runs per block)
     if alpha > 0.0:
-        v = min(v, (k / alpha) ** (1.0 / 3.0))
+        x = (k / alpha) ** (1.0 / 3.0)
+        if x < v:
+            v = x
         if c > 0.0:
-            v = min(v, sqrt(k / (alpha * c)))
+            x = sqrt(k / (alpha * c))
+            if x < v:
+                v = x
     if beta > 0.0:
-        v = min(v, sqrt(k / beta))
+        x = sqrt(k / beta)
+        if x < v:
+            v = x
         if c > 0.0:
-            v = min(v, k / (beta * c))
+            x = k / (beta * c)
+            if x < v:
+                v = x
     for _ in range(40):
         q = (alpha * v + beta) * v + lose
         h = q * (v + c) - k

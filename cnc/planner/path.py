@@ -21,6 +21,7 @@ from cnc.planner.limits import (
     centripetal,
     coast_cap,
     junction_cap,
+    line_limits,
     piece_limits,
 )
 
@@ -68,7 +69,10 @@ class Segment:
         self.block_last = True
         self.feed = feed  # mm/s, None for rapid
         self.normal_axis = normal_axis
-        self.vphys, self.at, self.jt = piece_limits(lim, geom, normal_axis)
+        if type(geom) is Line:
+            self.vphys, self.at, self.jt = line_limits(lim, geom.u)
+        else:
+            self.vphys, self.at, self.jt = piece_limits(lim, geom, normal_axis)
         self.stop_end = True  # until the next piece is known
         self.jcap_end = 0.0
         self.jcoast = -1.0  # coasted junction cap, computed when a span boundary needs it
@@ -96,15 +100,13 @@ class Segment:
     def jcoast_end(self) -> float:
         """Cap of the end junction when passed in a coast (see limits.coast_cap)."""
         if self.jcoast < 0.0:
-            ka1, kj1 = centripetal(self.lim, self.geom)
-            ka2, kj2 = centripetal(self.lim, self.next_geom)
-            self.jcoast = coast_cap(
-                self.lim,
-                self.jdu,
-                self.jdk,
-                tuple(max(x, y) for x, y in zip(ka1, ka2, strict=True)),
-                tuple(max(x, y) for x, y in zip(kj1, kj2, strict=True)),
-            )
+            lim = self.lim
+            ka1, kj1 = centripetal(lim, self.geom)
+            ka2, kj2 = centripetal(lim, self.next_geom)
+            if ka2 is not ka1:  # the larger of the two pieces, per axis
+                ka1 = tuple(x if x >= y else y for x, y in zip(ka1, ka2, strict=True))
+                kj1 = tuple(x if x >= y else y for x, y in zip(kj1, kj2, strict=True))
+            self.jcoast = coast_cap(lim, self.jdu, self.jdk, ka1, kj1)
         return self.jcoast
 
     def vcap(self, feed_ovr: float, rapid_ovr: float) -> float:
@@ -120,7 +122,11 @@ class Path:
     def __init__(self, params: MachineParams, lim: AxisLimits, start: tuple[float, ...]):
         self.params = params
         self.lim = lim
-        self.segs: list[Segment] = []
+        self._segs: list[Segment] = []
+        # the end junction of the second-last piece into the last one, not yet computed:
+        # the next blend usually uses the last line up and replaces that junction, so it
+        # is computed only when someone looks (see `segs`) or the next block keeps it
+        self._pending: tuple[Segment, Segment] | None = None
         self.base = 0  # executed segments dropped from the front of `segs`
         self.end_pose = start
         self.end_s = 0.0
@@ -129,6 +135,13 @@ class Path:
         self.blocks = 0
         self.max_feed = params.max_feed / 60.0
         self.head_sync: list = []  # sync commands before any pending segment
+
+    @property
+    def segs(self) -> list[Segment]:
+        """The pieces not yet executed, every junction computed."""
+        if self._pending is not None:
+            self._settle()
+        return self._segs
 
     # -- building -----------------------------------------------------------------------
     def set_path_mode(self, cmd: SetPathMode) -> None:
@@ -142,10 +155,12 @@ class Path:
         `join=False` makes the junction with the previous block an exact stop (single block).
         """
         start = self.end_pose
-        end = tuple(float(x) for x in cmd.end)
+        end = cmd.end
         if len(end) != len(start):
             raise NcError(f"pose has {len(end)} axes, machine has {len(start)}", cmd.line)
-        if not all(isfinite(x) for x in end):
+        x, y, z = end
+        end = (float(x), float(y), float(z))
+        if not (isfinite(end[0]) and isfinite(end[1]) and isfinite(end[2])):
             raise NcError(f"end point {end} is not a finite position", cmd.line)
         exact = self.mode is PathMode.EXACT_STOP or cmd.exact_stop
         if isinstance(cmd, StraightTraverse):
@@ -174,7 +189,7 @@ class Path:
             return  # a zero-length move does not touch the path
         self.blocks += 1
         seg = Segment(geom, cmd.line, self.blocks, feed, normal, self.lim, exact, self.tolerance)
-        prev = self.segs[-1] if self.segs else None
+        prev = self._segs[-1] if self._segs else None
         if prev is None:
             seg.s0 = self.end_s
         elif not join:
@@ -182,7 +197,7 @@ class Path:
         else:
             self._join(prev, seg, protect_s)
         seg.s1 = seg.s0 + seg.geom.length
-        self.segs.append(seg)
+        self._segs.append(seg)
         self.end_s = seg.s1
 
     def _feed(self, cmd) -> float:
@@ -194,22 +209,26 @@ class Path:
         return f if f < self.max_feed else self.max_feed
 
     def add_sync(self, cmd) -> None:
-        if self.segs:
-            self.segs[-1].sync_after.append(cmd)
-            self._finalised(len(self.segs) - 1)
+        if self._pending is not None:
+            self._settle()
+        if self._segs:
+            self._segs[-1].sync_after.append(cmd)
+            self._finalised(len(self._segs) - 1)
         else:
             self.head_sync.append(cmd)
 
     def finish(self) -> None:
         """End of program: the last segment keeps its length."""
-        if self.segs:
-            self._finalised(len(self.segs) - 1)
+        if self._pending is not None:
+            self._settle()
+        if self._segs:
+            self._finalised(len(self._segs) - 1)
 
     def _finalised(self, i: int) -> None:
         """Segment i's length is final: its start junction may now count it as its gap."""
         if i <= 0:
             return
-        before, seg = self.segs[i - 1], self.segs[i]
+        before, seg = self._segs[i - 1], self._segs[i]
         if before.exact or before.sync_after or not isinstance(seg.geom, Line):
             return
         if before.s1 != seg.s0 or seg.geom.length <= before.geom.length:
@@ -220,7 +239,7 @@ class Path:
         """Decide the junction prev -> seg: blend, pass at a capped speed, or stop."""
         seg.s0 = prev.s1
         if prev.exact or prev.sync_after:
-            self._finalised(len(self.segs) - 1)
+            self._finalised(len(self._segs) - 1)
             return  # prev.stop_end stays True: exact stop or sync point
         pg, sg = prev.geom, seg.geom
         if (
@@ -243,43 +262,70 @@ class Path:
                 )
                 if pg.length - d <= 1e-12 and protect_s <= prev.s0:
                     # the previous line is used up: the blend takes its place
-                    self.segs.pop()
+                    self._segs.pop()
                     arc.start = pg.start
                     bseg.block_last = prev.block_last
-                    before = self.segs[-1] if self.segs else None
+                    before = self._segs[-1] if self._segs else None
                     bseg.s0 = prev.s0
-                    if before is not None and not before.stop_end:
+                    pending = self._pending
+                    if pending is not None and pending[1] is prev:
+                        # the junction before -> prev was never computed: replaced here
+                        self._pending = None
+                        self._set_junction(before, bseg, True)
+                    elif before is not None and not before.stop_end:
                         self._set_junction(before, bseg, True)
                 else:
                     prev.geom = pg.with_ends(pg.start, arc.start)
                     prev.s1 = prev.s0 + prev.geom.length
                     prev.block_last = False
                     bseg.s0 = prev.s1
-                    self._finalised(len(self.segs) - 1)
+                    self._finalised(len(self._segs) - 1)
                     self._set_junction(prev, bseg, True)
                 bseg.s1 = bseg.s0 + arc.length
-                self.segs.append(bseg)
+                self._segs.append(bseg)
                 seg.geom = sg.with_ends(arc.end, sg.end)
                 seg.s0 = bseg.s1
-                self._set_junction(bseg, seg, False)
+                self._defer_junction(bseg, seg)
                 return
-        self._finalised(len(self.segs) - 1)
-        self._set_junction(prev, seg, False)
+        self._finalised(len(self._segs) - 1)
+        self._defer_junction(prev, seg)
+
+    def _defer_junction(self, a: Segment, b: Segment) -> None:
+        """Junction a -> b with b the new last piece (b_final False), computed later."""
+        if self._pending is not None:
+            self._settle()
+        self._pending = (a, b)
+
+    def _settle(self) -> None:
+        a, b = self._pending
+        self._pending = None
+        self._set_junction(a, b, False)
 
     def _set_junction(self, a: Segment, b: Segment, b_final: bool) -> None:
+        pending = self._pending
+        if pending is not None and pending[0] is a:
+            self._pending = None  # superseded
         ga, gb = a.geom, b.geom
         ta, tb, ka, kb = ga.t1, gb.t0, ga.k1, gb.k0
-        du = (tb[0] - ta[0], tb[1] - ta[1], tb[2] - ta[2])
+        du0, du1, du2 = tb[0] - ta[0], tb[1] - ta[1], tb[2] - ta[2]
+        du = (du0, du1, du2)
         dk = (kb[0] - ka[0], kb[1] - ka[1], kb[2] - ka[2])
-        big = max(abs(du[0]), abs(du[1]), abs(du[2])) > KINK_SPAN_BREAK
+        big = (
+            du0 > KINK_SPAN_BREAK
+            or -du0 > KINK_SPAN_BREAK
+            or du1 > KINK_SPAN_BREAK
+            or -du1 > KINK_SPAN_BREAK
+            or du2 > KINK_SPAN_BREAK
+            or -du2 > KINK_SPAN_BREAK
+        )
         at_max = a.at if a.at > b.at else b.at
         # a line that is still the last piece may yet be used up by the next blend
-        after = gb.length if b_final or not isinstance(gb, Line) else 0.0
+        after = gb.length if b_final or type(gb) is not Line else 0.0
         gap = ga.length if ga.length > after else after
         cap = junction_cap(self.lim, du, dk, gap, at_max, not big)
-        if (a.feed is None) != (b.feed is None) and big:
+        if big and (a.feed is None) != (b.feed is None):
             cap = 0.0  # a corner between a rapid and a feed move is an exact stop
-        jump = bool(du[0] or du[1] or du[2] or dk[0] or dk[1] or dk[2])
+        jump = bool(du0 or du1 or du2 or dk[0] or dk[1] or dk[2])
         a.jcap_end = cap
         a.jcoast = -1.0 if jump and cap > 0.0 else 0.0
         a.jdu = du

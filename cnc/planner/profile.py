@@ -185,14 +185,22 @@ def partition(
     out: list[list] = []
     cur = None
     n = len(segs)
+    last = n - 1
+    vn = -1.0  # speed cap of segs[k] when already known from the previous step
     while k < n:
         g = segs[k]
         a = s_start if s_start > g.s0 else g.s0
         b = g.s1
-        vc = g.vcap(feed_ovr, rapid_ovr)
-        if vc > vclamp:
-            vc = vclamp
-        gat, gjt = g.limits_at(vc) if vc < g.vphys else (g.at, g.jt)
+        if vn >= 0.0:
+            vc = vn
+        else:
+            vc = g.vcap(feed_ovr, rapid_ovr)
+            if vc > vclamp:
+                vc = vclamp
+        if vc < g.vphys:
+            gat, gjt = g.limits_at(vc)
+        else:
+            gat, gjt = g.at, g.jt
         stop_here = False
         if stop_s is not None and stop_s <= b:
             b = stop_s
@@ -209,12 +217,19 @@ def partition(
                 cur[4] = gat
             if gjt < cur[5]:
                 cur[5] = gjt
-        if stop_here or g.stop_end or k == n - 1 or (single_block and g.block_last):
+        if stop_here or g.stop_end or k == last or (single_block and g.block_last):
             cur[7] = True
             out.append(cur)
             cur = None
             break
-        vn = segs[k + 1].vcap(feed_ovr, rapid_ovr)
+        # Segment.vcap written out: this loop runs for every piece of every plan
+        h = segs[k + 1]
+        if h.feed is None:
+            vn = h.vphys * rapid_ovr
+        else:
+            vn = h.feed * feed_ovr
+            if vn > h.vphys:
+                vn = h.vphys
         if vn > vclamp:
             vn = vclamp
         jc = g.jcap_end
@@ -223,7 +238,9 @@ def partition(
         if g.break_end or jc < lo or lo < SPAN_RATIO * hi:
             cur[6] = jc if jc < lo else lo
             if g.jump_end and ipo > 0.0:
-                jco = g.jcoast_end
+                jco = g.jcoast
+                if jco < 0.0:
+                    jco = g.jcoast_end
                 cur[8] = jco if jco < lo else lo
             out.append(cur)
             cur = None
@@ -275,13 +292,20 @@ def solve(parts: list[list], v_start: float, ipo: float = 0.0) -> tuple[list[Spa
         eff.append(length if length > 0.0 else 0.0)
     vb = [0.0] * (n + 1)
     vb[n] = 0.0 if parts[-1][7] else parts[-1][6]
+    # reach(v, ...) >= v, so when the speed to meet already reaches the caps the caps
+    # decide and the S-curve reach need not be computed (most spans of a capped path)
     for i in range(n - 1, -1, -1):
         p = parts[i]
-        v = reach(vb[i + 1], eff[i], p[4], p[5])
-        if v > p[2]:
-            v = p[2]
-        if i > 0 and v > parts[i - 1][6]:
-            v = parts[i - 1][6]
+        cap = p[2]
+        if i > 0 and parts[i - 1][6] < cap:
+            cap = parts[i - 1][6]
+        v = vb[i + 1]
+        if v < cap:
+            v = reach(v, eff[i], p[4], p[5])
+            if v > cap:
+                v = cap
+        else:
+            v = cap
         vb[i] = v
     spans = []
     v = v_start
@@ -289,9 +313,11 @@ def solve(parts: list[list], v_start: float, ipo: float = 0.0) -> tuple[list[Spa
         p = parts[i]
         at, jt = p[4], p[5]
         length = eff[i]
-        v1 = reach(v, length, at, jt)
-        if v1 > vb[i + 1]:
-            v1 = vb[i + 1]
+        v1 = vb[i + 1]
+        if v < v1:
+            x = reach(v, length, at, jt)
+            if x < v1:
+                v1 = x
         if v > v1 and change_distance(v, v1, at, jt) > length * (1.0 + 1e-12) + 1e-12:
             v1 = min_reach(v, length, at, jt)
             ok = False
