@@ -42,6 +42,33 @@ MODE_NONE, MODE_AUTO, MODE_MDI, MODE_JOG, MODE_REF = 0, 1, 2, 3, 4
 MODE_NAMES = {MODE_NONE: "NONE", MODE_AUTO: "AUTO", MODE_MDI: "MDI", MODE_JOG: "JOG",
               MODE_REF: "REF"}  # fmt: skip
 
+# Why a program select or a zero return was refused: one code table for the NC's answers
+# (ProgSelectFailCode, HomeFailCode), the PLC's own refusals and the remote panel's
+# ProgRefuseCode / HomeRefuseCode.
+REFUSE_NOT_IN_MEMORY = 1
+REFUSE_PROGRAM_ACTIVE = 2
+REFUSE_BAD_NUMBER = 3
+REFUSE_NO_ANSWER = 4
+REFUSE_NOT_REF_MODE = 5
+REFUSE_ESTOP = 6
+REFUSE_NOT_ENABLED = 7
+REFUSE_HOMING = 8
+REFUSE_OTHER = 9
+REFUSE_ABORTED = 10
+REFUSAL_TEXTS = {
+    REFUSE_NOT_IN_MEMORY: "program not in memory",
+    REFUSE_PROGRAM_ACTIVE: "a program is active (running or held)",
+    REFUSE_BAD_NUMBER: "program number outside 1..9999",
+    REFUSE_NO_ANSWER: "the NC did not answer within 1 s (PLC alarm 1050/1051)",
+    REFUSE_NOT_REF_MODE: "mode is not REF",
+    REFUSE_ESTOP: "emergency stop active",
+    REFUSE_NOT_ENABLED: "axis drives not enabled",
+    REFUSE_HOMING: "homing already in progress",
+    REFUSE_OTHER: "refused by the NC (see its event log)",
+    REFUSE_ABORTED: "reset or E-stop aborted the request",
+}
+AXIS_BITS = "XYZABC"  # bit n of ReferencedAxes is the axis AXIS_BITS[n]
+
 _ADDR = re.compile(r"^%([IQM])([XW])(\d+)(?:\.([0-7]))?$")
 _AREAS_BY_DIRECTION = {
     NC_TO_PLC: ("IX", "IW"),
@@ -114,6 +141,16 @@ SIGNALS: tuple[Signal, ...] = (
     _s("SCode", NC_TO_PLC, "%IW1", "programmed spindle speed, rpm (0..12000)"),
     _s("TCode", NC_TO_PLC, "%IW2", "programmed tool number = pocket number (1..20)"),
     _s("NcMode", NC_TO_PLC, "%IW3", "active NC mode: 1 AUTO, 2 MDI, 3 JOG, 4 REF"),
+    _s("ProgSelectDone", NC_TO_PLC, "%IX0.7", "program selected (held while ProgSelectReq)"),
+    _s("ProgSelectFail", NC_TO_PLC, "%IX1.0", "program select refused (held while ProgSelectReq)"),
+    _s("HomeAck", NC_TO_PLC, "%IX1.1", "zero return request taken, homing started (held)"),
+    _s("HomeFail", NC_TO_PLC, "%IX1.2", "zero return request refused (held while HomeAllReq)"),
+    _s("HomingActive", NC_TO_PLC, "%IX1.3", "zero return (homing) in progress"),
+    _s("AllReferenced", NC_TO_PLC, "%IX1.4", "every axis referenced since power-on / E-stop"),
+    _s("ProgSelectFailCode", NC_TO_PLC, "%IW4", "why the NC refused the program select (code)"),
+    _s("HomeFailCode", NC_TO_PLC, "%IW5", "why the NC refused the zero return (code)"),
+    _s("ActiveProgram", NC_TO_PLC, "%IW6", "selected program O number, 0 = none"),
+    _s("ReferencedAxes", NC_TO_PLC, "%IW7", "referenced axes: bit 0 X, 1 Y, 2 Z, 3 A, 4 B, 5 C"),
     # --- PLC -> NC -----------------------------------------------------------------------
     _s("PlcReady", PLC_TO_NC, "%QX0.0", "PLC program running"),
     _s("MFinish", PLC_TO_NC, "%QX0.1", "M function finished (held until MStrobe drops)"),
@@ -135,6 +172,9 @@ SIGNALS: tuple[Signal, ...] = (
     _s("PlcAlarmNumber", PLC_TO_NC, "%QW4", "lowest-numbered active PLC alarm, 0 = none"),
     _s("ToolInSpindle", PLC_TO_NC, "%QW5", "tool number in the spindle, 0 = empty"),
     _s("PreparedTool", PLC_TO_NC, "%QW6", "tool prepared by the last T function"),
+    _s("ProgSelectReq", PLC_TO_NC, "%QX1.5", "program select request (held until answered)"),
+    _s("HomeAllReq", PLC_TO_NC, "%QX1.6", "zero return request, all axes (held until answered)"),
+    _s("ProgSelectNumber", PLC_TO_NC, "%QW7", "O number of the program select request"),
     # --- field -> PLC --------------------------------------------------------------------
     _s("EStopChainOk", FIELD_TO_PLC, "%IX2.0", "E-stop chain closed (NC wired: 0 = E-stop)"),
     _s("DoorClosedSw", FIELD_TO_PLC, "%IX2.1", "door switch: guard door closed"),
@@ -184,8 +224,17 @@ SIGNALS: tuple[Signal, ...] = (
     _s("RemRapidOvr", HOST_TO_PLC, "%MW1", "rapid override request, % (limited to 0..200)"),
     _s("RemSpindleOvr", HOST_TO_PLC, "%MW2", "spindle override request, % (limited 0..200)"),
     _s("RemModeReq", HOST_TO_PLC, "%MW3", "mode request 1..4 (PLC clears it when taken)"),
+    _s("RemProgSelect", HOST_TO_PLC, "%MX0.3", "program select strobe (hold 1 until answered)"),
+    _s("RemHomeAll", HOST_TO_PLC, "%MX0.4", "home all axes, REF mode (hold 1 until answered)"),
+    _s("RemProgNumber", HOST_TO_PLC, "%MW4", "O number for the program select (1..9999)"),
     _s("CycleStartRefused", PLC_TO_HOST, "%MX1.0", "last cycle start request was refused"),
     _s("ModeRefused", PLC_TO_HOST, "%MX1.1", "last mode request was refused"),
+    _s("ProgSelected", PLC_TO_HOST, "%MX1.2", "program select done (valid while RemProgSelect)"),
+    _s("ProgSelectRefused", PLC_TO_HOST, "%MX1.3", "program select refused: ProgRefuseCode"),
+    _s("HomeAccepted", PLC_TO_HOST, "%MX1.4", "home all taken, homing runs (while RemHomeAll)"),
+    _s("HomeRefused", PLC_TO_HOST, "%MX1.5", "home all refused: HomeRefuseCode"),
+    _s("ProgRefuseCode", PLC_TO_HOST, "%MW8", "why the program select was refused (code)"),
+    _s("HomeRefuseCode", PLC_TO_HOST, "%MW9", "why the home all was refused (code)"),
 )
 
 _BY_NAME = {s.name.upper(): s for s in SIGNALS}

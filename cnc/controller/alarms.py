@@ -55,6 +55,8 @@ PLC_ALARM_TEXTS = {
     1040: "air pressure low: feed hold",
     1041: "lubricant level low: refill (cycle start refused)",
     1042: "lubrication pressure not reached during the pulse",
+    1050: "program select: no answer from the NC within 1 s",
+    1051: "zero return: no answer from the NC within 1 s",
 }
 
 

@@ -31,7 +31,21 @@ from cnc.interp import Interpreter
 from cnc.interpolator import Motion
 from cnc.program_memory import ProgramMemory
 from cnc.status import AxisStatus, MachineStatus
-from plc.signals import MODE_AUTO, MODE_JOG, MODE_MDI, MODE_NONE, MODE_REF
+from plc.signals import (
+    AXIS_BITS,
+    MODE_AUTO,
+    MODE_JOG,
+    MODE_MDI,
+    MODE_NONE,
+    MODE_REF,
+    REFUSE_BAD_NUMBER,
+    REFUSE_ESTOP,
+    REFUSE_HOMING,
+    REFUSE_NOT_ENABLED,
+    REFUSE_NOT_IN_MEMORY,
+    REFUSE_NOT_REF_MODE,
+    REFUSE_PROGRAM_ACTIVE,
+)
 
 MODES = ("AUTO", "MDI", "JOG", "REF", "EDIT")
 _MODE_NUMBER = {"AUTO": MODE_AUTO, "MDI": MODE_MDI, "JOG": MODE_JOG, "REF": MODE_REF}
@@ -63,13 +77,17 @@ INTERP_BUDGET = 64  # canonical commands taken from the interpreter per IPO cycl
 class ControllerSettings:
     """Controller data that the machine YAML does not (yet) carry; defaults in brackets.
 
-    home_order: homing order [tool axis first: Z on a mill, X on a lathe, then the others in
-    configuration order]; ferror_max_mm / ferror_min_mm: the NC's following-error limit,
+    home_sequence: the homing sequence, groups of axes homed together, one group after the
+    other [a mill: ((Z,), (X, Y)), the tool axis clear of the work first; a lathe:
+    ((X,), (Z,)), the cross slide clear of the chuck first; other kinds: the tool axis Z,
+    then the others together]; home_order: a flat order instead, one axis at a time
+    [None: the order of home_sequence]; ferror_max_mm / ferror_min_mm: the NC's following-error limit,
     scaled with the commanded axis speed like LinuxCNC's FERROR/MIN_FERROR [5.0 / 1.0];
     jog_feed / dry_run_feed in mm/min [1000 / 3000]; enable_retry_s [1.0];
     drip_buffer_bytes [4096]; homing_start_timeout_s: the axis layer must report `homing`
     within this time of the request [1.0]."""
 
+    home_sequence: tuple[tuple[str, ...], ...] | None = None
     home_order: tuple[str, ...] | None = None
     ferror_max_mm: float = 5.0
     ferror_min_mm: float = 1.0
@@ -128,7 +146,8 @@ class Controller:
         self.settings = settings or ControllerSettings()
         self.axes = tuple(config.axes)
         self.ipo = config.ipo_cycle_ms / 1000.0
-        self.home_order = self._home_order()
+        self.home_sequence = self._home_sequence()
+        self.home_order = tuple(a for group in self.home_sequence for a in group)
         self._vmax = {a: c.max_velocity / 60.0 for a, c in config.axes.items()}
         self.acc = AdaptiveLoop()
         self._alarms = al.AlarmList()
@@ -166,8 +185,14 @@ class Controller:
         self._axis_cmd = "none"
         self._home_axes: tuple[str, ...] = ()
         self._homing = ""  # "" | "requested" | "running"
-        self._homing_axes: tuple[str, ...] = ()
+        self._homing_axes: tuple[str, ...] = ()  # the group homing now
+        self._homing_next: deque[tuple[str, ...]] = deque()  # the groups after it
+        self._homing_done: list[str] = []  # axes of this homing run referenced so far
         self._homing_since = 0.0
+        # answers to the PLC's program select / zero return requests, held while the
+        # request is: None, or (taken, refusal code)
+        self._select_answer: tuple[bool, int] | None = None
+        self._home_answer: tuple[bool, int] | None = None
         self._run: _Run | None = None
         self._final = "READY"
         self._hold = False
@@ -325,12 +350,21 @@ class Controller:
             self.mode = mode
             self._event(f"mode {mode}")
 
+    def _select_refusal(self, number: int) -> tuple[int, str] | None:
+        """Why program `number` cannot be selected now: (refusal code, text), or None."""
+        if self._execution() in IN_CYCLE:
+            return REFUSE_PROGRAM_ACTIVE, f"program select refused while {self._execution()}"
+        if not 1 <= number <= 9999:
+            return REFUSE_BAD_NUMBER, f"program select refused: O{number} outside 1..9999"
+        if number not in self.memory:
+            return REFUSE_NOT_IN_MEMORY, f"program O{number:04d} not in memory"
+        return None
+
     def _cmd_select_program(self, number: int) -> None:
         number = int(number)
-        if self._execution() in IN_CYCLE:
-            raise CommandRefused(f"program select refused while {self._execution()}")
-        if number not in self.memory:
-            raise CommandRefused(f"program O{number:04d} not in memory")
+        why = self._select_refusal(number)
+        if why is not None:
+            raise CommandRefused(why[1])
         self.selected = number
         self._final = "READY"
         self._event(f"program O{number:04d} selected")
@@ -443,27 +477,42 @@ class Controller:
         v0 = self._jog.get(axis, (0.0, 0.0, 0.0))[2]
         self._jog[axis] = (target, f / 60.0, v0)
 
-    def _cmd_home(self, axes=None) -> None:
+    def _home_refusal(self) -> tuple[int, str] | None:
+        """Why a homing run cannot start now: (refusal code, text), or None."""
         if self.mode != "REF":
-            raise CommandRefused(f"homing refused: mode is {self.mode}, not REF")
+            return REFUSE_NOT_REF_MODE, f"homing refused: mode is {self.mode}, not REF"
         if self._estop:
-            raise CommandRefused("homing refused: emergency stop active")
+            return REFUSE_ESTOP, "homing refused: emergency stop active"
         if not self._enabled:
-            raise CommandRefused("homing refused: axes not enabled")
+            return REFUSE_NOT_ENABLED, "homing refused: axes not enabled"
         if self._homing:
-            raise CommandRefused("homing refused: homing already in progress")
-        if axes is None:
-            order = self.home_order
-        else:
+            return REFUSE_HOMING, "homing refused: homing already in progress"
+        return None
+
+    def _cmd_home(self, axes=None) -> None:
+        why = self._home_refusal()
+        if why is not None:
+            raise CommandRefused(why[1])
+        if axes is not None:
             unknown = [a for a in axes if a not in self.axes]
             if unknown:
                 raise CommandRefused(f"homing refused: no axis {', '.join(unknown)}")
-            order = tuple(a for a in self.home_order if a in axes)
+        # the configured sequence, keeping only the axes asked for
+        groups = [
+            tuple(a for a in group if axes is None or a in axes) for group in self.home_sequence
+        ]
+        groups = [g for g in groups if g]
+        self._homing_next = deque(groups[1:])
+        self._homing_done = []
+        self._home_group(groups[0])
+        self._event("homing " + " then ".join(" ".join(g) for g in groups))
+
+    def _home_group(self, group: tuple[str, ...]) -> None:
+        """Ask the axis layer to home one group of the sequence."""
         self._homing = "requested"
-        self._homing_axes = order
+        self._homing_axes = group
         self._homing_since = self._t
-        self._axis("home", order)
-        self._event(f"homing {' '.join(order)}")
+        self._axis("home", group)
 
     # ================================================================ operator actions ====
     def _start_interlocks(self, what: str, need_mode: str) -> str | None:
@@ -625,6 +674,7 @@ class Controller:
         ):
             if sig in plc and plc[sig] != self._plc_prev.get(sig):
                 setattr(self, attr, float(min(max(int(plc[sig]), lo), hi)))
+        self._plc_select_and_home(plc)
         if plc.get("FeedHold", False) and self._run is not None and not self._hold:
             self._plc_hold = True
             self._feed_hold("PLC")
@@ -640,6 +690,33 @@ class Controller:
             text = al.PLC_ALARM_TEXTS.get(number, f"PLC alarm {number}")
             self._alarms.raise_(number, text, self._t, source="PLC", rule=al.SELF, cause="plc")
 
+    def _plc_select_and_home(self, plc) -> None:
+        """The PLC's program select and zero return requests (remote operator panel): taken
+        on the rising edge, answered with done/refused (and a code) until the request drops."""
+        if self._rose("ProgSelectReq"):
+            number = int(plc.get("ProgSelectNumber", 0))
+            why = self._select_refusal(number)
+            if why is None:
+                self.selected = number
+                self._final = "READY"
+                self._event(f"program O{number:04d} selected (PLC)")
+                self._select_answer = (True, 0)
+            else:
+                self._event(f"PLC: {why[1]}")
+                self._select_answer = (False, why[0])
+        elif not plc.get("ProgSelectReq", False):
+            self._select_answer = None
+        if self._rose("HomeAllReq"):
+            why = self._home_refusal()
+            if why is None:
+                self._cmd_home()
+                self._home_answer = (True, 0)
+            else:
+                self._event(f"PLC: {why[1]}")
+                self._home_answer = (False, why[0])
+        elif not plc.get("HomeAllReq", False):
+            self._home_answer = None
+
     def _estop_event(self) -> None:
         self._estop = True
         self._axis("quick_stop")
@@ -649,6 +726,7 @@ class Controller:
             self._abort_now("STOPPED")
         self._ref = dict.fromkeys(self.axes, False)  # incremental encoders lose the reference
         self._homing = ""
+        self._homing_next.clear()
         self._alarms.raise_(
             al.ESTOP,
             "emergency stop: axes quick-stopped, spindle stopped, reference lost (home again)",
@@ -667,6 +745,10 @@ class Controller:
     def _plc_outputs(self) -> dict:
         """NC->PLC signals; the same (read-only) dict while nothing changes."""
         hs = self._hs
+        referenced = 0
+        for a in self.axes:
+            if self._ref[a] and self._fb_homed(a):
+                referenced |= 1 << AXIS_BITS.index(a) if a in AXIS_BITS else 0
         key = (
             self._ex in IN_CYCLE or self._run is not None,
             self._t < self._resetting_until,
@@ -678,6 +760,11 @@ class Controller:
             hs["S"].code,
             hs["T"].phase,
             hs["T"].code,
+            self._select_answer,
+            self._home_answer,
+            bool(self._homing),
+            self.selected,
+            referenced,
         )
         if key == self._plc_out_key:
             return self._plc_out
@@ -687,6 +774,16 @@ class Controller:
             "NcResetting": key[1],
             "NcAlarm": key[2] > 0,
             "NcMode": _MODE_NUMBER.get(self.mode, MODE_NONE),
+            "ProgSelectDone": self._select_answer is not None and self._select_answer[0],
+            "ProgSelectFail": self._select_answer is not None and not self._select_answer[0],
+            "ProgSelectFailCode": self._select_answer[1] if self._select_answer else 0,
+            "HomeAck": self._home_answer is not None and self._home_answer[0],
+            "HomeFail": self._home_answer is not None and not self._home_answer[0],
+            "HomeFailCode": self._home_answer[1] if self._home_answer else 0,
+            "HomingActive": bool(self._homing),
+            "AllReferenced": all(self._ref[a] and self._fb_homed(a) for a in self.axes),
+            "ActiveProgram": self.selected or 0,
+            "ReferencedAxes": referenced,
         }
         for h in hs.values():
             h.write(out)
@@ -697,15 +794,32 @@ class Controller:
     def _fb_homed(self, axis: str) -> bool:
         return bool(self._fb.homed.get(axis, False)) if self._fb is not None else False
 
-    def _home_order(self) -> tuple[str, ...]:
-        s = self.settings.home_order
-        if s is not None:
-            missing = [a for a in self.axes if a not in s]
-            if missing or any(a not in self.axes for a in s):
-                raise ValueError(f"home_order {s} must name each axis of {self.axes} once")
-            return tuple(s)
-        first = "X" if self.config.kind == "lathe" else "Z"
-        return tuple([a for a in self.axes if a == first] + [a for a in self.axes if a != first])
+    def _home_sequence(self) -> tuple[tuple[str, ...], ...]:
+        s = self.settings
+        if s.home_sequence is not None:
+            groups = tuple(tuple(g) for g in s.home_sequence)
+            what = f"home_sequence {[list(g) for g in groups]}"
+        elif s.home_order is not None:
+            groups = tuple((a,) for a in s.home_order)
+            what = f"home_order {tuple(s.home_order)}"
+        elif self.config.kind == "lathe":
+            # the cross slide first, clear of the chuck, then the carriage
+            first = [a for a in self.axes if a == "X"]
+            groups = tuple((a,) for a in first + [a for a in self.axes if a != "X"])
+            what = "the lathe's default homing sequence"
+        else:
+            # the tool axis first, clear of the work and the fixtures, then the table
+            first = tuple(a for a in self.axes if a == "Z")
+            rest = tuple(a for a in self.axes if a != "Z")
+            groups = tuple(g for g in (first, rest) if g)
+            what = "the default homing sequence"
+        flat = [a for g in groups for a in g]
+        if any(not g for g in groups) or sorted(flat) != sorted(self.axes):
+            raise ValueError(
+                f"{what} must name each axis of {', '.join(self.axes)} exactly once,"
+                " in non-empty groups"
+            )
+        return groups
 
     def _supervise_axes(self, fb: AxisFeedback) -> None:
         for axis, code, text in fb.faults:
@@ -770,12 +884,18 @@ class Controller:
                 return
             for a in self._homing_axes:
                 self._ref[a] = True
-            self._homing = ""
+            self._homing_done.extend(self._homing_axes)
             self._cmd = dict(self._actual)
-            self._event(f"homed {' '.join(self._homing_axes)}")
+            if self._homing_next:
+                # the next group starts once this one is referenced (Z clear, then X Y)
+                self._home_group(self._homing_next.popleft())
+                return
+            self._homing = ""
+            self._event(f"homed {' '.join(self._homing_done)}")
 
     def _homing_failed(self, why: str) -> None:
         self._homing = ""
+        self._homing_next.clear()
         self._alarms.raise_(al.HOMING_FAILED, f"homing failed: {why}", self._t)
 
     def _following_error(self, fb: AxisFeedback, dt: float) -> None:

@@ -195,7 +195,10 @@ def test_homing_order_is_tool_axis_first():
     rig.cmd("mode", mode="REF")
     rig.cmd("home")
     rig.step()
+    # the tool axis alone first; X and Y together once Z is referenced
     assert rig.outputs.axis_command == "home"
-    assert rig.outputs.home_axes == ("Z", "X", "Y")
+    assert rig.outputs.home_axes == ("Z",)
+    assert rig.ctl.home_sequence == (("Z",), ("X", "Y"))
     lathe = Rig("lathe2")
     assert lathe.ctl.home_order == ("X", "Z")
+    assert lathe.ctl.home_sequence == (("X",), ("Z",))

@@ -211,7 +211,7 @@ N50 M30
 
 def _scenario() -> tuple[str, str]:
     trace, candump = io.StringIO(), io.StringIO()
-    m = build(trace=trace, candump=candump, faults=["plc:air_pressure_loss@1.8s"])
+    m = build(trace=trace, candump=candump, faults=["plc:air_pressure_loss@3.0s"])  # mid-program
     try:
         home(m)
         start(m, SHORT)
