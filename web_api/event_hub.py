@@ -30,6 +30,7 @@ import threading
 import time
 import weakref
 from collections.abc import Callable, Sequence
+from dataclasses import dataclass
 from typing import Protocol
 
 import anyio
@@ -45,6 +46,20 @@ log = logging.getLogger(__name__)
 
 ReadAfter = Callable[[int, int], Sequence[Event]]
 """(after_id, limit) -> up to `limit` events with id > after_id, in id order."""
+
+
+@dataclass(frozen=True, slots=True)
+class Published:
+    """An event as the streams send it, encoded once however many clients receive it."""
+
+    id: int
+    json: str  # the WebSocket message
+    sse: bytes  # the server-sent event, blank line included
+
+    @classmethod
+    def of(cls, event: Event) -> Published:
+        text = event.to_json()
+        return cls(event.id, text, f"id: {event.id}\ndata: {text}\n\n".encode())
 
 
 class HubClosed(Exception):
@@ -70,7 +85,7 @@ class Stream(Protocol):
 
     cursor: int
 
-    async def next_batch(self, timeout: float) -> list[Event]: ...
+    async def next_batch(self, timeout: float) -> list[Published]: ...
 
     def close(self) -> None: ...
 
@@ -98,7 +113,7 @@ class EventHub:
         self._lock = threading.Lock()
         self._start_lock = threading.Lock()  # one subscriber anchors and starts the reader
         # The ring holds every accepted event with floor < id <= horizon, ascending.
-        self._ring: list[Event] = []
+        self._ring: list[Published] = []
         self._ids: list[int] = []
         self._floor = 0
         self._horizon = 0
@@ -143,7 +158,7 @@ class EventHub:
         rows = self._read_after(self._horizon, self.batch)
         self.polls += 1
         now = self._clock()
-        accepted: list[Event] = []
+        accepted: list[Published] = []
         expect = self._horizon + 1
         for event in rows:
             if event.id > expect:  # a hole: an id not committed (yet)
@@ -152,7 +167,7 @@ class EventHub:
                 if now - self._gap_since < self.gap_grace_s:
                     break
             self._gap_since = None
-            accepted.append(event)
+            accepted.append(Published.of(event))
             expect = event.id + 1
         if accepted:
             with self._lock:
@@ -167,7 +182,7 @@ class EventHub:
             self._wake_all()
         return len(accepted)
 
-    def take(self, cursor: int, limit: int) -> tuple[list[Event] | None, int]:
+    def take(self, cursor: int, limit: int) -> tuple[list[Published] | None, int]:
         """Events after `cursor` from the ring, and the horizon they are bounded by.
 
         None when the cursor is older than the ring: the caller reads (cursor, horizon]
@@ -178,10 +193,10 @@ class EventHub:
             i = bisect.bisect_right(self._ids, cursor)
             return self._ring[i : i + limit], self._horizon
 
-    def read_behind(self, cursor: int, bound: int, limit: int) -> tuple[list[Event], int]:
+    def read_behind(self, cursor: int, bound: int, limit: int) -> tuple[list[Published], int]:
         """The database's events in (cursor, bound] for a subscriber behind the ring, and
         the cursor after them."""
-        rows = [e for e in self._read_after(cursor, limit) if e.id <= bound]
+        rows = [Published.of(e) for e in self._read_after(cursor, limit) if e.id <= bound]
         if rows:
             return rows, rows[-1].id
         # Nothing stored up to the bound (holes stepped over): the ring continues from there.
@@ -312,7 +327,7 @@ class Subscription:
         self._hub, self.cursor, self.limit = hub, cursor, limit
         self._open = True
 
-    async def next_batch(self, timeout: float) -> list[Event]:
+    async def next_batch(self, timeout: float) -> list[Published]:
         """The next events in id order, or [] when none came within `timeout` seconds.
 
         Raises HubClosed when the app shuts down."""
@@ -354,14 +369,14 @@ class PollingStream:
     def __init__(self, read_after: ReadAfter, cursor: int, poll_s: float, limit: int = 200):
         self._read_after, self.cursor, self.poll_s, self.limit = read_after, cursor, poll_s, limit
 
-    async def next_batch(self, timeout: float) -> list[Event]:
+    async def next_batch(self, timeout: float) -> list[Published]:
         loop = asyncio.get_running_loop()
         deadline = loop.time() + timeout
         while True:
             got = list(await anyio.to_thread.run_sync(self._read_after, self.cursor, self.limit))
             if got:
                 self.cursor = got[-1].id
-                return got
+                return [Published.of(e) for e in got]
             remaining = deadline - loop.time()
             if remaining <= 0:
                 return []

@@ -5,13 +5,18 @@ that drops the connection and resumes with Last-Event-ID, as a browser's EventSo
 from __future__ import annotations
 
 import json
+import logging
 import socket
 import threading
+import time
+from datetime import UTC, datetime
 
 import httpx
 import pytest
 import uvicorn
 
+from dnc.db import transaction
+from dnc.events import record
 from tests.web_api.test_api_common import (  # noqa: F401 - fixtures
     GOOD,
     KEYS,
@@ -88,3 +93,45 @@ def test_problem_over_the_wire(live):
     assert r.status_code == 400
     assert r.headers["content-type"] == "application/problem+json"
     assert r.json()["type"] == "https://fmscell.dev/problems/malformed-json"
+
+
+class Records(logging.Handler):
+    def __init__(self) -> None:
+        super().__init__(logging.WARNING)
+        self.records: list[logging.LogRecord] = []
+
+    def emit(self, record: logging.LogRecord) -> None:
+        self.records.append(record)
+
+
+def test_clients_dropping_mid_stream_are_released_without_an_error_logged(live):
+    """Dropping while a backlog is being written used to log BrokenResourceError (FastAPI's
+    per-connection SSE tasks); the subscription must also be given back to the hub."""
+    api, c = live
+    with transaction(api.sessions) as s:
+        for n in range(1500):
+            record(
+                s,
+                now=datetime.now(UTC),
+                actor="t",
+                action="machine.status",
+                entity="machine",
+                entity_id=None,
+                machine=f"m{n % 50}",
+                pad="x" * 200,
+            )
+    errors = Records()
+    logging.getLogger("uvicorn.error").addHandler(errors)
+    try:
+        for _ in range(3):
+            with c.stream("GET", "/api/events?after=0") as r:
+                sse_events(r.iter_lines(), 10)  # then drop with most of the backlog unsent
+        hub = api.client.app.state.event_hub
+        deadline = time.monotonic() + 20
+        while hub.subscribers and time.monotonic() < deadline:
+            time.sleep(0.02)
+        assert hub.subscribers == 0, "a dropped client's subscription was not released"
+        assert c.get("/api/health").status_code == 200
+    finally:
+        logging.getLogger("uvicorn.error").removeHandler(errors)
+    assert [r.getMessage() for r in errors.records] == []
