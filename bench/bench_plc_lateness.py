@@ -12,8 +12,14 @@ Phases in the same run: `idle` (no Modbus traffic) as the peer figure, then `loa
 Prints one JSON object: lateness p50/p99/max per phase, overruns, missed periods, requests/s
 served, handshakes completed, the 1 ms p99 target.
 
+Two runtime remedies (plc/runtime/realtime.py) are off by default, as in the runtime:
+`--scan-gate` builds the face with `scan_gate=runner.gate` (the face steps aside, GIL released,
+just before each scan) and `--rt-priority N` asks SCHED_FIFO N for the scan thread (the JSON
+says whether it was granted). Compare runs with and without them, alternated, in one session.
+
 Usage: bench_plc_lateness.py [--seconds 10] [--idle-seconds 3] [--client-procs 2]
                              [--connections 8] [--client-nice 0]
+                             [--scan-gate] [--rt-priority N]
 """
 
 from __future__ import annotations
@@ -144,6 +150,17 @@ def main() -> None:
     ap.add_argument(
         "--client-nice", type=int, default=0, help="nice increment of the client processes"
     )
+    ap.add_argument(
+        "--scan-gate",
+        action="store_true",
+        help="the face steps aside before each scan (ModbusFace(scan_gate=runner.gate))",
+    )
+    ap.add_argument(
+        "--rt-priority",
+        type=int,
+        default=None,
+        help="SCHED_FIFO priority of the scan thread (default: FMSCELL_PLC_RT_PRIORITY or 0)",
+    )
     args = ap.parse_args()
     if not 0 < args.seconds <= 60 or not 0 < args.idle_seconds <= 60:
         ap.error("--seconds and --idle-seconds must be in (0, 60]")
@@ -155,11 +172,17 @@ def main() -> None:
 
     load_before = os.getloadavg()[0]
     rt, io = machine_plc(RuntimeConfig(period_ms=PERIOD_MS))
+    runner = RealtimeRunner(rt, rt_priority=args.rt_priority)
     face = ModbusFace(
-        lambda: rt.snapshot, rt.writes, rt.image.size, port=0, writable=WRITABLE, idle_timeout=None
+        lambda: rt.snapshot,
+        rt.writes,
+        rt.image.size,
+        port=0,
+        writable=WRITABLE,
+        idle_timeout=None,
+        scan_gate=runner.gate if args.scan_gate else None,
     )
     face.start_in_thread()
-    runner = RealtimeRunner(rt)
     nc = NcDriver(io.nc)
     runner.start()
     nc.start()
@@ -168,7 +191,7 @@ def main() -> None:
         stats = rt.stats
         c0, o0, m0, r0 = stats.count, stats.overruns, stats.missed, face.stats.requests
         h0 = nc.handshakes
-        t0 = time.monotonic()
+        t0, cpu0 = time.monotonic(), time.process_time()
         served = exceptions = 0
         if load:
             procs = max(1, min(args.client_procs, args.connections))
@@ -190,7 +213,7 @@ def main() -> None:
                 w.start()
             time.sleep(max(0.0, start_at - time.monotonic()))
             c0, o0, m0, r0 = stats.count, stats.overruns, stats.missed, face.stats.requests
-            h0, t0 = nc.handshakes, time.monotonic()
+            h0, t0, cpu0 = nc.handshakes, time.monotonic(), time.process_time()
             results = [q.get(timeout=seconds + 30) for _ in workers]
             for w in workers:
                 w.join(10)
@@ -201,6 +224,7 @@ def main() -> None:
         else:
             time.sleep(seconds)
         elapsed = time.monotonic() - t0
+        cpu = time.process_time() - cpu0
         n = stats.count - c0
         samples = list(stats.late_ms)[-n:] if n else []
         out = {
@@ -209,9 +233,12 @@ def main() -> None:
             "missed_periods": stats.missed - m0,
             "nc_handshakes": nc.handshakes - h0,
             "seconds": round(elapsed, 2),
+            # CPU of this process (scan + face + NC threads) per wall second: 1.0 = one core
+            "process_cpu_per_s": round(cpu / elapsed, 3),
         }
         if load:
             out["requests_per_s"] = round(served / elapsed)
+            out["process_cpu_us_per_request"] = round(cpu / served * 1e6, 1) if served else None
             out["face_requests_per_s"] = round((face.stats.requests - r0) / elapsed)
             out["exception_answers"] = exceptions
         return out
@@ -235,6 +262,10 @@ def main() -> None:
                 "client_processes": args.client_procs,
                 "connections": args.connections,
                 "client_nice": args.client_nice,
+                "scan_gate": args.scan_gate,
+                "scan_thread_scheduling": runner.scheduling,
+                "gate_holds": runner.gate.holds,
+                "gate_hold_timeouts": runner.gate.hold_timeouts,
                 "workload": "FC03x10, FC01x16, FC03x10, FC16x3 in turn; 1 outstanding/conn",
                 "loaded": loaded,
                 "idle": idle,

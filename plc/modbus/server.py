@@ -17,6 +17,7 @@ import time
 from collections import deque
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass
+from typing import Protocol
 
 from plc.image import ImageSize, Snapshot, WriteQueue
 from plc.modbus.allowlist import AllowList
@@ -44,6 +45,15 @@ _READ_ANSWER = [None] + [
 
 #: Frames a connection may have waiting behind an unanswered write in ack-after-scan mode.
 _MAX_BACKLOG = 32
+
+
+class ScanGateLike(Protocol):
+    """What the face needs of a scan gate (plc.runtime.realtime.ScanGate; not imported so
+    the face stays independent of the runtime)."""
+
+    step_aside_at: float
+
+    def step_aside(self, now: float) -> bool: ...
 
 
 @dataclass
@@ -82,6 +92,11 @@ class ModbusFace:
     Write responses are sent when the batch is queued (`ack_after_scan=False`), or once a scan
     that certainly applied it has published (`ack_after_scan=True`, at most two scans later;
     exception 04 if that takes longer than `ack_timeout`, the batch then stays queued).
+
+    `scan_gate` (a PLC runner's `gate`, e.g. `RealtimeRunner.gate`): when a request arrives
+    within the gate's guard before a scan deadline, the face first waits, without the GIL,
+    until that scan has published (bounded by the gate), so the scan thread of the same
+    process never waits for the GIL held by a busy face. None: never wait.
     """
 
     def __init__(
@@ -102,6 +117,7 @@ class ModbusFace:
         ack_timeout: float = 1.0,
         identity: DeviceIdentity | None = None,
         allowed_clients: Iterable[str] | None = None,
+        scan_gate: ScanGateLike | None = None,
     ) -> None:
         if mb_map is None:
             mb_map = ModbusMap(size)
@@ -141,6 +157,7 @@ class ModbusFace:
             )
         except ValueError as e:
             raise ValueError(f"ModbusFace: allowed_clients: {e}") from None
+        self.scan_gate = scan_gate
         self.stats = FaceStats()
         self._server: asyncio.Server | None = None
         self._sweeper: asyncio.Task | None = None
@@ -310,6 +327,7 @@ class _Connection(asyncio.Protocol):
         self._write_paused = False
         self._fast = not face.ack_after_scan
         self._read_segments = face._read_segments
+        self._gate = face.scan_gate
         self._loop = asyncio.get_running_loop()
 
     # -- asyncio.Protocol -------------------------------------------------------------
@@ -356,6 +374,9 @@ class _Connection(asyncio.Protocol):
         if self.closed:
             return
         self.last_rx = now = _monotonic()
+        gate = self._gate
+        if gate is not None and now >= gate.step_aside_at:
+            gate.step_aside(now)  # let the due scan have the GIL; answer right after it
         n = len(data)
         # Fast path, the normal case of a polling client: exactly one whole, well-formed
         # frame at a frame boundary. Anything else takes the general decoder below.

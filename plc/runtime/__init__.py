@@ -11,7 +11,9 @@ Public API::
         .load_program(compiled)                     online change at the next scan
         .alarms / .alarm_log / .raise_alarm() / .acknowledge(n)
         .stats (ScanStats) / .status() / .save_retain() / .close()
-    RealtimeRunner(runtime, period_ms=None).start() / .stop()
+    RealtimeRunner(runtime, period_ms=None, *, rt_priority=None, gate_guard_s=None)
+        .start() / .stop() / .gate (ScanGate) / .scheduling
+    ScanGate: the next scan's deadline, for threads that step aside before it
     SimulatedIO, Debounce, MemoryRetainStore, FileRetainStore
 """
 
@@ -27,6 +29,7 @@ from plc.runtime.alarms import (
 )
 from plc.runtime.core import Mode, ProgramSwapError, Runtime, RuntimeConfig
 from plc.runtime.io import Debounce, IOProvider, SimulatedIO
+from plc.runtime.realtime import RT_PRIORITY_ENV, ScanGate
 from plc.runtime.retain import FileRetainStore, MemoryRetainStore, RetainStore
 from plc.runtime.shell import RealtimeRunner
 from plc.runtime.stats import ScanStats, Summary
@@ -46,9 +49,11 @@ __all__ = [
     "MemoryRetainStore",
     "Mode",
     "ProgramSwapError",
+    "RT_PRIORITY_ENV",
     "RealtimeRunner",
     "RetainStore",
     "Runtime",
+    "ScanGate",
     "RuntimeConfig",
     "ScanStats",
     "SimulatedIO",
