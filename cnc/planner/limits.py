@@ -111,6 +111,13 @@ def line_limits(lim: AxisLimits, u: tuple[float, ...]) -> tuple[float, float, fl
 def arc_limits(
     lim: AxisLimits, arc: Arc, normal_axis: int, vmax: float = INF
 ) -> tuple[float, float, float]:
+    v, at, jt, _at, _jt = arc_limits_at(lim, arc, normal_axis, vmax, -1.0)
+    return v, at, jt
+
+
+def arc_limits_at(
+    lim: AxisLimits, arc: Arc, normal_axis: int, vmax: float, vslow: float
+) -> tuple[float, float, float, float, float]:
     """(speed cap, tangential accel, tangential jerk) of an arc or helix.
 
     In-plane speed is c*sdot (c = cos of the helix angle). The in-plane acceleration
@@ -156,7 +163,24 @@ def arc_limits(
         if x < v:
             v = x
     if v <= 0.0:  # blocked (zero override): whatever tangential limits, no motion
-        return 0.0, ap / c, Q_TANGENT * jp / c
+        return 0.0, ap / c, Q_TANGENT * jp / c, 0.0, 0.0
+    if sa > 0.0:
+        an_ = acc[normal_axis] * (1.0 - RHO_KINK_A) / sa
+        jn_ = jerk[normal_axis] * (1.0 - RHO_JUMP) / sa
+    else:
+        an_ = jn_ = INF
+    at, jt = _arc_tangential(ap, jp, c, r, v, an_, jn_)
+    # also at the slower speed vslow (a programmed feed below the cap): the planner asks
+    # for both, and everything above is shared
+    if 0.0 < vslow < v:
+        at2, jt2 = _arc_tangential(ap, jp, c, r, vslow, an_, jn_)
+    else:
+        at2, jt2 = at, jt
+    return v, at, jt, at2, jt2
+
+
+def _arc_tangential(ap, jp, c, r, v, an_, jn_) -> tuple[float, float]:
+    """Tangential (accel, jerk) on an arc at path speed v, from the plane budgets."""
     an = c * c * v * v / r
     x = ap * ap - an * an
     at = sqrt(x if x >= 0.0 else 0.0) / c
@@ -171,14 +195,11 @@ def arc_limits(
     x = sqrt(x if x >= 0.0 else 0.0) * r / (3.0 * c * c * v)
     if x < at:
         at = x
-    if sa > 0.0:
-        x = acc[normal_axis] * (1.0 - RHO_KINK_A) / sa
-        if x < at:
-            at = x
-        x = jerk[normal_axis] * (1.0 - RHO_JUMP) / sa
-        if x < jt:
-            jt = x
-    return v, at, jt
+    if an_ < at:
+        at = an_
+    if jn_ < jt:
+        jt = jn_
+    return at, jt
 
 
 def junction_cap(
@@ -313,23 +334,13 @@ def coast_cap(
         d1 = -d1
     if d2 < 0.0:
         d2 = -d2
-    a3 = a2 = a1 = 0.0  # normalised jerk coefficients of v^3, v^2, v
-    b2 = b1 = 0.0  # normalised acceleration coefficients of v^2, v
-    for x in (kjerk[0] / bj0, kjerk[1] / bj1, kjerk[2] / bj2):
-        if x > a3:
-            a3 = x
-    for x in (k75 * d0 / bj0, k75 * d1 / bj1, k75 * d2 / bj2):
-        if x > a2:
-            a2 = x
-    for x in (u0 / tj0, u1 / tj1, u2 / tj2):
-        if x > a1:
-            a1 = x
-    for x in (kacc[0] / ba0, kacc[1] / ba1, kacc[2] / ba2):
-        if x > b2:
-            b2 = x
-    for x in (u0 / ta0, u1 / ta1, u2 / ta2):
-        if x > b1:
-            b1 = x
+    # normalised jerk coefficients of v^3, v^2, v and acceleration coefficients of v^2, v
+    # (each the largest over the axes; all are >= 0, as the zero start was)
+    a3 = _max3(kjerk[0] / bj0, kjerk[1] / bj1, kjerk[2] / bj2)
+    a2 = _max3(k75 * d0 / bj0, k75 * d1 / bj1, k75 * d2 / bj2)
+    a1 = _max3(u0 / tj0, u1 / tj1, u2 / tj2)
+    b2 = _max3(kacc[0] / ba0, kacc[1] / ba1, kacc[2] / ba2)
+    b1 = _max3(u0 / ta0, u1 / ta1, u2 / ta2)
     v = lim.vtop
     # acceleration: b2 v^2 + b1 v <= 1
     if b2 > 0.0:
@@ -381,17 +392,30 @@ def centripetal(lim: AxisLimits, geom) -> tuple[tuple[float, ...], tuple[float, 
     got = geom.cent
     if got is not None:
         return got
-    c = geom.plane_fraction
-    r = min(geom.r0, geom.r1)
-    e1, e2 = geom.e1, geom.e2
-    ka = []
-    kj = []
-    for i in range(3):
-        e = sqrt(e1[i] * e1[i] + e2[i] * e2[i])
-        ka.append(e * c * c / r)
-        kj.append(e * c * c * c / (r * r))
-    geom.cent = got = (tuple(ka), tuple(kj))
+    r0, r1 = geom.r0, geom.r1
+    c = 0.5 * (r0 + r1) * geom.sweep / geom.length  # Arc.plane_fraction
+    r = r1 if r1 < r0 else r0
+    (a0, a1, a2), (b0, b1, b2) = geom.e1, geom.e2
+    e0 = sqrt(a0 * a0 + b0 * b0)
+    e1 = sqrt(a1 * a1 + b1 * b1)
+    e2 = sqrt(a2 * a2 + b2 * b2)
+    geom.cent = got = (
+        (e0 * c * c / r, e1 * c * c / r, e2 * c * c / r),
+        (e0 * c * c * c / (r * r), e1 * c * c * c / (r * r), e2 * c * c * c / (r * r)),
+    )
     return got
+
+
+def _max3(x: float, y: float, z: float) -> float:
+    """max(0.0, x, y, z) for non-negative x, y, z (comparisons, no builtin call)."""
+    m = 0.0
+    if x > m:
+        m = x
+    if y > m:
+        m = y
+    if z > m:
+        m = z
+    return m
 
 
 def _jerk_cap(alpha, beta, full, lose, gap, t, c, vtop) -> float:

@@ -16,13 +16,14 @@ from cnc.errors import NcError
 from cnc.params import MachineParams
 from cnc.planner.geometry import Line, arc_from_canon, blend
 from cnc.planner.limits import (
+    INF,
     AxisLimits,
     arc_limits,
+    arc_limits_at,
     centripetal,
     coast_cap,
     junction_cap,
     line_limits,
-    piece_limits,
 )
 
 KINK_SPAN_BREAK = 1e-9  # tangent jumps above this end a velocity span (a = 0 there)
@@ -69,10 +70,20 @@ class Segment:
         self.block_last = True
         self.feed = feed  # mm/s, None for rapid
         self.normal_axis = normal_axis
+        self.lim_v = -1.0
+        self.lim_at = self.lim_jt = 0.0
         if type(geom) is Line:
             self.vphys, self.at, self.jt = line_limits(lim, geom.u)
         else:
-            self.vphys, self.at, self.jt = piece_limits(lim, geom, normal_axis)
+            # the limits at the programmed feed come with the cap: a plan asks for both
+            vslow = -1.0 if feed is None else feed
+            self.vphys, self.at, self.jt, at2, jt2 = arc_limits_at(
+                lim, geom, normal_axis, INF, vslow
+            )
+            if 0.0 < vslow < self.vphys:
+                self.lim_v = vslow
+                self.lim_at = at2
+                self.lim_jt = jt2
         self.stop_end = True  # until the next piece is known
         self.jcap_end = 0.0
         self.jcoast = -1.0  # coasted junction cap, computed when a span boundary needs it
@@ -84,8 +95,6 @@ class Segment:
         self.exact = exact
         self.tolerance = tolerance
         self.lim = lim
-        self.lim_v = -1.0
-        self.lim_at = self.lim_jt = 0.0
 
     def limits_at(self, v: float) -> tuple[float, float]:
         """Tangential (accel, jerk) valid up to path speed v (arcs allow more when slower)."""
@@ -104,8 +113,16 @@ class Segment:
             ka1, kj1 = centripetal(lim, self.geom)
             ka2, kj2 = centripetal(lim, self.next_geom)
             if ka2 is not ka1:  # the larger of the two pieces, per axis
-                ka1 = tuple(x if x >= y else y for x, y in zip(ka1, ka2, strict=True))
-                kj1 = tuple(x if x >= y else y for x, y in zip(kj1, kj2, strict=True))
+                ka1 = (
+                    ka1[0] if ka1[0] >= ka2[0] else ka2[0],
+                    ka1[1] if ka1[1] >= ka2[1] else ka2[1],
+                    ka1[2] if ka1[2] >= ka2[2] else ka2[2],
+                )
+                kj1 = (
+                    kj1[0] if kj1[0] >= kj2[0] else kj2[0],
+                    kj1[1] if kj1[1] >= kj2[1] else kj2[1],
+                    kj1[2] if kj1[2] >= kj2[2] else kj2[2],
+                )
             self.jcoast = coast_cap(lim, self.jdu, self.jdk, ka1, kj1)
         return self.jcoast
 

@@ -71,23 +71,6 @@ class Span:
         return self.s0 + sa, va, aa, i
 
 
-def integrate(phases: list[tuple[float, float]], v0: float, a0: float = 0.0):
-    """Turn (dt, jerk) phases into (t0, dt, s, v, a, j) rows; returns rows, end state."""
-    rows = []
-    t = s = 0.0
-    v = v0
-    a = a0
-    for dt, j in phases:
-        if dt <= 0.0:
-            continue
-        rows.append((t, dt, s, v, a, j))
-        s += dt * (v + dt * (0.5 * a + dt * j / 6.0))
-        v += dt * (a + 0.5 * j * dt)
-        a += j * dt
-        t += dt
-    return rows, t, s, v, a
-
-
 def span_phases(v0, v1, vmax, length, at, jt) -> tuple[list[tuple[float, float]], float]:
     """(dt, jerk) phases covering `length` from v0 to v1 under vmax; returns peak too."""
     if v0 <= vmax:
@@ -95,14 +78,17 @@ def span_phases(v0, v1, vmax, length, at, jt) -> tuple[list[tuple[float, float]]
     else:
         lo = v1  # starting above the cap (override lowered): brake first
     hi = vmax
-    if change_distance(v0, hi, at, jt) + change_distance(hi, v1, at, jt) <= length or lo >= hi:
+    d1 = change_distance(v0, hi, at, jt)
+    d2 = change_distance(hi, v1, at, jt)
+    if d1 + d2 <= length or lo >= hi:
         vp = hi
     else:
         vp = _peak_acc_limited(v0, v1, length, at, jt)
-        if not (lo <= vp <= hi):
-            vp = _peak_search(v0, v1, length, at, jt, lo, hi)
-    d1 = change_distance(v0, vp, at, jt)
-    d2 = change_distance(vp, v1, at, jt)
+        if lo <= vp <= hi:
+            d1 = change_distance(v0, vp, at, jt)
+            d2 = change_distance(vp, v1, at, jt)
+        else:
+            vp, d1, d2 = _peak_search(v0, v1, length, at, jt, lo, hi, d1 + d2 - length)
     cruise = length - d1 - d2
     phases = change_phases(v0, vp, at, jt)
     if cruise > 0.0 and vp > 0.0:
@@ -132,14 +118,17 @@ def _peak_acc_limited(v0: float, v1: float, length: float, a: float, j: float) -
     return vp
 
 
-def _peak_search(v0, v1, length, at, jt, lo, hi) -> float:
+def _peak_search(v0, v1, length, at, jt, lo, hi, fhi) -> tuple[float, float, float]:
     """Largest vp in [lo, hi] with both changes fitting `length` (Illinois regula falsi).
 
-    The returned side always fits; whatever length is left is cruised at vp, so the
-    profile covers `length` exactly and a 1e-6 shortfall only costs that much speed.
+    `fhi` is the excess length at hi (the caller has it). Returns vp and the lengths of
+    the two changes at vp. The returned side always fits; whatever length is left is
+    cruised at vp, so the profile covers `length` exactly and a 1e-6 shortfall only costs
+    that much speed.
     """
-    flo = change_distance(v0, lo, at, jt) + change_distance(lo, v1, at, jt) - length
-    fhi = change_distance(v0, hi, at, jt) + change_distance(hi, v1, at, jt) - length
+    d1 = change_distance(v0, lo, at, jt)
+    d2 = change_distance(lo, v1, at, jt)
+    flo = d1 + d2 - length
     side = 0
     for _ in range(100):
         if hi - lo <= 1e-12 * hi or -flo <= 1e-6 * length:
@@ -147,9 +136,11 @@ def _peak_search(v0, v1, length, at, jt, lo, hi) -> float:
         x = hi - fhi * (hi - lo) / (fhi - flo) if fhi != flo else 0.5 * (lo + hi)
         if not lo < x < hi:
             x = 0.5 * (lo + hi)
-        fx = change_distance(v0, x, at, jt) + change_distance(x, v1, at, jt) - length
+        x1 = change_distance(v0, x, at, jt)
+        x2 = change_distance(x, v1, at, jt)
+        fx = x1 + x2 - length
         if fx <= 0.0:
-            lo, flo = x, fx
+            lo, flo, d1, d2 = x, fx, x1, x2
             if side == -1:
                 fhi *= 0.5
             side = -1
@@ -160,7 +151,7 @@ def _peak_search(v0, v1, length, at, jt, lo, hi) -> float:
             side = 1
         if fx == 0.0:
             break
-    return lo
+    return lo, d1, d2
 
 
 def partition(
@@ -326,11 +317,25 @@ def solve(parts: list[list], v_start: float, ipo: float = 0.0) -> tuple[list[Spa
         cout = t3 if p[10] and v1 > 0.0 else 0.0
         middle = p[1] - p[0] - cin * v - cout * v1
         phases, _vp = span_phases(v, v1, p[2], middle if middle > 0.0 else 0.0, at, jt)
-        if cin:
-            phases.insert(0, (cin, 0.0))
         if cout:
             phases.append((cout, 0.0))
-        rows, dur, _s, _v, _a = integrate(phases, v)
+        # the phases integrated into rows (t0, dt, s, v, a, j), times and s relative
+        rows = []
+        tt = ss = aa = 0.0
+        vv = v
+        if cin:  # the leading coast: constant speed
+            rows.append((0.0, cin, 0.0, v, 0.0, 0.0))
+            ss = cin * v
+            tt = cin
+        for dt, j in phases:
+            if dt <= 0.0:
+                continue
+            rows.append((tt, dt, ss, vv, aa, j))
+            ss += dt * (vv + dt * (0.5 * aa + dt * j / 6.0))
+            vv += dt * (aa + 0.5 * j * dt)
+            aa += j * dt
+            tt += dt
+        dur = tt
         if not rows:
             rows = [(0.0, 0.0, 0.0, v, 0.0, 0.0)]
         sp = Span(p[0], p[1], rows, dur, v, v1, p[7] and i == n - 1, p[2], jt)
