@@ -101,6 +101,7 @@ class EventHub:
         poll_s: float = 0.25,
         gap_grace_s: float = 2.0,
         idle_stop_s: float = 10.0,
+        coalesce_s: float = 0.02,
         clock: Callable[[], float] = time.monotonic,
     ) -> None:
         if capacity < batch:
@@ -108,7 +109,7 @@ class EventHub:
         self._read_after = read_after
         self._latest_id = latest_id
         self.capacity, self.batch, self.poll_s = capacity, batch, poll_s
-        self.gap_grace_s, self.idle_stop_s = gap_grace_s, idle_stop_s
+        self.gap_grace_s, self.idle_stop_s, self.coalesce_s = gap_grace_s, idle_stop_s, coalesce_s
         self._clock = clock
         self._lock = threading.Lock()
         self._start_lock = threading.Lock()  # one subscriber anchors and starts the reader
@@ -269,6 +270,7 @@ class EventHub:
 
     def _run(self) -> None:
         backoff = self.poll_s
+        last_read = time.monotonic()
         while not self._stop.is_set():
             try:
                 accepted = self.poll()
@@ -293,6 +295,13 @@ class EventHub:
             if accepted < self.batch:
                 self._nudge.wait(backoff if self._failure else self.poll_s)
                 self._nudge.clear()
+                # Commits come in bursts (a cell writes every few ms under load): reading at
+                # most every `coalesce_s` gives each burst one read and one wake-up per
+                # client instead of one per commit. A lone commit is read at once.
+                since = time.monotonic() - last_read
+                if since < self.coalesce_s:
+                    self._stop.wait(self.coalesce_s - since)
+            last_read = time.monotonic()
 
     def close(self) -> None:
         """Stop the reader and end every subscriber's stream (the app shuts down)."""

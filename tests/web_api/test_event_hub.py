@@ -278,3 +278,27 @@ def test_a_commit_with_outbox_rows_nudges_the_reader(sessions):
     with transaction(sessions) as s:
         record(s, now=T, actor="t", action="machine.status", entity="machine", entity_id=None)
     assert not hub._nudge.is_set(), "a closed hub no longer listens"
+
+
+def test_a_database_that_cannot_be_read_refuses_the_subscription():
+    from dnc.errors import DatabaseUnavailable
+
+    def down() -> int:
+        raise DatabaseUnavailable("database unavailable: no such file")
+
+    hub = EventHub(Outbox().read_after, down, capacity=8, batch=4)
+    with pytest.raises(DatabaseUnavailable):
+        hub.subscribe(0, start_reader=False)
+    assert hub.subscribers == 0
+
+
+def test_the_reader_stops_when_nobody_listened_for_a_while_and_reanchors_later():
+    outbox, clock = Outbox([1, 2]), Clock()
+    hub = make_hub(outbox, clock, idle_stop_s=5.0)
+    hub.subscribe(0, start_reader=False).close()
+    clock.t = 5.0
+    hub._run()  # in this thread: one read, then it sees nobody for 5 s and returns
+    assert outbox.reads == 1 and not hub._anchored
+    outbox.append(3)
+    hub.subscribe(0, start_reader=False)
+    assert hub.floor == hub.horizon == 5, "anchored again at the newest event"
