@@ -28,6 +28,7 @@ import can
 
 from drives.bus.candump import CandumpWriter
 from drives.bus.frame import ERROR_FRAME_BITS, data_frame_bits, frame_bits
+from drives.realtime import RealtimeProcess
 
 logger = logging.getLogger(__name__)
 
@@ -556,6 +557,7 @@ class CanHub:
             raise RuntimeError("start() is for realtime hubs; step a lockstep hub with advance()")
         if self._thread is not None:
             return
+        RealtimeProcess.acquire()  # the GC in the slack, short GIL switch interval
         self._running = True
         self._thread = threading.Thread(
             target=self._run, name=f"canhub-{self.channel}", daemon=True
@@ -571,23 +573,31 @@ class CanHub:
             self._wake.notify()
         self._thread.join(timeout=5.0)
         self._thread = None
+        RealtimeProcess.release()
 
     def _run(self) -> None:
+        # Frames wake the condition and are delivered at once (a SYNC's TPDOs are answered
+        # from here). Ticks need no spin: the drives integrate the measured dt. Garbage is
+        # collected in the slack before a tick, when no frame is waiting.
+        perf = time.perf_counter
         tick = self.realtime_tick_s
-        next_tick = time.perf_counter() + tick
-        last = time.perf_counter()
+        next_tick = perf() + tick
+        last = perf()
         while True:
             with self._lock:
                 if not self._running:
                     return
-                timeout = next_tick - time.perf_counter()
+                timeout = next_tick - perf()
                 if timeout > 0 and not self._pending:
-                    self._wake.wait(timeout)
+                    RealtimeProcess.collect_in_slack(timeout)
+                    timeout = next_tick - perf()
+                    if timeout > 0:
+                        self._wake.wait(timeout)
                 if not self._running:
                     return
                 self._release_delayed()
                 self.deliver()
-                now = time.perf_counter()
+                now = perf()
                 if now >= next_tick:
                     self.ticks += 1
                     if now - next_tick > tick:

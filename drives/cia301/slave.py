@@ -36,6 +36,7 @@ from drives.cia301.pdo import PdoChannel, PdoService
 from drives.cia301.sdo_server import SdoServer
 from drives.cia301.store import ParameterStore
 from drives.cia301.sync import SyncConsumer
+from drives.realtime import RealtimeProcess
 
 logger = logging.getLogger(__name__)
 _new_message = can.Message.__new__
@@ -513,6 +514,7 @@ class CanopenSlave:
             raise RuntimeError("lockstep hub: step it with hub.advance(dt) instead of start()")
         if self._thread is not None:
             return
+        RealtimeProcess.acquire()  # the GC in the slack, short GIL switch interval
         self._running = True
         self._thread = threading.Thread(
             target=self._serve, args=(tick_s,), name=f"canopen-slave-{self.node_id}", daemon=True
@@ -524,11 +526,14 @@ class CanopenSlave:
         if self._thread is not None:
             self._thread.join(timeout=5.0)
             self._thread = None
+            RealtimeProcess.release()
 
     def _serve(self, tick_s: float) -> None:
         last = next_tick = time.perf_counter()
         next_tick += tick_s
         while self._running:
+            # garbage collection in the slack before the tick, not while a frame waits
+            RealtimeProcess.collect_in_slack(next_tick - time.perf_counter())
             msg = self.bus.recv(timeout=max(0.0, next_tick - time.perf_counter()))
             if msg is not None:
                 self.handle(msg)

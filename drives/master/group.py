@@ -37,6 +37,7 @@ from drives.bus.hub import CanHub, SimBus
 from drives.bus.loadplan import BusOverloadError, CyclicFrame, LoadPlan, plan_load
 from drives.master import power
 from drives.master.config import AxisConfig, AxisError, AxisFault, AxisFeedback
+from drives.realtime import Pacer, RealtimeProcess
 
 logger = logging.getLogger(__name__)
 
@@ -255,6 +256,8 @@ class AxisGroup:
         self._running = False  # after configure(): boot-ups are faults, heartbeats watched
         self._t0 = time.perf_counter()
         self._slot: float | None = None
+        self._pacer = Pacer(ipo_cycle_s)
+        self._realtime_held = False
         self._sync_sent_at = 0.0
         self._hb_elapsed = 0.0
         self._waiting = 0
@@ -632,23 +635,17 @@ class AxisGroup:
         return feedback
 
     def _pace(self) -> None:
-        """Realtime: sleep until this cycle's slot (absolute deadlines, no drift)."""
-        period = self.ipo_cycle_s
-        now = time.perf_counter()
-        if self._slot is None:
-            self._slot = now
-        else:
-            self._slot += period
-            if now > self._slot + period:  # a whole slot missed: skip ahead, count it
-                missed = int((now - self._slot) / period)
-                self.stats.skipped_slots += missed
-                self._slot += missed * period
-        while True:
-            remaining = self._slot - time.perf_counter()
-            if remaining <= 0:
-                break
-            time.sleep(remaining if remaining > 0.0002 else 0)
-        self.stats.lateness_s.append(time.perf_counter() - self._slot)
+        """Realtime: wait for this cycle's slot (absolute deadlines, sleep then spin; the
+        garbage collector runs in the slack, see `drives.realtime`)."""
+        if not self._realtime_held:
+            RealtimeProcess.acquire()  # released by close()
+            self._realtime_held = True
+        pacer = self._pacer
+        skipped = pacer.skipped
+        lateness = pacer.wait()
+        self._slot = pacer.slot
+        self.stats.skipped_slots += pacer.skipped - skipped
+        self.stats.lateness_s.append(lateness)
 
     def _await_tpdos(self, n: int) -> None:
         deadline = (self._slot or time.perf_counter()) + self.ipo_cycle_s
@@ -940,6 +937,9 @@ class AxisGroup:
     def close(self) -> None:
         """Detach from the buses (the buses themselves stay open: they are the caller's)."""
         self._running = False
+        if self._realtime_held:
+            self._realtime_held = False
+            RealtimeProcess.release()
         for line in self._lines:
             line.close()
 

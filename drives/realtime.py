@@ -1,0 +1,164 @@
+"""Pacing for the realtime shells: absolute deadlines, sleep then spin, the GC in the slack.
+
+Three things made a 1 ms cycle late on an otherwise idle machine, measured with
+`bench/bench_drives_realtime.py`:
+
+* the cyclic garbage collector: a young collection (~0.1 ms) every few cycles, a middle one
+  (~1 ms) every ~10 of those, and now and then a full one through every object of the
+  process (the canopen object dictionaries of every node: tens of ms). Python starts them
+  on allocation counts, i.e. in the middle of a cycle's work;
+* `time.sleep` wakes up late (timer slack, scheduler), by 50-100 us typically and by far
+  more when the machine is busy;
+* the GIL's switch interval (5 ms by default): another Python thread that holds the GIL
+  delays a realtime thread by up to that long.
+
+`RealtimeProcess` takes the collector out of the cycles while any realtime shell runs: it
+collects once and freezes what exists after setup (`gc.freeze`: the long-lived object
+dictionaries are never traversed again), raises the automatic collector's threshold to
+FORCED_THRESHOLD allocations and lets the pacers collect the young generation in the slack
+before a deadline as soon as YOUNG_THRESHOLD are pending (an older generation only when the
+slack is larger). While the pacers run, the automatic collector never triggers; if they
+stop (an idle axis group that was never closed) it still does, at the higher threshold, so
+memory stays bounded. It also shortens the switch interval. Both are process-wide
+settings, so they are reference-counted and restored when the last shell stops.
+
+`Pacer` waits for absolute deadlines: it sleeps until `spin_s` before the deadline and
+spins the rest (calling `sleep(0)`, which releases the GIL but returns at once), so the
+wake-up error is the spin loop's, not the timer's.
+"""
+
+from __future__ import annotations
+
+import gc
+import sys
+import threading
+import time
+
+#: spin this long before a deadline instead of sleeping (covers the usual sleep overshoot)
+SPIN_S = 250e-6
+#: GIL switch interval while realtime shells run (CPython's default is 5 ms)
+SWITCH_INTERVAL_S = 0.0005
+#: collect the youngest generation once this many container allocations are pending
+YOUNG_THRESHOLD = 700
+#: the automatic collector's threshold meanwhile (it runs only if the pacers do not)
+FORCED_THRESHOLD = 50 * YOUNG_THRESHOLD
+#: slack needed before a deadline to start a young / middle / full collection
+SLACK_FOR_GENERATION_S = (0.2e-3, 0.5e-3, 0.8e-3)
+
+
+class RealtimeProcess:
+    """Process-wide realtime settings, reference-counted by the shells that need them."""
+
+    _lock = threading.Lock()
+    _users = 0
+    _saved_switch: float | None = None
+    _saved_threshold: tuple[int, ...] | None = None
+    _young_collections = 0
+    collections = [0, 0, 0]  # collections run in the slack, per generation
+    forced_collections = 0  # collections that could not wait for slack
+
+    @classmethod
+    def acquire(cls) -> None:
+        """First user: collect, freeze the survivors, the automatic collector's threshold
+        up, short switch interval."""
+        with cls._lock:
+            cls._users += 1
+            if cls._users > 1:
+                return
+            gc.collect()
+            gc.freeze()  # setup's objects (object dictionaries, EDS) leave the collector
+            cls._saved_threshold = gc.get_threshold()
+            gc.set_threshold(FORCED_THRESHOLD, *cls._saved_threshold[1:])
+            cls._saved_switch = sys.getswitchinterval()
+            sys.setswitchinterval(min(cls._saved_switch, SWITCH_INTERVAL_S))
+
+    @classmethod
+    def release(cls) -> None:
+        """Last user gone: the collector and the switch interval as they were."""
+        with cls._lock:
+            if cls._users == 0:
+                return
+            cls._users -= 1
+            if cls._users:
+                return
+            if cls._saved_threshold is not None:
+                gc.set_threshold(*cls._saved_threshold)
+                cls._saved_threshold = None
+            gc.unfreeze()
+            if cls._saved_switch is not None:
+                sys.setswitchinterval(cls._saved_switch)
+                cls._saved_switch = None
+
+    @classmethod
+    def active(cls) -> bool:
+        return cls._users > 0
+
+    @classmethod
+    def collect_in_slack(cls, slack_s: float) -> None:
+        """Run the collection that is due if `slack_s` (time to the next deadline) allows.
+
+        Generations follow CPython's own ratios (a middle collection every 10 young ones,
+        a full one every 10 middle ones) but a collection waits for enough slack.
+        """
+        if cls._users == 0:
+            return
+        pending = gc.get_count()[0]
+        if pending < YOUNG_THRESHOLD:
+            return
+        n = cls._young_collections + 1
+        generation = 2 if n % 100 == 0 else 1 if n % 10 == 0 else 0
+        if slack_s < SLACK_FOR_GENERATION_S[generation]:
+            if pending < FORCED_THRESHOLD:
+                return  # wait for a cycle with more slack
+            generation = 0
+            cls.forced_collections += 1
+        cls._young_collections = n
+        gc.collect(generation)
+        cls.collections[generation] += 1
+
+
+def sleep_until(deadline: float, spin_s: float = SPIN_S, clock=time.perf_counter, sleep=time.sleep):
+    """Sleep until `spin_s` before `deadline` (`clock` time), then spin to it."""
+    remaining = deadline - clock()
+    if remaining > spin_s:
+        sleep(remaining - spin_s)
+    while clock() < deadline:
+        sleep(0)  # releases the GIL: the bus and drive threads keep running while we spin
+
+
+class Pacer:
+    """Absolute deadlines every `period_s` on `clock` (perf_counter), no drift.
+
+    `wait()` returns at the next slot (collecting garbage first when the slack allows) and
+    gives its lateness; a slot that is already a whole period gone is skipped and counted.
+    `clock` and `sleep` are replaceable for tests.
+    """
+
+    def __init__(
+        self, period_s: float, *, spin_s: float = SPIN_S, clock=time.perf_counter, sleep=time.sleep
+    ) -> None:
+        if not period_s > 0:
+            raise ValueError(f"Pacer: period_s must be > 0, got {period_s!r}")
+        self.period_s = period_s
+        self.spin_s = spin_s
+        self.clock = clock
+        self.sleep = sleep
+        self.slot: float | None = None
+        self.skipped = 0
+
+    def wait(self) -> float:
+        """Wait for the next slot; returns how late (s) it was reached."""
+        period, clock = self.period_s, self.clock
+        now = clock()
+        if self.slot is None:
+            self.slot = now
+            return 0.0
+        slot = self.slot + period
+        if now > slot + period:  # a whole slot missed: skip ahead, count it
+            missed = int((now - slot) / period)
+            self.skipped += missed
+            slot += missed * period
+        self.slot = slot
+        RealtimeProcess.collect_in_slack(slot - now)
+        sleep_until(slot, self.spin_s, clock, self.sleep)
+        return clock() - slot

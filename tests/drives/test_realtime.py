@@ -1,0 +1,152 @@
+"""The realtime pacing helpers: process settings, GC in the slack, absolute deadlines."""
+
+from __future__ import annotations
+
+import gc
+import sys
+
+import pytest
+
+from drives.realtime import (
+    FORCED_THRESHOLD,
+    SWITCH_INTERVAL_S,
+    YOUNG_THRESHOLD,
+    Pacer,
+    RealtimeProcess,
+)
+
+
+@pytest.fixture
+def realtime():
+    threshold, interval = gc.get_threshold(), sys.getswitchinterval()
+    RealtimeProcess.acquire()
+    try:
+        yield
+    finally:
+        RealtimeProcess.release()
+    assert gc.get_threshold() == threshold
+    assert sys.getswitchinterval() == interval
+
+
+def test_settings_hold_while_any_user_remains_and_are_restored_after_the_last(realtime):
+    assert gc.get_threshold()[0] == FORCED_THRESHOLD  # the pacers collect before this
+    assert gc.get_freeze_count() > 0  # setup's objects left the collector
+    assert sys.getswitchinterval() <= SWITCH_INTERVAL_S
+    RealtimeProcess.acquire()  # a second shell
+    RealtimeProcess.release()
+    assert gc.get_threshold()[0] == FORCED_THRESHOLD and RealtimeProcess.active()
+
+
+class FakeGc:
+    """The collector as `collect_in_slack` sees it: a pending count and collect(gen)."""
+
+    def __init__(self, pending: int) -> None:
+        self.pending = pending
+        self.collected: list[int] = []
+
+    def get_count(self) -> tuple[int, int, int]:
+        return (self.pending, 0, 0)
+
+    def collect(self, generation: int) -> int:
+        self.collected.append(generation)
+        self.pending = 0
+        return 0
+
+
+@pytest.fixture
+def fake_gc(monkeypatch):
+    # Other tests' realtime threads may collect too: the policy is checked on a stand-in.
+    import drives.realtime as rt
+
+    fake = FakeGc(0)
+    monkeypatch.setattr(rt, "gc", fake)
+    monkeypatch.setattr(RealtimeProcess, "_users", 1)
+    monkeypatch.setattr(RealtimeProcess, "_young_collections", 0)
+    monkeypatch.setattr(RealtimeProcess, "collections", [0, 0, 0])
+    monkeypatch.setattr(RealtimeProcess, "forced_collections", 0)
+    return fake
+
+
+def test_young_collection_waits_for_slack(fake_gc):
+    fake_gc.pending = YOUNG_THRESHOLD - 1
+    RealtimeProcess.collect_in_slack(1.0)  # nothing due yet
+    fake_gc.pending = 2 * YOUNG_THRESHOLD
+    RealtimeProcess.collect_in_slack(0.0)  # due, but no slack: it waits
+    assert fake_gc.collected == []
+    RealtimeProcess.collect_in_slack(0.3e-3)
+    assert fake_gc.collected == [0]
+    assert RealtimeProcess.collections == [1, 0, 0]
+
+
+def test_older_generations_follow_cpythons_ratios_and_need_more_slack(fake_gc):
+    for _ in range(9):
+        fake_gc.pending = YOUNG_THRESHOLD
+        RealtimeProcess.collect_in_slack(0.3e-3)
+    fake_gc.pending = YOUNG_THRESHOLD
+    RealtimeProcess.collect_in_slack(0.3e-3)  # the 10th is a middle one: not enough slack
+    assert fake_gc.collected == [0] * 9
+    RealtimeProcess.collect_in_slack(0.6e-3)
+    assert fake_gc.collected == [0] * 9 + [1]
+
+
+def test_a_backlog_beyond_the_bound_is_collected_without_slack(fake_gc):
+    fake_gc.pending = FORCED_THRESHOLD
+    RealtimeProcess.collect_in_slack(0.0)
+    assert fake_gc.collected == [0]
+    assert RealtimeProcess.forced_collections == 1
+
+
+def test_without_a_user_nothing_is_collected_by_the_pacers(fake_gc, monkeypatch):
+    monkeypatch.setattr(RealtimeProcess, "_users", 0)
+    fake_gc.pending = FORCED_THRESHOLD
+    RealtimeProcess.collect_in_slack(1.0)
+    assert fake_gc.collected == []
+
+
+class FakeClock:
+    """perf_counter stand-in: sleeping and every read move it forward."""
+
+    def __init__(self, read_cost: float = 1e-6) -> None:
+        self.now = 100.0
+        self.read_cost = read_cost
+        self.slept: list[float] = []
+
+    def __call__(self) -> float:
+        self.now += self.read_cost
+        return self.now
+
+    def sleep(self, seconds: float) -> None:
+        if seconds == 0:  # the spin loop's GIL release: back at once
+            self.now += 1e-6
+            return
+        self.slept.append(seconds)
+        self.now += seconds + 60e-6  # the scheduler wakes us late
+
+
+def test_pacer_sleeps_to_the_spin_window_then_reaches_the_slot_exactly():
+    clock = FakeClock()
+    pacer = Pacer(0.001, spin_s=250e-6, clock=clock, sleep=clock.sleep)
+    assert pacer.wait() == 0.0
+    first = pacer.slot
+    for k in range(1, 6):
+        lateness = pacer.wait()
+        assert pacer.slot == pytest.approx(first + k * 0.001)  # absolute: no drift
+        assert 0.0 <= lateness <= 2e-6  # the 60 us oversleep fell inside the spin window
+    assert all(s < 0.001 - 250e-6 + 1e-9 for s in clock.slept)
+
+
+def test_pacer_skips_whole_missed_slots_and_counts_them():
+    clock = FakeClock()
+    pacer = Pacer(0.001, clock=clock, sleep=clock.sleep)
+    pacer.wait()
+    first = pacer.slot
+    clock.now += 0.0035  # the work of one cycle took 3.5 periods
+    lateness = pacer.wait()
+    assert pacer.skipped == 2  # slots 1 and 2 are gone; slot 3 runs, half a period late
+    assert pacer.slot == pytest.approx(first + 0.003)
+    assert lateness == pytest.approx(0.0005, abs=1e-5)
+
+
+def test_pacer_refuses_a_bad_period():
+    with pytest.raises(ValueError, match="period_s"):
+        Pacer(0.0)
