@@ -22,7 +22,7 @@ from cnc.errors import NcError
 from cnc.params import MachineParams
 from cnc.planner.limits import AxisLimits
 from cnc.planner.path import Path
-from cnc.planner.profile import Span, partition, solve
+from cnc.planner.profile import PlanMemo, Span, partition, solve
 from cnc.planner.scurve import change_distance
 
 DROP_EVERY = 256
@@ -86,6 +86,9 @@ class Motion:
         self._urgent = False
         self._sb_wait = False
         self.replans = 0
+        # spans of the last plan by their inputs: a re-plan for new blocks rebuilds only
+        # the spans whose inputs changed (see profile.solve)
+        self._memo = PlanMemo()
 
     # -- feeding ------------------------------------------------------------------------
     def space(self) -> int:
@@ -282,7 +285,7 @@ class Motion:
                 spans = self._plan_single_block(k, s0, v0, fo, ro)
             else:
                 parts = partition(segs, k, s0, fo, ro, False, None, ipo=self.ipo)
-                spans, _ok = solve(parts, v0, self.ipo)
+                spans, _ok = solve(parts, v0, self.ipo, self._memo)
         self._spans = ([lead] if lead is not None else []) + spans
         self._si = 0
         self._t = 0.0

@@ -19,6 +19,17 @@ from cnc.planner.scurve import change_distance, change_phases, min_reach, reach
 SPAN_RATIO = 0.95
 
 
+class PlanMemo:
+    """What one plan leaves for the next (see `solve`): its spans and its S-curve reach
+    results, each by its inputs. Both are pure functions of those inputs."""
+
+    __slots__ = ("spans", "reach")
+
+    def __init__(self) -> None:
+        self.spans: dict = {}
+        self.reach: dict = {}
+
+
 class Span:
     """One planned stretch [s0, s1] of the path: phases (t0, dt, s, v, a, j), s relative."""
 
@@ -154,6 +165,36 @@ def _peak_search(v0, v1, length, at, jt, lo, hi, fhi) -> tuple[float, float, flo
     return lo, d1, d2
 
 
+def _span(s0, s1, vmax, at, jt, v, v1, cin, cout, stop) -> Span:
+    """The S-curve of one part: from v to v1 under vmax, coasts of cin/cout seconds."""
+    middle = s1 - s0 - cin * v - cout * v1
+    phases, _vp = span_phases(v, v1, vmax, middle if middle > 0.0 else 0.0, at, jt)
+    if cout:
+        phases.append((cout, 0.0))
+    # the phases integrated into rows (t0, dt, s, v, a, j), times and s relative
+    rows = []
+    tt = ss = aa = 0.0
+    vv = v
+    if cin:  # the leading coast: constant speed
+        rows.append((0.0, cin, 0.0, v, 0.0, 0.0))
+        ss = cin * v
+        tt = cin
+    for dt, j in phases:
+        if dt <= 0.0:
+            continue
+        rows.append((tt, dt, ss, vv, aa, j))
+        ss += dt * (vv + dt * (0.5 * aa + dt * j / 6.0))
+        vv += dt * (aa + 0.5 * j * dt)
+        aa += j * dt
+        tt += dt
+    if not rows:
+        rows = [(0.0, 0.0, 0.0, v, 0.0, 0.0)]
+    sp = Span(s0, s1, rows, tt, v, v1, stop, vmax, jt)
+    sp.coast_in_t = cin
+    sp.coast_out_t = cout
+    return sp
+
+
 def partition(
     segs: list[Segment],
     k: int,
@@ -262,11 +303,19 @@ def _coasts(parts: list[list], ipo: float) -> None:
             right[9] = True
 
 
-def solve(parts: list[list], v_start: float, ipo: float = 0.0) -> tuple[list[Span], bool]:
+def solve(
+    parts: list[list], v_start: float, ipo: float = 0.0, memo: PlanMemo | None = None
+) -> tuple[list[Span], bool]:
     """Backward and forward passes over the spans, then one S-curve per span.
 
     The flag is False when the start speed is too high to meet a later cap (the plan then
     brakes as hard as it may and the caller looks for a later stop point).
+
+    `memo` (optional) holds the spans and reach results of the caller's previous plan by
+    their inputs; a span with the same part, limits and end speeds is taken from it
+    instead of being built again (a span is a pure function of these), and it is refilled
+    with this plan's. A re-plan for new blocks at the path end changes only the spans near
+    its start and its end, so most come from the memo. Spans handed out must not change.
     """
     n = len(parts)
     ok = True
@@ -283,6 +332,11 @@ def solve(parts: list[list], v_start: float, ipo: float = 0.0) -> tuple[list[Spa
         eff.append(length if length > 0.0 else 0.0)
     vb = [0.0] * (n + 1)
     vb[n] = 0.0 if parts[-1][7] else parts[-1][6]
+    rmemo = smemo = None
+    rfresh: dict = {}
+    fresh: dict = {}
+    if memo is not None:
+        rmemo, smemo = memo.reach, memo.spans
     # reach(v, ...) >= v, so when the speed to meet already reaches the caps the caps
     # decide and the S-curve reach need not be computed (most spans of a capped path)
     for i in range(n - 1, -1, -1):
@@ -292,7 +346,15 @@ def solve(parts: list[list], v_start: float, ipo: float = 0.0) -> tuple[list[Spa
             cap = parts[i - 1][6]
         v = vb[i + 1]
         if v < cap:
-            v = reach(v, eff[i], p[4], p[5])
+            if rmemo is None:
+                v = reach(v, eff[i], p[4], p[5])
+            else:
+                key = (v, eff[i], p[4], p[5])
+                x = rmemo.get(key)
+                if x is None:
+                    x = reach(v, eff[i], p[4], p[5])
+                rfresh[key] = x
+                v = x
             if v > cap:
                 v = cap
         else:
@@ -306,7 +368,14 @@ def solve(parts: list[list], v_start: float, ipo: float = 0.0) -> tuple[list[Spa
         length = eff[i]
         v1 = vb[i + 1]
         if v < v1:
-            x = reach(v, length, at, jt)
+            if rmemo is None:
+                x = reach(v, length, at, jt)
+            else:
+                key = (v, length, at, jt)
+                x = rmemo.get(key)
+                if x is None:
+                    x = reach(v, length, at, jt)
+                rfresh[key] = x
             if x < v1:
                 v1 = x
         if v > v1 and change_distance(v, v1, at, jt) > length * (1.0 + 1e-12) + 1e-12:
@@ -315,32 +384,18 @@ def solve(parts: list[list], v_start: float, ipo: float = 0.0) -> tuple[list[Spa
         # the coasts actually run at v and v1 (<= the caps reserved above)
         cin = t3 if p[9] and v > 0.0 else 0.0
         cout = t3 if p[10] and v1 > 0.0 else 0.0
-        middle = p[1] - p[0] - cin * v - cout * v1
-        phases, _vp = span_phases(v, v1, p[2], middle if middle > 0.0 else 0.0, at, jt)
-        if cout:
-            phases.append((cout, 0.0))
-        # the phases integrated into rows (t0, dt, s, v, a, j), times and s relative
-        rows = []
-        tt = ss = aa = 0.0
-        vv = v
-        if cin:  # the leading coast: constant speed
-            rows.append((0.0, cin, 0.0, v, 0.0, 0.0))
-            ss = cin * v
-            tt = cin
-        for dt, j in phases:
-            if dt <= 0.0:
-                continue
-            rows.append((tt, dt, ss, vv, aa, j))
-            ss += dt * (vv + dt * (0.5 * aa + dt * j / 6.0))
-            vv += dt * (aa + 0.5 * j * dt)
-            aa += j * dt
-            tt += dt
-        dur = tt
-        if not rows:
-            rows = [(0.0, 0.0, 0.0, v, 0.0, 0.0)]
-        sp = Span(p[0], p[1], rows, dur, v, v1, p[7] and i == n - 1, p[2], jt)
-        sp.coast_in_t = cin
-        sp.coast_out_t = cout
+        stop = p[7] and i == n - 1
+        if smemo is None:
+            sp = _span(p[0], p[1], p[2], at, jt, v, v1, cin, cout, stop)
+        else:
+            key = (p[0], p[1], p[2], at, jt, v, v1, cin, cout, stop)
+            sp = smemo.get(key)
+            if sp is None:
+                sp = _span(p[0], p[1], p[2], at, jt, v, v1, cin, cout, stop)
+            fresh[key] = sp
         spans.append(sp)
         v = v1
+    if memo is not None:
+        memo.spans = fresh
+        memo.reach = rfresh
     return spans, ok
