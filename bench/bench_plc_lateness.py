@@ -15,11 +15,13 @@ served, handshakes completed, the 1 ms p99 target.
 Two runtime remedies (plc/runtime/realtime.py) are off by default, as in the runtime:
 `--scan-gate` builds the face with `scan_gate=runner.gate` (the face steps aside, GIL released,
 just before each scan) and `--rt-priority N` asks SCHED_FIFO N for the scan thread (the JSON
-says whether it was granted). Compare runs with and without them, alternated, in one session.
+says whether it was granted); `--face-rt-priority M` (M below N) also gives the face's thread
+SCHED_FIFO so that ordinary processes cannot deschedule it while it holds the GIL. Compare
+runs with and without them, alternated, in one session.
 
 Usage: bench_plc_lateness.py [--seconds 10] [--idle-seconds 3] [--client-procs 2]
                              [--connections 8] [--client-nice 0]
-                             [--scan-gate] [--rt-priority N]
+                             [--scan-gate] [--rt-priority N] [--face-rt-priority M]
 """
 
 from __future__ import annotations
@@ -161,6 +163,12 @@ def main() -> None:
         default=None,
         help="SCHED_FIFO priority of the scan thread (default: FMSCELL_PLC_RT_PRIORITY or 0)",
     )
+    ap.add_argument(
+        "--face-rt-priority",
+        type=int,
+        default=0,
+        help="SCHED_FIFO priority of the face's thread (below --rt-priority; 0 = ordinary)",
+    )
     args = ap.parse_args()
     if not 0 < args.seconds <= 60 or not 0 < args.idle_seconds <= 60:
         ap.error("--seconds and --idle-seconds must be in (0, 60]")
@@ -182,7 +190,7 @@ def main() -> None:
         idle_timeout=None,
         scan_gate=runner.gate if args.scan_gate else None,
     )
-    face.start_in_thread()
+    face.start_in_thread(rt_priority=args.face_rt_priority)
     nc = NcDriver(io.nc)
     runner.start()
     nc.start()
@@ -264,6 +272,7 @@ def main() -> None:
                 "client_nice": args.client_nice,
                 "scan_gate": args.scan_gate,
                 "scan_thread_scheduling": runner.scheduling,
+                "face_thread_scheduling": face.thread_scheduling,
                 "gate_holds": runner.gate.holds,
                 "gate_hold_timeouts": runner.gate.hold_timeouts,
                 "workload": "FC03x10, FC01x16, FC03x10, FC16x3 in turn; 1 outstanding/conn",

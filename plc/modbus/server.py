@@ -11,6 +11,7 @@ import asyncio
 import contextlib
 import ipaddress
 import logging
+import os
 import struct
 import threading
 import time
@@ -158,6 +159,8 @@ class ModbusFace:
         except ValueError as e:
             raise ValueError(f"ModbusFace: allowed_clients: {e}") from None
         self.scan_gate = scan_gate
+        #: the face thread's scheduling once `start_in_thread` ran, e.g. "SCHED_FIFO 10"
+        self.thread_scheduling = "not started in a thread"
         self.stats = FaceStats()
         self._server: asyncio.Server | None = None
         self._sweeper: asyncio.Task | None = None
@@ -230,16 +233,26 @@ class ModbusFace:
 
     # -- thread-hosted, for synchronous callers ---------------------------------------
 
-    def start_in_thread(self) -> ModbusFace:
-        """Serve from a daemon thread with its own event loop; returns once bound."""
+    def start_in_thread(self, rt_priority: int = 0) -> ModbusFace:
+        """Serve from a daemon thread with its own event loop; returns once bound.
+
+        `rt_priority` 1..99 asks SCHED_FIFO for that thread: give it one *below* the PLC
+        scan thread's, so the scan still preempts it, while ordinary processes no longer
+        deschedule the face in the middle of a request, holding the GIL the scan needs
+        (docs/ladder.md, "Staying on time"). Refused (no CAP_SYS_NICE), the face runs with
+        ordinary scheduling and `thread_scheduling` says why. 0 (default): ordinary.
+        """
         if self._thread is not None:
             raise RuntimeError("ModbusFace already started in a thread")
+        if not 0 <= rt_priority <= 99:
+            raise ValueError(f"ModbusFace: rt_priority {rt_priority} outside 0..99 (0 = off)")
         ready = threading.Event()
         failure: list[BaseException] = []
         loop = asyncio.new_event_loop()
 
         def run() -> None:
             asyncio.set_event_loop(loop)
+            self.thread_scheduling = _promote_thread(rt_priority)
             try:
                 loop.run_until_complete(self.start())
             except BaseException as e:  # noqa: BLE001 - handed to the caller below
@@ -296,6 +309,26 @@ class ModbusFace:
                     self.stats.idle_timeouts += 1
                     log.info("%s: idle for %.3g s, closing", conn.peer, self.idle_timeout)
                     conn.close()
+
+
+def _set_thread_fifo(priority: int) -> None:
+    # pid 0 = the calling thread on Linux (a thread's scheduling policy is its own)
+    os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(priority))
+
+
+def _promote_thread(priority: int) -> str:
+    """SCHED_FIFO `priority` for the calling thread, best effort; what it got, as text."""
+    if priority == 0:
+        return "SCHED_OTHER (rt_priority 0)"
+    if not hasattr(os, "sched_setscheduler"):
+        return f"SCHED_OTHER (SCHED_FIFO {priority} not available on this OS)"
+    try:
+        _set_thread_fifo(priority)
+    except OSError as exc:
+        text = f"SCHED_OTHER (SCHED_FIFO {priority} refused: {exc.strerror or exc})"
+        log.warning("Modbus face thread: %s", text)
+        return text
+    return f"SCHED_FIFO {priority}"
 
 
 def _peer_allowed(peer, networks) -> bool:

@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import asyncio
 import math
+import socket
 import struct
 import threading
 import time
@@ -246,3 +247,36 @@ def test_face_steps_aside_before_answering_when_the_gate_says_a_scan_is_due(step
     sent = asyncio.run(serve())
     assert len(sent) == 2  # answered either way
     assert len(gate.calls) == steps
+
+
+def test_face_thread_priority_granted_refused_and_checked(monkeypatch):
+    from plc.modbus import server
+
+    size = ImageSize(ix=8, qx=8, mx=8, iw=8, qw=8, mw=8)
+    snap = ProcessImage(size).snapshot(1)
+    asked = []
+    monkeypatch.setattr(server, "_set_thread_fifo", asked.append)
+    face = ModbusFace(lambda: snap, None, size, port=0)  # type: ignore[arg-type]
+    face.start_in_thread(rt_priority=9)
+    face.stop_thread()
+    assert face.thread_scheduling == "SCHED_FIFO 9"
+    assert asked == [9]
+
+    def refuse(priority: int) -> None:
+        raise PermissionError(1, "Operation not permitted")
+
+    monkeypatch.setattr(server, "_set_thread_fifo", refuse)
+    face = ModbusFace(lambda: snap, None, size, port=0)  # type: ignore[arg-type]
+    face.start_in_thread(rt_priority=9)
+    try:
+        assert face.thread_scheduling == (
+            "SCHED_OTHER (SCHED_FIFO 9 refused: Operation not permitted)"
+        )
+        sock = socket.create_connection(("127.0.0.1", face.bound_port), timeout=5)
+        with sock:
+            sock.sendall(struct.pack(">HHHBBHH", 1, 0, 6, 1, 3, 0, 1))
+            assert sock.recv(64) == struct.pack(">HHHBBBh", 1, 0, 5, 1, 3, 2, 0)  # serves anyway
+    finally:
+        face.stop_thread()
+    with pytest.raises(ValueError, match="rt_priority 100 outside 0..99"):
+        ModbusFace(lambda: snap, None, size, port=0).start_in_thread(rt_priority=100)  # type: ignore[arg-type]
