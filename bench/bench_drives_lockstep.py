@@ -11,6 +11,7 @@ from __future__ import annotations
 import argparse
 import json
 import math
+import os
 import time
 import warnings
 
@@ -84,6 +85,7 @@ def main() -> None:
                 "target": f"<= {TARGET_WALL_S} s wall per machine second (>= 4x real time)",
                 "default_substep": default,
                 "coarse_substep": coarse,
+                "load_average_1min": round(os.getloadavg()[0], 2),
             }
         )
     )

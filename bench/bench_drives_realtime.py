@@ -18,11 +18,14 @@ from __future__ import annotations
 import argparse
 import json
 import math
+import os
+import time
 import warnings
 
 from drives import VirtualDrive
 from drives.bus import BusLoadWarning, CanHub
 from drives.master import AxisConfig, AxisGroup
+from drives.realtime import RealtimeProcess
 
 TARGET_LATE_PCT = 0.1
 NAMES = ["X", "Y", "Z", "A", "B", "C"]
@@ -53,13 +56,17 @@ def run(mode: str, seconds: float, substep: float) -> dict:
         group.enable()
         start = {n: group.position_mm(n) for n in NAMES}
         group.stats = type(group.stats)()  # measure the steady run only
+        collections = list(RealtimeProcess.collections)
+        cpu0, wall0 = time.process_time(), time.perf_counter()
         for k in range(round(seconds / 0.001)):
             t = k * 0.001
             group.cycle(
                 {n: start[n] + 10.0 * math.sin(2 * math.pi * t + i) for i, n in enumerate(NAMES)}
             )
+        cpu, wall = time.process_time() - cpu0, time.perf_counter() - wall0
         summary = group.stats.summary()
         faults = len(group.fault_log)
+        gc_in_slack = [b - a for a, b in zip(collections, RealtimeProcess.collections, strict=True)]
         late_ticks = sum(h.late_ticks for h in hubs)
     finally:
         group.close()
@@ -72,6 +79,12 @@ def run(mode: str, seconds: float, substep: float) -> dict:
         summary["drive_ticks_late"] = late_ticks
     return {
         **summary,
+        # CPU of this process over the run (threads included) and the box's load: a late
+        # cycle on a busy shared box is mostly the scheduler's, not the work's
+        "cpu_s": round(cpu, 3),
+        "wall_s": round(wall, 3),
+        "load_average_1min": round(os.getloadavg()[0], 2),
+        "gc_collections_in_slack": gc_in_slack,
         "faults": faults,
         "meets_target": summary["late_pct"] < TARGET_LATE_PCT,
     }
