@@ -19,7 +19,7 @@ from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any
 
-from sqlalchemy import and_, column, exists, func, or_, select, table
+from sqlalchemy import and_, column, exists, func, literal_column, or_, select, table
 from sqlalchemy.exc import IntegrityError
 from sqlalchemy.orm import Session, sessionmaker
 
@@ -40,6 +40,7 @@ from dnc.tape import (
 DRAFT, RELEASED, OBSOLETE = "draft", "released", "obsolete"
 IMPORT_SUFFIXES = {".nc", ".ngc", ".tap", ".txt", ".iso", ".cnc"}
 DEFAULT_UPLOAD_LIMIT = 16 * 1024 * 1024
+TEXT_PROBE_LIMIT = 2000
 
 Checker = Callable[[str, str], list[dict[str, Any]]]
 """(text, machine_kind) -> list of {"line", "col", "message"}; empty when the program is valid."""
@@ -101,6 +102,9 @@ class Library:
         self._checker = checker
         self.upload_limit = upload_limit
         self._now = now
+        # How many matching contents a text search maps to programs through the index before
+        # it walks the programs in page order instead (see _programs_with_text).
+        self.text_probe_limit = TEXT_PROBE_LIMIT
 
     # ----------------------------------------------------------------- programs and revisions
 
@@ -340,6 +344,8 @@ class Library:
     ) -> Page:
         """Programs by name/number (`query`), exact number, tag, or text in any revision.
 
+        `text` is a case-insensitive substring of any revision's text (every revision, not
+        only the released one: finding which program ever used a tool is the point).
         Cursor pagination over program id: stable under concurrent inserts.
         """
         limit = max(1, min(limit, 500))
@@ -365,14 +371,7 @@ class Library:
             )
         with transaction(self._sessions) as s:
             if text:
-                # Driven from the text index: the programs whose revisions hold a match.
-                stmt = stmt.where(
-                    m.Program.id.in_(
-                        select(m.Revision.program_id).where(
-                            m.Revision.sha256.in_(_contents_containing(s, text))
-                        )
-                    )
-                )
+                stmt = stmt.where(_programs_with_text(s, text, self.text_probe_limit))
             rows = list(s.scalars(stmt))
             more = len(rows) > limit
             rows = rows[:limit]
@@ -729,16 +728,44 @@ def _machine_dict(x: m.Machine) -> dict:
 _CONTENTS_FTS = table("contents_fts", column("sha256"), column("text"))
 
 
-def _contents_containing(s: Session, text: str):
-    """Content hashes whose text contains `text` (a subquery).
+def _programs_with_text(s: Session, text: str, probe_limit: int):
+    """A condition on Program.id: some revision of the program contains `text` (any case).
 
-    On SQLite the FTS5 trigram table answers a LIKE from its index; elsewhere the contents
-    table is searched (PostgreSQL uses its pg_trgm index when the extension is there).
+    SQLite: the FTS5 trigram table answers a quoted phrase (a substring of 3 or more
+    characters, case-folded) from its index. A LIKE with an ESCAPE clause would not use that
+    index (FTS5 only takes a two-argument LIKE) and scanned a million rows per search.
+    The index gives contents in its own order, not in program order, so mapping every match
+    to its programs costs one lookup per match: fine for a selective search, seconds for
+    text in nearly every program (`G21`). So the index is probed for at most `probe_limit`
+    matches; beyond that (or under 3 characters, which the trigram index cannot answer) the
+    matches are dense and the search walks the programs in page order, testing each one's
+    revisions, and stops when the page is full.
+
+    PostgreSQL: ILIKE, answered by the pg_trgm GIN index when the extension is there.
     """
     like = f"%{_escape_like(text)}%"
-    if s.get_bind().dialect.name == "sqlite":
-        return select(_CONTENTS_FTS.c.sha256).where(_CONTENTS_FTS.c.text.like(like, escape="\\"))
-    return select(m.Content.sha256).where(m.Content.text.like(like, escape="\\"))
+    in_any_revision = select(m.Revision.program_id)
+    if s.get_bind().dialect.name != "sqlite":
+        matching = select(m.Content.sha256).where(m.Content.text.ilike(like, escape="\\"))
+        return m.Program.id.in_(in_any_revision.where(m.Revision.sha256.in_(matching)))
+    if len(text) >= 3:
+        phrase = '"' + text.replace('"', '""') + '"'
+        shas = list(
+            s.scalars(
+                select(_CONTENTS_FTS.c.sha256)
+                .where(literal_column("contents_fts").op("MATCH")(phrase))
+                .limit(probe_limit + 1)
+            )
+        )
+        if len(shas) <= probe_limit:
+            return m.Program.id.in_(in_any_revision.where(m.Revision.sha256.in_(shas)))
+    # SQLite's LIKE folds ASCII case, as the trigram index does.
+    return exists(
+        select(1)
+        .select_from(m.Revision)
+        .join(m.Content, m.Content.sha256 == m.Revision.sha256)
+        .where(m.Revision.program_id == m.Program.id, m.Content.text.like(like, escape="\\"))
+    )
 
 
 def _escape_like(s: str) -> str:

@@ -17,18 +17,21 @@ import time
 from collections.abc import Callable, Iterable, Iterator
 from dataclasses import dataclass
 
-from cnc.faces.tape import (
-    PUNCH_OFF,
-    PUNCH_ON,
-    XOFF,
-    XON,
-    TapeDecoder,
-    add_parity,
-    encode_program,
-    strip_parity,
-)
+from cnc.faces.tape import PUNCH_OFF, PUNCH_ON, XOFF, XON, TapeDecoder, encode_program
 
 _FLOW_BYTES = bytes([XON, XOFF, PUNCH_ON, PUNCH_OFF])
+_FLOW_BYTE = re.compile(rb"[\x11-\x14]")
+# Parity as whole-buffer translations: the host handles every byte of every transfer, so no
+# per-byte Python loop (cnc.faces.tape's helpers check and strip one byte at a time).
+_STRIP = bytes(i & 0x7F for i in range(256))
+_EVEN = bytes((i | 0x80) if bin(i).count("1") % 2 else i for i in range(128)) + bytes(128)
+# Little in flight, like a serial line, so XOFF takes effect within a few blocks (in a
+# drip-feed the machine counts what still arrives after its XOFF as an overrun). The
+# machine's DNC port reads with a 4 KB receive buffer, smaller than a loopback segment:
+# writes larger than that window leave TCP waiting on its persist timer (measured: 100 KB
+# loads of 0.4 ms turned into 0.2-1.7 s stalls with 16-64 KB writes), so writes stay small.
+CHUNK = 1024
+WINDOW = 4096
 LINE_ALARMS = frozenset({2001, 2004, 2007, 2010})  # parity, cut off, time-out, overrun
 _REQUEST = re.compile(r"/REQ\s*(\d{1,5})", re.I)
 
@@ -73,6 +76,12 @@ def canonical_text(text: str) -> str:
     return "%\n" + "".join(f"{ln}\n" for ln in lines) + "%\n"
 
 
+def stored_form(tape: bytes) -> str:
+    """A punched tape (parity already stripped) decoded to the form machines store."""
+    lines = [ev.text for ev in TapeDecoder().feed(tape) if ev.kind == "line"]
+    return "%\n" + "".join(f"{ln}\n" for ln in lines) + "%\n"
+
+
 def sha256_text(text: str) -> str:
     return hashlib.sha256(text.encode("utf-8")).hexdigest()
 
@@ -86,7 +95,7 @@ class DncClient:
         parity: bool = False,
         timeout_s: float = 10.0,
         xoff_timeout_s: float = 30.0,
-        chunk: int = 1024,
+        chunk: int = CHUNK,
     ) -> None:
         self.host, self.port, self.parity = host, port, parity
         self.timeout_s, self.xoff_timeout_s, self.chunk = timeout_s, xoff_timeout_s, chunk
@@ -109,8 +118,7 @@ class DncClient:
                 "connect", f"cannot reach the DNC port {self.host}:{self.port}: {exc}"
             ) from exc
         self._sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
-        # Like a serial line, keep little in flight so XOFF takes effect within a few blocks.
-        self._sock.setsockopt(socket.SOL_SOCKET, socket.SO_SNDBUF, 4096)
+        self._sock.setsockopt(socket.SOL_SOCKET, socket.SO_SNDBUF, WINDOW)
         return self
 
     def __exit__(self, *exc: object) -> None:
@@ -121,17 +129,27 @@ class DncClient:
             self._sock = None
 
     def _encode(self, data: bytes) -> bytes:
-        return add_parity(data) if self.parity else data
+        if not self.parity:
+            return data
+        if not data.isascii():
+            raise TransferError("protocol", "tape text must be 7-bit ASCII to add parity")
+        return data.translate(_EVEN)
+
+    def _decode(self, data: bytes) -> bytes:
+        return data.translate(_STRIP) if self.parity else data
 
     def _raw_send(self, data: bytes) -> None:
         try:
             self._sock.sendall(self._encode(data))
         except OSError as exc:
-            self._raise_machine_reason()
-            raise TransferError(
-                "cut_off", f"connection lost after {self.sent} bytes: {exc}", sent=self.sent
-            ) from exc
+            self._lost(exc)
         self.sent += len(data)
+
+    def _lost(self, exc: OSError) -> None:
+        self._raise_machine_reason()
+        raise TransferError(
+            "cut_off", f"connection lost after {self.sent} bytes: {exc}", sent=self.sent
+        ) from exc
 
     def _raise_machine_reason(self) -> None:
         """When the line drops, the machine's last words (`ERR <alarm> ...`) say why."""
@@ -140,7 +158,7 @@ class DncClient:
                 data = self._sock.recv(4096)
                 if not data:
                     break
-                self._inbox += strip_parity(data) if self.parity else data
+                self._inbox += self._decode(data)
         start = self._inbox.find(b"ERR ")
         if start >= 0 and b"\n" in self._inbox[start:]:
             self._inbox = self._inbox[start:]
@@ -149,10 +167,12 @@ class DncClient:
     def _poll_flow(self, wait: float) -> None:
         """Read what the machine sent; track XON/XOFF; keep everything else for replies."""
         readable, _, _ = select.select([self._sock], [], [], wait)
-        if not readable:
-            return
+        if readable:
+            self._receive()
+
+    def _receive(self) -> None:
         try:
-            data = self._sock.recv(4096)
+            data = self._sock.recv(65536)
         except OSError as exc:
             raise TransferError("cut_off", f"connection lost: {exc}", sent=self.sent) from exc
         if not data:
@@ -162,15 +182,14 @@ class DncClient:
                 f"the machine closed the connection after {self.sent} bytes",
                 sent=self.sent,
             )
-        plain = strip_parity(data) if self.parity else data
-        if len(plain.translate(None, _FLOW_BYTES)) == len(plain):
-            # No flow or punch control in this chunk: it all goes where the last one went.
-            if self._punching:
-                self._tape += plain
-            else:
-                self._inbox += plain
-            return
-        for b in plain:
+        plain = self._decode(data)
+        # Runs between control characters go where the last control sent them, whole: a
+        # punched tape arrives as DC2, 100 KB of text, DC4 and is never walked byte by byte.
+        start = 0
+        for match in _FLOW_BYTE.finditer(plain):
+            self._keep(plain[start : match.start()])
+            start = match.end()
+            b = plain[match.start()]
             if b == XOFF:
                 self._stopped = True
                 self.xoff_count += 1
@@ -179,31 +198,70 @@ class DncClient:
             elif b == PUNCH_ON:
                 self._punching = True
                 self._tape.clear()
-            elif b == PUNCH_OFF and self._punching:
+            elif self._punching:  # PUNCH_OFF
                 self._punching = False
                 self._tapes.append(bytes(self._tape))
-            elif self._punching:
-                self._tape.append(b)
+        self._keep(plain[start:])
+
+    def _keep(self, data: bytes) -> None:
+        if data:
+            if self._punching:
+                self._tape += data
             else:
-                self._inbox += bytes([b])
+                self._inbox += data
 
     def _send_paced(self, data: bytes) -> None:
-        for i in range(0, len(data), self.chunk):
-            self._poll_flow(0)
-            deadline = time.monotonic() + self.xoff_timeout_s
-            while self._stopped:
-                if b"\n" in self._inbox and self._inbox.startswith(b"ERR"):
-                    return  # the machine gave up; its reply explains why
-                if time.monotonic() > deadline:
+        """Send `data`, never writing while the machine holds XOFF.
+
+        Each write hands the kernel at most `chunk` bytes and only what it takes at once
+        (socket.send, not sendall), then the line is checked for XOFF again: what can be in
+        flight when XOFF arrives is bounded by the socket buffers, as on a serial line by the
+        UART FIFO. Parity is added to the whole buffer once, not per chunk.
+        """
+        wire = memoryview(self._encode(data))
+        i, stall = 0, time.monotonic() + self.timeout_s
+        while i < len(wire):
+            try:
+                readable, writable, _ = select.select([self._sock], [self._sock], [], 0.05)
+            except OSError as exc:
+                self._lost(exc)
+            if readable:
+                self._receive()
+            if self._stopped:
+                self._hold()
+                stall = time.monotonic() + self.timeout_s
+            if b"ERR" in self._inbox:
+                return  # the machine gave up; its reply explains why
+            if self._stopped or not writable:
+                if time.monotonic() > stall:
                     raise TransferError(
-                        "xoff_timeout",
-                        f"the machine held XOFF for {self.xoff_timeout_s:g} s after {self.sent} bytes",
+                        "timeout",
+                        f"the machine took nothing for {self.timeout_s:g} s "
+                        f"after {self.sent} bytes",
                         sent=self.sent,
                     )
-                self._poll_flow(0.05)
-            if b"ERR" in self._inbox:
+                continue
+            try:
+                n = self._sock.send(wire[i : i + self.chunk])
+            except OSError as exc:
+                self._lost(exc)
+            i += n
+            self.sent += n
+            stall = time.monotonic() + self.timeout_s
+
+    def _hold(self) -> None:
+        """Stopped by XOFF: send nothing until XON, the machine's ERR, or the XOFF time-out."""
+        deadline = time.monotonic() + self.xoff_timeout_s
+        while self._stopped:
+            if b"\n" in self._inbox and self._inbox.startswith(b"ERR"):
                 return
-            self._raw_send(data[i : i + self.chunk])
+            if time.monotonic() > deadline:
+                raise TransferError(
+                    "xoff_timeout",
+                    f"the machine held XOFF for {self.xoff_timeout_s:g} s after {self.sent} bytes",
+                    sent=self.sent,
+                )
+            self._poll_flow(0.05)
 
     def _reply(self) -> str:
         deadline = time.monotonic() + self.timeout_s
@@ -226,6 +284,10 @@ class DncClient:
 
     def _receive_tape(self) -> str:
         """The next punched tape (DC2 ... DC4), in stored form."""
+        return stored_form(self._receive_raw_tape())
+
+    def _receive_raw_tape(self) -> bytes:
+        """The next punched tape (DC2 ... DC4) as the bytes between the two controls."""
         deadline = time.monotonic() + self.timeout_s
         while not self._tapes:
             if self._inbox.startswith(b"ERR") and b"\n" in self._inbox:
@@ -233,8 +295,7 @@ class DncClient:
             if time.monotonic() > deadline:
                 raise TransferError("timeout", "punch output did not arrive", sent=self.sent)
             self._poll_flow(0.05)
-        lines = [ev.text for ev in TapeDecoder().feed(self._tapes.pop(0)) if ev.kind == "line"]
-        return "%\n" + "".join(f"{ln}\n" for ln in lines) + "%\n"
+        return self._tapes.pop(0)
 
     # -------------------------------------------------------------------------- operations
 
@@ -283,6 +344,20 @@ class DncClient:
         """Upload program `number` from the machine's memory (in the machine's stored form)."""
         self._raw_send(f"PUNCH O{number:04d}\n".encode())
         return self._receive_tape()
+
+    def punch_sha256(self, number: int, *, expected: str | None = None) -> str:
+        """sha256 of program `number` as the machine holds it (read back by punching).
+
+        A machine punches its stored form unchanged, so when the raw tape hashes to
+        `expected` it is that text byte for byte and is not decoded; otherwise it is decoded
+        to stored form, which is what the answer is about.
+        """
+        self._raw_send(f"PUNCH O{number:04d}\n".encode())
+        raw = self._receive_raw_tape()
+        digest = hashlib.sha256(raw).hexdigest()
+        if expected is not None and digest == expected:
+            return digest
+        return sha256_text(stored_form(raw))
 
     def directory(self) -> list[tuple[int, int, str]]:
         self._raw_send(b"DIR\n")

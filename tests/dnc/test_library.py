@@ -250,3 +250,40 @@ def test_text_search_finds_substrings_of_any_length(library, needle, found):
     library.create_program(number=1, name="a", text=PROG.replace("O1000", "O1"))
     library.create_program(number=2, name="b", text="%\nO2 (100% FEED)\nG0 X0\n%\n")
     assert [p.number for p in library.search(text=needle).items] == found
+
+
+def test_text_search_ignores_case_on_every_backend(library):
+    library.create_program(number=1, name="a", text=PROG.replace("O1000", "O1"))
+    assert [p.number for p in library.search(text="(bracket)").items] == [1]
+    assert [p.number for p in library.search(text="n20 g1").items] == [1]
+
+
+@pytest.mark.parametrize("probe_limit", [0, 3, 1000])
+def test_text_search_pages_alike_whether_from_the_index_or_by_walking_programs(
+    library, probe_limit
+):
+    """A text found in many contents is searched by walking programs in page order; a rare
+    one through the index. Both give the same pages, old revisions included."""
+    library.text_probe_limit = probe_limit
+    for n in range(1, 10):
+        prog, _ = library.create_program(
+            number=n, name=f"p{n}", text=f"%\nO{n} (OP{n % 3})\nG0 X{n}\n%\n"
+        )
+        # The tool call lives only in an older revision of every third program.
+        library.add_revision(prog.id, f"%\nO{n} (OP{n % 3})\nT{n % 3} M6\nG0 X{n}\n%\n")
+        library.add_revision(prog.id, f"%\nO{n} (OP{n % 3} NEW)\nG0 X{n}\n%\n")
+
+    def pages(**kw) -> list[list[int]]:
+        out, cursor = [], None
+        while True:
+            page = library.search(limit=2, cursor=cursor, **kw)
+            out.append([p.number for p in page.items])
+            if not (cursor := page.next_cursor):
+                return out
+
+    assert pages(text="T0 M6") == [[3, 6], [9]]
+    assert pages(text="(op1") == [[1, 4], [7]]
+    assert pages(text="G0 X") == [[1, 2], [3, 4], [5, 6], [7, 8], [9]]
+    assert pages(text="X") == pages(text="G0 X")
+    assert pages(text="T0 M6", tag="none") == [[]]
+    assert pages(text='"') == [[]]
