@@ -22,7 +22,7 @@ from cnc.errors import NcError
 from cnc.params import MachineParams
 from cnc.planner.limits import AxisLimits
 from cnc.planner.path import Path
-from cnc.planner.profile import PlanMemo, Span, partition, solve
+from cnc.planner.profile import INF, PlanMemo, Span, partition, partition_again, solve
 from cnc.planner.scurve import change_distance
 
 DROP_EVERY = 256
@@ -284,7 +284,9 @@ class Motion:
             elif self.single_block:
                 spans = self._plan_single_block(k, s0, v0, fo, ro)
             else:
-                parts = partition(segs, k, s0, fo, ro, False, None, ipo=self.ipo)
+                path = self.path
+                parts = partition_again(segs, k, s0, fo, ro, self.ipo, self._memo, path.changed_s)
+                path.changed_s = INF
                 spans, _ok = solve(parts, v0, self.ipo, self._memo)
         self._spans = ([lead] if lead is not None else []) + spans
         self._si = 0

@@ -144,6 +144,9 @@ class Path:
         # the next blend usually uses the last line up and replaces that junction, so it
         # is computed only when someone looks (see `segs`) or the next block keeps it
         self._pending: tuple[Segment, Segment] | None = None
+        # lowest path position of a piece added or changed since the planner last reset
+        # it (profile.partition_again takes earlier parts of its last cut as they were)
+        self.changed_s = INF
         self.base = 0  # executed segments dropped from the front of `segs`
         self.end_pose = start
         self.end_s = 0.0
@@ -216,6 +219,8 @@ class Path:
         seg.s1 = seg.s0 + seg.geom.length
         self._segs.append(seg)
         self.end_s = seg.s1
+        if seg.s0 < self.changed_s:
+            self.changed_s = seg.s0
 
     def _feed(self, cmd) -> float:
         if not cmd.feed or cmd.feed <= 0.0:
@@ -230,6 +235,8 @@ class Path:
             self._settle()
         if self._segs:
             self._segs[-1].sync_after.append(cmd)
+            if self._segs[-1].s0 < self.changed_s:
+                self.changed_s = self._segs[-1].s0
             self._finalised(len(self._segs) - 1)
         else:
             self.head_sync.append(cmd)
@@ -280,6 +287,8 @@ class Path:
                 if pg.length - d <= 1e-12 and protect_s <= prev.s0:
                     # the previous line is used up: the blend takes its place
                     self._segs.pop()
+                    if prev.s0 < self.changed_s:
+                        self.changed_s = prev.s0
                     arc.start = pg.start
                     bseg.block_last = prev.block_last
                     before = self._segs[-1] if self._segs else None
@@ -292,6 +301,8 @@ class Path:
                     elif before is not None and not before.stop_end:
                         self._set_junction(before, bseg, True)
                 else:
+                    if prev.s0 < self.changed_s:
+                        self.changed_s = prev.s0
                     prev.geom = pg.with_ends(pg.start, arc.start)
                     prev.s1 = prev.s0 + prev.geom.length
                     prev.block_last = False
@@ -322,6 +333,8 @@ class Path:
         pending = self._pending
         if pending is not None and pending[0] is a:
             self._pending = None  # superseded
+        if a.s0 < self.changed_s:
+            self.changed_s = a.s0
         ga, gb = a.geom, b.geom
         ta, tb, ka, kb = ga.t1, gb.t0, ga.k1, gb.k0
         du0, du1, du2 = tb[0] - ta[0], tb[1] - ta[1], tb[2] - ta[2]

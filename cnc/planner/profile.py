@@ -11,23 +11,29 @@ current state.
 
 from __future__ import annotations
 
+from bisect import bisect_left
 from math import sqrt
 
 from cnc.planner.path import Segment
 from cnc.planner.scurve import change_distance, change_phases, min_reach, reach
 
 SPAN_RATIO = 0.95
+INF = float("inf")
 
 
 class PlanMemo:
-    """What one plan leaves for the next (see `solve`): its spans and its S-curve reach
-    results, each by its inputs. Both are pure functions of those inputs."""
+    """What one plan leaves for the next (see `solve` and `partition_again`): its parts,
+    its spans and its S-curve reach results, each by what it depends on."""
 
-    __slots__ = ("spans", "reach")
+    __slots__ = ("spans", "reach", "part_key", "part_raw", "part_ends")
 
     def __init__(self) -> None:
         self.spans: dict = {}
         self.reach: dict = {}
+        # the parts of the last partition_again (before coasts), by their end position
+        self.part_key: tuple | None = None
+        self.part_raw: list[list] = []
+        self.part_ends: dict = {}
 
 
 class Span:
@@ -215,6 +221,75 @@ def partition(
     has a coast at both ends (all of it otherwise), so the spans always hold them.
     """
     out: list[list] = []
+    _cut(segs, k, s_start, feed_ovr, rapid_ovr, single_block, stop_s, vclamp, ipo, out, None)
+    if ipo > 0.0:
+        _coasts(out, ipo)
+    return out
+
+
+def partition_again(
+    segs: list[Segment],
+    k: int,
+    s_start: float,
+    feed_ovr: float,
+    rapid_ovr: float,
+    ipo: float,
+    memo: PlanMemo,
+    changed_s: float,
+) -> list[list]:
+    """`partition(segs, k, s_start, feed_ovr, rapid_ovr, False, None, ipo=ipo)`, taking the
+    parts of the previous such call (kept in `memo`) where nothing they depend on changed.
+
+    A part that ends at piece e depends on the pieces up to e + 1 (the next speed cap)
+    and, once the cut reaches one of its boundaries, not on where the cut began. So the
+    cut runs from k until it ends a part where a previous part ended, takes the previous
+    parts from there on as long as they end before `changed_s` (the lowest path position
+    of a piece changed since, see `Path.changed_s`), and cuts the rest afresh. The result
+    equals the full cut (tests/cnc/test_planner_incremental.py).
+    """
+    raw: list[list] = []
+    key = (feed_ovr, rapid_ovr)
+    ends = memo.part_ends if memo.part_key == key else None
+    n = len(segs)
+    while True:
+        hit = _cut(segs, k, s_start, feed_ovr, rapid_ovr, False, None, INF, ipo, raw, ends)
+        if hit < 0:
+            break
+        # the cut met a boundary of the previous cut: take its parts while unchanged
+        old = memo.part_raw
+        j = hit + 1
+        m = len(old)
+        while j < m and old[j][1] < changed_s:
+            raw.append(old[j].copy())
+            j += 1
+        if raw[-1][7]:
+            break  # a taken part ended the plan (the next stop)
+        s_next = raw[-1][1]
+        k = bisect_left(segs, s_next, key=_seg_start)
+        if k >= n:
+            break
+        s_start = s_next
+        ends = None  # cut the rest afresh
+    memo.part_key = key
+    memo.part_raw = [p.copy() for p in raw]
+    memo.part_ends = {p[1]: i for i, p in enumerate(raw) if not p[7]}
+    if ipo > 0.0:
+        _coasts(raw, ipo)
+    return raw
+
+
+def _seg_start(g: Segment) -> float:
+    return g.s0
+
+
+def _cut(
+    segs, k, s_start, feed_ovr, rapid_ovr, single_block, stop_s, vclamp, ipo, out, ends
+) -> int:
+    """Append the parts from piece k to the next stop to `out` (coasts not decided yet).
+
+    With `ends` (end position -> index of a part of a previous cut), stop after a part
+    that ends where a previous part ended and return that index; else return -1.
+    """
     cur = None
     n = len(segs)
     last = n - 1
@@ -275,14 +350,16 @@ def partition(
                     jco = g.jcoast_end
                 cur[8] = jco if jco < lo else lo
             out.append(cur)
+            if ends is not None:
+                hit = ends.get(b, -1)
+                if hit >= 0:
+                    return hit
             cur = None
         k += 1
     if cur is not None:
         cur[7] = True
         out.append(cur)
-    if ipo > 0.0:
-        _coasts(out, ipo)
-    return out
+    return -1
 
 
 def _coasts(parts: list[list], ipo: float) -> None:

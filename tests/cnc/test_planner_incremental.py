@@ -1,7 +1,8 @@
 """The planner's work-saving paths give exactly what the full computation gives.
 
 * `solve(..., memo)` takes spans (and S-curve reach results) from the previous plan when
-  their inputs are the same: a streaming re-plan must equal a plan from scratch.
+  their inputs are the same, and `partition_again` the parts of the previous cut where
+  nothing they depend on changed: a streaming re-plan must equal a plan from scratch.
 * `Path` computes the junction into the last piece only when it survives (the next G64
   blend usually replaces it): the junctions must equal those computed at every push.
 """
@@ -14,7 +15,7 @@ import random
 from cnc.canon import ArcFeed, PathMode, Plane, SetPathMode, StraightFeed, StraightTraverse
 from cnc.interpolator import Motion
 from cnc.params import MachineParams
-from cnc.planner.profile import PlanMemo, partition, solve
+from cnc.planner.profile import INF, PlanMemo, partition, partition_again, solve
 
 IPO = 0.002
 
@@ -84,12 +85,15 @@ def test_streaming_plans_with_memo_equal_plans_from_scratch():
         segs = m.path.segs
         if count % 3 or not segs:
             continue
-        # start a little further along each time, at the speed the last plan had there
+        # start a little further along each time (at a piece start or inside a piece)
         k = min(count // 6, len(segs) - 1)
-        s0 = segs[k].s0
+        s0 = segs[k].s0 + (0.4 * (segs[k].s1 - segs[k].s0) if count % 2 else 0.0)
+        again = partition_again(segs, k, s0, 1.0, 1.0, IPO, memo, m.path.changed_s)
+        m.path.changed_s = INF
         parts = partition(segs, k, s0, 1.0, 1.0, False, None, ipo=IPO)
+        assert again == parts
         before = set(map(id, memo.spans.values()))
-        with_memo, ok1 = solve(parts, v0, IPO, memo)
+        with_memo, ok1 = solve(again, v0, IPO, memo)
         parts = partition(segs, k, s0, 1.0, 1.0, False, None, ipo=IPO)
         scratch, ok2 = solve(parts, v0, IPO)
         assert ok1 == ok2
