@@ -4,7 +4,8 @@ drip-feed costs.
 Both ends are real: each machine is a `cnc.faces.dnc_port.DncPort` on loopback, the host side
 is the dispatch record + `TransferWorker` (transfer, read back, sha256 verify) for the
 dispatch figure, and `DncClient.drip_feed` streaming generated blocks for the drip figure.
-Targets from issue 6: dispatch p95 < 250 ms; drip-feed memory growth < 64 MB for 1 GB.
+Targets from issue 6: dispatch p95 < 250 ms; drip-feed memory growth < 64 MB for 1 GB
+(measured over --drip-mb, default 64, and extrapolated by the growth slope unless 1024).
 """
 
 from __future__ import annotations
@@ -12,6 +13,7 @@ from __future__ import annotations
 import argparse
 import json
 import multiprocessing
+import os
 import statistics
 import sys
 import tempfile
@@ -178,28 +180,62 @@ def drip_bench(total_mb: int) -> dict:
 
     sampler = threading.Thread(target=sample)
     sampler.start()
-    t = time.perf_counter()
-    with DncClient("127.0.0.1", port.bound_port, timeout_s=60, chunk=1024) as client:
-        result = client.drip_feed(blocks())
-    wall = time.perf_counter() - t
+    # RSS against bytes sent, about every MB: the slope says whether memory grows with the
+    # program (it must not: O(1)) and carries the figure to 1 GB when a shorter run is made.
+    curve: list[tuple[float, float]] = []
+    next_mb = [1.0]
+
+    def progress(_blocks: int, sent: int) -> None:
+        if sent >= next_mb[0] * 1048576:
+            curve.append((sent / 1048576, rss_mb()))
+            next_mb[0] += 1.0
+
+    t, client_cpu = time.perf_counter(), time.thread_time()
+    with DncClient("127.0.0.1", port.bound_port, timeout_s=60) as client:
+        result = client.drip_feed(blocks(), progress=progress)
+    wall, client_cpu = time.perf_counter() - t, time.thread_time() - client_cpu
     consumer.join(60)
     stop.set()
     done.set()
     sampler.join()
     loop.run(port.stop)
     loop.stop()
+    sent_mb = result.bytes_sent / 1048576
+    growth = peak[0] - before
+    slope = _slope(curve[len(curve) // 4 :])  # past the first quarter: buffers warmed up
     return {
         "program_mb": total_mb,
+        "measured_mb": round(sent_mb, 1),
         "blocks": result.blocks,
         "blocks_taken_by_nc": taken[0],
         "bytes_sent": result.bytes_sent,
         "xoff_count": result.xoff_count,
         "wall_s": round(wall, 1),
-        "mb_per_s": round(result.bytes_sent / wall / 1e6, 1),
+        "mb_per_s": round(result.bytes_sent / wall / 1e6, 2),
+        # The host client's own thread; the rest of the wall time it waits for XON (the
+        # machine's 4 KB drip buffer and its NC set the pace, in this same process).
+        "client_cpu_s_per_mb": round(client_cpu / sent_mb, 3),
         "rss_before_mb": round(before, 1),
         "rss_peak_mb": round(peak[0], 1),
-        "memory_growth_mb": round(peak[0] - before, 1),
+        "memory_growth_mb": round(growth, 1),
+        "growth_mb_per_mb": None if slope is None else round(slope, 5),
+        "growth_at_1gb_mb": (
+            round(growth, 1)
+            if sent_mb >= 1024 or slope is None
+            else round(growth + max(0.0, slope) * (1024 - sent_mb), 1)
+        ),
+        "growth_at_1gb_is": "measured" if sent_mb >= 1024 else "extrapolated from the slope",
     }
+
+
+def _slope(points: list[tuple[float, float]]) -> float | None:
+    """Least-squares slope of RSS (MB) over MB sent."""
+    if len(points) < 2:
+        return None
+    mx = statistics.fmean(x for x, _ in points)
+    my = statistics.fmean(y for _, y in points)
+    sxx = sum((x - mx) ** 2 for x, _ in points)
+    return sum((x - mx) * (y - my) for x, y in points) / sxx if sxx else None
 
 
 def main() -> None:
@@ -207,7 +243,10 @@ def main() -> None:
     ap.add_argument("--machines", type=int, default=20)
     ap.add_argument("--program-kb", type=int, default=100)
     ap.add_argument("--rounds", type=int, default=5)
-    ap.add_argument("--drip-mb", type=int, default=1024)
+    # The drip runs at the machine's pace, about 1-2 MB/s with its 4 KB buffer: 1 GB takes
+    # 10-15 minutes, so the default measures 64 MB (about a minute) and extrapolates to 1 GB
+    # from the growth slope; pass --drip-mb 1024 for the full program.
+    ap.add_argument("--drip-mb", type=int, default=64)
     args = ap.parse_args()
     dispatch = dispatch_bench(args.machines, args.program_kb * 1024, args.rounds)
     drip = drip_bench(args.drip_mb)
@@ -219,8 +258,9 @@ def main() -> None:
                 "targets": {"dispatch_p95_ms": 250, "drip_memory_growth_mb": 64},
                 "meets": {
                     "dispatch": dispatch["p95_ms"] < 250 and dispatch["failed"] == 0,
-                    "drip_memory": drip["memory_growth_mb"] < 64,
+                    "drip_memory": drip["growth_at_1gb_mb"] < 64,
                 },
+                "load_average": [round(x, 2) for x in os.getloadavg()],
                 "peer": None,
             }
         )

@@ -38,6 +38,10 @@ def normalise_url(url: str) -> str:
 def make_engine(url: str | None = None, **kwargs: object) -> Engine:
     url = normalise_url(database_url(url))
     if url.startswith("sqlite"):
+        if ":memory:" not in url and url.rstrip("/") != "sqlite:":
+            # One pooled connection per transfer thread (twenty dispatches at once): past the
+            # pool the overflow connections were opened and closed per transaction, 10 ms each.
+            kwargs = {"pool_size": 20, "max_overflow": 20, **kwargs}
         engine = create_engine(url, connect_args={"timeout": 30}, **kwargs)
         event.listen(engine, "connect", _sqlite_pragmas)
         _one_writer_at_a_time(engine)

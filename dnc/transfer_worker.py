@@ -136,26 +136,15 @@ class TransferWorker:
         """One attempt at one dispatch; returns its new state."""
         now = self._now()
         with transaction(self._sessions) as s:
-            # Claim it: only one worker moves a pending dispatch to transferring.
-            claimed = s.execute(
-                update(m.Dispatch)
-                .where(m.Dispatch.id == dispatch_id, m.Dispatch.state == PENDING)
-                .values(state=TRANSFERRING, attempts=m.Dispatch.attempts + 1, updated_at=now)
-            ).rowcount
-            if not claimed:
-                return s.scalar(select(m.Dispatch.state).where(m.Dispatch.id == dispatch_id))
-            # Everything the attempt needs in one query, Core rather than ORM: twenty
-            # transfers at once made the ORM's per-row work most of the host's CPU time.
+            # Everything the attempt needs in one query, Core rather than ORM (twenty
+            # transfers at once made the ORM's per-row work most of the host's CPU time),
+            # read before the claim so the write lock is held only for the writes.
             found = s.execute(
                 select(
                     m.Dispatch.machine,
                     m.Dispatch.revision_id,
                     m.Dispatch.mode,
                     m.Dispatch.start,
-                    m.Dispatch.attempts,
-                    m.Dispatch.bytes_sent,
-                    m.Dispatch.verified,
-                    m.Dispatch.error,
                     m.Machine.dnc_address,
                     m.Machine.dnc_profile,
                     m.Revision.sha256,
@@ -169,21 +158,35 @@ class TransferWorker:
                 .outerjoin(m.Machine, m.Machine.name == m.Dispatch.machine)
                 .where(m.Dispatch.id == dispatch_id)
             ).one()
+            # Claim it: only one worker moves a pending dispatch to transferring.
+            claimed = s.execute(
+                update(m.Dispatch)
+                .where(m.Dispatch.id == dispatch_id, m.Dispatch.state == PENDING)
+                .values(state=TRANSFERRING, attempts=m.Dispatch.attempts + 1, updated_at=now)
+                .returning(
+                    m.Dispatch.attempts,
+                    m.Dispatch.bytes_sent,
+                    m.Dispatch.verified,
+                    m.Dispatch.error,
+                )
+            ).one_or_none()
+            if claimed is None:
+                return s.scalar(select(m.Dispatch.state).where(m.Dispatch.id == dispatch_id))
             snap = dict(
                 id=dispatch_id,
                 machine=found.machine,
                 revision_id=found.revision_id,
                 state=TRANSFERRING,
-                attempts=found.attempts,
-                bytes_sent=found.bytes_sent,
-                verified=found.verified,
-                error=found.error,
+                attempts=claimed.attempts,
+                bytes_sent=claimed.bytes_sent,
+                verified=claimed.verified,
+                error=claimed.error,
             )
             _event(s, snap, now)
             job = dict(
                 mode=found.mode,
                 start=found.start,
-                attempts=found.attempts,
+                attempts=claimed.attempts,
                 machine=found.machine,
                 address=found.dnc_address or "",
                 profile=dict(found.dnc_profile or {}),
