@@ -98,7 +98,7 @@ class Motion:
     def push(self, cmd) -> bool:
         """Queue one canonical command; False (nothing queued) when the look-ahead is full."""
         if isinstance(cmd, MOTION_TYPES):
-            if self.space() <= 0:
+            if self.params.lookahead <= self.path.blocks - self._blocks_done:  # space() <= 0
                 return False
             self.path.add_motion(cmd, self._protect_s(), not self.single_block)
             self._dirty = True

@@ -244,7 +244,41 @@ def blend(
     end = (x + d * b0, y + d * b1, z + d * b2)
     center = (start[0] + r * n1[0], start[1] + r * n1[1], start[2] + r * n1[2])
     e1 = (-n1[0], -n1[1], -n1[2])
-    return Arc(start, end, center, e1, u1, ZERO, r, r, theta, 0.0), d
+    return _planar_arc(start, end, center, e1, u1, r, theta), d
+
+
+def _planar_arc(start: Vec, end: Vec, center: Vec, e1: Vec, e2: Vec, r: float, sweep: float) -> Arc:
+    """`Arc(start, end, center, e1, e2, ZERO, r, r, sweep, 0.0)` with the zero rise and the
+    constant radius folded in (the same values): every G64 blend builds one."""
+    arc = Arc.__new__(Arc)
+    arc.start = start
+    arc.end = end
+    arc.center = center
+    arc.e1 = e1
+    arc.e2 = e2
+    arc.w = ZERO
+    arc.r0 = arc.r1 = r
+    arc.sweep = sweep
+    arc.rise = 0.0
+    arc.cent = None
+    arc.length = length = sqrt((r * sweep) ** 2)
+    k = sweep / length
+    cp, sp = cos(sweep), sin(sweep)
+    a0, a1, a2 = e1
+    b0, b1, b2 = e2
+    rk = r * k
+    # "+ 0.0" as in Arc: the zero terms of the general formula turn -0.0 into 0.0
+    arc.t0 = (rk * b0 + 0.0, rk * b1 + 0.0, rk * b2 + 0.0)
+    c0, c1, c2 = cp * a0 + sp * b0, cp * a1 + sp * b1, cp * a2 + sp * b2
+    arc.t1 = (
+        rk * (-sp * a0 + cp * b0) + 0.0,
+        rk * (-sp * a1 + cp * b1) + 0.0,
+        rk * (-sp * a2 + cp * b2) + 0.0,
+    )
+    q = -r * k * k
+    arc.k0 = (q * a0, q * a1, q * a2)
+    arc.k1 = (q * c0, q * c1, q * c2)
+    return arc
 
 
 def _dist(a: Vec, b: Vec) -> float:
