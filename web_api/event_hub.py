@@ -230,16 +230,24 @@ class EventHub:
         with self._start_lock:
             if self._closed:
                 raise HubClosed("the app is shutting down")
-            running = self._thread is not None and self._thread.is_alive()
-            if running and self._failure is not None:
-                raise self._failure
-            if not running and not (self._anchored and not start_reader):
+            with self._lock:
+                # Decided under the lock the reader decides to stop under: a reader that
+                # is seen running has also seen this subscriber before it could stop.
+                running = self._thread is not None and self._thread.is_alive()
+                if running and self._failure is None:
+                    self._subscribers += 1
+                    self._idle_since = None
+                    return Subscription(self, cursor)
+                failure = self._failure if running else None
+            if failure is not None:
+                raise failure
+            if start_reader or not self._anchored:
                 self.anchor()  # reads the database: a dead one raises here
-                if start_reader:
-                    self._start_reader()
-        with self._lock:
-            self._subscribers += 1
-            self._idle_since = None
+            with self._lock:
+                self._subscribers += 1
+                self._idle_since = None
+            if start_reader:
+                self._start_reader()
         return Subscription(self, cursor)
 
     def _unsubscribe(self) -> None:
@@ -303,14 +311,18 @@ class EventHub:
                     self._stop.wait(self.coalesce_s - since)
             last_read = time.monotonic()
 
-    def close(self) -> None:
-        """Stop the reader and end every subscriber's stream (the app shuts down)."""
+    def close(self, *, wait: bool = True) -> None:
+        """Stop the reader and end every subscriber's stream (the app shuts down).
+
+        uvicorn waits for open responses before it runs the lifespan's shutdown, so a
+        server that means to stop while clients watch calls this first (`wait=False` from
+        a signal handler); the lifespan's call then only finishes the job."""
         with self._lock:
             self._closed = True
             thread = self._thread
         self._stop.set()
         self._nudge.set()
-        if thread is not None and thread is not threading.current_thread():
+        if wait and thread is not None and thread is not threading.current_thread():
             thread.join(timeout=5)
         self._wake_all()
         if self.on_close is not None:
@@ -375,13 +387,23 @@ class PollingStream:
     """The stream as it was before the hub: this client polls the outbox itself every
     `poll_s`. Kept as the benchmark's peer (`events_fanout: poll`)."""
 
-    def __init__(self, read_after: ReadAfter, cursor: int, poll_s: float, limit: int = 200):
+    def __init__(
+        self,
+        read_after: ReadAfter,
+        cursor: int,
+        poll_s: float,
+        limit: int = 200,
+        closed: Callable[[], bool] = lambda: False,
+    ):
         self._read_after, self.cursor, self.poll_s, self.limit = read_after, cursor, poll_s, limit
+        self._closed = closed
 
     async def next_batch(self, timeout: float) -> list[Published]:
         loop = asyncio.get_running_loop()
         deadline = loop.time() + timeout
         while True:
+            if self._closed():
+                raise HubClosed("the app is shutting down")
             got = list(await anyio.to_thread.run_sync(self._read_after, self.cursor, self.limit))
             if got:
                 self.cursor = got[-1].id

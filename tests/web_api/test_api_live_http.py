@@ -135,3 +135,34 @@ def test_clients_dropping_mid_stream_are_released_without_an_error_logged(live):
     finally:
         logging.getLogger("uvicorn.error").removeHandler(errors)
     assert [r.getMessage() for r in errors.records] == []
+
+
+@pytest.mark.parametrize("fanout", ["hub", "poll"])
+def test_closing_the_hub_ends_open_streams_so_the_server_can_stop(sessions, fanout):
+    """uvicorn waits for open responses before the lifespan's shutdown: a watching
+    dashboard kept the server from stopping until the hub learnt to end its streams."""
+    api = make_api(sessions, events_fanout=fanout)
+    sock = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
+    sock.bind(("127.0.0.1", 0))
+    sock.listen(64)
+    server = uvicorn.Server(uvicorn.Config(api.client.app, log_level="warning"))
+    thread = threading.Thread(target=server.run, kwargs={"sockets": [sock]}, daemon=True)
+    thread.start()
+    base = f"http://127.0.0.1:{sock.getsockname()[1]}"
+    try:
+        with httpx.Client(base_url=base, headers={"X-API-Key": KEYS["viewer"]}, timeout=20) as c:
+            with c.stream("GET", "/api/events") as r:
+                lines = r.iter_lines()
+                assert next(lines) == ": fmscell events"
+                api.client.app.state.event_hub.close(wait=False)  # as on SIGTERM
+                list(lines)  # returns: the server ended the stream
+            after = c.get("/api/events")
+            assert after.status_code == 503
+            assert after.json()["type"].endswith("/shutting-down")
+        server.should_exit = True
+        thread.join(timeout=20)
+        assert not thread.is_alive(), "uvicorn still waits for a stream"
+    finally:
+        server.should_exit = True
+        thread.join(timeout=20)
+        sock.close()

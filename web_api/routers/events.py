@@ -72,6 +72,8 @@ async def open_stream(app: FastAPI, cursor: int) -> Stream:
     is a 503 problem before the response starts, not a stream that stays silent."""
     services: Services = app.state.services
     settings = services.settings
+    if app.state.event_hub.closed:
+        raise ApiProblem(503, "shutting-down", "the server is shutting down")
     if settings.events_fanout == "poll":
         await run_in_threadpool(events_after, services.sessions, cursor, 1)
         return PollingStream(
@@ -79,6 +81,7 @@ async def open_stream(app: FastAPI, cursor: int) -> Stream:
             cursor,
             settings.events_poll_s,
             BATCH,
+            closed=lambda: app.state.event_hub.closed,
         )
     try:
         return await run_in_threadpool(app.state.event_hub.subscribe, cursor)
