@@ -6,17 +6,22 @@ after the scan's timer fires: (1) for a CPU, when the box is busy, and (2) for t
 by the Modbus face's thread, which may itself be waiting for a CPU while holding it. A
 shorter GIL switch interval shortens (2) only while the holder is running.
 
-Two remedies, both opt-in per deployment:
+Remedies, all opt-in per deployment:
 
 * `ScanGate`: the runner announces each scan's deadline; a cooperating thread (the Modbus
   face) that finds itself within `guard_s` of the deadline steps aside, i.e. waits without
-  the GIL until that scan has published. The scan then finds the GIL free, whatever the OS
-  does to the other thread meanwhile. Cost: the face pauses about guard + scan time once per
-  period, and only while it is busy.
+  the GIL until that scan has published. Cost: the face pauses about guard + scan time once
+  per period, and only while it is busy. It cannot help when the OS deschedules the face
+  while it holds the GIL *before* its check; hence the third remedy.
 * `rt_priority`: SCHED_FIFO for the scan thread (as OpenPLC's runtime and LinuxCNC's RT
   threads have), so its timer wake-up preempts ordinary processes: remedy for (1). Needs
   CAP_SYS_NICE (root in most containers has it); refused, the scan runs as before and the
   runner says so.
+* SCHED_FIFO for the face's thread, below the scan's (`ModbusFace.start_in_thread(
+  rt_priority=...)`), so ordinary processes cannot deschedule it while it holds the GIL.
+
+Measured effect of each and together: docs/ladder.md, "Staying on time beside a busy Modbus
+face".
 """
 
 from __future__ import annotations
