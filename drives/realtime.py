@@ -16,10 +16,12 @@ Three things made a 1 ms cycle late on an otherwise idle machine, measured with
 collects once and freezes what exists after setup (`gc.freeze`: the long-lived object
 dictionaries are never traversed again), raises the automatic collector's threshold to
 FORCED_THRESHOLD allocations and lets the pacers collect the young generation in the slack
-before a deadline as soon as YOUNG_THRESHOLD are pending (an older generation only when the
-slack is larger). While the pacers run, the automatic collector never triggers; if they
-stop (an idle axis group that was never closed) it still does, at the higher threshold, so
-memory stays bounded. It also shortens the switch interval. Both are process-wide
+before a deadline as soon as YOUNG_THRESHOLD are pending (the middle one every 10th time,
+when the slack is larger). While the pacers run, the automatic collector never triggers;
+if they stop (an idle axis group that was never closed) it still does, at the higher
+threshold, so memory stays bounded. The old generation is not collected in the slack: its
+size is unknown (in a host that was busy before, a full collection takes 100s of ms), so
+cyclic garbage that survives two collections waits until the last shell stops. It also shortens the switch interval. Both are process-wide
 settings, so they are reference-counted and restored when the last shell stops.
 
 `Pacer` waits for absolute deadlines: it sleeps until `spin_s` before the deadline and
@@ -42,8 +44,8 @@ SWITCH_INTERVAL_S = 0.0005
 YOUNG_THRESHOLD = 700
 #: the automatic collector's threshold meanwhile (it runs only if the pacers do not)
 FORCED_THRESHOLD = 50 * YOUNG_THRESHOLD
-#: slack needed before a deadline to start a young / middle / full collection
-SLACK_FOR_GENERATION_S = (0.2e-3, 0.5e-3, 0.8e-3)
+#: slack needed before a deadline to start a young / middle collection
+SLACK_FOR_GENERATION_S = (0.2e-3, 0.5e-3)
 
 
 class RealtimeProcess:
@@ -54,7 +56,7 @@ class RealtimeProcess:
     _saved_switch: float | None = None
     _saved_threshold: tuple[int, ...] | None = None
     _young_collections = 0
-    collections = [0, 0, 0]  # collections run in the slack, per generation
+    collections = [0, 0]  # collections run in the slack: young, middle
     forced_collections = 0  # collections that could not wait for slack
 
     @classmethod
@@ -97,8 +99,8 @@ class RealtimeProcess:
     def collect_in_slack(cls, slack_s: float) -> None:
         """Run the collection that is due if `slack_s` (time to the next deadline) allows.
 
-        Generations follow CPython's own ratios (a middle collection every 10 young ones,
-        a full one every 10 middle ones) but a collection waits for enough slack.
+        A middle collection every 10 young ones (CPython's own ratio); each waits for enough
+        slack, unless FORCED_THRESHOLD allocations are pending.
         """
         if cls._users == 0:
             return
@@ -106,7 +108,7 @@ class RealtimeProcess:
         if pending < YOUNG_THRESHOLD:
             return
         n = cls._young_collections + 1
-        generation = 2 if n % 100 == 0 else 1 if n % 10 == 0 else 0
+        generation = 1 if n % 10 == 0 else 0
         if slack_s < SLACK_FOR_GENERATION_S[generation]:
             if pending < FORCED_THRESHOLD:
                 return  # wait for a cycle with more slack

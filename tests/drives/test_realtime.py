@@ -62,7 +62,7 @@ def fake_gc(monkeypatch):
     monkeypatch.setattr(rt, "gc", fake)
     monkeypatch.setattr(RealtimeProcess, "_users", 1)
     monkeypatch.setattr(RealtimeProcess, "_young_collections", 0)
-    monkeypatch.setattr(RealtimeProcess, "collections", [0, 0, 0])
+    monkeypatch.setattr(RealtimeProcess, "collections", [0, 0])
     monkeypatch.setattr(RealtimeProcess, "forced_collections", 0)
     return fake
 
@@ -75,10 +75,10 @@ def test_young_collection_waits_for_slack(fake_gc):
     assert fake_gc.collected == []
     RealtimeProcess.collect_in_slack(0.3e-3)
     assert fake_gc.collected == [0]
-    assert RealtimeProcess.collections == [1, 0, 0]
+    assert RealtimeProcess.collections == [1, 0]
 
 
-def test_older_generations_follow_cpythons_ratios_and_need_more_slack(fake_gc):
+def test_middle_generation_every_tenth_time_needs_more_slack_and_never_the_old(fake_gc):
     for _ in range(9):
         fake_gc.pending = YOUNG_THRESHOLD
         RealtimeProcess.collect_in_slack(0.3e-3)
@@ -87,6 +87,10 @@ def test_older_generations_follow_cpythons_ratios_and_need_more_slack(fake_gc):
     assert fake_gc.collected == [0] * 9
     RealtimeProcess.collect_in_slack(0.6e-3)
     assert fake_gc.collected == [0] * 9 + [1]
+    for _ in range(200):
+        fake_gc.pending = YOUNG_THRESHOLD
+        RealtimeProcess.collect_in_slack(1.0)
+    assert 2 not in fake_gc.collected
 
 
 def test_a_backlog_beyond_the_bound_is_collected_without_slack(fake_gc):
