@@ -96,8 +96,8 @@ class ModbusFace:
 
     `scan_gate` (a PLC runner's `gate`, e.g. `RealtimeRunner.gate`): when a request arrives
     within the gate's guard before a scan deadline, the face first waits, without the GIL,
-    until that scan has published (bounded by the gate), so the scan thread of the same
-    process never waits for the GIL held by a busy face. None: never wait.
+    until that scan has published (bounded by the gate), so that a busy face is not holding
+    the GIL when the scan thread of the same process wakes. None: never wait.
     """
 
     def __init__(
