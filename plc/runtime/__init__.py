@@ -3,7 +3,7 @@
 Public API::
 
     Runtime(program, config=RuntimeConfig(), *, image=None, io=None, retain_store=None,
-            writes=None, clock_ns=time.perf_counter_ns)
+            writes=None, clock_ns=time.thread_time_ns)
         .scan(now_ms, late_ms=0.0) -> Snapshot      one scan in virtual time
         .snapshot / .read(name) / .image / .writes (WriteQueue)
         .run() / .stop() / .reset_fault() / .mode (Mode.RUN|STOP|FAULT)

@@ -11,7 +11,11 @@ Scan cycle (one call of `scan`):
     8. outputs to the I/O provider, statistics, publish the Snapshot
 
 The core reads no clock of its own: time comes in as `now_ms`; the execution time is taken
-with the injectable `clock_ns` (a test passes a fake one to make a scan look slow).
+with the injectable `clock_ns` (a test passes a fake one to make a scan look slow). The
+default is the scan thread's CPU time, not the wall clock: a simulation process that the OS
+deschedules for 100 ms on a loaded host has not overrun its scan, and a lockstep run must not
+trip the watchdog (and so change its outcome) because of what else the host is doing. Late
+starts are the realtime shell's `late_ms` (`stall_periods`).
 """
 
 from __future__ import annotations
@@ -93,7 +97,7 @@ class Runtime:
         io: IOProvider | None = None,
         retain_store: RetainStore | None = None,
         writes: WriteQueue | None = None,
-        clock_ns: Callable[[], int] = time.perf_counter_ns,
+        clock_ns: Callable[[], int] = time.thread_time_ns,
     ) -> None:
         self.config = config or RuntimeConfig()
         self.image = image or ProcessImage(program.size)
