@@ -146,6 +146,7 @@ class Drive402:
         self._fault_emcy_sent = False
         self._fe_timer = 0.0
         self._fe_latched = False
+        self._split_dt, self._split = -1.0, (1, 0.0)  # advance(): last tick, its sub-steps
         self._limit_active = False
         self._inputs = self.plant.switch_inputs()
         self._last_sync = None
@@ -248,18 +249,20 @@ class Drive402:
             pass  # PV follows 0x60FF continuously
 
     def on_sync(self) -> None:
-        period = self.interpolation_period
+        od = self._od
+        period = od[(0x60C2, 1)] * 10.0 ** od[(0x60C2, 2)]  # `interpolation_period`
         if period <= 0.0:
             period = (self.time - self._last_sync) if self._last_sync is not None else 0.002
         self._last_sync = self.time
-        if self._power.state != State.OPERATION_ENABLED or self._power.stop is not None:
+        power = self._power
+        if power.state != State.OPERATION_ENABLED or power.stop is not None:
             return
         if self._mode == CSP:
-            tgt = self._clamp_position(self._od[(0x607A, 0)])
-            to = self._from_user(tgt)
+            tgt = self._clamp_position(od[(0x607A, 0)])
+            to = self._zero + tgt * self._rpu  # `_from_user`
             self._seg_to = to
-            self._seg_T = max(period, 1e-6)
-            self._seg_v = (to - self._dem.pos) / self._seg_T
+            self._seg_T = seg_T = max(period, 1e-6)
+            self._seg_v = (to - self._dem.pos) / seg_T
             self._seg_t = 0.0
         elif self._mode == CSV:
             self._csv_vel = self._od[(0x60FF, 0)] * self.rad_per_unit
@@ -269,15 +272,18 @@ class Drive402:
             return
         if self._power.state == State.NOT_READY_TO_SWITCH_ON:
             self._sm(None)  # transition 1: self-test passed
-        n = max(1, math.ceil(dt_s / self.params.loops.substep - 1e-9))
-        h = dt_s / n
+        if dt_s == self._split_dt:  # the same tick length every cycle: split it once
+            n, h = self._split
+        else:
+            n = max(1, math.ceil(dt_s / self.params.loops.substep - 1e-9))
+            h = dt_s / n
+            self._split_dt, self._split = dt_s, (n, h)
         # objects that cannot change inside advance(): convert them once per call
         od = self._od
-        rpu = self.rad_per_unit
         window = od[(0x6065, 0)]
-        self._fe_window = None if window == 0xFFFFFFFF else window * rpu
+        self._fe_window = None if window == 0xFFFFFFFF else window * self._rpu
         self._fe_timeout = od[(0x6066, 0)] * 1e-3
-        self._ilim = self._current_limit()
+        self._ilim = od[(0x6072, 0)] * 1e-3 * self.params.motor.rated_current  # _current_limit
         done = self._csp_substeps(h, n) if self._mode == CSP else 0
         for _ in range(n - done):
             self._substep(h)
