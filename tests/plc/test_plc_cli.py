@@ -113,3 +113,32 @@ def test_run_refuses_a_bad_program(tmp_path):
     f.write_text("XIC Nope OTE %QX0.0\n")
     result = runner.invoke(plc_app, ["run", str(f), "--duration-s", "0.1"])
     assert result.exit_code == 1 and f"{f}:1:5: error: undeclared tag 'Nope'" in result.output
+
+
+def test_run_with_scan_gate_and_rt_priority_reports_the_scheduling():
+    result = runner.invoke(
+        plc_app,
+        [
+            "run",
+            str(PROGRAMS / "spindle.ld"),
+            "--modbus-port",
+            "0",
+            "--duration-s",
+            "0.2",
+            "--scan-gate",
+            "--rt-priority",
+            "5",
+        ],
+    )
+    assert result.exit_code == 0, result.output
+    # granted (root / CAP_SYS_NICE) or refused with the reason: either way it is reported
+    assert "scan thread scheduling: " in result.output and "mode RUN" in result.output
+
+
+def test_run_refuses_a_malformed_rt_priority_environment(monkeypatch):
+    monkeypatch.setenv("FMSCELL_PLC_RT_PRIORITY", "high")
+    result = runner.invoke(
+        plc_app, ["run", str(PROGRAMS / "spindle.ld"), "--modbus-port", "0", "--duration-s", "0.1"]
+    )
+    assert result.exit_code == 2
+    assert "FMSCELL_PLC_RT_PRIORITY='high': not an integer" in result.output
