@@ -409,11 +409,12 @@ class CanHub:
                 return 0
             self._delivering = True
             delivered = 0
+            endpoints, faults = self.endpoints, self.faults  # both mutated in place only
             try:
                 while self._pending or self._babbler:
                     winner = None
                     best = None
-                    for bus in self.endpoints:
+                    for bus in endpoints:
                         tx = bus._tx
                         if tx:
                             key = _priority(tx[0][1])
@@ -433,7 +434,7 @@ class CanHub:
                         break
                     queued_at, msg = winner._tx.popleft()
                     self._pending -= 1
-                    if self._apply_faults(winner, msg):
+                    if faults and self._apply_faults(winner, msg):
                         continue
                     self._transmit(winner, msg, queued_at)
                     delivered += 1
