@@ -1,13 +1,18 @@
 """`fmscell machine --config FILE --name NAME`: one machine with its faces, in its own process.
 
 The lead mounts `machine` as a command of the top-level app. The machine runs in realtime
-(paced to the wall clock) until SIGINT or SIGTERM; on start it prints one JSON line with its
-name and bound ports so a supervisor (or a cell on another host) can find its faces.
+(paced to the wall clock, or the fast clock) until SIGINT or SIGTERM; on start it prints one
+JSON line with its name and bound ports so a supervisor (or a cell on another host) can find
+its faces, and with `--ready-file` writes the same (with its pid) atomically to a file once it
+is ready: a cell host starts its machine processes with it and adopts them again after a
+host restart. Everything else (program select, homing, cycle start) reaches the machine
+through its faces: DNC port, Modbus remote panel, simulation face.
 """
 
 from __future__ import annotations
 
 import json
+import os
 from pathlib import Path
 
 import typer
@@ -16,12 +21,28 @@ import typer
 def machine(
     config: Path | None = typer.Option(None, "--config", help="cell or machine YAML"),
     name: str = typer.Option("mill3", "--name", help="machine name in the cell file"),
-    simulation: bool = typer.Option(
-        False, "--simulation", help="enable the simulation face (faults, operator, clock)"
+    simulation: bool | None = typer.Option(
+        None,
+        "--simulation/--no-simulation",
+        help="simulation face (faults, operator, clock) on or off (default: as configured)",
     ),
     ideal: bool = typer.Option(False, "--ideal", help="ideal axes instead of CANopen drives"),
     dnc_parity: bool = typer.Option(False, "--dnc-parity", help="ISO 7-bit even parity"),
     speed: float = typer.Option(1.0, "--speed", help="clock speed factor (1 = real time)"),
+    clock: str = typer.Option(
+        "realtime",
+        "--clock",
+        help="realtime (paced at --speed) | fast (as fast as the CPU allows while a program"
+        " is active, 4x real time while idle)",
+    ),
+    power_on: bool = typer.Option(
+        False,
+        "--power-on",
+        help="the operator's power-on routine first: home every axis (homing sequence), AUTO",
+    ),
+    ready_file: Path | None = typer.Option(
+        None, "--ready-file", help="write {machine, pid, ports} here (atomically) once ready"
+    ),
     seconds: float | None = typer.Option(None, "--seconds", help="stop after this wall time"),
     event_log: Path | None = typer.Option(None, "--event-log", help="JSONL event log file"),
     candump: Path | None = typer.Option(None, "--candump", help="CAN frames, candump log"),
@@ -33,6 +54,7 @@ def machine(
     from cnc.config import builtin_machine, load_machine_config
     from cnc.errors import NcError
     from cnc.machine import Machine, RealtimeRunner
+    from cnc.machine.runner import FAST_SPEED, IDLE_SPEED
 
     try:
         cfg = load_machine_config(config, name) if config else builtin_machine(name)
@@ -42,25 +64,37 @@ def machine(
     if not 0.01 <= speed <= 100.0:
         typer.echo(f"--speed {speed}: must be 0.01..100", err=True)
         raise typer.Exit(2)
+    if clock not in ("realtime", "fast"):
+        typer.echo(f"--clock {clock!r}: realtime or fast", err=True)
+        raise typer.Exit(2)
     dump = open(candump, "w", encoding="ascii") if candump else None  # noqa: SIM115
     m = Machine(
         cfg, name, ideal=ideal, candump=dump, event_log_path=str(event_log) if event_log else None
     )
     try:
         try:
-            faces = m.start_faces(simulation=simulation or None, dnc_parity=dnc_parity)
+            faces = m.start_faces(simulation=simulation, dnc_parity=dnc_parity)
         except OSError as err:
             typer.echo(f"{name}: cannot bind a face: {err}", err=True)
             raise typer.Exit(2) from None
-        runner = RealtimeRunner(m, speed=speed)
+        if clock == "fast":
+            runner = RealtimeRunner(m, speed=FAST_SPEED, idle_speed=IDLE_SPEED)
+        else:
+            runner = RealtimeRunner(m, speed=speed)
         previous = {
             sig: signal.signal(sig, lambda *_: runner.stop())
             for sig in (signal.SIGINT, signal.SIGTERM)
         }
-        typer.echo(
-            json.dumps({"machine": name, "ports": faces.ports(), "ipo_cycle_ms": cfg.ipo_cycle_ms}),
-            nl=True,
-        )
+        if power_on:
+            try:
+                m.power_on()
+            except Exception as err:  # noqa: BLE001 - one clear line, not a traceback
+                typer.echo(f"{name}: power-on failed: {err}", err=True)
+                raise typer.Exit(1) from None
+        ready = {"machine": name, "ports": faces.ports(), "ipo_cycle_ms": cfg.ipo_cycle_ms}
+        typer.echo(json.dumps(ready), nl=True)
+        if ready_file is not None:
+            _write_atomically(ready_file, {**ready, "pid": os.getpid()})
         try:
             summary = runner.run(seconds)
         finally:
@@ -73,3 +107,10 @@ def machine(
         m.close()
         if dump is not None:
             dump.close()
+
+
+def _write_atomically(path: Path, data: dict) -> None:
+    """A reader never sees half a file: write a sibling, then rename over the target."""
+    tmp = path.with_name(path.name + ".tmp")
+    tmp.write_text(json.dumps(data))
+    tmp.replace(path)

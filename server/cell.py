@@ -6,7 +6,8 @@
     cell.stop()
 
 `start()` migrates the database, starts the machines (in this process, or as `fmscell
-machine` subprocesses with `processes=True`), registers them in the library with their face
+machine` subprocesses with `processes=True`; either way reached only through their faces),
+registers them in the library with their face
 addresses, connects the MTConnect agent to their SHDR streams and starts the host loops:
 scheduler tick, transfer worker (whose starter presses cycle start on the machine's Modbus
 remote panel), remote-request listeners and, when configured, the outbox publisher to MQTT.
@@ -326,29 +327,26 @@ class Cell:
             link.simulation("ESTOP PRESS")
             return "E-stop button pressed (simulation face)"
         if command == "home":
-            link.panel("request_mode", 4)
+            link.home()  # REF, home all, every axis referenced, AUTO: all on the panel
             from server.supervisor import wait_for
 
-            wait_for(
-                lambda: self.monitor.status(name)["mode"] == "MANUAL",
-                10,
-                f"{name}: REF mode",
-            )
-            link.operator("home")  # answers once every axis is referenced
-            link.panel("request_mode", 1)
+            # answer once the host's own view (SHDR -> agent) shows it too
             wait_for(
                 lambda: self.monitor.status(name)["mode"] == "AUTOMATIC",
                 10,
-                f"{name}: AUTO after homing",
+                f"{name}: AUTO after homing seen on the status face",
             )
-            return "mode REF on the Modbus remote panel, every axis homed, AUTO again"
+            return (
+                "homed on the Modbus remote panel: mode REF, home all in the homing sequence,"
+                " every axis referenced, AUTO"
+            )
         if command == "select_program":
-            link.operator("select_program", number=int(args["number"]))
-            return f"program O{int(args['number']):04d} selected at the machine"
+            number = int(args["number"])
+            link.select_program(number)  # answers once the NC selected it
+            return f"program O{number:04d} selected on the Modbus remote panel"
         if command == "mode":
-            modes = {"AUTO": 1, "MDI": 2, "JOG": 3, "REF": 4}
-            link.panel("request_mode", modes[args["mode"]])
-            return f"mode {args['mode']} requested on the Modbus remote panel"
+            link.mode(str(args["mode"]).upper())
+            return f"mode {args['mode']} taken (Modbus remote panel)"
         raise MachineUnavailable(f"unknown command {command!r}")
 
     # ------------------------------------------------------------------ faults

@@ -161,14 +161,14 @@ def make_starter(
     timeout_s: float = 30.0,
     repress_s: float = 5.0,
 ) -> Callable[[str, int], None]:
-    """The transfer worker's cycle start: select the program at the machine, press cycle
-    start on its Modbus remote panel, and wait until the machine reports it running."""
+    """The transfer worker's cycle start: select the program and press cycle start on the
+    machine's Modbus remote panel, and wait until the machine reports it running."""
 
     def start(machine: str, number: int) -> None:
         link = links[machine]
         name = f"O{number:04d}"
         before = monitor.status(machine)["counters"]["part_count"]
-        link.operator("select_program", number=number)
+        link.select_program(number)  # Modbus remote panel, answered by the NC
         wait_for(
             lambda: monitor.status(machine)["program"] == name,
             timeout_s,

@@ -210,6 +210,13 @@ def test_machine_services_run_the_machine_of_their_name_from_the_mounted_cell(se
         )
 
 
+def test_machine_services_power_on_before_the_attached_host_gives_them_work(services):
+    """The attached host starts no machine and runs no power-on: each machine service homes
+    its axes and takes AUTO itself (a `home` command over the API would do it later)."""
+    for name, s in machine_services(services).items():
+        assert "--power-on" in s["command"], name
+
+
 def test_machine_healthchecks_probe_the_configured_modbus_face(services, cell):
     for name, s in machine_services(services).items():
         test = s["healthcheck"]["test"]

@@ -267,6 +267,32 @@ class Machine:
             self.face_alarms.clear()
         return result
 
+    def power_on(self, *, home: bool = True, max_s: float = 60.0) -> None:
+        """The operator's power-on routine at the machine, in lockstep before a runner
+        starts: wait for the drives, reference every axis in the homing sequence (REF mode,
+        home), then AUTO. RuntimeError (with the alarms) when homing does not finish."""
+        if home:
+            self.command("mode", mode="REF")
+            end = self.t + max_s
+            while True:  # the drives come up over the first PLC scans: home once enabled
+                try:
+                    self.command("home")
+                    break
+                except Exception:
+                    if self.t >= end:
+                        raise
+                    self.step(self.plc_every)
+            ctl = self.controller
+            if not self.run_until(
+                lambda m: all(ctl.referenced.values()) and not getattr(ctl, "_homing", ""),
+                max_s,
+            ):
+                raise RuntimeError(
+                    f"{self.name}: homing did not finish in {max_s} s (alarms {self.alarms})"
+                )
+        self.command("mode", mode="AUTO")
+        self.step(self.plc_every)
+
     def load_program(self, text: str, number: int | None = None) -> int:
         """Store a program (tape text) in memory; returns its O number.
 

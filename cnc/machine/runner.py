@@ -5,6 +5,13 @@ from __future__ import annotations
 import threading
 import time
 
+# the fast clock: a machine in a cycle runs at FAST_SPEED x real time (as fast as the CPU
+# allows), an idle one at IDLE_SPEED (it has nothing to hurry for and leaves the CPU to the
+# machines that cut)
+FAST_SPEED = 1000.0
+IDLE_SPEED = 4.0
+BUSY = frozenset({"ACTIVE", "INTERRUPTED", "FEED_HOLD", "OPTIONAL_STOP", "PROGRAM_STOPPED"})
+
 
 class RealtimeRunner:
     """Steps `machine` once per IPO cycle at absolute deadlines (`speed` x real time).
@@ -12,11 +19,15 @@ class RealtimeRunner:
     A cycle is late when its work ends after the next cycle's deadline; a whole slot missed
     is skipped (counted) rather than run back to back. `pause()`, `resume()`, `step(n)` and
     `speed` are the simulation face's clock control (thread-safe).
+
+    `idle_speed`: the fast clock. When set, `speed` applies while a program is active
+    (execution in `BUSY`) and `idle_speed` otherwise (`FAST_SPEED`, `IDLE_SPEED`).
     """
 
-    def __init__(self, machine, *, speed: float = 1.0) -> None:
+    def __init__(self, machine, *, speed: float = 1.0, idle_speed: float | None = None) -> None:
         self.machine = machine
         self.speed = speed
+        self.idle_speed = idle_speed
         self.cycles = 0
         self.error: str | None = None
         self.late_cycles = 0
@@ -29,7 +40,11 @@ class RealtimeRunner:
         self._stepped = 0  # cycles run by step() requests
         self._lock = threading.Lock()
         machine.runner = self
-        machine.plc.clock_ns = time.perf_counter_ns  # a real scan watchdog in realtime
+        if speed == 1.0 and idle_speed is None:
+            machine.plc.clock_ns = time.perf_counter_ns  # a real scan watchdog in realtime
+        # else: a simulation sped up (the fast clock) keeps the watchdog on machine time, as
+        # in lockstep: wall time means nothing there, and the host descheduling the thread
+        # mid-scan must not throw the simulated PLC into FAULT
 
     @property
     def paused(self) -> bool:
@@ -79,7 +94,10 @@ class RealtimeRunner:
                     time.sleep(0.001)
                 slot = time.perf_counter()
                 continue
-            period = m.ipo_s / self.speed
+            speed = self.speed
+            if self.idle_speed is not None and m.status.execution not in BUSY:
+                speed = self.idle_speed
+            period = m.ipo_s / speed
             slot += period
             now = time.perf_counter()
             if now > slot + period:

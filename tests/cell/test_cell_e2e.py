@@ -135,3 +135,38 @@ def test_commands_through_the_faces_select_start_and_refusals(make_cell):
     assert ("machine.command_refused", "select_program") in commands
     accepted = [c for a, c in commands if a == "machine.command"]
     assert accepted == ["cycle_start", "select_program", "cycle_start", "reset", "home", "mode"]
+
+
+def test_panel_commands_refused_while_a_program_is_active_say_why(make_cell):
+    from tests.cell.test_cell_faults import STOPPING_PROGRAM
+
+    _, api = make_cell()
+    rev = upload_released(api, STOPPING_PROGRAM, number=1002)
+    r = api("operator").post(
+        "/api/dispatches",
+        json={"revision_id": rev, "machine": "mill1", "start": True},
+        headers=idem(),
+    )
+    assert r.status_code == 202, r.text
+    # the part waits at its M0: a program is active however fast the clock runs
+    poll(
+        lambda: machine(api, "mill1")["status"]["execution"] == "PROGRAM_STOPPED",
+        60,
+        "mill1 at M0",
+    )
+    op = api("operator")
+    for body, why in (
+        ({"command": "home"}, "home refused: a program is active"),
+        ({"command": "select_program", "number": 1002}, "O1002 refused: a program is active"),
+        ({"command": "mode", "mode": "REF"}, "mode REF refused: a program is active"),
+    ):
+        r = op.post("/api/machines/mill1/commands", json=body)
+        assert r.status_code == 409, (body, r.text)
+        assert why in r.json()["detail"], (body, r.json())
+    assert machine(api, "mill1")["status"]["mode"] == "AUTOMATIC"
+    # reset ends the part; then the same commands are taken
+    assert op.post("/api/machines/mill1/commands", json={"command": "reset"}).status_code == 202
+    poll(lambda: machine(api, "mill1")["status"]["execution"] != "PROGRAM_STOPPED", 20, "reset")
+    r = op.post("/api/machines/mill1/commands", json={"command": "select_program", "number": 1002})
+    assert r.status_code == 202, r.text
+    assert "selected on the Modbus remote panel" in r.json()["detail"]

@@ -9,6 +9,8 @@ import subprocess
 import sys
 import textwrap
 
+import pytest
+
 RUNNER = textwrap.dedent(
     """
     import typer
@@ -65,3 +67,60 @@ def test_standalone_machine_refuses_an_unknown_machine_name(tmp_path):
     )
     assert proc.returncode == 2
     assert "lathe7" in proc.stderr
+
+
+def test_standalone_machine_powers_on_writes_its_ready_file_and_takes_panel_requests(tmp_path):
+    """`--power-on --ready-file --clock fast`: what a cell host starts. The ready file
+    appears once the axes are homed; program select and home all then work over Modbus."""
+    import time
+
+    from pymodbus.client import ModbusTcpClient
+
+    from plc.remote_panel import PanelRefused, RemotePanel
+
+    cfg = tmp_path / "cell.yaml"
+    cfg.write_text(
+        "machines:\n  lathe9:\n    base: lathe2\n    ports: {dnc: 0, modbus: 0, shdr: 0}\n"
+    )
+    ready = tmp_path / "lathe9.machine.json"
+    argv = ["--config", str(cfg), "--name", "lathe9", "--ideal", "--no-simulation"]
+    argv += ["--power-on", "--ready-file", str(ready), "--clock", "fast"]
+    proc = subprocess.Popen(
+        [sys.executable, "-c", RUNNER, *argv],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
+    try:
+        end = time.monotonic() + 60
+        while not ready.exists():
+            assert proc.poll() is None, proc.stderr.read()
+            assert time.monotonic() < end, "no ready file within 60 s"
+            time.sleep(0.05)
+        state = json.loads(ready.read_text())
+        assert state["machine"] == "lathe9" and state["pid"] == proc.pid
+        assert state["ports"]["simulation"] is None
+        client = ModbusTcpClient("127.0.0.1", port=state["ports"]["modbus"], timeout=3)
+        assert client.connect()
+        panel = RemotePanel(client)
+        nc = panel.nc_state()
+        assert nc["AllReferenced"] and nc["NcMode"] == 1  # homed, AUTO
+        assert panel.referenced() == dict.fromkeys("XYZABC", False) | {"X": True, "Z": True}
+        with pytest.raises(PanelRefused, match="not in memory") as refused:
+            panel.select_program(4711)
+        assert refused.value.code == 1
+        panel.request_mode(4)
+        while panel.nc_state()["NcMode"] != 4:
+            assert time.monotonic() < end
+            time.sleep(0.01)
+        panel.home_all()
+        while (s := panel.nc_state())["HomingActive"] or not s["AllReferenced"]:
+            assert time.monotonic() < end
+            time.sleep(0.01)
+        client.close()
+        proc.send_signal(signal.SIGTERM)
+        out, err = proc.communicate(timeout=20)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+    assert proc.returncode == 0, err
