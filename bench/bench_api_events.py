@@ -13,7 +13,7 @@ lost, duplicated and out-of-order events are counted against what the producer w
 Target from issue 7: p95 latency < 200 ms. The peer in the same run is the old fan-out
 (`events_fanout: poll`: each client polls the outbox itself every 0.25 s), shorter.
 
-    .venv/bin/python bench/bench_api_events.py [--seconds 12] [--peer-seconds 6]
+    .venv/bin/python bench/bench_api_events.py [--seconds 10] [--peer-seconds 5]
 """
 
 from __future__ import annotations

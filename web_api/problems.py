@@ -47,6 +47,7 @@ TITLES = {
     "method-not-allowed": "Method not allowed",
     "unsupported-media-type": "Unsupported media type",
     "internal": "Internal server error",
+    "shutting-down": "The server is shutting down",
 }
 _KIND_OF_STATUS = {
     400: "bad-request",
