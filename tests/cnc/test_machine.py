@@ -265,3 +265,35 @@ def test_lathe_composes_two_canopen_axes_and_homes_them():
         assert m.axes.hub.channel == "lathe2"
     finally:
         m.close()
+
+
+def test_power_on_homes_in_the_sequence_and_ends_in_auto():
+    m = build(ideal=True)
+    try:
+        m.power_on()
+        assert homed(m) and m.controller.mode == "AUTO"
+        texts = [t for _, t in m.controller.events]
+        assert "homing Z then X Y" in texts and "homed Z X Y" in texts, texts
+    finally:
+        m.close()
+
+
+@pytest.mark.parametrize(
+    ("kwargs", "wall_watchdog"),
+    [
+        ({}, True),  # real time: the scan watchdog on the wall clock
+        ({"speed": 10.0}, False),  # sped up: machine time, as in lockstep
+        ({"speed": 1000.0, "idle_speed": 4.0}, False),  # the fast clock
+    ],
+)
+def test_runner_puts_the_plc_watchdog_on_the_wall_clock_only_at_real_time(kwargs, wall_watchdog):
+    import time
+
+    from cnc.machine import RealtimeRunner
+
+    m = build(ideal=True)
+    try:
+        RealtimeRunner(m, **kwargs)
+        assert (m.plc.clock_ns is time.perf_counter_ns) is wall_watchdog
+    finally:
+        m.close()
