@@ -240,6 +240,11 @@ class Controller:
         return self._execution()
 
     @property
+    def homing(self) -> bool:
+        """A homing sequence is running (one of its groups requested or homing)."""
+        return bool(self._homing)
+
+    @property
     def referenced(self) -> dict[str, bool]:
         """Per axis: homed since power-on / the last E-stop."""
         return {a: self._ref[a] and self._fb_homed(a) for a in self.axes}

@@ -284,7 +284,7 @@ class Machine:
                     self.step(self.plc_every)
             ctl = self.controller
             if not self.run_until(
-                lambda m: all(ctl.referenced.values()) and not getattr(ctl, "_homing", ""),
+                lambda m: all(ctl.referenced.values()) and not getattr(ctl, "homing", False),
                 max_s,
             ):
                 raise RuntimeError(

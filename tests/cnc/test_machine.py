@@ -297,3 +297,35 @@ def test_runner_puts_the_plc_watchdog_on_the_wall_clock_only_at_real_time(kwargs
         assert (m.plc.clock_ns is time.perf_counter_ns) is wall_watchdog
     finally:
         m.close()
+
+
+def test_home_all_and_program_select_from_the_remote_panel_on_canopen_drives():
+    """The remote panel's markers through the PLC to the NC, in lockstep, with the CiA 402
+    homing runs blocking inside a cycle: the PLC catches up after each group and takes the
+    NC's answer without a handshake timeout."""
+    m = build()
+    rt = m.plc
+    try:
+        m.step(50)
+        rt.write_once("RemModeReq", 4)
+        assert m.run_until(lambda m: m.controller.mode == "REF", 1.0)
+        rt.write_once("RemHomeAll", True)
+        assert m.run_until(lambda m: rt.read("HomeAccepted") or rt.read("HomeRefused"), 2.0)
+        assert rt.read("HomeAccepted"), rt.read("HomeRefuseCode")
+        rt.write_once("RemHomeAll", False)
+        assert m.run_until(lambda m: rt.read("AllReferenced") and not rt.read("HomingActive"), 30)
+        assert rt.read("ReferencedAxes") == 0b111
+        texts = [t for _, t in m.controller.events]
+        assert "homing Z then X Y" in texts and "homed Z X Y" in texts, texts
+        fb = m.axes.feedback()
+        # at the reference point (home_mm = 0) within the creep's stopping distance
+        assert all(abs(fb.actual[a]) < 0.05 for a in "XYZ"), fb.actual
+        rt.write_once("RemModeReq", 1)
+        n = m.load_program(SHORT)
+        rt.write_once("RemProgNumber", n)
+        rt.write_once("RemProgSelect", True)
+        assert m.run_until(lambda m: rt.read("ProgSelected"), 1.0)
+        assert m.controller.mode == "AUTO" and rt.read("ActiveProgram") == n
+        assert m.alarms == () and rt.alarms == {}
+    finally:
+        m.close()
