@@ -68,8 +68,9 @@ def resume_point(last_event_id: str | None, after: int | None) -> int:
 async def open_stream(app: FastAPI, cursor: int) -> Stream:
     """A stream after `cursor` from the app's hub (or, in `poll` fan-out, its own poller).
 
-    Opening reads the database (the hub's anchor, or the first poll), so a dead database
-    is a 503 problem before the response starts, not a stream that stays silent."""
+    Opening reads the database (the hub's anchor, or the first poll) or, with the hub's
+    reader running, takes its last read's failure, so a dead database is a 503 problem
+    before the response starts, not a stream that stays silent."""
     services: Services = app.state.services
     settings = services.settings
     if app.state.event_hub.closed:
