@@ -68,3 +68,38 @@ def test_fault_requests_become_fault_specs():
     ]
     for request, spec in cases:
         assert fault_spec(request) == spec
+
+
+def test_the_cells_machine_process_command_line_is_a_valid_fmscell_machine(tmp_path):
+    """`--processes` starts `python -m server.cli machine ...`: every option it passes must
+    exist in `fmscell machine` (parsed by the real CLI, nothing run)."""
+    import sys
+
+    import click
+    import typer
+
+    from server.supervisor import machine_command
+
+    for fast, simulation, ideal in ((True, True, True), (False, False, False)):
+        cmd = machine_command(
+            tmp_path / "cell.yaml",
+            "mill1",
+            ready_file=tmp_path / "mill1.machine.json",
+            fast=fast,
+            simulation=simulation,
+            ideal=ideal,
+        )
+        assert cmd[:4] == [sys.executable, "-m", "server.cli", "machine"]
+        group = typer.main.get_command(app)
+        with click.Context(group, info_name="fmscell") as ctx:
+            sub = group.get_command(ctx, "machine")
+            params = sub.make_context("machine", cmd[4:], parent=ctx).params
+        assert params["name"] == "mill1" and params["power_on"] is True
+        assert params["ready_file"] == tmp_path / "mill1.machine.json"
+        assert params["clock"] == ("fast" if fast else "realtime")
+        assert params["simulation"] is simulation and params["ideal"] is ideal
+
+
+def test_machine_refuses_an_unknown_clock():
+    result = CliRunner().invoke(app, ["machine", "--name", "mill3", "--clock", "warp"])
+    assert result.exit_code == 2 and "--clock 'warp'" in result.output
