@@ -40,11 +40,6 @@ class RealtimeRunner:
         self._stepped = 0  # cycles run by step() requests
         self._lock = threading.Lock()
         machine.runner = self
-        if speed == 1.0 and idle_speed is None:
-            machine.plc.clock_ns = time.perf_counter_ns  # a real scan watchdog in realtime
-        # else: a simulation sped up (the fast clock) keeps the watchdog on machine time, as
-        # in lockstep: wall time means nothing there, and the host descheduling the thread
-        # mid-scan must not throw the simulated PLC into FAULT
 
     @property
     def paused(self) -> bool:
