@@ -168,7 +168,8 @@ class TransferWorker:
                     m.Dispatch.bytes_sent,
                     m.Dispatch.verified,
                     m.Dispatch.error,
-                )
+                ),
+                execution_options=_NO_SYNC,
             ).one_or_none()
             if claimed is None:
                 return s.scalar(select(m.Dispatch.state).where(m.Dispatch.id == dispatch_id))
@@ -278,6 +279,7 @@ class TransferWorker:
                     verified=snap["verified"],
                     error=snap["error"],
                 ),
+                execution_options=_NO_SYNC,
             )
             _event(s, snap, now)
 
@@ -289,6 +291,8 @@ class TransferWorker:
         _event(s, {k: getattr(info, k) for k in _EVENT_FIELDS}, now)
 
 
+# No ORM object of the dispatch is in these sessions: nothing to evaluate or refresh.
+_NO_SYNC = {"synchronize_session": False}
 _STEP = (
     update(m.Dispatch)
     .where(m.Dispatch.id == bindparam("dispatch_id"))
