@@ -509,8 +509,22 @@ def run_cell(
     try:
         if stop_requested:
             return 0
-        server = uvicorn.Server(
-            uvicorn.Config(cell.app(settings), host=bind, port=port, log_level="warning")
+        app = cell.app(settings)
+        hub = app.state.event_hub
+
+        class CellServer(uvicorn.Server):
+            # uvicorn waits for open responses before it runs the app's shutdown, and an
+            # event stream (a watching dashboard) never ends by itself: on SIGINT/SIGTERM
+            # the hub is closed first, which ends every stream; the graceful timeout bounds
+            # whatever else is still open.
+            def handle_exit(self, sig, frame) -> None:
+                super().handle_exit(sig, frame)
+                hub.close(wait=False)
+
+        server = CellServer(
+            uvicorn.Config(
+                app, host=bind, port=port, log_level="warning", timeout_graceful_shutdown=10
+            )
         )
         url = f"http://{bind}:{port}"
         echo(f"fmscell cell: {', '.join(cell.links)} ({clock} clock)")
