@@ -271,6 +271,12 @@ class MachineConfig(_Section):
     program_memory_bytes: int = Field(
         262_144, ge=1024, description="Part-program memory capacity, bytes."
     )
+    home_sequence: list[list[AxisName]] | None = Field(
+        None,
+        description="Homing sequence: groups of axes homed together, one group after the"
+        " other, each axis exactly once (e.g. [[Z], [X, Y]]); null = the kind's default"
+        " (mill: Z first, then the others together; lathe: X, then Z).",
+    )
     spindle: SpindleConfig = Field(
         default_factory=SpindleConfig, description="The spindle section."
     )
@@ -735,6 +741,14 @@ def _check_machine(name: tuple[Any, ...], m: MachineConfig) -> list[tuple[tuple,
                 f" got {_fmt(value)}"
             )
             out.append(((*name, "second_reference_mm", axis), reason))
+    if m.home_sequence is not None:
+        flat = [a for group in m.home_sequence for a in group]
+        if any(not g for g in m.home_sequence) or sorted(flat) != sorted(m.axes):
+            reason = (
+                f"must name each axis of {' '.join(m.axes)} exactly once, in non-empty groups,"
+                f" got {[list(g) for g in m.home_sequence]}"
+            )
+            out.append(((*name, "home_sequence"), reason))
     ratio = m.plc.period_ms / m.ipo_cycle_ms
     if abs(ratio - round(ratio)) > 1e-9:
         reason = (

@@ -78,7 +78,7 @@ class ControllerSettings:
     """Controller data that the machine YAML does not (yet) carry; defaults in brackets.
 
     home_sequence: the homing sequence, groups of axes homed together, one group after the
-    other [a mill: ((Z,), (X, Y)), the tool axis clear of the work first; a lathe:
+    other; overrides the machine YAML's `home_sequence` [that key, else for a mill: ((Z,), (X, Y)), the tool axis clear of the work first; a lathe:
     ((X,), (Z,)), the cross slide clear of the chuck first; other kinds: the tool axis Z,
     then the others together]; home_order: a flat order instead, one axis at a time
     [None: the order of home_sequence]; ferror_max_mm / ferror_min_mm: the NC's following-error limit,
@@ -807,6 +807,9 @@ class Controller:
         elif s.home_order is not None:
             groups = tuple((a,) for a in s.home_order)
             what = f"home_order {tuple(s.home_order)}"
+        elif self.config.home_sequence is not None:  # the machine YAML's key
+            groups = tuple(tuple(g) for g in self.config.home_sequence)
+            what = f"home_sequence {[list(g) for g in groups]}"
         elif self.config.kind == "lathe":
             # the cross slide first, clear of the chuck, then the carriage
             first = [a for a in self.axes if a == "X"]

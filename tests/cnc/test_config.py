@@ -255,6 +255,11 @@ ERRORS = [
      "machines.m1.second_reference_mm.X: must lie within the soft limits -600 .. 0, got 5"),
     ("second_reference_mm: {B: 0}", "machines.m1.second_reference_mm.B: no such axis (axes: X Y Z)"),
     ("program_memory_bytes: 10", "machines.m1.program_memory_bytes: must be >= 1024, got 10"),
+    ("home_sequence: [[Z], [X]]", "machines.m1.home_sequence: must name each axis of X Y Z exactly"
+     " once, in non-empty groups, got [['Z'], ['X']]"),
+    ("home_sequence: [[Z], [], [X, Y]]", "machines.m1.home_sequence: must name each axis"),
+    ("home_sequence: [[Z, Z], [X, Y]]", "machines.m1.home_sequence: must name each axis"),
+    ("home_sequence: [[Q], [X, Y, Z]]", "4:22: machines.m1.home_sequence.0.0: bad name 'Q': an axis"),
     ("max_acel: 3", "machines.m1.max_acel: unknown key (did you mean 'max_feed'?"),
     ("spindle: {max_rpm: -1}", "machines.m1.spindle.max_rpm: must be > 0, got -1"),
     ("spindle: {min_rpm: 9000}", "machines.m1.spindle.min_rpm: must be <= max_rpm (8000), got 9000"),
@@ -489,3 +494,23 @@ def test_random_sections_only_ever_raise_config_error(section, keep_base):
         assert all(
             line.startswith(("<config>:", str(MACHINES_DIR))) for line in str(exc).splitlines()
         )
+
+
+def test_home_sequence_key_sets_the_controllers_homing_sequence(tmp_path):
+    from cnc.controller import Controller, ControllerSettings
+    from cnc.program_memory import ProgramMemory
+
+    path = write(
+        tmp_path, "machines:\n  m1:\n    base: mill3\n    home_sequence: [[Z], [Y], [X]]\n"
+    )
+    cfg = load_cell_config(path).machine("m1")
+    assert Controller(cfg, ProgramMemory(4096)).home_sequence == (("Z",), ("Y",), ("X",))
+    # ControllerSettings, when given, still wins over the YAML key
+    ctl = Controller(
+        cfg, ProgramMemory(4096), settings=ControllerSettings(home_order=("X", "Y", "Z"))
+    )
+    assert ctl.home_sequence == (("X",), ("Y",), ("Z",))
+    assert Controller(builtin_machine("mill3"), ProgramMemory(4096)).home_sequence == (
+        ("Z",),
+        ("X", "Y"),
+    )
