@@ -509,6 +509,8 @@ def run_cell(
     try:
         if stop_requested:
             return 0
+        import threading
+
         app = cell.app(settings)
         hub = app.state.event_hub
 
@@ -519,7 +521,9 @@ def run_cell(
             # whatever else is still open.
             def handle_exit(self, sig, frame) -> None:
                 super().handle_exit(sig, frame)
-                hub.close(wait=False)
+                # Not here: a signal handler runs between two bytecodes of the main thread,
+                # which may be inside the hub's (non-reentrant) lock just then.
+                threading.Thread(target=hub.close, kwargs={"wait": False}, daemon=True).start()
 
         server = CellServer(
             uvicorn.Config(
