@@ -293,12 +293,10 @@ class Agent:
                 wanted = select(doc, path)
             except PathError as exc:
                 raise RestError(
-                    "INVALID_XPATH", f"The path could not be parsed. Invalid syntax: {exc}"
+                    "INVALID_PATH", f"The path could not be parsed. Invalid syntax: {exc}"
                 ) from None
         if not wanted:
-            raise RestError(
-                "INVALID_XPATH", f"The path could not be parsed. Invalid syntax: {path}"
-            )
+            raise RestError("INVALID_PATH", f"The path could not be parsed. Invalid syntax: {path}")
         return wanted
 
     def current(
@@ -516,7 +514,7 @@ def _unsigned(params: Mapping[str, str], name: str) -> int | None:
     if raw is None:
         return None
     if not _UNSIGNED.match(raw.strip()):
-        raise RestError("QUERY_ERROR", f"'{name}' must be an unsigned integer, got '{raw}'")
+        raise RestError("INVALID_REQUEST", f"'{name}' must be an unsigned integer, got '{raw}'")
     return int(raw)
 
 
@@ -525,10 +523,10 @@ def _integer(params: Mapping[str, str], name: str, default: int | None = None) -
     if raw is None:
         return default
     if not _INTEGER.match(raw.strip()):
-        raise RestError("QUERY_ERROR", f"'{name}' must be an integer, got '{raw}'")
+        raise RestError("INVALID_REQUEST", f"'{name}' must be an integer, got '{raw}'")
     value = int(raw)
     if not -(2**31) <= value < 2**31:
-        raise RestError("QUERY_ERROR", f"'{name}' does not fit a 32-bit integer: '{raw}'")
+        raise RestError("INVALID_REQUEST", f"'{name}' does not fit a 32-bit integer: '{raw}'")
     return value
 
 
@@ -543,7 +541,7 @@ def _common(params: Mapping[str, str]) -> dict:
         )
     pretty = params.get("pretty")
     if pretty is not None and pretty.lower() not in ("true", "false"):
-        raise RestError("QUERY_ERROR", f"'pretty' must be true or false, got '{pretty}'")
+        raise RestError("INVALID_REQUEST", f"'pretty' must be true or false, got '{pretty}'")
     return {"device_type": device_type}
 
 

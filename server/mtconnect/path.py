@@ -10,7 +10,8 @@ accept the subset that MTConnect clients use in practice (docs/mtconnect.md):
 - unions of such paths with `|`.
 
 A matched DataItem selects itself; any other matched element selects every DataItem under
-it. A path that cannot be parsed, or that selects nothing, is INVALID_XPATH, as in cppagent.
+it. A path that cannot be parsed, or that selects nothing, is INVALID_PATH (the MTConnectError
+2.5 code; cppagent says INVALID_XPATH).
 """
 
 from __future__ import annotations

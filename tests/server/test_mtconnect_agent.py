@@ -276,7 +276,7 @@ def test_bad_or_empty_path_is_invalid_xpath(path):
     a = small_agent()
     status, text = doc(a, "sample", path=path)
     code, message = error_code(text)
-    assert (status, code) == (400, "INVALID_XPATH")
+    assert (status, code) == (400, "INVALID_PATH")
     assert message.startswith("The path could not be parsed. Invalid syntax:")
 
 
@@ -289,15 +289,15 @@ def test_unknown_device(kind):
 @pytest.mark.parametrize(
     ("kind", "params", "code"),
     [
-        ("sample", {"count": "abc"}, "QUERY_ERROR"),
-        ("sample", {"from": "-1"}, "QUERY_ERROR"),
-        ("sample", {"count": "99999999999"}, "QUERY_ERROR"),
-        ("current", {"at": "1.5"}, "QUERY_ERROR"),
+        ("sample", {"count": "abc"}, "INVALID_REQUEST"),
+        ("sample", {"from": "-1"}, "INVALID_REQUEST"),
+        ("sample", {"count": "99999999999"}, "INVALID_REQUEST"),
+        ("current", {"at": "1.5"}, "INVALID_REQUEST"),
         ("sample", {"interval": "100"}, "UNSUPPORTED"),
         ("current", {"interval": "100"}, "UNSUPPORTED"),
         ("probe", {"format": "json"}, "UNSUPPORTED"),
         ("probe", {"deviceType": "Robot"}, "INVALID_REQUEST"),
-        ("sample", {"pretty": "maybe"}, "QUERY_ERROR"),
+        ("sample", {"pretty": "maybe"}, "INVALID_REQUEST"),
         ("assets", {}, "INVALID_URI"),
     ],
 )
@@ -610,8 +610,8 @@ SCHEMA_REQUESTS = [
     ("current", None, {"at": "0"}),  # OUT_OF_RANGE
     ("current", "nope", {}),  # NO_DEVICE
     ("probe", None, {"deviceType": "Agent"}),  # NO_DEVICE: no Agent device is published
-    ("sample", None, {"path": "//Nothing"}),  # INVALID_XPATH
-    ("sample", None, {"count": "abc"}),  # QUERY_ERROR
+    ("sample", None, {"path": "//Nothing"}),  # INVALID_PATH
+    ("sample", None, {"count": "abc"}),  # INVALID_REQUEST
     ("probe", None, {"deviceType": "Robot"}),  # INVALID_REQUEST
     ("probe", None, {"format": "json"}),  # UNSUPPORTED
     ("sample", None, {"interval": "100"}),  # UNSUPPORTED
@@ -797,7 +797,7 @@ CHECKER_CASES = [
     (("current", {}), 'qualifier="HIGH"', 'qualifier="VERY"', "not HIGH or LOW"),
     (
         ("sample", {"count": "abc"}),
-        'errorCode="QUERY_ERROR"',
+        'errorCode="INVALID_REQUEST"',
         'errorCode="BAD"',
         "not a 2.5 ErrorCodeType",
     ),

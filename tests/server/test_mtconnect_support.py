@@ -127,8 +127,8 @@ HEADER_MINIMUM = {  # xs:integer attributes and their minInclusive
 }
 HEADER_TIMES = ("creationTime", "deviceModelChangeTime")
 
-# ErrorCodeType of MTConnectError 2.5. INVALID_XPATH and QUERY_ERROR are what cppagent 2.x
-# sends (and this agent with it) but are not in the 2.5 enumeration: the one known deviation.
+# ErrorCodeType of MTConnectError 2.5 (cppagent's INVALID_XPATH and QUERY_ERROR are not in
+# it: this agent sends INVALID_PATH and INVALID_REQUEST instead).
 ERROR_CODES_25 = {
     "UNAUTHORIZED",
     "NO_DEVICE",
@@ -141,7 +141,6 @@ ERROR_CODES_25 = {
     "UNSUPPORTED",
     "ASSET_NOT_FOUND",
 }
-ERROR_CODES_CPPAGENT_ONLY = {"INVALID_XPATH", "QUERY_ERROR"}
 
 OBSERVATION_ATTRS = {
     "sequence",
@@ -270,7 +269,7 @@ def schema_problems(text: str) -> list[str]:
     ]
     if kind == "Error":
         for e in root.iter(f"{{{ns}}}Error"):
-            if e.get("errorCode") not in ERROR_CODES_25 | ERROR_CODES_CPPAGENT_ONLY:
+            if e.get("errorCode") not in ERROR_CODES_25:
                 out.append(f"errorCode {e.get('errorCode')!r} is not a 2.5 ErrorCodeType")
     elif kind == "Devices":
         out += _devices_problems(root, ns)

@@ -71,15 +71,15 @@ def test_sample_paging_by_next_sequence(client, agent):
         ("/mtconnect/sample?from=0", 400, "OUT_OF_RANGE"),
         ("/mtconnect/sample?count=0", 400, "OUT_OF_RANGE"),
         ("/mtconnect/current?at=999999", 400, "OUT_OF_RANGE"),
-        ("/mtconnect/sample?count=many", 400, "QUERY_ERROR"),
+        ("/mtconnect/sample?count=many", 400, "INVALID_REQUEST"),
         ("/mtconnect/nope/current", 404, "NO_DEVICE"),
-        ("/mtconnect/current?path=//Bogus", 400, "INVALID_XPATH"),
+        ("/mtconnect/current?path=//Bogus", 400, "INVALID_PATH"),
         ("/mtconnect/m1/assets/x", 404, "INVALID_URI"),
         ("/mtconnect/sample?interval=-5", 400, "OUT_OF_RANGE"),
         ("/mtconnect/sample?interval=10&heartbeat=0", 400, "OUT_OF_RANGE"),
         ("/mtconnect/current?interval=0", 400, "OUT_OF_RANGE"),
         ("/mtconnect/nope/sample?interval=10", 404, "NO_DEVICE"),
-        ("/mtconnect/sample?interval=10&path=//Bogus", 400, "INVALID_XPATH"),
+        ("/mtconnect/sample?interval=10&path=//Bogus", 400, "INVALID_PATH"),
     ],
 )
 def test_error_documents(client, url, status, code):
