@@ -25,7 +25,7 @@ import warnings
 from drives import VirtualDrive
 from drives.bus import BusLoadWarning, CanHub
 from drives.master import AxisConfig, AxisGroup
-from drives.realtime import RealtimeProcess
+from drives.realtime import RT_PRIORITY_ENV, RealtimeProcess
 
 TARGET_LATE_PCT = 0.1
 NAMES = ["X", "Y", "Z", "A", "B", "C"]
@@ -68,6 +68,7 @@ def run(mode: str, seconds: float, substep: float) -> dict:
         faults = len(group.fault_log)
         gc_in_slack = [b - a for a, b in zip(collections, RealtimeProcess.collections, strict=True)]
         late_ticks = sum(h.late_ticks for h in hubs)
+        scheduling = group.scheduling if mode == "paced" else "threads: SCHED_OTHER"
     finally:
         group.close()
         for hub in hubs:
@@ -86,6 +87,7 @@ def run(mode: str, seconds: float, substep: float) -> dict:
         "load_average_1min": round(os.getloadavg()[0], 2),
         "gc_collections_in_slack": gc_in_slack,
         "faults": faults,
+        "scheduling": scheduling,
         "meets_target": summary["late_pct"] < TARGET_LATE_PCT,
     }
 
@@ -95,6 +97,12 @@ def main() -> None:
     parser.add_argument("--seconds", type=float, default=60.0, help="per mode")
     parser.add_argument("--mode", choices=("paced", "threaded", "both"), default="paced")
     parser.add_argument("--substep", type=float, default=1e-3, help="plant sub-step, s")
+    parser.add_argument(
+        "--rt-priority",
+        type=int,
+        default=50,
+        help="SCHED_FIFO priority of the pacing thread for the second paced run (0 = skip it)",
+    )
     args = parser.parse_args()
     modes = ("paced", "threaded") if args.mode == "both" else (args.mode,)
     out = {
@@ -106,6 +114,13 @@ def main() -> None:
     }
     for mode in modes:
         out[mode] = run(mode, args.seconds, args.substep)
+    if "paced" in modes and args.rt_priority:
+        # the same run with the pacing thread at SCHED_FIFO (opt-in in drives.realtime)
+        os.environ[RT_PRIORITY_ENV] = str(args.rt_priority)
+        try:
+            out["paced_sched_fifo"] = run("paced", args.seconds, args.substep)
+        finally:
+            del os.environ[RT_PRIORITY_ENV]
     print(json.dumps(out))
 
 

@@ -27,11 +27,18 @@ settings, so they are reference-counted and restored when the last shell stops.
 `Pacer` waits for absolute deadlines: it sleeps until `spin_s` before the deadline and
 spins the rest (calling `sleep(0)`, which releases the GIL but returns at once), so the
 wake-up error is the spin loop's, not the timer's.
+
+What none of that helps against is the OS giving the CPU to another process at the deadline
+(a busy host). Opt-in, as LinuxCNC's RT threads and the PLC's scan thread do: a pacer with
+`rt_priority` N (or `FMSCELL_DRIVES_RT_PRIORITY=N` in the environment) asks SCHED_FIFO N for
+the thread that paces, on its first wait. It needs CAP_SYS_NICE; a refusal is reported in
+`Pacer.scheduling`, never raised, and the shell runs with ordinary scheduling.
 """
 
 from __future__ import annotations
 
 import gc
+import os
 import sys
 import threading
 import time
@@ -119,6 +126,31 @@ class RealtimeProcess:
         cls.collections[generation] += 1
 
 
+#: environment variable read by a Pacer given no rt_priority (0 or unset = off)
+RT_PRIORITY_ENV = "FMSCELL_DRIVES_RT_PRIORITY"
+
+
+def rt_priority_from_env(environ=None) -> int:
+    """The SCHED_FIFO priority `FMSCELL_DRIVES_RT_PRIORITY` asks for; ValueError names it."""
+    raw = (os.environ if environ is None else environ).get(RT_PRIORITY_ENV, "").strip()
+    if not raw:
+        return 0
+    if not raw.isdigit() or not 0 <= int(raw) <= 99:
+        raise ValueError(f"{RT_PRIORITY_ENV}={raw!r}: must be an integer 0..99 (0 = off)")
+    return int(raw)
+
+
+def request_fifo(priority: int) -> str:
+    """SCHED_FIFO `priority` for the calling thread (Linux: pid 0 is the calling thread);
+    returns the scheduling it runs with, a refusal included."""
+    try:
+        os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(priority))
+    except (OSError, AttributeError) as exc:
+        why = getattr(exc, "strerror", None) or "not available on this OS"
+        return f"SCHED_OTHER (SCHED_FIFO {priority} refused: {why})"
+    return f"SCHED_FIFO {priority}"
+
+
 def sleep_until(deadline: float, spin_s: float = SPIN_S, clock=time.perf_counter, sleep=time.sleep):
     """Sleep until `spin_s` before `deadline` (`clock` time), then spin to it."""
     remaining = deadline - clock()
@@ -137,10 +169,24 @@ class Pacer:
     """
 
     def __init__(
-        self, period_s: float, *, spin_s: float = SPIN_S, clock=time.perf_counter, sleep=time.sleep
+        self,
+        period_s: float,
+        *,
+        spin_s: float = SPIN_S,
+        clock=time.perf_counter,
+        sleep=time.sleep,
+        rt_priority: int | None = None,
+        promote=request_fifo,
     ) -> None:
         if not period_s > 0:
             raise ValueError(f"Pacer: period_s must be > 0, got {period_s!r}")
+        if rt_priority is None:
+            rt_priority = rt_priority_from_env()
+        elif not 0 <= rt_priority <= 99:
+            raise ValueError(f"Pacer: rt_priority must be 0..99 (0 = off), got {rt_priority!r}")
+        self.rt_priority = rt_priority
+        self._promote = promote
+        self.scheduling = "SCHED_OTHER"  # what the pacing thread runs with, once it waited
         self.period_s = period_s
         self.spin_s = spin_s
         self.clock = clock
@@ -152,7 +198,9 @@ class Pacer:
         """Wait for the next slot; returns how late (s) it was reached."""
         period, clock = self.period_s, self.clock
         now = clock()
-        if self.slot is None:
+        if self.slot is None:  # the first wait, on the thread that will pace
+            if self.rt_priority:
+                self.scheduling = self._promote(self.rt_priority)
             self.slot = now
             return 0.0
         slot = self.slot + period

@@ -154,6 +154,11 @@ class _Line:
         for listener in self.network.listeners:
             listener.on_message_received(msg)
 
+    @property
+    def scheduling(self) -> str:
+        """What the paced cycle's thread runs with (`drives.realtime`: SCHED_FIFO on request)."""
+        return self._pacer.scheduling
+
     def close(self) -> None:
         net = self.network
         if self.threaded and net.notifier is not None:

@@ -9,6 +9,7 @@ import pytest
 
 from drives.realtime import (
     FORCED_THRESHOLD,
+    RT_PRIORITY_ENV,
     SWITCH_INTERVAL_S,
     YOUNG_THRESHOLD,
     Pacer,
@@ -154,3 +155,53 @@ def test_pacer_skips_whole_missed_slots_and_counts_them():
 def test_pacer_refuses_a_bad_period():
     with pytest.raises(ValueError, match="period_s"):
         Pacer(0.0)
+
+
+@pytest.mark.parametrize(
+    ("rt_priority", "env", "promoted", "scheduling"),
+    [
+        (None, None, [], "SCHED_OTHER"),  # default: ordinary scheduling, nothing asked
+        (None, "0", [], "SCHED_OTHER"),
+        (None, "40", [40], "SCHED_FIFO 40"),  # FMSCELL_DRIVES_RT_PRIORITY
+        (20, "40", [20], "SCHED_FIFO 20"),  # the argument wins over the environment
+        (0, "40", [], "SCHED_OTHER"),
+    ],
+)
+def test_pacer_asks_sched_fifo_once_on_its_first_wait(
+    monkeypatch, rt_priority, env, promoted, scheduling
+):
+    if env is None:
+        monkeypatch.delenv(RT_PRIORITY_ENV, raising=False)
+    else:
+        monkeypatch.setenv(RT_PRIORITY_ENV, env)
+    asked: list[int] = []
+
+    def promote(priority: int) -> str:
+        asked.append(priority)
+        return f"SCHED_FIFO {priority}"
+
+    clock = FakeClock()
+    pacer = Pacer(0.001, clock=clock, sleep=clock.sleep, rt_priority=rt_priority, promote=promote)
+    assert asked == []  # not on the constructing thread: on the one that paces
+    for _ in range(3):
+        pacer.wait()
+    assert asked == promoted and pacer.scheduling == scheduling
+
+
+def test_pacer_refusal_is_reported_not_raised():
+    pacer = Pacer(
+        0.001,
+        rt_priority=5,
+        promote=lambda p: f"SCHED_OTHER (SCHED_FIFO {p} refused: Operation not permitted)",
+    )
+    pacer.wait()
+    assert pacer.scheduling.startswith("SCHED_OTHER (SCHED_FIFO 5 refused")
+
+
+@pytest.mark.parametrize("raw", ["high", "-1", "100", "1.5"])
+def test_a_malformed_priority_is_refused_naming_the_variable(monkeypatch, raw):
+    monkeypatch.setenv(RT_PRIORITY_ENV, raw)
+    with pytest.raises(ValueError, match=f"FMSCELL_DRIVES_RT_PRIORITY={raw!r}: must be an"):
+        Pacer(0.001)
+    with pytest.raises(ValueError, match="rt_priority must be 0..99"):
+        Pacer(0.001, rt_priority=100)
