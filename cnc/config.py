@@ -322,7 +322,7 @@ class MachineConfig(_Section):
 
 
 class HostConfig(_Section):
-    """The DNC host (`host`). A placeholder the cell server (issue 7) extends."""
+    """The DNC host and cell server (`host`)."""
 
     database_url: str | None = Field(
         None, description="SQLAlchemy URL; null = the embedded SQLite file."
@@ -331,6 +331,11 @@ class HostConfig(_Section):
     port: Port = Field(8000, description="REST/dashboard TCP port.")
     auth: dict[str, Any] = Field(
         default_factory=dict, description="Authentication settings (free-form for now)."
+    )
+    faults: bool = Field(
+        False,
+        description="Fault injection: the `/api/...faults` endpoints and each machine's"
+        " simulation face (as `fmscell run --faults` or FMSCELL_FAULTS=1); off = 404.",
     )
 
 

@@ -480,7 +480,9 @@ def run_cell(
     except (NcError, ValueError, OSError) as err:
         echo(f"{config or 'default cell'}: {err}")
         return 2
-    faults = faults or os.environ.get("FMSCELL_FAULTS", "") in ("1", "true", "yes")
+    faults = (
+        faults or cfg.host.faults or os.environ.get("FMSCELL_FAULTS", "") in ("1", "true", "yes")
+    )
     bind = host or cfg.host.bind
     port = cfg.host.port if port is None else port
     cell = Cell(
