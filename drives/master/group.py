@@ -154,11 +154,6 @@ class _Line:
         for listener in self.network.listeners:
             listener.on_message_received(msg)
 
-    @property
-    def scheduling(self) -> str:
-        """What the paced cycle's thread runs with (`drives.realtime`: SCHED_FIFO on request)."""
-        return self._pacer.scheduling
-
     def close(self) -> None:
         net = self.network
         if self.threaded and net.notifier is not None:
@@ -939,6 +934,11 @@ class AxisGroup:
         self.cycle()
 
     # ------------------------------------------------------------------ shutdown
+    @property
+    def scheduling(self) -> str:
+        """What the paced cycle's thread runs with (`drives.realtime`: SCHED_FIFO on request)."""
+        return self._pacer.scheduling
+
     def close(self) -> None:
         """Detach from the buses (the buses themselves stay open: they are the caller's)."""
         self._running = False

@@ -205,3 +205,17 @@ def test_a_malformed_priority_is_refused_naming_the_variable(monkeypatch, raw):
         Pacer(0.001)
     with pytest.raises(ValueError, match="rt_priority must be 0..99"):
         Pacer(0.001, rt_priority=100)
+
+
+def test_axis_group_reports_its_pacers_scheduling(monkeypatch):
+    from drives.bus import CanHub
+    from drives.master import AxisConfig, AxisGroup
+
+    monkeypatch.delenv(RT_PRIORITY_ENV, raising=False)
+    hub = CanHub()
+    group = AxisGroup([hub.endpoint("master")], [AxisConfig("X", 1)], ipo_cycle_s=0.001)
+    try:
+        assert group.scheduling == "SCHED_OTHER"
+    finally:
+        group.close()
+        hub.close()
