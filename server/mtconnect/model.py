@@ -20,6 +20,7 @@ from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 
 from cnc.faces.shdr import ROTARY_AXES, ShdrItem, shdr_items, spindle_name
+from cnc.status import EXECUTION
 
 
 @dataclass(frozen=True, slots=True)
@@ -102,20 +103,8 @@ EVENT_VALUES: dict[str, str | frozenset[str]] = {
     "CONTROLLER_MODE": frozenset(
         {"AUTOMATIC", "MANUAL", "MANUAL_DATA_INPUT", "SEMI_AUTOMATIC", "EDIT", "FEED_HOLD"}
     ),
-    "EXECUTION": frozenset(
-        {
-            "READY",
-            "ACTIVE",
-            "INTERRUPTED",
-            "FEED_HOLD",
-            "STOPPED",
-            "OPTIONAL_STOP",
-            "PROGRAM_STOPPED",
-            "PROGRAM_COMPLETED",
-            "WAIT",
-            "PROGRAM_OPTIONAL_STOP",
-        }
-    ),
+    # what the controller reports (cnc.status) plus the two 2.5 values it never sends
+    "EXECUTION": frozenset(EXECUTION) | {"WAIT", "PROGRAM_OPTIONAL_STOP"},
     "ROTARY_MODE": frozenset({"SPINDLE", "INDEX", "CONTOUR"}),
 }
 
