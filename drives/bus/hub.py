@@ -155,6 +155,22 @@ class OwnedMessage(can.Message):
     __slots__ = ()
 
 
+def owned_frame(cob_id: int, data: bytes, remote: bool = False) -> OwnedMessage:
+    """A new standard-ID frame to hand over to a bus for good. Filled slot by slot:
+    can.Message() costs ~3 us per frame, and the slaves and the axis group send one per PDO."""
+    msg = _new_message(OwnedMessage)
+    msg.timestamp = 0.0
+    msg.arbitration_id = cob_id
+    msg.is_extended_id = False
+    msg.is_remote_frame = remote
+    msg.is_error_frame = False
+    msg.channel = None
+    msg.dlc = len(data)
+    msg.data = bytearray(data)
+    msg.is_fd = msg.is_rx = msg.bitrate_switch = msg.error_state_indicator = False
+    return msg
+
+
 def _priority(msg: can.Message) -> int:
     """Arbitration order as one int (lower wins): base ID, then 11-bit before 29-bit, then
     the extension, then data before remote. Bits: base << 20 | IDE << 19 | ext << 1 | RTR."""

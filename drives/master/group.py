@@ -33,7 +33,7 @@ import canopen
 from canopen.sdo.exceptions import SdoError
 
 from drives import EDS_PATH
-from drives.bus.hub import CanHub, OwnedMessage, SimBus
+from drives.bus.hub import CanHub, SimBus, owned_frame
 from drives.bus.loadplan import BusOverloadError, CyclicFrame, LoadPlan, plan_load
 from drives.master import power
 from drives.master.config import AxisConfig, AxisError, AxisFault, AxisFeedback
@@ -45,25 +45,8 @@ _RPDO = struct.Struct("<Hi")  # controlword, target position
 _TPDO1 = struct.Struct("<Hi")  # statusword, position actual
 _I32 = struct.Struct("<i")
 _EMCY = struct.Struct("<HB")
-_new_message = can.Message.__new__
 _OE_MASK, _OE = 0x6F, 0x27
 _STATE_NAMES: dict[int, str] = {}  # statusword -> power state name (at most 65536 entries)
-
-
-def _frame(cob_id: int, data: bytes) -> can.Message:
-    # Filled slot by slot (as the slave does): can.Message() costs ~3 us per frame. A new
-    # frame per send, handed over to the bus for good (`OwnedMessage`).
-    msg = _new_message(OwnedMessage)
-    msg.timestamp = 0.0
-    msg.arbitration_id = cob_id
-    msg.is_extended_id = False
-    msg.is_remote_frame = False
-    msg.is_error_frame = False
-    msg.channel = None
-    msg.dlc = len(data)
-    msg.data = bytearray(data)
-    msg.is_fd = msg.is_rx = msg.bitrate_switch = msg.error_state_indicator = False
-    return msg
 
 
 @dataclass
@@ -586,12 +569,12 @@ class AxisGroup:
             for axis in line.axes:
                 if axis.sw & _OE_MASK != _OE or not axis.known:
                     axis.target = axis.pos  # hold: only an enabled axis follows targets
-                send(_frame(axis.rpdo_cob, pack(axis.cw, axis.target)))
+                send(owned_frame(axis.rpdo_cob, pack(axis.cw, axis.target)))
         self._heartbeat()
         if self.paced or not self.lockstep:
             self._sync_sent_at = time.perf_counter()
         for line in self._lines:
-            line.bus.send(_frame(0x080, b""))
+            line.bus.send(owned_frame(0x080, b""))
 
     def end_cycle(self) -> AxisFeedback:
         """Second half of `cycle`: let one IPO cycle pass (lockstep) or await the TPDOs."""
@@ -671,7 +654,7 @@ class AxisGroup:
         if self._hb_elapsed + 1e-9 >= self.heartbeat_ms / 1000.0:
             self._hb_elapsed = 0.0
             for line in self._lines:  # a frame per line: the bus keeps the one it is given
-                line.bus.send(_frame(0x700 + self.master_node_id, b"\x05"))
+                line.bus.send(owned_frame(0x700 + self.master_node_id, b"\x05"))
         self._hb_elapsed += self.ipo_cycle_s
 
     def _watch(self) -> None:
