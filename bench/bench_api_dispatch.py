@@ -27,11 +27,9 @@ import json
 import math
 import os
 import select
-import socket
 import subprocess
 import sys
 import tempfile
-import threading
 import time
 from pathlib import Path
 
@@ -171,15 +169,12 @@ def main() -> int:
     if not 1 <= args.connections <= 64:
         ap.error("--connections must be 1..64")
 
-    import uvicorn
+    from api_server import serve_api
     from sqlalchemy import func, select
 
     from dnc import models as m
     from dnc.db import make_engine, migrate, session_factory, transaction
-    from dnc.dispatch import Dispatches
-    from dnc.jobs import Jobs
     from dnc.library import Library
-    from web_api.app import create_app
     from web_api.settings import ApiSettings
 
     tmp = tempfile.mkdtemp(prefix="bench-api-dispatch-")
@@ -194,20 +189,7 @@ def main() -> int:
     settings = ApiSettings.from_mapping(
         {"api_keys": [{"user": "bench", "role": "operator", "key": KEY}]}
     )
-    app = create_app(
-        settings,
-        library=library,
-        dispatches=Dispatches(sessions),
-        jobs=Jobs(sessions),
-        sessions=sessions,
-    )
-    sock = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
-    sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
-    sock.bind(("127.0.0.1", 0))
-    sock.listen(128)
-    server = uvicorn.Server(uvicorn.Config(app, log_level="warning", timeout_graceful_shutdown=5))
-    thread = threading.Thread(target=server.run, kwargs={"sockets": [sock]}, daemon=True)
-    thread.start()
+    _, server, thread, sock = serve_api(sessions, library, settings, backlog=128)
     base = f"http://127.0.0.1:{sock.getsockname()[1]}"
     try:
         new = run_phase(base, "new", args.seconds, args.connections, rev.id)

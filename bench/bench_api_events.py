@@ -28,11 +28,9 @@ import json
 import math
 import os
 import select
-import socket
 import subprocess
 import sys
 import tempfile
-import threading
 import time
 from datetime import UTC, datetime
 from pathlib import Path
@@ -148,11 +146,8 @@ async def client_process(url: str, count: int, deadline_s: float) -> dict:
 
 
 def start_server(sessions, library, fanout: str, poll_s: float | None = None):
-    import uvicorn
+    from api_server import serve_api
 
-    from dnc.dispatch import Dispatches
-    from dnc.jobs import Jobs
-    from web_api.app import create_app
     from web_api.settings import ApiSettings
 
     settings = ApiSettings.from_mapping(
@@ -162,23 +157,7 @@ def start_server(sessions, library, fanout: str, poll_s: float | None = None):
             **({"events_poll_s": poll_s} if poll_s else {}),
         }
     )
-    app = create_app(
-        settings,
-        library=library,
-        dispatches=Dispatches(sessions),
-        jobs=Jobs(sessions),
-        sessions=sessions,
-    )
-    sock = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
-    sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
-    sock.bind(("127.0.0.1", 0))
-    sock.listen(256)
-    server = uvicorn.Server(
-        uvicorn.Config(app, log_level="warning", timeout_graceful_shutdown=5, backlog=256)
-    )
-    thread = threading.Thread(target=server.run, kwargs={"sockets": [sock]}, daemon=True)
-    thread.start()
-    return app, server, thread, sock
+    return serve_api(sessions, library, settings)
 
 
 class Producer:
