@@ -1,0 +1,55 @@
+"""Build hook: compile the hot pure-Python modules with mypyc.
+
+The NC planner and the drive model run tens of thousands of times per machine second; mypyc
+turns their typed Python into C extensions with the same behaviour. Each package that wants
+this lists its modules, one path per line relative to the list's folder, in a `mypyc.list`
+file. The Python sources stay the reference: with `FMSCELL_PURE_PYTHON=1` at install time
+(or without mypy in the build environment) nothing is compiled and the same code runs as
+plain Python. `tests/test_compiled.py` checks that the compiled modules are not older than
+their sources, so an edit is never shadowed by a stale extension.
+"""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+from setuptools import setup
+
+ROOT = Path(__file__).resolve().parent
+
+
+def compiled_sources() -> list[str]:
+    """Every module named in a `mypyc.list`, as a path relative to the project root."""
+    sources: list[str] = []
+    for listing in sorted(ROOT.glob("*/**/mypyc.list")):
+        for line in listing.read_text().splitlines():
+            line = line.split("#", 1)[0].strip()
+            if line:
+                path = listing.parent / line
+                if not path.is_file():
+                    raise SystemExit(f"{listing}: no such module {line!r}")
+                sources.append(str(path.relative_to(ROOT)))
+    return sources
+
+
+def ext_modules() -> list:
+    if os.environ.get("FMSCELL_PURE_PYTHON") == "1":
+        return []
+    sources = compiled_sources()
+    if not sources:
+        return []
+    try:
+        from mypyc.build import mypycify
+    except ImportError:  # a build without mypy: the plain Python modules are used
+        return []
+    # Imported modules that are not compiled are read for their types only: their own type
+    # errors must not stop the build.
+    return mypycify(
+        ["--follow-imports=silent", "--ignore-missing-imports", *sources],
+        opt_level="3",
+        debug_level="0",
+    )
+
+
+setup(ext_modules=ext_modules())
