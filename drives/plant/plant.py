@@ -19,27 +19,27 @@ The plant knows nothing of CANopen; `step` returns 0 or the CiA 402 fault code i
 from __future__ import annotations
 
 import math
+from typing import Final
 
 from drives.plant.params import PlantParams
 
 # Control modes of the inner loops.
-OFF = 0  # inverter disabled, motor coasts
-POSITION = 1  # position P (+ feed-forward) → velocity PI → current
-VELOCITY = 2  # velocity PI → current
+OFF: Final = 0  # inverter disabled, motor coasts
+POSITION: Final = 1  # position P (+ feed-forward) → velocity PI → current
+VELOCITY: Final = 2  # velocity PI → current
 
 # Fault codes the plant detects (CiA 402 / IEC 61800-7 numbering).
-OVERCURRENT = 0x2310
-I2T = 0x2350
-MAINS_PHASE_FAILURE = 0x3130
-DC_OVERVOLTAGE = 0x3210
-DC_UNDERVOLTAGE = 0x3220
-OVERTEMPERATURE = 0x4310
-MOTOR_BLOCKED = 0x7121
-ENCODER = 0x7305
-FOLLOWING_ERROR = 0x8611  # the drive's monitor, run inside `follow_ramp`
+OVERCURRENT: Final = 0x2310
+I2T: Final = 0x2350
+MAINS_PHASE_FAILURE: Final = 0x3130
+DC_OVERVOLTAGE: Final = 0x3210
+DC_UNDERVOLTAGE: Final = 0x3220
+OVERTEMPERATURE: Final = 0x4310
+MOTOR_BLOCKED: Final = 0x7121
+ENCODER: Final = 0x7305
+FOLLOWING_ERROR: Final = 0x8611  # the drive's monitor, run inside `follow_ramp`
 
-_TWO_PI = 2.0 * math.pi
-_floor, _copysign = math.floor, math.copysign  # module-level: `step` runs at 8 kHz per axis
+_TWO_PI: Final = 2.0 * math.pi
 
 
 class Plant:
@@ -56,7 +56,7 @@ class Plant:
         self._mpr = p.metres_per_motor_rad
         self._h_cached = -1.0
         self._decay = 0.0
-        self._c = self._constants()
+        self._c: tuple[float, ...] = self._constants()
         self.speed_limit = m.max_speed_rpm * _TWO_PI / 60.0  # rad/s, the drive's 0x6080
         self._i2t_limit = (m.peak_current**2 - m.rated_current**2) * p.thermal.i2t_peak_time
         # injections
@@ -143,10 +143,12 @@ class Plant:
         return self.params.motor.km * self.current
 
     # -- one sub-step ---------------------------------------------------------------------
-    def _constants(self) -> tuple:
+    def _constants(self) -> tuple[float, ...]:
+        # all floats (a YAML integer becomes 2.0 here, the same value in every expression):
+        # the compiled plant (mypyc, drives/plant/mypyc.list) keeps them as C doubles
         p = self.params
         m, sc, dl, th, mo = p.motor, p.screw, p.dc_link, p.thermal, p.monitor
-        return (
+        values = (
             m.resistance,
             m.kb,
             m.km,
@@ -178,6 +180,7 @@ class Plant:
             mo.blocked_time,
             mo.blocked_speed,
         )
+        return tuple(float(v) for v in values)
 
     def step(
         self,
@@ -294,9 +297,9 @@ class Plant:
             if -tc <= net <= tc:
                 w_new = 0.0
             else:
-                w_new = h * (net - _copysign(tc, net)) / j
+                w_new = h * (net - math.copysign(tc, net)) / j
         else:
-            w_new = omega + h * (net - _copysign(tc, omega)) / j
+            w_new = omega + h * (net - math.copysign(tc, omega)) / j
             if w_new * omega < 0.0:
                 w_new = 0.0
         theta = self.theta + 0.5 * (omega + w_new) * h
@@ -314,7 +317,7 @@ class Plant:
             self.table_x = nut
 
         # --- encoder read at the end of the sub-step; speed from the count difference
-        counts = _floor(theta / rpc) + self.encoder_offset
+        counts = math.floor(theta / rpc) + self.encoder_offset
         dc = counts - self._prev_counts
         jump = max_counts_per_s * h + 2
         if dc > jump or -dc > jump:
@@ -462,8 +465,16 @@ class Plant:
         ambient = self.ambient
         i2t_limit = self._i2t_limit
         sw = self.params.switches
+        # the optional switches and window as a flag and a float: the loop then compares
+        # plain floats (C doubles when compiled)
         neg_limit, pos_limit, home = sw.negative_limit, sw.positive_limit, sw.home_switch
+        has_neg, has_pos, has_home = neg_limit is not None, pos_limit is not None, home is not None
+        neg = neg_limit if neg_limit is not None else 0.0
+        posl = pos_limit if pos_limit is not None else 0.0
+        home_x = home if home is not None else 0.0
         home_below = sw.home_switch_active_below
+        check_fe = fe_window is not None
+        fe_win = fe_window if fe_window is not None else 0.0
         # the state, in locals for the loop and written back once
         theta, omega, i_old = self.theta, self.omega, self.current
         integ, vel_m, counts = self.vel_integral, self.vel_meas, self.counts
@@ -527,9 +538,9 @@ class Plant:
                 if -tc <= net <= tc:
                     w_new = 0.0
                 else:
-                    w_new = h * (net - _copysign(tc, net)) / j
+                    w_new = h * (net - math.copysign(tc, net)) / j
             else:
-                w_new = omega + h * (net - _copysign(tc, omega)) / j
+                w_new = omega + h * (net - math.copysign(tc, omega)) / j
                 if w_new * omega < 0.0:
                     w_new = 0.0
             theta = theta + 0.5 * (omega + w_new) * h
@@ -543,7 +554,7 @@ class Plant:
             else:
                 table_x = nut
             # --- encoder
-            counts = _floor(theta / rpc) + encoder_offset
+            counts = math.floor(theta / rpc) + encoder_offset
             dc = counts - prev_counts
             if dc > jump or -dc > jump:
                 fault = ENCODER
@@ -596,18 +607,18 @@ class Plant:
                             elif temp > temp_trip:
                                 fault = OVERTEMPERATURE
             # --- the drive's monitors: following error, then the switch inputs
-            if fe_window is not None and abs(pos - counts * rpc) > fe_window:
+            if check_fe and abs(pos - counts * rpc) > fe_win:
                 fe_timer += h
                 if fe_timer > fe_timeout and not fault:
                     fault = FOLLOWING_ERROR
             else:
                 fe_timer = 0.0
             new_inputs = 0
-            if neg_limit is not None and table_x <= neg_limit:
+            if has_neg and table_x <= neg:
                 new_inputs = 1
-            if pos_limit is not None and table_x >= pos_limit:
+            if has_pos and table_x >= posl:
                 new_inputs |= 2
-            if home is not None and (table_x <= home if home_below else table_x >= home):
+            if has_home and (table_x <= home_x if home_below else table_x >= home_x):
                 new_inputs |= 4
             if fault or new_inputs != inputs:
                 break
