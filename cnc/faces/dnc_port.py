@@ -85,6 +85,9 @@ XOFF_GRACE_S = 0.5
 # 1.6 KB measured on an idle machine, up to ~24 KB (both kernels' buffers and the reader's) on
 # a loaded one. More than all of that together means it does not honour XOFF.
 IN_FLIGHT_MAX = 64 * 1024
+# Punch output is written a receive window at a time, the flow checked between writes: the
+# host reads whatever arrives, so smaller writes only cost wake-ups at both ends.
+PUNCH_CHUNK = LINE_BUFFER_BYTES
 
 Policy = Callable[[str, int | None], str | None]
 """(operation, program number) -> None to allow, or the reason the machine refuses it."""
@@ -101,7 +104,7 @@ def program_number(lines: list[str]) -> int | None:
 
 def stored_text(lines: list[str]) -> str:
     """The form a received program is kept in: `%`, its blocks, `%`, LF line ends."""
-    return "%\n" + "".join(f"{ln}\n" for ln in lines) + "%\n"
+    return "%\n" + "\n".join(lines) + ("\n%\n" if lines else "%\n")
 
 
 def sha256_text(text: str) -> str:
@@ -239,14 +242,24 @@ class DncPort(TcpFace):
         if exc.alarm in RAISES_ALARM:
             self._on_alarm(exc.alarm, exc.text)
 
-    async def _receive_tape(self, conn: _Conn, pushback: bytes, on_block) -> None:
-        """Decode one tape from the connection, handing each block to `on_block`."""
+    async def _receive_tape(self, conn: _Conn, pushback: bytes, on_block, on_blocks=None) -> None:
+        """Decode one tape from the connection, handing each block to `on_block`, or each
+        run of blocks to `on_blocks` when given (a list per read instead of a call per block).
+        """
         decoder = TapeDecoder(parity=self.parity, max_block=self.max_block)
         data = pushback
         while True:
-            for ev in decoder.feed(data):
-                if ev.kind == "line":
-                    pending = on_block(ev.text)  # a coroutine only when it may have to wait
+            for ev in decoder.feed_runs(data):
+                if ev.kind == "lines":
+                    if on_blocks is not None:
+                        on_blocks(ev.lines)
+                        continue
+                    for text in ev.lines:
+                        pending = on_block(text)  # a coroutine only when it may have to wait
+                        if pending is not None:
+                            await pending
+                elif ev.kind == "line":
+                    pending = on_block(ev.text)
                     if pending is not None:
                         await pending
                 elif ev.kind == "parity_error":
@@ -277,18 +290,27 @@ class DncPort(TcpFace):
         lines: list[str] = []
         size = 4  # the two % lines
 
-        def keep(block: str) -> None:
-            nonlocal size
-            size += len(block) + 1
+        def fits() -> None:
             if size > self.memory.capacity:
                 raise DncError(
                     ALARM_MEMORY_FULL,
                     f"program exceeds the program memory of {self.memory.capacity} bytes; "
                     "use drip-feed (DRIP) for programs larger than memory",
                 )
+
+        def keep(block: str) -> None:
+            nonlocal size
+            size += len(block) + 1
+            fits()
             lines.append(block)
 
-        await self._receive_tape(conn, pushback, keep)
+        def keep_all(blocks: list[str]) -> None:
+            nonlocal size
+            size += sum(map(len, blocks)) + len(blocks)
+            fits()
+            lines.extend(blocks)
+
+        await self._receive_tape(conn, pushback, keep, keep_all)
         number = number or program_number(lines)
         if number is None:
             raise DncError(ALARM_NO_NUMBER, "no program number: the first block needs an O word")
@@ -494,15 +516,22 @@ class _Conn:
         may_send.set()
         watcher = asyncio.ensure_future(self._watch_flow(may_send))
         try:
-            for i in range(0, len(payload), 1024):
-                try:
-                    await asyncio.wait_for(may_send.wait(), 5.0)
-                except TimeoutError:
-                    raise DncError(ALARM_TIMEOUT, "the receiver stayed in XOFF for 5 s") from None
+            tape = memoryview(payload)
+            for i in range(0, len(payload), PUNCH_CHUNK):
+                if not may_send.is_set():
+                    try:
+                        await asyncio.wait_for(may_send.wait(), 5.0)
+                    except TimeoutError:
+                        raise DncError(
+                            ALARM_TIMEOUT, "the receiver stayed in XOFF for 5 s"
+                        ) from None
                 if watcher.done() and watcher.exception() is None and watcher.result():
                     raise ConnectionError("peer closed during punch")
-                self.writer.write(payload[i : i + 1024])
+                self.writer.write(tape[i : i + PUNCH_CHUNK])
                 await self.writer.drain()
+                # drain() does not yield while the transport takes everything: let the
+                # watcher see an XOFF that came in during the last chunk.
+                await asyncio.sleep(0)
         finally:
             watcher.cancel()
             with contextlib.suppress(asyncio.CancelledError):

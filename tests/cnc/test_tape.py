@@ -50,6 +50,9 @@ def test_parity_refuses_8_bit_text():
         ("O1\nG0 X1", b"%\nO1\nG0 X1\n%\n"),
         ("%\nO1\nM30\n%\n", b"%\nO1\nM30\n%\n"),
         ("O1\r\nM30\r\n\r\n", b"%\nO1\nM30\n%\n"),
+        ("%\n%\n", b"%\n%\n"),
+        ("%\nO1\n\nM30\n%\n\n", b"%\nO1\n\nM30\n%\n"),
+        (" %\nO1\n%\n", b" %\nO1\n%\n"),
     ],
 )
 def test_encode_program_frames_once(text, tape):
@@ -113,3 +116,54 @@ def test_xoff_inside_a_block_does_not_split_it():
         ("control", ""),
         ("line", "G0X1"),
     ]
+
+
+class BlockByBlock(TapeDecoder):
+    """The decoder without its runs of blocks: the reference they must agree with."""
+
+    def _run_of_blocks(self, data, i, events, runs):
+        return i
+
+
+def runs(decoder, data):
+    out = []
+    for e in decoder.feed_runs(data):
+        out += [("line", t) for t in e.lines] if e.kind == "lines" else [(e.kind, e.text)]
+    return out
+
+
+def detailed(decoder, data):
+    return [(e.kind, e.text, e.offset, e.code) for e in decoder.feed(data)]
+
+
+@given(
+    st.lists(st.from_regex(r"[A-Z0-9 .\-()%\r\x13]{0,12}", fullmatch=True), max_size=12),
+    st.lists(st.integers(1, 40), min_size=1, max_size=10),
+    st.booleans(),
+)
+def test_runs_of_blocks_decode_as_block_by_block(blocks, cuts, parity):
+    tape = encode_program("\n".join(["O1", *blocks]), parity=parity)
+    if not parity:
+        tape = tape[:4] + b"\xff" + tape[4:]  # a stray 8-bit byte in the first block
+    elif blocks:
+        tape = tape[:-3] + bytes([tape[-3] ^ 1]) + tape[-2:]  # a parity error near the end
+    reference = detailed(BlockByBlock(parity=parity, max_block=10), tape)
+    assert detailed(TapeDecoder(parity=parity, max_block=10), tape) == reference
+    d, out, i = TapeDecoder(parity=parity, max_block=10), [], 0
+    for n in cuts * (len(tape) // len(cuts) + 1):
+        if i >= len(tape):
+            break
+        out += runs(d, tape[i : i + n])
+        i += n
+    out += runs(d, tape[i:])
+    assert out == [(k, t) for k, t, *_ in reference]
+
+
+def test_line_offsets_are_those_of_the_block_ends():
+    data = b"%\nO1\nG0 X1\nG1 Y2\n%\n"
+    lf = [i for i, b in enumerate(data) if b == 0x0A]
+    lines = [e.offset for e in TapeDecoder().feed(data) if e.kind == "line"]
+    assert lines == lf[1:4]
+    d = TapeDecoder()
+    d.feed(data[:7])  # "G0" carried into the next feed
+    assert [e.offset for e in d.feed(data[7:]) if e.kind == "line"] == lf[2:4]
