@@ -15,37 +15,61 @@ commands always give the same samples, bit for bit.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from typing import Final
 
-from cnc.canon import MOTION_TYPES, SetPathMode
+from cnc.canon import MOTION_TYPES, ArcFeed, SetPathMode, StraightFeed, StraightTraverse
 from cnc.errors import NcError
+from cnc.interpolator.sample import Sample
 from cnc.params import MachineParams
+from cnc.planner.geometry import Vec, Vec3
 from cnc.planner.limits import AxisLimits
 from cnc.planner.path import Path
-from cnc.planner.profile import INF, PlanMemo, Span, partition, partition_again, solve
+from cnc.planner.profile import INF, PlanMemo, Row, Span, partition, partition_again, solve
 from cnc.planner.scurve import change_distance
 
-DROP_EVERY = 256
+DROP_EVERY: Final = 256
 
-
-@dataclass(frozen=True, slots=True)
-class Sample:
-    """One IPO-cycle setpoint."""
-
-    t: float  # seconds since the Motion was created (cycle count x IPO cycle)
-    pose: tuple[float, ...]  # commanded machine position, mm
-    velocity: float  # path velocity, mm/s
-    line: int  # source line of the block being executed (0 before the first)
-    sync: object | None = None  # a sync-point command reached in this cycle
+__all__ = ["Motion", "Sample"]
 
 
 class Motion:
     """Look-ahead planner + interpolator for one machine (pure, stepped per IPO cycle)."""
 
+    params: MachineParams
+    ipo: float
+    lim: AxisLimits
+    _pose: Vec3
+    path: Path
+    single_block: bool
+    _feed_ovr: float
+    _rapid_ovr: float
+    _hold: bool
+    _eop: bool
+    _cycle: int
+    _s: float
+    _v: float
+    _a: float
+    _spans: list[Span]
+    _si: int
+    _t: float
+    _hint: int
+    _kp: int
+    _kdone: int
+    _blocks_done: int
+    _line: int
+    _last_block: int
+    _sync_queue: list
+    _waiting: object | None
+    _dirty: bool
+    _urgent: bool
+    _sb_wait: bool
+    replans: int
+    _memo: PlanMemo
+
     def __init__(
         self,
         params: MachineParams,
-        start: tuple[float, ...] | None = None,
+        start: Vec | None = None,
         ipo_cycle_s: float | None = None,
     ) -> None:
         t = params.ipo_cycle_s if ipo_cycle_s is None else ipo_cycle_s
@@ -58,9 +82,9 @@ class Motion:
         self.lim = AxisLimits.from_params(params, t)
         if start is None:
             start = (0.0, 0.0, 0.0)
-        self._pose = tuple(float(x) for x in start)
-        if len(self._pose) != 3:
+        if len(start) != 3:
             raise NcError(f"the planner moves X Y Z poses; got a start pose of {len(start)} axes")
+        self._pose = (float(start[0]), float(start[1]), float(start[2]))
         self.path = Path(params, self.lim, self._pose)
         self.single_block = False
         self._feed_ovr = 1.0
@@ -71,7 +95,7 @@ class Motion:
         self._s = 0.0
         self._v = 0.0
         self._a = 0.0
-        self._spans: list[Span] = []
+        self._spans = []
         self._si = 0
         self._t = 0.0
         self._hint = 0
@@ -80,7 +104,7 @@ class Motion:
         self._blocks_done = 0
         self._line = 0
         self._last_block = 0
-        self._sync_queue: list = []
+        self._sync_queue = []
         self._waiting = None
         self._dirty = False
         self._urgent = False
@@ -95,11 +119,12 @@ class Motion:
         """Motion blocks the look-ahead can still take."""
         return self.params.lookahead - (self.path.blocks - self._blocks_done)
 
-    def push(self, cmd) -> bool:
+    def push(self, cmd: object) -> bool:
         """Queue one canonical command; False (nothing queued) when the look-ahead is full."""
         if isinstance(cmd, MOTION_TYPES):
             if self.params.lookahead <= self.path.blocks - self._blocks_done:  # space() <= 0
                 return False
+            assert isinstance(cmd, StraightTraverse | StraightFeed | ArcFeed)
             self.path.add_motion(cmd, self._protect_s(), not self.single_block)
             self._dirty = True
         elif isinstance(cmd, SetPathMode):
@@ -164,7 +189,7 @@ class Motion:
         return self._rapid_ovr
 
     @property
-    def waiting(self):
+    def waiting(self) -> object | None:
         """The sync-point command awaiting `acknowledge()`, or None."""
         return self._waiting
 
@@ -184,7 +209,7 @@ class Motion:
         )
 
     @property
-    def pose(self) -> tuple[float, ...]:
+    def pose(self) -> Vec3:
         return self._pose
 
     @property
@@ -288,7 +313,9 @@ class Motion:
                 parts = partition_again(segs, k, s0, fo, ro, self.ipo, self._memo, path.changed_s)
                 path.changed_s = INF
                 spans, _ok = solve(parts, v0, self.ipo, self._memo)
-        self._spans = ([lead] if lead is not None else []) + spans
+        if lead is not None:
+            spans.insert(0, lead)
+        self._spans = spans
         self._si = 0
         self._t = 0.0
         self._hint = 0
@@ -305,6 +332,7 @@ class Motion:
         a_now = a + j * x
         s_now = self._s - sp.s0
         v_now = v + x * (a + 0.5 * j * x)
+        tail: list[Row]
         if urgent and a_now > 0.0:
             jj = sp.jerk_limit
             tail = [(0.0, a_now / jj, 0.0, v_now, a_now, -jj)]
@@ -318,7 +346,7 @@ class Motion:
                 acc = ta + tj * tdt
                 k += 1
         # re-integrate the tail so times and states are relative to now
-        out = []
+        out: list[Row] = []
         tt = 0.0
         ss = 0.0
         vv = v_now
@@ -347,7 +375,7 @@ class Motion:
 
     def _stop_limits(self, k: int, s0: float, dist: float, v0: float) -> tuple[float, float]:
         segs = self.path.segs
-        at = jt = float("inf")
+        at = jt = INF
         while k < len(segs):
             g = segs[k]
             gat, gjt = g.limits_at(v0)
@@ -358,7 +386,7 @@ class Motion:
             k += 1
         return at, jt
 
-    def _plan_stop(self, k, s0, v0, fo, ro) -> list[Span]:
+    def _plan_stop(self, k: int, s0: float, v0: float, fo: float, ro: float) -> list[Span]:
         if v0 == 0.0:
             return []
         segs = self.path.segs
@@ -373,15 +401,15 @@ class Motion:
             # a hold only ever slows down: caps clamped to the current speed
             parts = partition(segs, k, s0, max(fo, 1.0), max(ro, 1.0), False, stop_s, v0, self.ipo)
             for p in parts:
-                if p[6] > v0:
-                    p[6] = v0
+                if p.end_cap > v0:
+                    p.end_cap = v0
             spans, ok = solve(parts, v0, self.ipo)
             if ok:
                 return spans
             extra = extra * 2.0 + 0.05 * dist + 1e-6
         return spans
 
-    def _plan_single_block(self, k, s0, v0, fo, ro) -> list[Span]:
+    def _plan_single_block(self, k: int, s0: float, v0: float, fo: float, ro: float) -> list[Span]:
         segs = self.path.segs
         kk = k
         spans: list[Span] = []
@@ -438,7 +466,7 @@ class Motion:
                 self._spans = []
                 self._si = 0
                 self._arrived()
-                if getattr(sp, "single_block_stop", False):
+                if sp.single_block_stop:
                     self._sb_wait = True
                 return
             if self._dirty and not (

@@ -5,23 +5,57 @@ pieces; G64 corner blends are `Arc`s too. `point(s)` is exact at both ends (it r
 stored end points), so consecutive pieces join without rounding drift and the programmed
 end point of a block is reached bit for bit. Poses are (X, Y, Z); the hot path is written
 out for three axes with plain floats.
+
+This module is compiled with mypyc (cnc/planner/mypyc.list): the fixed-size
+`tuple[float, float, float]` and the typed attributes of the `Piece` classes become native
+C values. The source is the reference and must give the same floats when run as Python.
 """
 
 from __future__ import annotations
 
 from math import atan2, cos, pi, sin, sqrt, tan
+from math import pow as fpow
+from typing import Final
 
+Vec3 = tuple[float, float, float]
 Vec = tuple[float, ...]
-ZERO = (0.0, 0.0, 0.0)
+ZERO: Final = (0.0, 0.0, 0.0)
 
 
-class Line:
-    """Straight piece from `start` to `end`."""
+class Piece:
+    """What every piece has: end points, length, unit tangents and curvature vectors at both
+    ends (t0/t1, k0/k1)."""
 
-    __slots__ = ("start", "end", "u", "length", "t0", "t1", "k0", "k1")
-    kind = "line"
+    __slots__ = ("start", "end", "length", "t0", "t1", "k0", "k1")
 
-    def __init__(self, start: Vec, end: Vec) -> None:
+    start: Vec3
+    end: Vec3
+    length: float
+    t0: Vec3
+    t1: Vec3
+    k0: Vec3
+    k1: Vec3
+
+    def point(self, s: float) -> Vec3:
+        raise NotImplementedError
+
+    def tangent(self, s: float) -> Vec3:
+        raise NotImplementedError
+
+    def curvature(self, s: float) -> Vec3:
+        """Curvature vector d^2P/ds^2 (kappa * normal)."""
+        raise NotImplementedError
+
+
+class Line(Piece):
+    """Straight piece from `start` to `end` (`u`: the unit direction, given when the line is
+    a shortened copy of another, so that trimming never bends it)."""
+
+    __slots__ = ("u",)
+
+    u: Vec3
+
+    def __init__(self, start: Vec3, end: Vec3, u: Vec3 | None = None) -> None:
         self.start = start
         self.end = end
         dx = end[0] - start[0]
@@ -29,41 +63,32 @@ class Line:
         dz = end[2] - start[2]
         n = sqrt(dx * dx + dy * dy + dz * dz)
         self.length = n
-        u = (dx / n, dy / n, dz / n) if n > 0.0 else ZERO
+        if u is None:
+            u = (dx / n, dy / n, dz / n) if n > 0.0 else ZERO
         self.u = self.t0 = self.t1 = u
         self.k0 = self.k1 = ZERO
 
-    def point(self, s: float) -> Vec:
+    def point(self, s: float) -> Vec3:
         if s <= 0.0:
             return self.start
         if s >= self.length:
             return self.end
-        p = self.start
-        u = self.u
-        return (p[0] + u[0] * s, p[1] + u[1] * s, p[2] + u[2] * s)
+        p0, p1, p2 = self.start
+        u0, u1, u2 = self.u
+        return (p0 + u0 * s, p1 + u1 * s, p2 + u2 * s)
 
-    def tangent(self, s: float) -> Vec:
+    def tangent(self, s: float) -> Vec3:
         return self.u
 
-    def curvature(self, s: float) -> Vec:
-        """Curvature vector d^2P/ds^2 (kappa * normal)."""
+    def curvature(self, s: float) -> Vec3:
         return ZERO
 
-    def with_ends(self, start: Vec, end: Vec) -> Line:
+    def with_ends(self, start: Vec3, end: Vec3) -> Line:
         """The same line shortened (direction kept exactly, so trimming never bends it)."""
-        ln = Line.__new__(Line)
-        ln.start = start
-        ln.end = end
-        ln.u = ln.t0 = ln.t1 = self.u
-        ln.k0 = ln.k1 = ZERO
-        dx = end[0] - start[0]
-        dy = end[1] - start[1]
-        dz = end[2] - start[2]
-        ln.length = sqrt(dx * dx + dy * dy + dz * dz)
-        return ln
+        return Line(start, end, self.u)
 
 
-class Arc:
+class Arc(Piece):
     """Circle/helix: P(phi) = O + r(phi) (cos phi e1 + sin phi e2) + w * rise * phi / sweep.
 
     `phi` runs linearly with s from 0 to `sweep`; r(phi) is linear from r0 to r1 (r0 == r1
@@ -72,8 +97,6 @@ class Arc:
     """
 
     __slots__ = (
-        "start",
-        "end",
         "center",
         "e1",
         "e2",
@@ -82,16 +105,33 @@ class Arc:
         "r1",
         "sweep",
         "rise",
-        "length",
-        "t0",
-        "t1",
-        "k0",
-        "k1",
         "cent",
     )
-    kind = "arc"
 
-    def __init__(self, start, end, center, e1, e2, w, r0, r1, sweep, rise) -> None:
+    center: Vec3
+    e1: Vec3
+    e2: Vec3
+    w: Vec3
+    r0: float
+    r1: float
+    sweep: float
+    rise: float
+    # per-axis centripetal coefficients (planner.limits.centripetal), once computed
+    cent: tuple[Vec3, Vec3] | None
+
+    def __init__(
+        self,
+        start: Vec3,
+        end: Vec3,
+        center: Vec3,
+        e1: Vec3,
+        e2: Vec3,
+        w: Vec3,
+        r0: float,
+        r1: float,
+        sweep: float,
+        rise: float,
+    ) -> None:
         self.start = start
         self.end = end
         self.center = center
@@ -102,10 +142,10 @@ class Arc:
         self.r1 = r1
         self.sweep = sweep
         self.rise = rise
-        self.cent = None  # per-axis centripetal coefficients (planner.limits.centripetal)
+        self.cent = None
         rm = 0.5 * (r0 + r1)
-        self.length = sqrt((rm * sweep) ** 2 + rise * rise)
-        length = self.length
+        length = sqrt(fpow(rm * sweep, 2.0) + rise * rise)
+        self.length = length
         k = sweep / length
         h = rise / length
         dr = (r1 - r0) / length
@@ -133,7 +173,7 @@ class Arc:
         q = -r1 * k * k
         self.k1 = (q * c0, q * c1, q * c2)
 
-    def point(self, s: float) -> Vec:
+    def point(self, s: float) -> Vec3:
         if s <= 0.0:
             return self.start
         length = self.length
@@ -145,14 +185,17 @@ class Arc:
         c = r * cos(phi)
         sn = r * sin(phi)
         h = self.rise * f
-        o, a, b, z = self.center, self.e1, self.e2, self.w
+        o0, o1, o2 = self.center
+        a0, a1, a2 = self.e1
+        b0, b1, b2 = self.e2
+        z0, z1, z2 = self.w
         return (
-            o[0] + c * a[0] + sn * b[0] + h * z[0],
-            o[1] + c * a[1] + sn * b[1] + h * z[1],
-            o[2] + c * a[2] + sn * b[2] + h * z[2],
+            o0 + c * a0 + sn * b0 + h * z0,
+            o1 + c * a1 + sn * b1 + h * z1,
+            o2 + c * a2 + sn * b2 + h * z2,
         )
 
-    def tangent(self, s: float) -> Vec:
+    def tangent(self, s: float) -> Vec3:
         f = s / self.length
         phi = self.sweep * f
         k = self.sweep / self.length
@@ -161,18 +204,23 @@ class Arc:
         cp, sp = cos(phi), sin(phi)
         h = self.rise / self.length
         a, b, z = self.e1, self.e2, self.w
-        return tuple(
-            r * k * (-sp * a[i] + cp * b[i]) + dr * (cp * a[i] + sp * b[i]) + h * z[i]
-            for i in range(3)
+        return (
+            r * k * (-sp * a[0] + cp * b[0]) + dr * (cp * a[0] + sp * b[0]) + h * z[0],
+            r * k * (-sp * a[1] + cp * b[1]) + dr * (cp * a[1] + sp * b[1]) + h * z[1],
+            r * k * (-sp * a[2] + cp * b[2]) + dr * (cp * a[2] + sp * b[2]) + h * z[2],
         )
 
-    def curvature(self, s: float) -> Vec:
+    def curvature(self, s: float) -> Vec3:
         phi = self.sweep * s / self.length
         k = self.sweep / self.length
         r = self.r0 + (self.r1 - self.r0) * s / self.length
         cp, sp = cos(phi), sin(phi)
         a, b = self.e1, self.e2
-        return tuple(-r * k * k * (cp * a[i] + sp * b[i]) for i in range(3))
+        return (
+            -r * k * k * (cp * a[0] + sp * b[0]),
+            -r * k * k * (cp * a[1] + sp * b[1]),
+            -r * k * k * (cp * a[2] + sp * b[2]),
+        )
 
     @property
     def plane_fraction(self) -> float:
@@ -190,9 +238,12 @@ def arc_from_canon(
 ) -> Arc:
     """Build the closed-form arc of a G2/G3 block (plane given by its normal axis index)."""
     k = normal_axis
-    w = tuple(1.0 if i == k else 0.0 for i in range(3))
-    rel0 = tuple(0.0 if i == k else start[i] - center[i] for i in range(3))
-    rel1 = tuple(0.0 if i == k else end[i] - center[i] for i in range(3))
+    s0, s1, s2 = start
+    p0, p1, p2 = end
+    m0, m1, m2 = center
+    w = (1.0 if k == 0 else 0.0, 1.0 if k == 1 else 0.0, 1.0 if k == 2 else 0.0)
+    rel0 = (0.0 if k == 0 else s0 - m0, 0.0 if k == 1 else s1 - m1, 0.0 if k == 2 else s2 - m2)
+    rel1 = (0.0 if k == 0 else p0 - m0, 0.0 if k == 1 else p1 - m1, 0.0 if k == 2 else p2 - m2)
     r0 = sqrt(rel0[0] ** 2 + rel0[1] ** 2 + rel0[2] ** 2)
     r1 = sqrt(rel1[0] ** 2 + rel1[1] ** 2 + rel1[2] ** 2)
     e1 = (rel0[0] / r0, rel0[1] / r0, rel0[2] / r0)
@@ -207,12 +258,12 @@ def arc_from_canon(
         ang += 2.0 * pi
     sweep = ang + 2.0 * pi * turns
     rise = end[k] - start[k]
-    c = tuple(center[i] if i != k else start[i] for i in range(3))
-    return Arc(start, end, c, e1, e2, w, r0, r1, sweep, rise)
+    c = (m0 if k != 0 else s0, m1 if k != 1 else s1, m2 if k != 2 else s2)
+    return Arc((s0, s1, s2), (p0, p1, p2), c, e1, e2, w, r0, r1, sweep, rise)
 
 
 def blend(
-    corner: Vec, u1: Vec, u2: Vec, tolerance: float, avail1: float, avail2: float
+    corner: Vec3, u1: Vec3, u2: Vec3, tolerance: float, avail1: float, avail2: float
 ) -> tuple[Arc, float] | None:
     """Circular blend of the corner between two lines, deviating at most `tolerance`.
 
@@ -238,54 +289,22 @@ def blend(
     r = d / tan(0.5 * theta)
     px, py, pz = b0 - c * a0, b1 - c * a1, b2 - c * a2
     pn = sqrt(px * px + py * py + pz * pz)
-    n1 = (px / pn, py / pn, pz / pn)
+    n0, n1, n2 = px / pn, py / pn, pz / pn
     x, y, z = corner
     start = (x - d * a0, y - d * a1, z - d * a2)
     end = (x + d * b0, y + d * b1, z + d * b2)
-    center = (start[0] + r * n1[0], start[1] + r * n1[1], start[2] + r * n1[2])
-    e1 = (-n1[0], -n1[1], -n1[2])
-    return _planar_arc(start, end, center, e1, u1, r, theta), d
-
-
-def _planar_arc(start: Vec, end: Vec, center: Vec, e1: Vec, e2: Vec, r: float, sweep: float) -> Arc:
-    """`Arc(start, end, center, e1, e2, ZERO, r, r, sweep, 0.0)` with the zero rise and the
-    constant radius folded in (the same values): every G64 blend builds one."""
-    arc = Arc.__new__(Arc)
-    arc.start = start
-    arc.end = end
-    arc.center = center
-    arc.e1 = e1
-    arc.e2 = e2
-    arc.w = ZERO
-    arc.r0 = arc.r1 = r
-    arc.sweep = sweep
-    arc.rise = 0.0
-    arc.cent = None
-    arc.length = length = sqrt((r * sweep) ** 2)
-    k = sweep / length
-    cp, sp = cos(sweep), sin(sweep)
-    a0, a1, a2 = e1
-    b0, b1, b2 = e2
-    rk = r * k
-    # "+ 0.0" as in Arc: the zero terms of the general formula turn -0.0 into 0.0
-    arc.t0 = (rk * b0 + 0.0, rk * b1 + 0.0, rk * b2 + 0.0)
-    c0, c1, c2 = cp * a0 + sp * b0, cp * a1 + sp * b1, cp * a2 + sp * b2
-    arc.t1 = (
-        rk * (-sp * a0 + cp * b0) + 0.0,
-        rk * (-sp * a1 + cp * b1) + 0.0,
-        rk * (-sp * a2 + cp * b2) + 0.0,
-    )
-    q = -r * k * k
-    arc.k0 = (q * a0, q * a1, q * a2)
-    arc.k1 = (q * c0, q * c1, q * c2)
-    return arc
+    center = (start[0] + r * n0, start[1] + r * n1, start[2] + r * n2)
+    # a planar arc of constant radius (rise 0, r0 == r1): the general formulas then give
+    # what the folded-in ones would (x + 0.0 for the zero terms), so one constructor serves
+    arc = Arc(start, end, center, (-n0, -n1, -n2), u1, ZERO, r, r, theta, 0.0)
+    return arc, d
 
 
 def _dist(a: Vec, b: Vec) -> float:
     return sqrt((a[0] - b[0]) ** 2 + (a[1] - b[1]) ** 2 + (a[2] - b[2]) ** 2)
 
 
-def distance_to_piece(p: Vec, piece: Line | Arc) -> float:
+def distance_to_piece(p: Vec, piece: Piece) -> float:
     """Distance from p to a programmed piece (used by tests and the plan report)."""
     if isinstance(piece, Line):
         u = piece.u
@@ -293,6 +312,8 @@ def distance_to_piece(p: Vec, piece: Line | Arc) -> float:
         t = (p[0] - st[0]) * u[0] + (p[1] - st[1]) * u[1] + (p[2] - st[2]) * u[2]
         t = 0.0 if t < 0.0 else (piece.length if t > piece.length else t)
         return _dist(p, piece.point(t))
+    if not isinstance(piece, Arc):
+        raise TypeError(f"not a path piece: {piece!r}")
     # arc: the angle of p in the arc plane, then the helix point at that angle (each turn)
     o = piece.center
     rel = (p[0] - o[0], p[1] - o[1], p[2] - o[2])

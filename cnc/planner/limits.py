@@ -13,57 +13,109 @@ The budget split (documented in docs/motion.md):
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from math import pow as fpow
 from math import sqrt
+from typing import Final
 
 from cnc.params import MachineParams
-from cnc.planner.geometry import Arc, Line
+from cnc.planner.geometry import Arc, Line, Piece, Vec3
 
-RHO_KINK_A = 0.01
-RHO_JUMP = 0.05
-RHO_ARC_A = 0.96
-RHO_ARC_J = 0.96
-Q_TANGENT = 0.98  # share of the plane jerk for the tangential component on arcs
-POSE_AXES = ("X", "Y", "Z")
-INF = float("inf")
+RHO_KINK_A: Final = 0.01
+RHO_JUMP: Final = 0.05
+RHO_ARC_A: Final = 0.96
+RHO_ARC_J: Final = 0.96
+Q_TANGENT: Final = 0.98  # share of the plane jerk for the tangential component on arcs
+POSE_AXES: Final = ("X", "Y", "Z")
+INF: Final = float("inf")
 
 
-@dataclass(frozen=True, slots=True)
 class AxisLimits:
-    """Limits per pose index in mm/s, mm/s^2, mm/s^3, plus the IPO cycle."""
+    """Limits per pose index (X, Y, Z) in mm/s, mm/s^2, mm/s^3, plus the IPO cycle.
 
-    vel: tuple[float, ...]
-    acc: tuple[float, ...]
-    jerk: tuple[float, ...]
+    Treat as immutable: the derived per-axis constants below are computed once from the
+    limits when the object is made.
+    """
+
+    __slots__ = (
+        "vel",
+        "acc",
+        "jerk",
+        "ipo",
+        "window",
+        "dv3",
+        "vtop",
+        "acc_c",
+        "jerk_c",
+        "jerk_q",
+        "jerk_qtt",
+        "acc_qt",
+        "jerk_k",
+        "jerk_ktt",
+        "acc_k",
+        "acc_kt",
+    )
+
+    vel: Vec3
+    acc: Vec3
+    jerk: Vec3
     ipo: float
     window: float  # path length that 3 IPO cycles can cover at most, mm
     dv3: float  # most the path speed can change within 3 IPO cycles, mm/s
-    vtop: float = INF  # no path speed exceeds this (all axes at their velocity limit)
-    acc_c: tuple[float, ...] = ()  # continuous shares (see the module docstring)
-    jerk_c: tuple[float, ...] = ()
-    # derived per-axis constants of junction_cap (a quarter of the junction shares), set
-    # in __post_init__: they are the same for every junction of the path
-    jerk_q: tuple[float, ...] = field(default=(), init=False)
-    jerk_qtt: tuple[float, ...] = field(default=(), init=False)  # jerk_q * T^2
-    acc_qt: tuple[float, ...] = field(default=(), init=False)  # acc share * T
+    vtop: float  # no path speed exceeds this (all axes at their velocity limit)
+    acc_c: Vec3  # continuous shares (see the module docstring)
+    jerk_c: Vec3
+    # derived per-axis constants of junction_cap (a quarter of the junction shares): they
+    # are the same for every junction of the path
+    jerk_q: Vec3
+    jerk_qtt: Vec3  # jerk_q * T^2
+    acc_qt: Vec3  # acc share * T
     # the same for coast_cap (the continuous budget)
-    jerk_k: tuple[float, ...] = field(default=(), init=False)
-    jerk_ktt: tuple[float, ...] = field(default=(), init=False)
-    acc_k: tuple[float, ...] = field(default=(), init=False)
-    acc_kt: tuple[float, ...] = field(default=(), init=False)
+    jerk_k: Vec3
+    jerk_ktt: Vec3
+    acc_k: Vec3
+    acc_kt: Vec3
 
-    def __post_init__(self) -> None:
-        t = self.ipo
-        jq = tuple(0.25 * RHO_JUMP * j for j in self.jerk)
-        object.__setattr__(self, "jerk_q", jq)
-        object.__setattr__(self, "jerk_qtt", tuple(t * t * j for j in jq))
-        object.__setattr__(self, "acc_qt", tuple(0.25 * RHO_KINK_A * a * t for a in self.acc))
-        jk = tuple((1.0 - RHO_JUMP) * j for j in self.jerk)
-        ak = tuple((1.0 - RHO_KINK_A) * a for a in self.acc)
-        object.__setattr__(self, "jerk_k", jk)
-        object.__setattr__(self, "jerk_ktt", tuple(t * t * j for j in jk))
-        object.__setattr__(self, "acc_k", ak)
-        object.__setattr__(self, "acc_kt", tuple(t * a for a in ak))
+    def __init__(
+        self,
+        vel: Vec3,
+        acc: Vec3,
+        jerk: Vec3,
+        ipo: float,
+        window: float,
+        dv3: float,
+        vtop: float,
+        acc_c: Vec3,
+        jerk_c: Vec3,
+    ) -> None:
+        self.vel = vel
+        self.acc = acc
+        self.jerk = jerk
+        self.ipo = ipo
+        self.window = window
+        self.dv3 = dv3
+        self.vtop = vtop
+        self.acc_c = acc_c
+        self.jerk_c = jerk_c
+        t = ipo
+        j0, j1, j2 = jerk
+        a0, a1, a2 = acc
+        q = 0.25 * RHO_JUMP
+        jq0, jq1, jq2 = q * j0, q * j1, q * j2
+        self.jerk_q = (jq0, jq1, jq2)
+        self.jerk_qtt = (t * t * jq0, t * t * jq1, t * t * jq2)
+        q = 0.25 * RHO_KINK_A
+        self.acc_qt = (q * a0 * t, q * a1 * t, q * a2 * t)
+        q = 1.0 - RHO_JUMP
+        jk0, jk1, jk2 = q * j0, q * j1, q * j2
+        q = 1.0 - RHO_KINK_A
+        ak0, ak1, ak2 = q * a0, q * a1, q * a2
+        self.jerk_k = (jk0, jk1, jk2)
+        self.jerk_ktt = (t * t * jk0, t * t * jk1, t * t * jk2)
+        self.acc_k = (ak0, ak1, ak2)
+        self.acc_kt = (t * ak0, t * ak1, t * ak2)
+
+    def __repr__(self) -> str:
+        return f"AxisLimits(vel={self.vel}, acc={self.acc}, jerk={self.jerk}, ipo={self.ipo})"
 
     @classmethod
     def from_params(cls, params: MachineParams, ipo: float | None = None) -> AxisLimits:
@@ -73,38 +125,68 @@ class AxisLimits:
         fallback = min(params.axes, key=lambda a: a.max_accel)
         axes = [by_name.get(n, fallback) for n in POSE_AXES]
         t = params.ipo_cycle_s if ipo is None else ipo
-        vel = tuple(a.max_velocity / 60.0 for a in axes)
+        vel = [a.max_velocity / 60.0 for a in axes]
+        acc = [float(a.max_accel) for a in axes]
+        jerk = [float(a.max_jerk) for a in axes]
         return cls(
-            vel=vel,
-            acc=tuple(float(a.max_accel) for a in axes),
-            jerk=tuple(float(a.max_jerk) for a in axes),
+            vel=(vel[0], vel[1], vel[2]),
+            acc=(acc[0], acc[1], acc[2]),
+            jerk=(jerk[0], jerk[1], jerk[2]),
             ipo=t,
             window=3.0 * t * sqrt(sum(v * v for v in vel)),
             dv3=3.0 * t * sqrt(sum(float(a.max_accel) ** 2 for a in axes)),
             vtop=sqrt(sum(v * v for v in vel)),
-            acc_c=tuple(float(a.max_accel) * (1.0 - RHO_KINK_A) for a in axes),
-            jerk_c=tuple(float(a.max_jerk) * (1.0 - RHO_JUMP) for a in axes),
+            acc_c=(
+                acc[0] * (1.0 - RHO_KINK_A),
+                acc[1] * (1.0 - RHO_KINK_A),
+                acc[2] * (1.0 - RHO_KINK_A),
+            ),
+            jerk_c=(
+                jerk[0] * (1.0 - RHO_JUMP),
+                jerk[1] * (1.0 - RHO_JUMP),
+                jerk[2] * (1.0 - RHO_JUMP),
+            ),
         )
 
 
-def line_limits(lim: AxisLimits, u: tuple[float, ...]) -> tuple[float, float, float]:
+def line_limits(lim: AxisLimits, u: Vec3) -> tuple[float, float, float]:
     """(speed cap, tangential accel, tangential jerk) of a line with unit direction u."""
+    # written out for the three axes (in axis order): every line of the path runs this
     v = a = j = INF
-    lv, la, lj = lim.vel, lim.acc_c, lim.jerk_c
-    for i in range(3):
-        c = u[i]
-        if c < 0.0:
-            c = -c
-        if c > 0.0:
-            x = lv[i] / c
-            if x < v:
-                v = x
-            x = la[i] / c
-            if x < a:
-                a = x
-            x = lj[i] / c
-            if x < j:
-                j = x
+    lv0, lv1, lv2 = lim.vel
+    la0, la1, la2 = lim.acc_c
+    lj0, lj1, lj2 = lim.jerk_c
+    c0, c1, c2 = u
+    if c0 < 0.0:
+        c0 = -c0
+    if c0 > 0.0:
+        v = lv0 / c0
+        a = la0 / c0
+        j = lj0 / c0
+    if c1 < 0.0:
+        c1 = -c1
+    if c1 > 0.0:
+        x = lv1 / c1
+        if x < v:
+            v = x
+        x = la1 / c1
+        if x < a:
+            a = x
+        x = lj1 / c1
+        if x < j:
+            j = x
+    if c2 < 0.0:
+        c2 = -c2
+    if c2 > 0.0:
+        x = lv2 / c2
+        if x < v:
+            v = x
+        x = la2 / c2
+        if x < a:
+            a = x
+        x = lj2 / c2
+        if x < j:
+            j = x
     return v, a, j
 
 
@@ -129,20 +211,43 @@ def arc_limits_at(
     # Written out with comparisons instead of min()/max() (same values): every G64
     # blend runs this once.
     ap = jp = vp = INF
-    e1, e2 = arc.e1, arc.e2
+    a0, a1, a2 = arc.e1
+    b0, b1, b2 = arc.e2
     acc, jerk, vel = lim.acc, lim.jerk, lim.vel
-    for i in range(len(acc)):
-        e = sqrt(e1[i] ** 2 + e2[i] ** 2)
-        if e > 1e-12:
-            x = acc[i] * (1.0 - RHO_KINK_A) / e
-            if x < ap:
-                ap = x
-            x = jerk[i] * (1.0 - RHO_JUMP) / e
-            if x < jp:
-                jp = x
-            x = vel[i] / e
-            if x < vp:
-                vp = x
+    # the three axes in order (x ** 2 is pow(x, 2.0) in Python too)
+    e = sqrt(fpow(a0, 2.0) + fpow(b0, 2.0))
+    if e > 1e-12:
+        x = acc[0] * (1.0 - RHO_KINK_A) / e
+        if x < ap:
+            ap = x
+        x = jerk[0] * (1.0 - RHO_JUMP) / e
+        if x < jp:
+            jp = x
+        x = vel[0] / e
+        if x < vp:
+            vp = x
+    e = sqrt(fpow(a1, 2.0) + fpow(b1, 2.0))
+    if e > 1e-12:
+        x = acc[1] * (1.0 - RHO_KINK_A) / e
+        if x < ap:
+            ap = x
+        x = jerk[1] * (1.0 - RHO_JUMP) / e
+        if x < jp:
+            jp = x
+        x = vel[1] / e
+        if x < vp:
+            vp = x
+    e = sqrt(fpow(a2, 2.0) + fpow(b2, 2.0))
+    if e > 1e-12:
+        x = acc[2] * (1.0 - RHO_KINK_A) / e
+        if x < ap:
+            ap = x
+        x = jerk[2] * (1.0 - RHO_JUMP) / e
+        if x < jp:
+            jp = x
+        x = vel[2] / e
+        if x < vp:
+            vp = x
     r0, r1 = arc.r0, arc.r1
     r = r1 if r1 < r0 else r0
     length = arc.length
@@ -153,20 +258,20 @@ def arc_limits_at(
     x = sqrt(RHO_ARC_A * ap * r) / c
     if x < v:
         v = x
-    x = (RHO_ARC_J * jp * r * r) ** (1.0 / 3.0) / c
+    x = fpow(RHO_ARC_J * jp * r * r, 1.0 / 3.0) / c
     if x < v:
         v = x
     if vmax < v:
         v = vmax
     if sa > 0.0:
-        x = vel[normal_axis] / sa
+        x = _axis(vel, normal_axis) / sa
         if x < v:
             v = x
     if v <= 0.0:  # blocked (zero override): whatever tangential limits, no motion
         return 0.0, ap / c, Q_TANGENT * jp / c, 0.0, 0.0
     if sa > 0.0:
-        an_ = acc[normal_axis] * (1.0 - RHO_KINK_A) / sa
-        jn_ = jerk[normal_axis] * (1.0 - RHO_JUMP) / sa
+        an_ = _axis(acc, normal_axis) * (1.0 - RHO_KINK_A) / sa
+        jn_ = _axis(jerk, normal_axis) * (1.0 - RHO_JUMP) / sa
     else:
         an_ = jn_ = INF
     at, jt = _arc_tangential(ap, jp, c, r, v, an_, jn_)
@@ -179,7 +284,22 @@ def arc_limits_at(
     return v, at, jt, at2, jt2
 
 
-def _arc_tangential(ap, jp, c, r, v, an_, jn_) -> tuple[float, float]:
+def _axis(x: Vec3, i: int) -> float:
+    """x[i] of a pose-axis triple, indexed as a Python tuple (-1 is the last)."""
+    if i < 0:
+        i += 3
+    if i == 0:
+        return x[0]
+    if i == 1:
+        return x[1]
+    if i == 2:
+        return x[2]
+    raise IndexError(f"pose axis index {i} out of range")
+
+
+def _arc_tangential(
+    ap: float, jp: float, c: float, r: float, v: float, an_: float, jn_: float
+) -> tuple[float, float]:
     """Tangential (accel, jerk) on an arc at path speed v, from the plane budgets."""
     an = c * c * v * v / r
     x = ap * ap - an * an
@@ -204,8 +324,8 @@ def _arc_tangential(ap, jp, c, r, v, an_, jn_) -> tuple[float, float]:
 
 def junction_cap(
     lim: AxisLimits,
-    du: tuple[float, ...],
-    dk: tuple[float, ...],
+    du: Vec3,
+    dk: Vec3,
     gap: float,
     at_max: float,
     inside_span: bool,
@@ -298,13 +418,7 @@ def junction_cap(
     return cap if cap > 0.0 else 0.0
 
 
-def coast_cap(
-    lim: AxisLimits,
-    du: tuple[float, ...],
-    dk: tuple[float, ...],
-    kacc: tuple[float, ...],
-    kjerk: tuple[float, ...],
-) -> float:
+def coast_cap(lim: AxisLimits, du: Vec3, dk: Vec3, kacc: Vec3, kjerk: Vec3) -> float:
     """Highest speed for a junction passed in a *coast*: 3 IPO cycles of constant path
     speed on both sides (no path acceleration or jerk), so within its sampling window the
     only continuous terms are the centripetal ones of the two pieces (kacc_i v^2 and
@@ -336,10 +450,12 @@ def coast_cap(
         d2 = -d2
     # normalised jerk coefficients of v^3, v^2, v and acceleration coefficients of v^2, v
     # (each the largest over the axes; all are >= 0, as the zero start was)
-    a3 = _max3(kjerk[0] / bj0, kjerk[1] / bj1, kjerk[2] / bj2)
+    kj0, kj1, kj2 = kjerk
+    ka0, ka1, ka2 = kacc
+    a3 = _max3(kj0 / bj0, kj1 / bj1, kj2 / bj2)
     a2 = _max3(k75 * d0 / bj0, k75 * d1 / bj1, k75 * d2 / bj2)
     a1 = _max3(u0 / tj0, u1 / tj1, u2 / tj2)
-    b2 = _max3(kacc[0] / ba0, kacc[1] / ba1, kacc[2] / ba2)
+    b2 = _max3(ka0 / ba0, ka1 / ba1, ka2 / ba2)
     b1 = _max3(u0 / ta0, u1 / ta1, u2 / ta2)
     v = lim.vtop
     # acceleration: b2 v^2 + b1 v <= 1
@@ -353,11 +469,11 @@ def coast_cap(
             v = x
     # jerk: a3 v^3 + a2 v^2 + a1 v <= 1, Newton from an upper bound (convex, increasing)
     if a3 > 0.0:
-        x = a3 ** (-1.0 / 3.0)
+        x = fpow(a3, -1.0 / 3.0)
         if x < v:
             v = x
     if a2 > 0.0:
-        x = a2**-0.5
+        x = fpow(a2, -0.5)
         if x < v:
             v = x
     if a1 > 0.0:
@@ -378,16 +494,16 @@ def coast_cap(
     return v
 
 
-ZERO3 = (0.0, 0.0, 0.0)
-NO_CENTRIPETAL = (ZERO3, ZERO3)
+ZERO3: Final = (0.0, 0.0, 0.0)
+NO_CENTRIPETAL: Final = (ZERO3, ZERO3)
 
 
-def centripetal(lim: AxisLimits, geom) -> tuple[tuple[float, ...], tuple[float, ...]]:
+def centripetal(lim: AxisLimits, geom: Piece) -> tuple[Vec3, Vec3]:
     """Per-axis (accel / v^2, jerk / v^3) of constant-speed motion on a piece.
 
     Kept on the arc once computed: each arc meets two junctions.
     """
-    if type(geom) is not Arc:
+    if not isinstance(geom, Arc):
         return NO_CENTRIPETAL
     got = geom.cent
     if got is not None:
@@ -418,7 +534,16 @@ def _max3(x: float, y: float, z: float) -> float:
     return m
 
 
-def _jerk_cap(alpha, beta, full, lose, gap, t, c, vtop) -> float:
+def _jerk_cap(
+    alpha: float,
+    beta: float,
+    full: float,
+    lose: float,
+    gap: float,
+    t: float,
+    c: float,
+    vtop: float,
+) -> float:
     """Largest v <= vtop with alpha v^2 + beta v + lose <= full * min(1, gap / (3T (v + c))).
 
     Returns INF when even vtop (no path speed can exceed it) qualifies.
@@ -442,7 +567,7 @@ def _jerk_cap(alpha, beta, full, lose, gap, t, c, vtop) -> float:
         return 0.0
     # upper bounds of the root (comparisons rather than min(): same values, runs per block)
     if alpha > 0.0:
-        x = (k / alpha) ** (1.0 / 3.0)
+        x = fpow(k / alpha, 1.0 / 3.0)
         if x < v:
             v = x
         if c > 0.0:
@@ -479,7 +604,9 @@ def _jerk_cap(alpha, beta, full, lose, gap, t, c, vtop) -> float:
     return v if v > 0.0 else 0.0
 
 
-def piece_limits(lim: AxisLimits, geom: Line | Arc, normal_axis: int) -> tuple[float, float, float]:
+def piece_limits(lim: AxisLimits, geom: Piece, normal_axis: int) -> tuple[float, float, float]:
     if isinstance(geom, Line):
         return line_limits(lim, geom.u)
+    if not isinstance(geom, Arc):
+        raise TypeError(f"not a path piece: {geom!r}")
     return arc_limits(lim, geom, normal_axis)

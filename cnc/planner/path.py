@@ -10,11 +10,12 @@ is then an exact stop.
 from __future__ import annotations
 
 from math import isfinite
+from typing import Final
 
 from cnc.canon import ArcFeed, PathMode, SetPathMode, StraightFeed, StraightTraverse
 from cnc.errors import NcError
 from cnc.params import MachineParams
-from cnc.planner.geometry import Line, arc_from_canon, blend
+from cnc.planner.geometry import Arc, Line, Piece, Vec, Vec3, arc_from_canon, blend
 from cnc.planner.limits import (
     INF,
     AxisLimits,
@@ -26,7 +27,9 @@ from cnc.planner.limits import (
     line_limits,
 )
 
-KINK_SPAN_BREAK = 1e-9  # tangent jumps above this end a velocity span (a = 0 there)
+KINK_SPAN_BREAK: Final = 1e-9  # tangent jumps above this end a velocity span (a = 0 there)
+ZERO3: Final = (0.0, 0.0, 0.0)
+MotionCommand = StraightTraverse | StraightFeed | ArcFeed
 
 
 class Segment:
@@ -59,22 +62,66 @@ class Segment:
         "lim_at",
         "lim_jt",
         "lim",
+        "rapid",
+        "feed_v",
     )
 
-    def __init__(self, geom, line, block, feed, normal_axis, lim, exact, tolerance):
+    geom: Piece
+    s0: float
+    s1: float
+    line: int
+    block: int
+    block_last: bool
+    vphys: float
+    at: float
+    jt: float
+    feed: float | None  # mm/s, None for rapid
+    normal_axis: int
+    stop_end: bool
+    jcap_end: float
+    jcoast: float
+    jump_end: bool
+    jdu: Vec3
+    jdk: Vec3
+    next_geom: Piece | None
+    break_end: bool
+    sync_after: list
+    exact: bool
+    tolerance: float
+    lim_v: float
+    lim_at: float
+    lim_jt: float
+    lim: AxisLimits
+    rapid: bool  # feed is None (a typed copy for the planner's inner loops)
+    feed_v: float  # feed, or 0.0 for a rapid
+
+    def __init__(
+        self,
+        geom: Piece,
+        line: int,
+        block: int,
+        feed: float | None,
+        normal_axis: int,
+        lim: AxisLimits,
+        exact: bool,
+        tolerance: float,
+    ) -> None:
         self.geom = geom
         self.s0 = 0.0
         self.s1 = 0.0
         self.line = line
         self.block = block
         self.block_last = True
-        self.feed = feed  # mm/s, None for rapid
+        self.feed = feed
+        self.rapid = feed is None
+        self.feed_v = 0.0 if feed is None else feed
         self.normal_axis = normal_axis
         self.lim_v = -1.0
         self.lim_at = self.lim_jt = 0.0
-        if type(geom) is Line:
+        if isinstance(geom, Line):
             self.vphys, self.at, self.jt = line_limits(lim, geom.u)
         else:
+            assert isinstance(geom, Arc)
             # the limits at the programmed feed come with the cap: a plan asks for both
             vslow = -1.0 if feed is None else feed
             self.vphys, self.at, self.jt, at2, jt2 = arc_limits_at(
@@ -88,20 +135,21 @@ class Segment:
         self.jcap_end = 0.0
         self.jcoast = -1.0  # coasted junction cap, computed when a span boundary needs it
         self.jump_end = True
-        self.jdu = self.jdk = (0.0, 0.0, 0.0)
+        self.jdu = self.jdk = ZERO3
         self.next_geom = None
         self.break_end = True
-        self.sync_after: list = []
+        self.sync_after = []
         self.exact = exact
         self.tolerance = tolerance
         self.lim = lim
 
     def limits_at(self, v: float) -> tuple[float, float]:
         """Tangential (accel, jerk) valid up to path speed v (arcs allow more when slower)."""
-        if v >= self.vphys or self.geom.kind != "arc":
+        geom = self.geom
+        if v >= self.vphys or not isinstance(geom, Arc):
             return self.at, self.jt
         if v != self.lim_v:
-            _v, self.lim_at, self.lim_jt = arc_limits(self.lim, self.geom, self.normal_axis, v)
+            _v, self.lim_at, self.lim_jt = arc_limits(self.lim, geom, self.normal_axis, v)
             self.lim_v = v
         return self.lim_at, self.lim_jt
 
@@ -110,9 +158,12 @@ class Segment:
         """Cap of the end junction when passed in a coast (see limits.coast_cap)."""
         if self.jcoast < 0.0:
             lim = self.lim
+            nxt = self.next_geom
+            assert nxt is not None, "coast cap of a junction not yet known"
             ka1, kj1 = centripetal(lim, self.geom)
-            ka2, kj2 = centripetal(lim, self.next_geom)
-            if ka2 is not ka1:  # the larger of the two pieces, per axis
+            ka2, kj2 = centripetal(lim, nxt)
+            if isinstance(self.geom, Arc) or isinstance(nxt, Arc):
+                # the larger of the two pieces, per axis (two lines: both zero)
                 ka1 = (
                     ka1[0] if ka1[0] >= ka2[0] else ka2[0],
                     ka1[1] if ka1[1] >= ka2[1] else ka2[1],
@@ -127,34 +178,50 @@ class Segment:
         return self.jcoast
 
     def vcap(self, feed_ovr: float, rapid_ovr: float) -> float:
-        if self.feed is None:
+        if self.rapid:
             return self.vphys * rapid_ovr
-        v = self.feed * feed_ovr
+        v = self.feed_v * feed_ovr
         return v if v < self.vphys else self.vphys
 
 
 class Path:
     """Segments not yet executed, in order, with absolute path coordinates."""
 
-    def __init__(self, params: MachineParams, lim: AxisLimits, start: tuple[float, ...]):
+    params: MachineParams
+    lim: AxisLimits
+    _segs: list[Segment]
+    _pending: tuple[Segment, Segment] | None
+    changed_s: float
+    base: int
+    end_pose: Vec3
+    end_s: float
+    mode: PathMode
+    tolerance: float
+    blocks: int
+    max_feed: float
+    head_sync: list
+
+    def __init__(self, params: MachineParams, lim: AxisLimits, start: Vec) -> None:
         self.params = params
         self.lim = lim
-        self._segs: list[Segment] = []
+        self._segs = []
         # the end junction of the second-last piece into the last one, not yet computed:
         # the next blend usually uses the last line up and replaces that junction, so it
         # is computed only when someone looks (see `segs`) or the next block keeps it
-        self._pending: tuple[Segment, Segment] | None = None
+        self._pending = None
         # lowest path position of a piece added or changed since the planner last reset
         # it (profile.partition_again takes earlier parts of its last cut as they were)
         self.changed_s = INF
         self.base = 0  # executed segments dropped from the front of `segs`
-        self.end_pose = start
+        if len(start) != 3:
+            raise NcError(f"the planner moves X Y Z poses; got a start pose of {len(start)} axes")
+        self.end_pose = (float(start[0]), float(start[1]), float(start[2]))
         self.end_s = 0.0
         self.mode = PathMode.CONTINUOUS
         self.tolerance = params.default_path_tolerance
         self.blocks = 0
         self.max_feed = params.max_feed / 60.0
-        self.head_sync: list = []  # sync commands before any pending segment
+        self.head_sync = []  # sync commands before any pending segment
 
     @property
     def segs(self) -> list[Segment]:
@@ -169,20 +236,21 @@ class Path:
         tol = cmd.tolerance
         self.tolerance = tol if tol > 0.0 else self.params.default_path_tolerance
 
-    def add_motion(self, cmd, protect_s: float, join: bool = True) -> None:
+    def add_motion(self, cmd: MotionCommand, protect_s: float, join: bool = True) -> None:
         """Append a motion block. Path before `protect_s` is committed and never reshaped.
 
         `join=False` makes the junction with the previous block an exact stop (single block).
         """
         start = self.end_pose
-        end = cmd.end
-        if len(end) != len(start):
-            raise NcError(f"pose has {len(end)} axes, machine has {len(start)}", cmd.line)
-        x, y, z = end
-        end = (float(x), float(y), float(z))
+        cmd_end = cmd.end
+        if len(cmd_end) != 3:
+            raise NcError(f"pose has {len(cmd_end)} axes, machine has 3", cmd.line)
+        end = (float(cmd_end[0]), float(cmd_end[1]), float(cmd_end[2]))
         if not (isfinite(end[0]) and isfinite(end[1]) and isfinite(end[2])):
             raise NcError(f"end point {end} is not a finite position", cmd.line)
         exact = self.mode is PathMode.EXACT_STOP or cmd.exact_stop
+        geom: Piece
+        feed: float | None
         if isinstance(cmd, StraightTraverse):
             geom = Line(start, end)
             feed = None
@@ -193,9 +261,11 @@ class Path:
             normal = -1
         elif isinstance(cmd, ArcFeed):
             normal = cmd.plane.value
-            center = tuple(float(x) for x in cmd.center)
+            center = tuple([float(x) for x in cmd.center])
             if not all(isfinite(x) for x in center):
                 raise NcError(f"arc centre {center} is not a finite position", cmd.line)
+            if len(center) != 3:
+                raise NcError(f"arc centre has {len(center)} axes, machine has 3", cmd.line)
             r0 = _plane_dist(start, center, normal)
             r1 = _plane_dist(end, center, normal)
             if r0 <= 1e-9 or r1 <= 1e-9:
@@ -222,7 +292,7 @@ class Path:
         if seg.s0 < self.changed_s:
             self.changed_s = seg.s0
 
-    def _feed(self, cmd) -> float:
+    def _feed(self, cmd: StraightFeed | ArcFeed) -> float:
         if not cmd.feed or cmd.feed <= 0.0:
             raise NcError("feed move without a feed rate (F)", cmd.line)
         if not isfinite(cmd.feed):
@@ -230,7 +300,7 @@ class Path:
         f = cmd.feed / 60.0
         return f if f < self.max_feed else self.max_feed
 
-    def add_sync(self, cmd) -> None:
+    def add_sync(self, cmd: object) -> None:
         if self._pending is not None:
             self._settle()
         if self._segs:
@@ -266,11 +336,7 @@ class Path:
             self._finalised(len(self._segs) - 1)
             return  # prev.stop_end stays True: exact stop or sync point
         pg, sg = prev.geom, seg.geom
-        if (
-            isinstance(pg, Line)
-            and isinstance(sg, Line)
-            and (prev.feed is None) == (seg.feed is None)
-        ):
+        if isinstance(pg, Line) and isinstance(sg, Line) and prev.rapid == seg.rapid:
             # the blend may use what is left of prev (never what the executor has committed
             # to) and of seg: all of it when prev's rest is at most 3/4 of seg (so chains of
             # short lines become chains of arcs with no leftover line between them), else
@@ -296,7 +362,9 @@ class Path:
                     pending = self._pending
                     if pending is not None and pending[1] is prev:
                         # the junction before -> prev was never computed: replaced here
+                        # (a pending junction has its first piece before prev)
                         self._pending = None
+                        assert before is not None
                         self._set_junction(before, bseg, True)
                     elif before is not None and not before.stop_end:
                         self._set_junction(before, bseg, True)
@@ -325,7 +393,9 @@ class Path:
         self._pending = (a, b)
 
     def _settle(self) -> None:
-        a, b = self._pending
+        pending = self._pending
+        assert pending is not None
+        a, b = pending
         self._pending = None
         self._set_junction(a, b, False)
 
@@ -353,7 +423,7 @@ class Path:
         after = gb.length if b_final or type(gb) is not Line else 0.0
         gap = ga.length if ga.length > after else after
         cap = junction_cap(self.lim, du, dk, gap, at_max, not big)
-        if big and (a.feed is None) != (b.feed is None):
+        if big and a.rapid != b.rapid:
             cap = 0.0  # a corner between a rapid and a feed move is an exact stop
         jump = bool(du0 or du1 or du2 or dk[0] or dk[1] or dk[2])
         a.jcap_end = cap
@@ -366,5 +436,5 @@ class Path:
         a.stop_end = cap <= 0.0
 
 
-def _plane_dist(p, c, normal: int) -> float:
+def _plane_dist(p: Vec, c: Vec, normal: int) -> float:
     return sum((p[i] - c[i]) ** 2 for i in range(len(p)) if i != normal) ** 0.5

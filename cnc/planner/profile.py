@@ -13,12 +13,98 @@ from __future__ import annotations
 
 from bisect import bisect_left
 from math import sqrt
+from typing import Final
 
 from cnc.planner.path import Segment
 from cnc.planner.scurve import change_distance, change_phases, min_reach, reach
 
-SPAN_RATIO = 0.95
-INF = float("inf")
+SPAN_RATIO: Final = 0.95
+INF: Final = float("inf")
+
+Row = tuple[float, float, float, float, float, float]  # (t0, dt, s, v, a, j) of a phase
+
+
+class Part:
+    """One stretch of the path planned as one span, as `partition` cuts it.
+
+    `vmax`/`vmax_hi` are the lowest and highest speed caps of its pieces, `at`/`jt` their
+    smallest tangential limits, `end_cap` the speed allowed at its end junction, `stop`
+    whether it ends at rest, `coast_cap` the end junction's cap when passed in a coast and
+    `coast_in`/`coast_out` whether its ends are coasts.
+    """
+
+    __slots__ = (
+        "s0",
+        "s1",
+        "vmax",
+        "vmax_hi",
+        "at",
+        "jt",
+        "end_cap",
+        "stop",
+        "coast_cap",
+        "coast_in",
+        "coast_out",
+    )
+
+    s0: float
+    s1: float
+    vmax: float
+    vmax_hi: float
+    at: float
+    jt: float
+    end_cap: float
+    stop: bool
+    coast_cap: float
+    coast_in: bool
+    coast_out: bool
+
+    def __init__(self, s0: float, s1: float, vmax: float, at: float, jt: float) -> None:
+        self.s0 = s0
+        self.s1 = s1
+        self.vmax = vmax
+        self.vmax_hi = vmax
+        self.at = at
+        self.jt = jt
+        self.end_cap = 0.0
+        self.stop = False
+        self.coast_cap = 0.0
+        self.coast_in = False
+        self.coast_out = False
+
+    def copy(self) -> Part:
+        p = Part(self.s0, self.s1, self.vmax, self.at, self.jt)
+        p.vmax_hi = self.vmax_hi
+        p.end_cap = self.end_cap
+        p.stop = self.stop
+        p.coast_cap = self.coast_cap
+        p.coast_in = self.coast_in
+        p.coast_out = self.coast_out
+        return p
+
+    def as_list(self) -> list:
+        """[s0, s1, vmax, vmax_hi, at, jt, end_cap, stop, coast_cap, coast_in, coast_out]"""
+        return [
+            self.s0,
+            self.s1,
+            self.vmax,
+            self.vmax_hi,
+            self.at,
+            self.jt,
+            self.end_cap,
+            self.stop,
+            self.coast_cap,
+            self.coast_in,
+            self.coast_out,
+        ]
+
+    def __eq__(self, other: object) -> bool:
+        if not isinstance(other, Part):
+            return NotImplemented
+        return self.as_list() == other.as_list()
+
+    def __repr__(self) -> str:
+        return f"Part({self.as_list()!r})"
 
 
 class PlanMemo:
@@ -27,13 +113,19 @@ class PlanMemo:
 
     __slots__ = ("spans", "reach", "part_key", "part_raw", "part_ends")
 
+    spans: dict[tuple, Span]
+    reach: dict[tuple[float, float, float, float], float]
+    part_key: tuple[float, float] | None
+    part_raw: list[Part]
+    part_ends: dict[float, int]
+
     def __init__(self) -> None:
-        self.spans: dict = {}
-        self.reach: dict = {}
+        self.spans = {}
+        self.reach = {}
         # the parts of the last partition_again (before coasts), by their end position
-        self.part_key: tuple | None = None
-        self.part_raw: list[list] = []
-        self.part_ends: dict = {}
+        self.part_key = None
+        self.part_raw = []
+        self.part_ends = {}
 
 
 class Span:
@@ -54,7 +146,31 @@ class Span:
         "coast_out_t",
     )
 
-    def __init__(self, s0, s1, phases, dur, v0, v1, stop, vmax, jerk_limit=0.0):
+    s0: float
+    s1: float
+    phases: list[Row]
+    dur: float
+    v0: float
+    v1: float
+    stop: bool
+    vmax: float
+    jerk_limit: float
+    single_block_stop: bool
+    coast_in_t: float
+    coast_out_t: float
+
+    def __init__(
+        self,
+        s0: float,
+        s1: float,
+        phases: list[Row],
+        dur: float,
+        v0: float,
+        v1: float,
+        stop: bool,
+        vmax: float,
+        jerk_limit: float = 0.0,
+    ) -> None:
         self.s0 = s0
         self.s1 = s1
         self.phases = phases
@@ -88,7 +204,9 @@ class Span:
         return self.s0 + sa, va, aa, i
 
 
-def span_phases(v0, v1, vmax, length, at, jt) -> tuple[list[tuple[float, float]], float]:
+def span_phases(
+    v0: float, v1: float, vmax: float, length: float, at: float, jt: float
+) -> tuple[list[tuple[float, float]], float]:
     """(dt, jerk) phases covering `length` from v0 to v1 under vmax; returns peak too."""
     if v0 <= vmax:
         lo = v0 if v0 > v1 else v1
@@ -135,7 +253,16 @@ def _peak_acc_limited(v0: float, v1: float, length: float, a: float, j: float) -
     return vp
 
 
-def _peak_search(v0, v1, length, at, jt, lo, hi, fhi) -> tuple[float, float, float]:
+def _peak_search(
+    v0: float,
+    v1: float,
+    length: float,
+    at: float,
+    jt: float,
+    lo: float,
+    hi: float,
+    fhi: float,
+) -> tuple[float, float, float]:
     """Largest vp in [lo, hi] with both changes fitting `length` (Illinois regula falsi).
 
     `fhi` is the excess length at hi (the caller has it). Returns vp and the lengths of
@@ -171,14 +298,25 @@ def _peak_search(v0, v1, length, at, jt, lo, hi, fhi) -> tuple[float, float, flo
     return lo, d1, d2
 
 
-def _span(s0, s1, vmax, at, jt, v, v1, cin, cout, stop) -> Span:
+def _span(
+    s0: float,
+    s1: float,
+    vmax: float,
+    at: float,
+    jt: float,
+    v: float,
+    v1: float,
+    cin: float,
+    cout: float,
+    stop: bool,
+) -> Span:
     """The S-curve of one part: from v to v1 under vmax, coasts of cin/cout seconds."""
     middle = s1 - s0 - cin * v - cout * v1
     phases, _vp = span_phases(v, v1, vmax, middle if middle > 0.0 else 0.0, at, jt)
     if cout:
         phases.append((cout, 0.0))
     # the phases integrated into rows (t0, dt, s, v, a, j), times and s relative
-    rows = []
+    rows: list[Row] = []
     tt = ss = aa = 0.0
     vv = v
     if cin:  # the leading coast: constant speed
@@ -209,19 +347,32 @@ def partition(
     rapid_ovr: float,
     single_block: bool,
     stop_s: float | None,
-    vclamp: float = float("inf"),
+    vclamp: float = INF,
     ipo: float = 0.0,
-) -> list[list]:
+) -> list[Part]:
     """Cut the path from s_start to the next stop into spans.
 
-    Each item: [s0, s1, vmax, vmax_hi, at, jt, end_cap, stop, coast_cap, coast_in,
-    coast_out]. A boundary at a junction with a tangent or curvature jump is passed in a
-    coast (3 IPO cycles of constant speed each side) when that allows a higher speed than
-    the junction's share inside a span; each coast may use at most half of a span that
-    has a coast at both ends (all of it otherwise), so the spans always hold them.
+    Each item is a `Part`. A boundary at a junction with a tangent or curvature jump is
+    passed in a coast (3 IPO cycles of constant speed each side) when that allows a higher
+    speed than the junction's share inside a span; each coast may use at most half of a
+    span that has a coast at both ends (all of it otherwise), so the spans always hold them.
     """
-    out: list[list] = []
-    _cut(segs, k, s_start, feed_ovr, rapid_ovr, single_block, stop_s, vclamp, ipo, out, None)
+    out: list[Part] = []
+    has_stop = stop_s is not None
+    _cut(
+        segs,
+        k,
+        s_start,
+        feed_ovr,
+        rapid_ovr,
+        single_block,
+        has_stop,
+        stop_s if stop_s is not None else 0.0,
+        vclamp,
+        ipo,
+        out,
+        None,
+    )
     if ipo > 0.0:
         _coasts(out, ipo)
     return out
@@ -236,7 +387,7 @@ def partition_again(
     ipo: float,
     memo: PlanMemo,
     changed_s: float,
-) -> list[list]:
+) -> list[Part]:
     """`partition(segs, k, s_start, feed_ovr, rapid_ovr, False, None, ipo=ipo)`, taking the
     parts of the previous such call (kept in `memo`) where nothing they depend on changed.
 
@@ -247,24 +398,24 @@ def partition_again(
     of a piece changed since, see `Path.changed_s`), and cuts the rest afresh. The result
     equals the full cut (tests/cnc/test_planner_incremental.py).
     """
-    raw: list[list] = []
+    raw: list[Part] = []
     key = (feed_ovr, rapid_ovr)
-    ends = memo.part_ends if memo.part_key == key else None
+    ends: dict[float, int] | None = memo.part_ends if memo.part_key == key else None
     n = len(segs)
     while True:
-        hit = _cut(segs, k, s_start, feed_ovr, rapid_ovr, False, None, INF, ipo, raw, ends)
+        hit = _cut(segs, k, s_start, feed_ovr, rapid_ovr, False, False, 0.0, INF, ipo, raw, ends)
         if hit < 0:
             break
         # the cut met a boundary of the previous cut: take its parts while unchanged
         old = memo.part_raw
         j = hit + 1
         m = len(old)
-        while j < m and old[j][1] < changed_s:
+        while j < m and old[j].s1 < changed_s:
             raw.append(old[j].copy())
             j += 1
-        if raw[-1][7]:
+        if raw[-1].stop:
             break  # a taken part ended the plan (the next stop)
-        s_next = raw[-1][1]
+        s_next = raw[-1].s1
         k = bisect_left(segs, s_next, key=_seg_start)
         if k >= n:
             break
@@ -272,7 +423,7 @@ def partition_again(
         ends = None  # cut the rest afresh
     memo.part_key = key
     memo.part_raw = [p.copy() for p in raw]
-    memo.part_ends = {p[1]: i for i, p in enumerate(raw) if not p[7]}
+    memo.part_ends = {p.s1: i for i, p in enumerate(raw) if not p.stop}
     if ipo > 0.0:
         _coasts(raw, ipo)
     return raw
@@ -283,14 +434,26 @@ def _seg_start(g: Segment) -> float:
 
 
 def _cut(
-    segs, k, s_start, feed_ovr, rapid_ovr, single_block, stop_s, vclamp, ipo, out, ends
+    segs: list[Segment],
+    k: int,
+    s_start: float,
+    feed_ovr: float,
+    rapid_ovr: float,
+    single_block: bool,
+    has_stop: bool,
+    stop_s: float,
+    vclamp: float,
+    ipo: float,
+    out: list[Part],
+    ends: dict[float, int] | None,
 ) -> int:
     """Append the parts from piece k to the next stop to `out` (coasts not decided yet).
 
-    With `ends` (end position -> index of a part of a previous cut), stop after a part
-    that ends where a previous part ended and return that index; else return -1.
+    `stop_s` is a stop point when `has_stop`. With `ends` (end position -> index of a part
+    of a previous cut), stop after a part that ends where a previous part ended and return
+    that index; else return -1.
     """
-    cur = None
+    cur: Part | None = None
     n = len(segs)
     last = n - 1
     vn = -1.0  # speed cap of segs[k] when already known from the previous step
@@ -309,46 +472,46 @@ def _cut(
         else:
             gat, gjt = g.at, g.jt
         stop_here = False
-        if stop_s is not None and stop_s <= b:
+        if has_stop and stop_s <= b:
             b = stop_s
             stop_here = True
         if cur is None:
-            cur = [a, b, vc, vc, gat, gjt, 0.0, False, 0.0, False, False]
+            cur = Part(a, b, vc, gat, gjt)
         else:
-            cur[1] = b
-            if vc < cur[2]:
-                cur[2] = vc
-            if vc > cur[3]:
-                cur[3] = vc
-            if gat < cur[4]:
-                cur[4] = gat
-            if gjt < cur[5]:
-                cur[5] = gjt
+            cur.s1 = b
+            if vc < cur.vmax:
+                cur.vmax = vc
+            if vc > cur.vmax_hi:
+                cur.vmax_hi = vc
+            if gat < cur.at:
+                cur.at = gat
+            if gjt < cur.jt:
+                cur.jt = gjt
         if stop_here or g.stop_end or k == last or (single_block and g.block_last):
-            cur[7] = True
+            cur.stop = True
             out.append(cur)
             cur = None
             break
         # Segment.vcap written out: this loop runs for every piece of every plan
         h = segs[k + 1]
-        if h.feed is None:
+        if h.rapid:
             vn = h.vphys * rapid_ovr
         else:
-            vn = h.feed * feed_ovr
+            vn = h.feed_v * feed_ovr
             if vn > h.vphys:
                 vn = h.vphys
         if vn > vclamp:
             vn = vclamp
         jc = g.jcap_end
-        lo = cur[2] if cur[2] < vn else vn
-        hi = cur[3] if cur[3] > vn else vn
+        lo = cur.vmax if cur.vmax < vn else vn
+        hi = cur.vmax_hi if cur.vmax_hi > vn else vn
         if g.break_end or jc < lo or lo < SPAN_RATIO * hi:
-            cur[6] = jc if jc < lo else lo
+            cur.end_cap = jc if jc < lo else lo
             if g.jump_end and ipo > 0.0:
                 jco = g.jcoast
                 if jco < 0.0:
                     jco = g.jcoast_end
-                cur[8] = jco if jco < lo else lo
+                cur.coast_cap = jco if jco < lo else lo
             out.append(cur)
             if ends is not None:
                 hit = ends.get(b, -1)
@@ -357,31 +520,31 @@ def _cut(
             cur = None
         k += 1
     if cur is not None:
-        cur[7] = True
+        cur.stop = True
         out.append(cur)
     return -1
 
 
-def _coasts(parts: list[list], ipo: float) -> None:
+def _coasts(parts: list[Part], ipo: float) -> None:
     """Decide which span boundaries are passed in a coast, and at what speed."""
     n = len(parts)
-    cand = [p[8] > p[6] for p in parts]
+    cand = [p.coast_cap > p.end_cap for p in parts]
     t3 = 3.0 * ipo
     for i in range(n - 1):
         if not cand[i]:
             continue
         left, right = parts[i], parts[i + 1]
-        room_l = (left[1] - left[0]) * (0.5 if i > 0 and cand[i - 1] else 1.0)
-        room_r = (right[1] - right[0]) * (0.5 if cand[i + 1] and not right[7] else 1.0)
-        v = min(left[8], room_l / t3, room_r / t3)
-        if v > left[6]:
-            left[6] = v
-            left[10] = True
-            right[9] = True
+        room_l = (left.s1 - left.s0) * (0.5 if i > 0 and cand[i - 1] else 1.0)
+        room_r = (right.s1 - right.s0) * (0.5 if cand[i + 1] and not right.stop else 1.0)
+        v = min(left.coast_cap, room_l / t3, room_r / t3)
+        if v > left.end_cap:
+            left.end_cap = v
+            left.coast_out = True
+            right.coast_in = True
 
 
 def solve(
-    parts: list[list], v_start: float, ipo: float = 0.0, memo: PlanMemo | None = None
+    parts: list[Part], v_start: float, ipo: float = 0.0, memo: PlanMemo | None = None
 ) -> tuple[list[Span], bool]:
     """Backward and forward passes over the spans, then one S-curve per span.
 
@@ -399,77 +562,82 @@ def solve(
     if n == 0:
         return [], ok
     t3 = 3.0 * ipo
-    eff = []
-    for i, p in enumerate(parts):
-        length = p[1] - p[0]
-        if p[9] and i > 0:
-            length -= t3 * parts[i - 1][6]
-        if p[10]:
-            length -= t3 * p[6]
+    eff: list[float] = []
+    for i in range(n):
+        p = parts[i]
+        length = p.s1 - p.s0
+        if p.coast_in and i > 0:
+            length -= t3 * parts[i - 1].end_cap
+        if p.coast_out:
+            length -= t3 * p.end_cap
         eff.append(length if length > 0.0 else 0.0)
     vb = [0.0] * (n + 1)
-    vb[n] = 0.0 if parts[-1][7] else parts[-1][6]
-    rmemo = smemo = None
-    rfresh: dict = {}
-    fresh: dict = {}
+    vb[n] = 0.0 if parts[-1].stop else parts[-1].end_cap
+    rmemo: dict[tuple[float, float, float, float], float] | None = None
+    smemo: dict[tuple, Span] | None = None
+    rfresh: dict[tuple[float, float, float, float], float] = {}
+    fresh: dict[tuple, Span] = {}
     if memo is not None:
         rmemo, smemo = memo.reach, memo.spans
     # reach(v, ...) >= v, so when the speed to meet already reaches the caps the caps
     # decide and the S-curve reach need not be computed (most spans of a capped path)
     for i in range(n - 1, -1, -1):
         p = parts[i]
-        cap = p[2]
-        if i > 0 and parts[i - 1][6] < cap:
-            cap = parts[i - 1][6]
+        cap = p.vmax
+        if i > 0 and parts[i - 1].end_cap < cap:
+            cap = parts[i - 1].end_cap
         v = vb[i + 1]
         if v < cap:
             if rmemo is None:
-                v = reach(v, eff[i], p[4], p[5])
+                v = reach(v, eff[i], p.at, p.jt)
             else:
-                key = (v, eff[i], p[4], p[5])
-                x = rmemo.get(key)
+                rkey = (v, eff[i], p.at, p.jt)
+                x = rmemo.get(rkey)
                 if x is None:
-                    x = reach(v, eff[i], p[4], p[5])
-                rfresh[key] = x
+                    x = reach(v, eff[i], p.at, p.jt)
+                rfresh[rkey] = x
                 v = x
             if v > cap:
                 v = cap
         else:
             v = cap
         vb[i] = v
-    spans = []
+    spans: list[Span] = []
     v = v_start
     for i in range(n):
         p = parts[i]
-        at, jt = p[4], p[5]
+        at, jt = p.at, p.jt
         length = eff[i]
         v1 = vb[i + 1]
         if v < v1:
             if rmemo is None:
                 x = reach(v, length, at, jt)
             else:
-                key = (v, length, at, jt)
-                x = rmemo.get(key)
-                if x is None:
-                    x = reach(v, length, at, jt)
-                rfresh[key] = x
+                rkey = (v, length, at, jt)
+                y = rmemo.get(rkey)
+                if y is None:
+                    y = reach(v, length, at, jt)
+                rfresh[rkey] = y
+                x = y
             if x < v1:
                 v1 = x
         if v > v1 and change_distance(v, v1, at, jt) > length * (1.0 + 1e-12) + 1e-12:
             v1 = min_reach(v, length, at, jt)
             ok = False
         # the coasts actually run at v and v1 (<= the caps reserved above)
-        cin = t3 if p[9] and v > 0.0 else 0.0
-        cout = t3 if p[10] and v1 > 0.0 else 0.0
-        stop = p[7] and i == n - 1
+        cin = t3 if p.coast_in and v > 0.0 else 0.0
+        cout = t3 if p.coast_out and v1 > 0.0 else 0.0
+        stop = p.stop and i == n - 1
         if smemo is None:
-            sp = _span(p[0], p[1], p[2], at, jt, v, v1, cin, cout, stop)
+            sp = _span(p.s0, p.s1, p.vmax, at, jt, v, v1, cin, cout, stop)
         else:
-            key = (p[0], p[1], p[2], at, jt, v, v1, cin, cout, stop)
-            sp = smemo.get(key)
-            if sp is None:
-                sp = _span(p[0], p[1], p[2], at, jt, v, v1, cin, cout, stop)
-            fresh[key] = sp
+            skey = (p.s0, p.s1, p.vmax, at, jt, v, v1, cin, cout, stop)
+            got = smemo.get(skey)
+            if got is None:
+                sp = _span(p.s0, p.s1, p.vmax, at, jt, v, v1, cin, cout, stop)
+            else:
+                sp = got
+            fresh[skey] = sp
         spans.append(sp)
         v = v1
     if memo is not None:

@@ -11,6 +11,7 @@ Speeds in mm/s, accelerations mm/s^2, jerks mm/s^3, lengths mm.
 
 from __future__ import annotations
 
+from math import pow as fpow
 from math import sqrt
 
 
@@ -53,7 +54,8 @@ def reach(v1: float, length: float, a: float, j: float) -> float:
     disc = sqrt(0.25 * q * q + p * p * p / 27.0)
     u = 0.5 * q + disc
     w = 0.5 * q - disc
-    x = u ** (1.0 / 3.0) - (-w) ** (1.0 / 3.0) if w < 0.0 else u ** (1.0 / 3.0) + w ** (1.0 / 3.0)
+    third = 1.0 / 3.0
+    x = fpow(u, third) - fpow(-w, third) if w < 0.0 else fpow(u, third) + fpow(w, third)
     if x <= 0.0:
         x = q / p if p > 0.0 else 0.0
     for _ in range(3):  # Newton polish: Cardano cancels badly when p >> q

@@ -195,6 +195,12 @@ def piece_digest(segs: list) -> str:
     return d.hexdigest()
 
 
+def part_rows(parts: list) -> list:
+    """The parts of a partition as lists [s0, s1, vmax, vmax_hi, at, jt, end_cap, stop,
+    coast_cap, coast_in, coast_out] (the planner's `Part.as_list`)."""
+    return [p if isinstance(p, list) else p.as_list() for p in parts]
+
+
 def span_rows(d: Digest, spans: list) -> None:
     for sp in spans:
         d.add(sp.s0, sp.s1, sp.dur, sp.v0, sp.v1, sp.stop, sp.vmax, sp.jerk_limit)
@@ -234,14 +240,14 @@ def digests() -> dict[str, str]:
     while k < len(segs):
         window = segs[k : k + 200]
         parts = partition(window, 0, window[0].s0, 1.0, 1.0, False, None, ipo=pb.ipo_cycle_s)
-        d.add(parts)
+        d.add(part_rows(parts))
         spans, ok = solve(parts, 0.0, pb.ipo_cycle_s)
         d.add(ok)
         span_rows(d, spans)
         k += 100
     # a plan from a moving start with overrides, a stop point and a speed clamp
     parts = partition(segs, 3, segs[3].s0 + 0.01, 0.8, 0.5, False, segs[150].s1, 50.0, 0.002)
-    d.add(parts)
+    d.add(part_rows(parts))
     spans, ok = solve(parts, 20.0, 0.002)
     d.add(ok)
     span_rows(d, spans)
