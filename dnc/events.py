@@ -27,20 +27,27 @@ def record(
     The topic defaults to `fmscell/<entity>/<verb>` (the verb is the action's last part).
     """
     detail = json.loads(json.dumps(detail, default=str))  # JSON columns take plain data only
-    # The audit row by a Core insert (compiled once, reused): every change writes one, and
-    # the ORM's unit of work cost more CPU than the rest of a small state change. The outbox
-    # row stays an ORM object: the event hub learns of new events from the session's flush.
+    # Both rows by Core inserts on the tables (compiled once, reused): every change writes
+    # them, and the ORM's unit of work, even an ORM-enabled insert, cost more CPU than the
+    # rest of a small state change.
     s.execute(
         _AUDIT,
         dict(at=now, actor=actor, action=action, entity=entity, entity_id=entity_id, detail=detail),
     )
-    s.add(
-        m.OutboxEvent(
+    s.execute(
+        _OUTBOX,
+        dict(
             at=now,
             topic=topic or f"fmscell/{entity}/{action.rsplit('.', 1)[-1]}",
             payload={"action": action, "entity": entity, "id": entity_id, **detail},
-        )
+        ),
     )
+    # A Core insert is no ORM flush: tell the session's listeners (the event hub wakes its
+    # readers at commit) that this transaction wrote events.
+    s.info[OUTBOX_WRITTEN] = True
 
 
-_AUDIT = insert(m.AuditEntry)
+OUTBOX_WRITTEN = "fmscell_outbox_written"
+"""Session.info key set when a transaction wrote outbox rows (read by web_api.event_hub)."""
+_AUDIT = insert(m.AuditEntry.__table__)
+_OUTBOX = insert(m.OutboxEvent.__table__)

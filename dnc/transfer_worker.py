@@ -86,6 +86,9 @@ class TransferWorker:
         # revision to twenty machines decodes it once, not twenty times.
         self._stored_sha: OrderedDict[str, str] = OrderedDict()
         self._stored_sha_lock = threading.Lock()
+        self._texts: OrderedDict[str, str] = OrderedDict()  # content sha256 -> text
+        self._texts_chars = 0
+        self._texts_lock = threading.Lock()
 
     def recover(self) -> int:
         """After a restart: requeue interrupted transfers, fail interrupted starts."""
@@ -139,40 +142,11 @@ class TransferWorker:
             # Everything the attempt needs in one query, Core rather than ORM (twenty
             # transfers at once made the ORM's per-row work most of the host's CPU time),
             # read before the claim so the write lock is held only for the writes.
-            found = s.execute(
-                select(
-                    m.Dispatch.machine,
-                    m.Dispatch.revision_id,
-                    m.Dispatch.mode,
-                    m.Dispatch.start,
-                    m.Machine.dnc_address,
-                    m.Machine.dnc_profile,
-                    m.Revision.sha256,
-                    m.Program.number,
-                    m.Content.text,
-                )
-                .select_from(m.Dispatch)
-                .join(m.Revision, m.Revision.id == m.Dispatch.revision_id)
-                .join(m.Program, m.Program.id == m.Revision.program_id)
-                .join(m.Content, m.Content.sha256 == m.Revision.sha256)
-                .outerjoin(m.Machine, m.Machine.name == m.Dispatch.machine)
-                .where(m.Dispatch.id == dispatch_id)
-            ).one()
+            found = s.execute(_ATTEMPT, dict(dispatch_id=dispatch_id)).one()
             # Claim it: only one worker moves a pending dispatch to transferring.
-            claimed = s.execute(
-                update(m.Dispatch)
-                .where(m.Dispatch.id == dispatch_id, m.Dispatch.state == PENDING)
-                .values(state=TRANSFERRING, attempts=m.Dispatch.attempts + 1, updated_at=now)
-                .returning(
-                    m.Dispatch.attempts,
-                    m.Dispatch.bytes_sent,
-                    m.Dispatch.verified,
-                    m.Dispatch.error,
-                ),
-                execution_options=_NO_SYNC,
-            ).one_or_none()
+            claimed = s.execute(_CLAIM, dict(dispatch_id=dispatch_id, now=now)).one_or_none()
             if claimed is None:
-                return s.scalar(select(m.Dispatch.state).where(m.Dispatch.id == dispatch_id))
+                return s.scalar(select(_D.c.state).where(_D.c.id == dispatch_id))
             snap = dict(
                 id=dispatch_id,
                 machine=found.machine,
@@ -194,7 +168,7 @@ class TransferWorker:
                 sha=found.sha256,
                 number=found.number,
             )
-            text = found.text
+        text = self._text(found.sha256)
         try:
             host, port = _address(job["address"], dispatch_id)
             client = self._client(host, port, job["profile"])
@@ -248,6 +222,27 @@ class TransferWorker:
                 self._stored_sha.popitem(last=False)
         return expected
 
+    def _text(self, sha: str) -> str:
+        """The revision's text, read once for all the dispatches of it.
+
+        Content is stored by its sha256 and never changes, so a text read once stays right;
+        the cache keeps the most recently dispatched texts up to TEXT_CACHE_CHARS.
+        """
+        with self._texts_lock:
+            text = self._texts.get(sha)
+            if text is not None:
+                self._texts.move_to_end(sha)
+                return text
+        with transaction(self._sessions) as s:
+            text = s.scalar(_CONTENT, dict(sha=sha))
+        with self._texts_lock:
+            if sha not in self._texts:
+                self._texts[sha] = text
+                self._texts_chars += len(text)
+            while self._texts_chars > TEXT_CACHE_CHARS and len(self._texts) > 1:
+                self._texts_chars -= len(self._texts.popitem(last=False)[1])
+        return text
+
     def _fail(self, dispatch_id: int, attempts: int, exc: TransferError) -> str:
         now = self._now()
         retry = exc.retryable and attempts < self.retry.max_attempts
@@ -279,7 +274,6 @@ class TransferWorker:
                     verified=snap["verified"],
                     error=snap["error"],
                 ),
-                execution_options=_NO_SYNC,
             )
             _event(s, snap, now)
 
@@ -291,11 +285,38 @@ class TransferWorker:
         _event(s, {k: getattr(info, k) for k in _EVENT_FIELDS}, now)
 
 
-# No ORM object of the dispatch is in these sessions: nothing to evaluate or refresh.
-_NO_SYNC = {"synchronize_session": False}
+# Core statements on the tables, compiled once: an ORM-enabled UPDATE goes through the ORM's
+# bulk-update machinery, several times the CPU of the statement itself.
+_D = m.Dispatch.__table__
+_ATTEMPT = (
+    select(
+        _D.c.machine,
+        _D.c.revision_id,
+        _D.c.mode,
+        _D.c.start,
+        m.Machine.__table__.c.dnc_address,
+        m.Machine.__table__.c.dnc_profile,
+        m.Revision.__table__.c.sha256,
+        m.Program.__table__.c.number,
+    )
+    .select_from(_D)
+    .join(m.Revision.__table__, m.Revision.__table__.c.id == _D.c.revision_id)
+    .join(m.Program.__table__, m.Program.__table__.c.id == m.Revision.__table__.c.program_id)
+    .outerjoin(m.Machine.__table__, m.Machine.__table__.c.name == _D.c.machine)
+    .where(_D.c.id == bindparam("dispatch_id"))
+)
+_CLAIM = (
+    update(_D)
+    .where(_D.c.id == bindparam("dispatch_id"), _D.c.state == PENDING)
+    .values(state=TRANSFERRING, attempts=_D.c.attempts + 1, updated_at=bindparam("now"))
+    .returning(_D.c.attempts, _D.c.bytes_sent, _D.c.verified, _D.c.error)
+)
+_CONTENT = select(m.Content.__table__.c.text).where(
+    m.Content.__table__.c.sha256 == bindparam("sha")
+)
 _STEP = (
-    update(m.Dispatch)
-    .where(m.Dispatch.id == bindparam("dispatch_id"))
+    update(_D)
+    .where(_D.c.id == bindparam("dispatch_id"))
     .values(
         state=bindparam("state"),
         updated_at=bindparam("updated_at"),
@@ -304,6 +325,7 @@ _STEP = (
         error=bindparam("error"),
     )
 )
+TEXT_CACHE_CHARS = 64 * 1024 * 1024
 _EVENT_FIELDS = (
     "id",
     "machine",
