@@ -215,10 +215,6 @@ class Cell:
             m.start()
         for m in self.machines:
             m.wait_ready(timeout_s)
-        if fast:
-            from server.clock import FastClockGovernor
-
-            self.governor = FastClockGovernor(m.runner for m in self.machines).start()
 
     def _config_file(self) -> Path:
         if self.config_file is not None:
@@ -268,8 +264,6 @@ class Cell:
             timer.cancel()
         for loop in self.loops:
             loop.stop()
-        if getattr(self, "governor", None) is not None:
-            self.governor.stop()
         for rr in self.remote_requests:
             with contextlib.suppress(Exception):
                 rr.stop(2.0)

@@ -21,8 +21,6 @@ import time
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from server.clock import FAST_SPEED
-
 MODE_NUMBERS = {"AUTO": 1, "MDI": 2, "JOG": 3, "REF": 4}
 
 
@@ -183,9 +181,14 @@ class InProcessMachine:
         self, name: str, config, *, fast: bool, simulation: bool, ideal: bool = False
     ) -> None:
         from cnc.machine import Machine, RealtimeRunner
+        from cnc.machine.runner import FAST_SPEED, IDLE_SPEED
 
         self.machine = Machine(config, name, ideal=ideal)
-        self.runner = RealtimeRunner(self.machine, speed=FAST_SPEED if fast else 1.0)
+        # the fast clock: full speed while cutting, a slow tick while idle (see runner.py)
+        if fast:
+            self.runner = RealtimeRunner(self.machine, speed=FAST_SPEED, idle_speed=IDLE_SPEED)
+        else:
+            self.runner = RealtimeRunner(self.machine)
         self.ready = threading.Event()
         self.error: BaseException | None = None
         faces = self.machine.start_faces(simulation=simulation)

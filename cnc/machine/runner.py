@@ -6,8 +6,8 @@ import threading
 import time
 
 # the fast clock: a machine in a cycle runs at FAST_SPEED x real time (as fast as the CPU
-# allows), an idle one at IDLE_SPEED (it has nothing to hurry for and leaves the CPU to the
-# machines that cut)
+# allows), an idle one at IDLE_SPEED: it has nothing to hurry for and leaves the CPU to the
+# machines that cut (on a small host three free-running machines share one core)
 FAST_SPEED = 1000.0
 IDLE_SPEED = 4.0
 BUSY = frozenset({"ACTIVE", "INTERRUPTED", "FEED_HOLD", "OPTIONAL_STOP", "PROGRAM_STOPPED"})
