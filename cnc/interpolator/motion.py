@@ -17,7 +17,7 @@ from __future__ import annotations
 
 from typing import Final
 
-from cnc.canon import MOTION_TYPES, ArcFeed, SetPathMode, StraightFeed, StraightTraverse
+from cnc.canon import ArcFeed, SetPathMode, StraightFeed, StraightTraverse
 from cnc.errors import NcError
 from cnc.interpolator.sample import Sample
 from cnc.params import MachineParams
@@ -121,10 +121,9 @@ class Motion:
 
     def push(self, cmd: object) -> bool:
         """Queue one canonical command; False (nothing queued) when the look-ahead is full."""
-        if isinstance(cmd, MOTION_TYPES):
+        if isinstance(cmd, (StraightTraverse, StraightFeed, ArcFeed)):  # canon.MOTION_TYPES
             if self.params.lookahead <= self.path.blocks - self._blocks_done:  # space() <= 0
                 return False
-            assert isinstance(cmd, StraightTraverse | StraightFeed | ArcFeed)
             self.path.add_motion(cmd, self._protect_s(), not self.single_block)
             self._dirty = True
         elif isinstance(cmd, SetPathMode):

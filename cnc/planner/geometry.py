@@ -15,11 +15,10 @@ from __future__ import annotations
 
 from math import atan2, cos, pi, sin, sqrt, tan
 from math import pow as fpow
-from typing import Final
 
 Vec3 = tuple[float, float, float]
 Vec = tuple[float, ...]
-ZERO: Final = (0.0, 0.0, 0.0)
+ZERO: Vec3 = (0.0, 0.0, 0.0)  # (a Final tuple of floats is not set up by mypyc)
 
 
 class Piece:
@@ -64,9 +63,9 @@ class Line(Piece):
         n = sqrt(dx * dx + dy * dy + dz * dz)
         self.length = n
         if u is None:
-            u = (dx / n, dy / n, dz / n) if n > 0.0 else ZERO
+            u = (dx / n, dy / n, dz / n) if n > 0.0 else (0.0, 0.0, 0.0)
         self.u = self.t0 = self.t1 = u
-        self.k0 = self.k1 = ZERO
+        self.k0 = self.k1 = (0.0, 0.0, 0.0)
 
     def point(self, s: float) -> Vec3:
         if s <= 0.0:
@@ -81,7 +80,7 @@ class Line(Piece):
         return self.u
 
     def curvature(self, s: float) -> Vec3:
-        return ZERO
+        return (0.0, 0.0, 0.0)
 
     def with_ends(self, start: Vec3, end: Vec3) -> Line:
         """The same line shortened (direction kept exactly, so trimming never bends it)."""
@@ -296,7 +295,7 @@ def blend(
     center = (start[0] + r * n0, start[1] + r * n1, start[2] + r * n2)
     # a planar arc of constant radius (rise 0, r0 == r1): the general formulas then give
     # what the folded-in ones would (x + 0.0 for the zero terms), so one constructor serves
-    arc = Arc(start, end, center, (-n0, -n1, -n2), u1, ZERO, r, r, theta, 0.0)
+    arc = Arc(start, end, center, (-n0, -n1, -n2), u1, (0.0, 0.0, 0.0), r, r, theta, 0.0)
     return arc, d
 
 

@@ -25,7 +25,7 @@ RHO_JUMP: Final = 0.05
 RHO_ARC_A: Final = 0.96
 RHO_ARC_J: Final = 0.96
 Q_TANGENT: Final = 0.98  # share of the plane jerk for the tangential component on arcs
-POSE_AXES: Final = ("X", "Y", "Z")
+POSE_AXES = ("X", "Y", "Z")
 INF: Final = float("inf")
 
 
@@ -494,8 +494,8 @@ def coast_cap(lim: AxisLimits, du: Vec3, dk: Vec3, kacc: Vec3, kjerk: Vec3) -> f
     return v
 
 
-ZERO3: Final = (0.0, 0.0, 0.0)
-NO_CENTRIPETAL: Final = (ZERO3, ZERO3)
+ZERO3: Vec3 = (0.0, 0.0, 0.0)
+NO_CENTRIPETAL: tuple[Vec3, Vec3] = (ZERO3, ZERO3)
 
 
 def centripetal(lim: AxisLimits, geom: Piece) -> tuple[Vec3, Vec3]:
@@ -504,7 +504,7 @@ def centripetal(lim: AxisLimits, geom: Piece) -> tuple[Vec3, Vec3]:
     Kept on the arc once computed: each arc meets two junctions.
     """
     if not isinstance(geom, Arc):
-        return NO_CENTRIPETAL
+        return (0.0, 0.0, 0.0), (0.0, 0.0, 0.0)  # NO_CENTRIPETAL
     got = geom.cent
     if got is not None:
         return got

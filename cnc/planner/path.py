@@ -28,7 +28,6 @@ from cnc.planner.limits import (
 )
 
 KINK_SPAN_BREAK: Final = 1e-9  # tangent jumps above this end a velocity span (a = 0 there)
-ZERO3: Final = (0.0, 0.0, 0.0)
 MotionCommand = StraightTraverse | StraightFeed | ArcFeed
 
 
@@ -135,7 +134,7 @@ class Segment:
         self.jcap_end = 0.0
         self.jcoast = -1.0  # coasted junction cap, computed when a span boundary needs it
         self.jump_end = True
-        self.jdu = self.jdk = ZERO3
+        self.jdu = self.jdk = (0.0, 0.0, 0.0)
         self.next_geom = None
         self.break_end = True
         self.sync_after = []
