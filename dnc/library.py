@@ -19,7 +19,7 @@ from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any
 
-from sqlalchemy import and_, column, exists, func, literal_column, or_, select, table
+from sqlalchemy import Integer, and_, column, exists, func, literal_column, or_, select, table
 from sqlalchemy.exc import IntegrityError
 from sqlalchemy.orm import Session, sessionmaker
 
@@ -40,7 +40,6 @@ from dnc.tape import (
 DRAFT, RELEASED, OBSOLETE = "draft", "released", "obsolete"
 IMPORT_SUFFIXES = {".nc", ".ngc", ".tap", ".txt", ".iso", ".cnc"}
 DEFAULT_UPLOAD_LIMIT = 16 * 1024 * 1024
-TEXT_PROBE_LIMIT = 20_000
 
 Checker = Callable[[str, str], list[dict[str, Any]]]
 """(text, machine_kind) -> list of {"line", "col", "message"}; empty when the program is valid."""
@@ -102,9 +101,9 @@ class Library:
         self._checker = checker
         self.upload_limit = upload_limit
         self._now = now
-        # How many matching contents a text search maps to programs through the index before
-        # it walks the programs in page order instead (see _programs_with_text).
-        self.text_probe_limit = TEXT_PROBE_LIMIT
+        # Which side drives a text search on SQLite (see _text_drives_from_index): "auto",
+        # or "index" / "programs" to pin it (the tests check both give the same pages).
+        self.text_search_from = "auto"
 
     # ----------------------------------------------------------------- programs and revisions
 
@@ -370,9 +369,17 @@ class Library:
                 )
             )
         with transaction(self._sessions) as s:
-            if text:
-                stmt = stmt.where(_programs_with_text(s, text, self.text_probe_limit))
-            rows = list(s.scalars(stmt))
+            if text and _text_drives_from_index(s, text, number, query, self.text_search_from):
+                after = _decode_cursor(cursor) if cursor else 0
+                ids = _first_programs_with_text(s, text, stmt.whereclause, after, limit + 1)
+                rows = (
+                    list(s.scalars(select(m.Program).where(m.Program.id.in_(ids)))) if ids else []
+                )
+                rows.sort(key=lambda p: p.id)
+            else:
+                if text:
+                    stmt = stmt.where(_programs_with_text(s, text))
+                rows = list(s.scalars(stmt))
             more = len(rows) > limit
             rows = rows[:limit]
             items = self._program_infos(s, rows)
@@ -725,38 +732,84 @@ def _machine_dict(x: m.Machine) -> dict:
     )
 
 
-_CONTENTS_FTS = table("contents_fts", column("sha256"), column("text"))
+# SQLite's trigram index of every revision's text (migration 0005), contentless: its rowid
+# is program_id << 32 | revision_id, so its hits come grouped by program, in program order.
+_REVISION_TEXT = table("revision_text", column("rowid", Integer))
+_PROGRAM_SHIFT = 32
 
 
-def _programs_with_text(s: Session, text: str, probe_limit: int):
+def _match(text: str):
+    """FTS5 phrase for `text`: with the trigram tokenizer, a case-folded substring match."""
+    return literal_column("revision_text").op("MATCH")('"' + text.replace('"', '""') + '"')
+
+
+def _text_drives_from_index(
+    s: Session, text: str, number: int | None, query: str | None, pinned: str
+) -> bool:
+    """Walk the index's hits (program order) rather than the programs?
+
+    The index needs 3 characters or more. With a number or a name to look for, few programs
+    qualify and each is checked against the index directly; otherwise the hits are walked,
+    which reaches a page of programs after about a page of hits however rare the text is.
+    """
+    if s.get_bind().dialect.name != "sqlite" or len(text) < 3:
+        return False
+    if pinned != "auto":
+        return pinned == "index"
+    return number is None and not query
+
+
+def _first_programs_with_text(s: Session, text: str, where, after: int, want: int) -> list[int]:
+    """Ids of the first `want` programs past `after` that pass `where` and have `text` in a
+    revision, in id order: read off the index hits, stopping as soon as there are enough."""
+    key = _REVISION_TEXT.c.rowid
+    owner = key.op(">>")(_PROGRAM_SHIFT)
+    programs = m.Program.__table__
+    # Core on the tables: an ORM-enabled select would buffer every hit before the first
+    # one is looked at, and text in every revision has a million of them.
+    hits = (
+        select(owner)
+        .select_from(_REVISION_TEXT)
+        .join(programs, programs.c.id == owner)
+        .where(_match(text), key >= (after + 1) << _PROGRAM_SHIFT)
+        .order_by(key)
+    )
+    if where is not None:
+        hits = hits.where(where)
+    ids: list[int] = []
+    result = s.execute(hits)  # rows are stepped as they are read: the walk stops early
+    try:
+        for (program_id,) in result:
+            if not ids or ids[-1] != program_id:
+                ids.append(program_id)
+                if len(ids) == want:
+                    break
+    finally:
+        result.close()
+    return ids
+
+
+def _programs_with_text(s: Session, text: str):
     """A condition on Program.id: some revision of the program contains `text` (any case).
 
-    SQLite: the FTS5 trigram table answers a quoted phrase (a substring of 3 or more
-    characters, case-folded) from its index. A LIKE with an ESCAPE clause would not use that
-    index (FTS5 only takes a two-argument LIKE) and scanned a million rows per search.
-    The index gives contents in its own order, not in program order, so mapping every match
-    to its programs costs one lookup per match: fine for a selective search, seconds for
-    text in nearly every program (`G21`). So the index is probed for at most `probe_limit`
-    matches; beyond that (or under 3 characters, which the trigram index cannot answer) the
-    matches are dense and the search walks the programs in page order, testing each one's
-    revisions, and stops when the page is full.
-
-    PostgreSQL: ILIKE, answered by the pg_trgm GIN index when the extension is there.
+    SQLite: the program's own range of the trigram index, probed per program (the index's
+    rowid carries the program id). Under 3 characters, which the trigram index cannot
+    answer, a LIKE over the program's revisions (SQLite's LIKE folds ASCII case, as the
+    index does). PostgreSQL: ILIKE, answered by the pg_trgm GIN index when the extension
+    is there.
     """
     like = f"%{_escape_like(text)}%"
-    in_any_revision = select(m.Revision.program_id)
     if s.get_bind().dialect.name != "sqlite":
         matching = select(m.Content.sha256).where(m.Content.text.ilike(like, escape="\\"))
+        in_any_revision = select(m.Revision.program_id)
         return m.Program.id.in_(in_any_revision.where(m.Revision.sha256.in_(matching)))
     if len(text) >= 3:
-        match = literal_column("contents_fts").op("MATCH")('"' + text.replace('"', '""') + '"')
-        # Counting rowids reads only the index, not the stored text: a cheap probe.
-        probe = select(literal_column("rowid")).select_from(_CONTENTS_FTS).where(match)
-        found = s.scalar(select(func.count()).select_from(probe.limit(probe_limit + 1).subquery()))
-        if found <= probe_limit:
-            matching = select(_CONTENTS_FTS.c.sha256).where(match)
-            return m.Program.id.in_(in_any_revision.where(m.Revision.sha256.in_(matching)))
-    # SQLite's LIKE folds ASCII case, as the trigram index does.
+        key = _REVISION_TEXT.c.rowid
+        first = m.Program.id.op("<<")(_PROGRAM_SHIFT)
+        past = (m.Program.id + 1).op("<<")(_PROGRAM_SHIFT)
+        return exists(
+            select(1).select_from(_REVISION_TEXT).where(_match(text), key >= first, key < past)
+        )
     return exists(
         select(1)
         .select_from(m.Revision)

@@ -21,8 +21,9 @@ PROG = "%\nO{n}\nG0 X0\nM30\n%\n"
 
 def test_migrated_schema_matches_the_models(engine):
     def ours(obj, name, type_, reflected, compare_to):
-        # The full-text search table and index are kept by migration 0004, not by a model.
-        return not (name or "").startswith(("contents_fts", "ix_contents_text_trgm"))
+        # The text search index (SQLite FTS5 table, pg_trgm index) is kept by migrations
+        # 0004 and 0005, not by a model.
+        return not (name or "").startswith(("revision_text", "ix_contents_text_trgm"))
 
     with engine.connect() as conn:
         context = MigrationContext.configure(conn, opts={"include_object": ours})
@@ -91,3 +92,30 @@ def test_ten_concurrent_writers_on_postgres(pg_url):
     assert sorted(r.seq for r in revs) == list(range(1, 12))
     assert len(lib.search(limit=100).items) == 11
     eng.dispose()
+
+
+def test_text_index_survives_a_round_trip_through_0004_and_follows_revisions(tmp_path):
+    """0005 fills the program-keyed index from the revisions already there, its downgrade
+    restores 0004's index, and the triggers keep the index with the revisions."""
+    eng = make_engine(f"sqlite:///{tmp_path / 't.db'}")
+    migrate(eng)
+    lib = Library(session_factory(eng))
+    prog, _ = lib.create_program(number=1, name="A", text="%\nO1 (FACE MILL)\nG0 X0\n%\n")
+    lib.add_revision(prog.id, "%\nO1 (DRILL)\nG0 X0\n%\n")
+    downgrade(eng, "0004")
+    with eng.connect() as conn:
+        tables = sa.inspect(conn).get_table_names()
+        assert "contents_fts" in tables and "revision_text" not in tables
+        found = "SELECT count(*) FROM contents_fts WHERE contents_fts MATCH '\"face mill\"'"
+        assert conn.exec_driver_sql(found).scalar() == 1
+    migrate(eng)
+    assert "contents_fts" not in sa.inspect(eng).get_table_names()
+    assert [p.number for p in lib.search(text="face mill").items] == [1]
+    with eng.begin() as conn:  # a revision moved to another program, then one removed
+        other, _ = lib.create_program(number=2, name="B", text="%\nO2\nG0 X0\n%\n")
+        conn.exec_driver_sql(f"UPDATE revisions SET program_id = {other.id} WHERE seq = 2")
+    assert [p.number for p in lib.search(text="(drill)").items] == [2]
+    with eng.begin() as conn:
+        conn.exec_driver_sql(f"DELETE FROM revisions WHERE program_id = {other.id} AND seq = 2")
+    assert lib.search(text="(drill)").items == []
+    assert [p.number for p in lib.search(text="face mill").items] == [1]

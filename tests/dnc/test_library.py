@@ -258,13 +258,12 @@ def test_text_search_ignores_case_on_every_backend(library):
     assert [p.number for p in library.search(text="n20 g1").items] == [1]
 
 
-@pytest.mark.parametrize("probe_limit", [0, 3, 1000])
-def test_text_search_pages_alike_whether_from_the_index_or_by_walking_programs(
-    library, probe_limit
-):
-    """A text found in many contents is searched by walking programs in page order; a rare
-    one through the index. Both give the same pages, old revisions included."""
-    library.text_probe_limit = probe_limit
+@pytest.mark.parametrize("drive", ["auto", "index", "programs"])
+def test_text_search_pages_alike_whether_from_the_index_or_by_walking_programs(library, drive):
+    """A text search walks the index's hits in program order, or checks program after
+    program against the index (with a number or name to match, or under 3 characters).
+    Both give the same pages, old revisions included."""
+    library.text_search_from = drive
     for n in range(1, 10):
         prog, _ = library.create_program(
             number=n, name=f"p{n}", text=f"%\nO{n} (OP{n % 3})\nG0 X{n}\n%\n"
@@ -287,3 +286,6 @@ def test_text_search_pages_alike_whether_from_the_index_or_by_walking_programs(
     assert pages(text="X") == pages(text="G0 X")
     assert pages(text="T0 M6", tag="none") == [[]]
     assert pages(text='"') == [[]]
+    assert pages(text="G0 X", query="p") == pages(text="G0 X")
+    assert pages(text="(OP0", number=6) == [[6]]
+    assert pages(text="(OP0", machine_kind="lathe") == [[]]
