@@ -28,11 +28,22 @@ settings, so they are reference-counted and restored when the last shell stops.
 spins the rest (calling `sleep(0)`, which releases the GIL but returns at once), so the
 wake-up error is the spin loop's, not the timer's.
 
-What none of that helps against is the OS giving the CPU to another process at the deadline
-(a busy host). Opt-in, as LinuxCNC's RT threads and the PLC's scan thread do: a pacer with
-`rt_priority` N (or `FMSCELL_DRIVES_RT_PRIORITY=N` in the environment) asks SCHED_FIFO N for
-the thread that paces, on its first wait. It needs CAP_SYS_NICE; a refusal is reported in
-`Pacer.scheduling`, never raised, and the shell runs with ordinary scheduling.
+What none of that helps against is the OS giving the CPU to another task at the deadline.
+With that done, the few late cycles that remain are the OS's (measured per late cycle from
+`/proc/thread-self/schedstat`, see docs/drives.md): with ordinary scheduling the pacing
+thread sat on the run queue for as long as it was late (another task kept the CPU until its
+slice ended, on a tick: 4 ms at HZ=250), while the cycle's own work stays under 0.8 ms, no
+collection, page fault or other thread of ours in them; a no-work pacer, even one in C,
+misses slots the same way on the same box.
+
+Opt-in, as LinuxCNC's RT threads and the PLC's scan thread do: a pacer with `rt_priority` N
+(or `FMSCELL_DRIVES_RT_PRIORITY=N` in the environment) asks SCHED_FIFO N for the thread that
+paces, on its first wait, and with `cpu` C (or `FMSCELL_DRIVES_RT_CPU=C`, as LinuxCNC's
+RTAPI_CPU_NUMBER) pins it to CPU C, which pays on a CPU kept free for it (`isolcpus=`).
+Both need privileges (CAP_SYS_NICE) or a valid CPU; a refusal is reported in
+`Pacer.scheduling`, never raised, and the shell runs as it can. What SCHED_FIFO cannot fix is
+a kernel that does not preempt kernel code (`preempt=none`) or a hypervisor that takes the
+vCPU: a real-time kernel (PREEMPT_RT, or at least `preempt=full`) is the user's part.
 """
 
 from __future__ import annotations
@@ -128,6 +139,8 @@ class RealtimeProcess:
 
 #: environment variable read by a Pacer given no rt_priority (0 or unset = off)
 RT_PRIORITY_ENV = "FMSCELL_DRIVES_RT_PRIORITY"
+#: environment variable read by a Pacer given no cpu: pin the pacing thread to this CPU
+RT_CPU_ENV = "FMSCELL_DRIVES_RT_CPU"
 
 
 def rt_priority_from_env(environ=None) -> int:
@@ -138,6 +151,27 @@ def rt_priority_from_env(environ=None) -> int:
     if not raw.isdigit() or not 0 <= int(raw) <= 99:
         raise ValueError(f"{RT_PRIORITY_ENV}={raw!r}: must be an integer 0..99 (0 = off)")
     return int(raw)
+
+
+def rt_cpu_from_env(environ=None) -> int | None:
+    """The CPU `FMSCELL_DRIVES_RT_CPU` pins the pacing thread to (unset = no pinning)."""
+    raw = (os.environ if environ is None else environ).get(RT_CPU_ENV, "").strip()
+    if not raw:
+        return None
+    if not raw.isdigit():
+        raise ValueError(f"{RT_CPU_ENV}={raw!r}: must be a CPU number (0, 1, ...)")
+    return int(raw)
+
+
+def pin_to_cpu(cpu: int) -> str:
+    """Pin the calling thread to `cpu` (Linux: pid 0 is the calling thread); returns what
+    it got, a refusal included."""
+    try:
+        os.sched_setaffinity(0, {cpu})
+    except (OSError, AttributeError) as exc:
+        why = getattr(exc, "strerror", None) or "not available on this OS"
+        return f"any CPU (CPU {cpu} refused: {why})"
+    return f"CPU {cpu}"
 
 
 def request_fifo(priority: int) -> str:
@@ -165,7 +199,8 @@ class Pacer:
 
     `wait()` returns at the next slot (collecting garbage first when the slack allows) and
     gives its lateness; a slot that is already a whole period gone is skipped and counted.
-    `clock` and `sleep` are replaceable for tests.
+    `rt_priority` / `cpu` (None = from the environment) are applied to the thread of the first
+    wait. `clock`, `sleep`, `promote` and `pin` are replaceable for tests.
     """
 
     def __init__(
@@ -177,6 +212,8 @@ class Pacer:
         sleep=time.sleep,
         rt_priority: int | None = None,
         promote=request_fifo,
+        cpu: int | None = None,
+        pin=pin_to_cpu,
     ) -> None:
         if not period_s > 0:
             raise ValueError(f"Pacer: period_s must be > 0, got {period_s!r}")
@@ -186,6 +223,12 @@ class Pacer:
             raise ValueError(f"Pacer: rt_priority must be 0..99 (0 = off), got {rt_priority!r}")
         self.rt_priority = rt_priority
         self._promote = promote
+        if cpu is None:
+            cpu = rt_cpu_from_env()
+        elif cpu < 0:
+            raise ValueError(f"Pacer: cpu must be a CPU number >= 0, got {cpu!r}")
+        self.cpu = cpu
+        self._pin = pin
         self.scheduling = "SCHED_OTHER"  # what the pacing thread runs with, once it waited
         self.period_s = period_s
         self.spin_s = spin_s
@@ -201,6 +244,8 @@ class Pacer:
         if self.slot is None:  # the first wait, on the thread that will pace
             if self.rt_priority:
                 self.scheduling = self._promote(self.rt_priority)
+            if self.cpu is not None:
+                self.scheduling += f", {self._pin(self.cpu)}"
             self.slot = now
             return 0.0
         slot = self.slot + period

@@ -9,6 +9,7 @@ import pytest
 
 from drives.realtime import (
     FORCED_THRESHOLD,
+    RT_CPU_ENV,
     RT_PRIORITY_ENV,
     SWITCH_INTERVAL_S,
     YOUNG_THRESHOLD,
@@ -205,6 +206,59 @@ def test_a_malformed_priority_is_refused_naming_the_variable(monkeypatch, raw):
         Pacer(0.001)
     with pytest.raises(ValueError, match="rt_priority must be 0..99"):
         Pacer(0.001, rt_priority=100)
+
+
+@pytest.mark.parametrize(
+    ("cpu", "env", "pinned", "scheduling"),
+    [
+        (None, None, [], "SCHED_FIFO 7"),  # default: no pinning
+        (None, "1", [1], "SCHED_FIFO 7, CPU 1"),  # FMSCELL_DRIVES_RT_CPU
+        (0, "1", [0], "SCHED_FIFO 7, CPU 0"),  # the argument wins over the environment
+    ],
+)
+def test_pacer_pins_its_thread_on_the_first_wait_when_asked(
+    monkeypatch, cpu, env, pinned, scheduling
+):
+    if env is None:
+        monkeypatch.delenv(RT_CPU_ENV, raising=False)
+    else:
+        monkeypatch.setenv(RT_CPU_ENV, env)
+    asked: list[int] = []
+
+    def pin(n: int) -> str:
+        asked.append(n)
+        return f"CPU {n}"
+
+    clock = FakeClock()
+    pacer = Pacer(
+        0.001,
+        clock=clock,
+        sleep=clock.sleep,
+        rt_priority=7,
+        promote=lambda p: f"SCHED_FIFO {p}",
+        cpu=cpu,
+        pin=pin,
+    )
+    assert asked == []  # not on the constructing thread: on the one that paces
+    for _ in range(3):
+        pacer.wait()
+    assert asked == pinned and pacer.scheduling == scheduling
+
+
+def test_pinning_refusal_is_reported_not_raised(monkeypatch):
+    monkeypatch.delenv(RT_PRIORITY_ENV, raising=False)
+    pacer = Pacer(0.001, cpu=4096)  # no such CPU: the real call refuses it
+    pacer.wait()
+    assert pacer.scheduling.startswith("SCHED_OTHER, any CPU (CPU 4096 refused")
+
+
+@pytest.mark.parametrize("raw", ["first", "-1", "1.5"])
+def test_a_malformed_cpu_is_refused_naming_the_variable(monkeypatch, raw):
+    monkeypatch.setenv(RT_CPU_ENV, raw)
+    with pytest.raises(ValueError, match=f"FMSCELL_DRIVES_RT_CPU={raw!r}: must be a CPU"):
+        Pacer(0.001)
+    with pytest.raises(ValueError, match="cpu must be a CPU number"):
+        Pacer(0.001, cpu=-2)
 
 
 def test_axis_group_reports_its_pacers_scheduling(monkeypatch):
