@@ -28,6 +28,7 @@ import can
 
 from drives.bus.candump import CandumpWriter
 from drives.bus.frame import ERROR_FRAME_BITS, data_frame_bits, frame_bits
+from drives.bus.message import OwnedMessage, new_message
 from drives.realtime import RealtimeProcess
 
 logger = logging.getLogger(__name__)
@@ -142,35 +143,6 @@ class _Delayed:
     msg: can.Message = field(compare=False)
 
 
-_new_message = can.Message.__new__
-
-
-class OwnedMessage(can.Message):
-    """A frame its sender hands over for good: not kept, not sent twice, `data` a bytearray
-    of its own. The hub turns it into the received frame in place (a plain `can.Message`
-    again, timestamp and channel set) instead of delivering a copy: one Message less per
-    frame. The slaves and the axis group build their frames as this; any python-can bus
-    accepts it as the `can.Message` it is."""
-
-    __slots__ = ()
-
-
-def owned_frame(cob_id: int, data: bytes, remote: bool = False) -> OwnedMessage:
-    """A new standard-ID frame to hand over to a bus for good. Filled slot by slot:
-    can.Message() costs ~3 us per frame, and the slaves and the axis group send one per PDO."""
-    msg = _new_message(OwnedMessage)
-    msg.timestamp = 0.0
-    msg.arbitration_id = cob_id
-    msg.is_extended_id = False
-    msg.is_remote_frame = remote
-    msg.is_error_frame = False
-    msg.channel = None
-    msg.dlc = len(data)
-    msg.data = bytearray(data)
-    msg.is_fd = msg.is_rx = msg.bitrate_switch = msg.error_state_indicator = False
-    return msg
-
-
 def _priority(msg: can.Message) -> int:
     """Arbitration order as one int (lower wins): base ID, then 11-bit before 29-bit, then
     the extension, then data before remote. Bits: base << 20 | IDE << 19 | ext << 1 | RTR."""
@@ -246,7 +218,7 @@ class CanHub:
         self._seq = itertools.count()
         self._babbler: _Babbler | None = None
         self._wake = threading.Condition(self._lock)
-        self._thread: threading.Thread | None = None
+        self._worker: threading.Thread | None = None
         self._running = False
         self.late_ticks = 0
         self.tick_errors = 0
@@ -522,14 +494,14 @@ class CanHub:
         if latency > worst[kind]:
             worst[kind] = latency
         if type(msg) is OwnedMessage:  # handed over: it becomes the received frame
-            msg.__class__ = can.Message
+            msg.__class__ = can.Message  # type: ignore[assignment]
             msg.timestamp = end
             msg.channel = self.channel
             msg.is_rx = True
             self._fan_out(sender, msg)
             return
         # A fresh received copy of `msg`, filled slot by slot: Message() costs ~3 us.
-        wire = _new_message(can.Message)
+        wire = new_message(can.Message)
         wire.timestamp = end
         wire.arbitration_id = ident
         wire.is_extended_id = extended
@@ -589,24 +561,24 @@ class CanHub:
         """Realtime: start the delivery and tick thread."""
         if self.mode != "realtime":
             raise RuntimeError("start() is for realtime hubs; step a lockstep hub with advance()")
-        if self._thread is not None:
+        if self._worker is not None:
             return
         RealtimeProcess.acquire()  # the GC in the slack, short GIL switch interval
         self._running = True
-        self._thread = threading.Thread(
+        self._worker = threading.Thread(
             target=self._run, name=f"canhub-{self.channel}", daemon=True
         )
-        self._thread.start()
+        self._worker.start()
 
     def stop(self) -> None:
         """Realtime: stop the delivery thread (frames still queued stay queued)."""
-        if self._thread is None:
+        if self._worker is None:
             return
         with self._lock:
             self._running = False
             self._wake.notify()
-        self._thread.join(timeout=5.0)
-        self._thread = None
+        self._worker.join(timeout=5.0)
+        self._worker = None
         RealtimeProcess.release()
 
     def _run(self) -> None:
@@ -717,7 +689,7 @@ class SimBus(can.BusABC):
         if not wanted or any(a is None for a in wanted):
             self.accept_ids = None
         else:
-            self.accept_ids = set().union(*wanted)
+            self.accept_ids = {i for ids in wanted if ids is not None for i in ids}
 
     @property
     def bus_off(self) -> bool:

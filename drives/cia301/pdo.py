@@ -240,9 +240,10 @@ class PdoService:
         self.on_change()
 
     # ------------------------------------------------------------------ data
-    def unpack(self, channel: PdoChannel, data: bytes) -> None:
+    def unpack(self, channel: PdoChannel, data: bytes | bytearray) -> None:
         """Write received RPDO data to its mapped objects."""
-        for write, value in zip(channel.writers, channel.codec.unpack_from(data), strict=True):
+        codec = _codec_of(channel)
+        for write, value in zip(channel.writers, codec.unpack_from(data), strict=True):
             if write is None:
                 continue
             try:
@@ -252,11 +253,19 @@ class PdoService:
 
     def pack(self, channel: PdoChannel) -> bytes:
         """Sample the mapped objects of a TPDO."""
+        codec = _codec_of(channel)
         values = [read() for read in channel.readers]
         try:
-            return channel.codec.pack(*values)
+            return codec.pack(*values)
         except struct.error:
-            return channel.codec.pack(*(int(round(v)) for v in values))
+            return codec.pack(*(int(round(v)) for v in values))
+
+
+def _codec_of(channel: PdoChannel) -> struct.Struct:
+    codec = channel.codec
+    if codec is None:  # only a channel whose mapping was never compiled
+        raise ValueError(f"PDO {channel.number}: no mapping compiled")
+    return codec
 
 
 def _zero() -> int:

@@ -12,6 +12,7 @@ import copy
 import logging
 import threading
 import time
+from collections.abc import Callable
 from functools import partial
 
 import can
@@ -19,7 +20,8 @@ import canopen
 
 from drives import EDS_PATH
 from drives.application import DriveApplication, ObjectAccessError
-from drives.bus.hub import SimBus, owned_frame
+from drives.bus.hub import SimBus
+from drives.bus.message import owned_frame
 from drives.cia301.emcy import EmcyProducer
 from drives.cia301.heartbeat import HeartbeatConsumer, HeartbeatProducer
 from drives.cia301.nmt import (
@@ -74,12 +76,12 @@ class CanopenSlave:
         self._bus_off = False
         self._guard_toggle = 0
         self._lock = threading.RLock()
-        self._dispatch: dict[int, object] = {}
+        self._dispatch: dict[int, Callable[[can.Message], None]] = {}
         self._sync_rpdos: list[PdoChannel] = []
         self._sync_tpdos: list[PdoChannel] = []
         self._event_tpdos: list[PdoChannel] = []
         self._deadline_rpdos: list[PdoChannel] = []
-        self._thread: threading.Thread | None = None
+        self._worker: threading.Thread | None = None
         self._running = False
         self.od = ObjectDictionary(eds_path, node_id, application)
         self.emcy = EmcyProducer(self.od)
@@ -112,7 +114,7 @@ class CanopenSlave:
         if not hasattr(self, "pdo"):
             return  # services still being constructed
         n = self.node_id
-        table: dict[int, object] = {
+        table: dict[int, Callable[[can.Message], None]] = {
             0x000: self._on_nmt,
             self.sync.cob_id: self._on_sync,
             0x600 + n: self._on_sdo,
@@ -280,7 +282,7 @@ class CanopenSlave:
             self.reset_node()
         elif result == RESET_COMMUNICATION:
             self.reset_communication()
-        else:
+        elif isinstance(result, NmtState):
             self._set_state(result)
 
     def _on_guarding(self, msg: can.Message) -> None:
@@ -479,15 +481,15 @@ class CanopenSlave:
                 obj = od[index]
                 var = obj if isinstance(obj, canopen.objectdictionary.ODVariable) else obj[subindex]
                 if isinstance(value, bytes | bytearray):
-                    var.value_raw = bytes(value).hex()
+                    var.value_raw = bytes(value).hex()  # type: ignore[attr-defined]
                 elif isinstance(value, float):
-                    var.value_raw = repr(value)
+                    var.value_raw = repr(value)  # type: ignore[attr-defined]
                 elif isinstance(value, str):
-                    var.value_raw = value
+                    var.value_raw = value  # type: ignore[attr-defined]
                 else:
-                    var.value_raw = str(int(value))
+                    var.value_raw = str(int(value))  # type: ignore[attr-defined]
                 if getattr(var, "relative", False) and var.default is not None:
-                    var.default_raw = f"$NODEID+0x{var.default:X}"
+                    var.default_raw = f"$NODEID+0x{var.default:X}"  # type: ignore[attr-defined]
         canopen.export_od(od, dest, doc_type="dcf")
 
     # ------------------------------------------------------------------ realtime shell
@@ -502,20 +504,20 @@ class CanopenSlave:
                 self.bus.hub.start()
                 return
             raise RuntimeError("lockstep hub: step it with hub.advance(dt) instead of start()")
-        if self._thread is not None:
+        if self._worker is not None:
             return
         RealtimeProcess.acquire()  # the GC in the slack, short GIL switch interval
         self._running = True
-        self._thread = threading.Thread(
+        self._worker = threading.Thread(
             target=self._serve, args=(tick_s,), name=f"canopen-slave-{self.node_id}", daemon=True
         )
-        self._thread.start()
+        self._worker.start()
 
     def stop(self) -> None:
         self._running = False
-        if self._thread is not None:
-            self._thread.join(timeout=5.0)
-            self._thread = None
+        if self._worker is not None:
+            self._worker.join(timeout=5.0)
+            self._worker = None
             RealtimeProcess.release()
 
     def _serve(self, tick_s: float) -> None:

@@ -147,9 +147,12 @@ class Drive402:
         self._fe_timer = 0.0
         self._fe_latched = False
         self._split_dt, self._split = -1.0, (1, 0.0)  # advance(): last tick, its sub-steps
+        #: False runs every CSP sub-step through the generic `_substep` (the reference the
+        #: fast path is tested against; a compiled class cannot be monkeypatched)
+        self.csp_fast_path = True
         self._limit_active = False
         self._inputs = self.plant.switch_inputs()
-        self._last_sync = None
+        self._last_sync: float | None = None
         self._seg_to = self._seg_v = self._seg_t = 0.0
         self._seg_T = 0.0
         self._csv_vel = 0.0
@@ -210,7 +213,7 @@ class Drive402:
             self._entry(index, subindex)  # raises the abort saying what is missing
         return self._value(index, subindex)
 
-    def write_object(self, index: int, subindex: int, value: int | float | bytes) -> None:
+    def write_object(self, index: int, subindex: int, value: object) -> None:
         # Fast path for what RPDOs write every cycle (controlword, targets): a plain int
         # inside the object's limits needs none of the decoding and checking below.
         limits = _PLAIN_WRITES.get((index, subindex))
@@ -284,7 +287,7 @@ class Drive402:
         self._fe_window = None if window == 0xFFFFFFFF else window * self._rpu
         self._fe_timeout = od[(0x6066, 0)] * 1e-3
         self._ilim = od[(0x6072, 0)] * 1e-3 * self.params.motor.rated_current  # _current_limit
-        done = self._csp_substeps(h, n) if self._mode == CSP else 0
+        done = self._csp_substeps(h, n) if self._mode == CSP and self.csp_fast_path else 0
         for _ in range(n - done):
             self._substep(h)
         self.time += dt_s
@@ -853,6 +856,8 @@ class Drive402:
 
     def _observe_homing(self, inputs: int, new_inputs: int, th_prev: float, x_prev: float) -> None:
         hm, p = self._hm, self.plant
+        if hm is None:
+            return
         changed = inputs ^ new_inputs
         edges: dict[int, float] = {}
         if changed:

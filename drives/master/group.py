@@ -33,8 +33,9 @@ import canopen
 from canopen.sdo.exceptions import SdoError
 
 from drives import EDS_PATH
-from drives.bus.hub import CanHub, SimBus, owned_frame
+from drives.bus.hub import CanHub, SimBus
 from drives.bus.loadplan import BusOverloadError, CyclicFrame, LoadPlan, plan_load
+from drives.bus.message import owned_frame
 from drives.master import power
 from drives.master.config import AxisConfig, AxisError, AxisFault, AxisFeedback
 from drives.realtime import Pacer, RealtimeProcess
