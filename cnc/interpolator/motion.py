@@ -65,6 +65,7 @@ class Motion:
     _sb_wait: bool
     replans: int
     _memo: PlanMemo
+    _lookahead: int  # params.lookahead (params is frozen)
 
     def __init__(
         self,
@@ -78,6 +79,7 @@ class Motion:
         if params.lookahead < 1:
             raise NcError("look-ahead must hold at least one block")
         self.params = params
+        self._lookahead = params.lookahead
         self.ipo = t
         self.lim = AxisLimits.from_params(params, t)
         if start is None:
@@ -117,12 +119,12 @@ class Motion:
     # -- feeding ------------------------------------------------------------------------
     def space(self) -> int:
         """Motion blocks the look-ahead can still take."""
-        return self.params.lookahead - (self.path.blocks - self._blocks_done)
+        return self._lookahead - (self.path.blocks - self._blocks_done)
 
     def push(self, cmd: object) -> bool:
         """Queue one canonical command; False (nothing queued) when the look-ahead is full."""
         if isinstance(cmd, (StraightTraverse, StraightFeed, ArcFeed)):  # canon.MOTION_TYPES
-            if self.params.lookahead <= self.path.blocks - self._blocks_done:  # space() <= 0
+            if self._lookahead <= self.path.blocks - self._blocks_done:  # space() <= 0
                 return False
             self.path.add_motion(cmd, self._protect_s(), not self.single_block)
             self._dirty = True
@@ -478,7 +480,7 @@ class Motion:
         k = self._kdone - 1
         if 0 <= k < len(segs) and segs[k].s1 == self._s and segs[k].sync_after:
             self._sync_queue.extend(segs[k].sync_after)
-            segs[k].sync_after = []
+            segs[k].sync_after = ()
 
     def _place(self, s: float) -> None:
         segs = self.path.segs

@@ -16,11 +16,14 @@ from __future__ import annotations
 from math import atan2, cos, pi, sin, sqrt, tan
 from math import pow as fpow
 
+from cnc.planner.native import mypyc_attr
+
 Vec3 = tuple[float, float, float]
 Vec = tuple[float, ...]
 ZERO: Vec3 = (0.0, 0.0, 0.0)  # (a Final tuple of floats is not set up by mypyc)
 
 
+@mypyc_attr(acyclic=True)
 class Piece:
     """What every piece has: end points, length, unit tangents and curvature vectors at both
     ends (t0/t1, k0/k1)."""
@@ -46,6 +49,7 @@ class Piece:
         raise NotImplementedError
 
 
+@mypyc_attr(acyclic=True)
 class Line(Piece):
     """Straight piece from `start` to `end` (`u`: the unit direction, given when the line is
     a shortened copy of another, so that trimming never bends it)."""
@@ -86,7 +90,17 @@ class Line(Piece):
         """The same line shortened (direction kept exactly, so trimming never bends it)."""
         return Line(start, end, self.u)
 
+    def move_start(self, start: Vec3) -> None:
+        """Shorten this line in place to begin at `start` (as `with_ends(start, end)`)."""
+        self.start = start
+        end = self.end
+        dx = end[0] - start[0]
+        dy = end[1] - start[1]
+        dz = end[2] - start[2]
+        self.length = sqrt(dx * dx + dy * dy + dz * dz)
 
+
+@mypyc_attr(acyclic=True)
 class Arc(Piece):
     """Circle/helix: P(phi) = O + r(phi) (cos phi e1 + sin phi e2) + w * rise * phi / sweep.
 
@@ -105,6 +119,7 @@ class Arc(Piece):
         "sweep",
         "rise",
         "cent",
+        "trim",
     )
 
     center: Vec3
@@ -117,6 +132,7 @@ class Arc(Piece):
     rise: float
     # per-axis centripetal coefficients (planner.limits.centripetal), once computed
     cent: tuple[Vec3, Vec3] | None
+    trim: float  # of a G64 blend: the length trimmed from each of the two lines
 
     def __init__(
         self,
@@ -142,6 +158,7 @@ class Arc(Piece):
         self.sweep = sweep
         self.rise = rise
         self.cent = None
+        self.trim = 0.0
         rm = 0.5 * (r0 + r1)
         length = sqrt(fpow(rm * sweep, 2.0) + rise * rise)
         self.length = length
@@ -269,6 +286,14 @@ def blend(
     Returns (arc, d) where d is the length trimmed from each line, or None when the lines
     are collinear (no blend needed) or reverse (no blend possible).
     """
+    arc = blend_arc(corner, u1, u2, tolerance, avail1, avail2)
+    return None if arc is None else (arc, arc.trim)
+
+
+def blend_arc(
+    corner: Vec3, u1: Vec3, u2: Vec3, tolerance: float, avail1: float, avail2: float
+) -> Arc | None:
+    """`blend` with the trimmed length in `arc.trim` (no tuple: runs for every corner)."""
     a0, a1, a2 = u1
     b0, b1, b2 = u2
     c = a0 * b0 + a1 * b1 + a2 * b2
@@ -296,7 +321,8 @@ def blend(
     # a planar arc of constant radius (rise 0, r0 == r1): the general formulas then give
     # what the folded-in ones would (x + 0.0 for the zero terms), so one constructor serves
     arc = Arc(start, end, center, (-n0, -n1, -n2), u1, (0.0, 0.0, 0.0), r, r, theta, 0.0)
-    return arc, d
+    arc.trim = d
+    return arc
 
 
 def _dist(a: Vec, b: Vec) -> float:

@@ -19,6 +19,7 @@ from typing import Final
 
 from cnc.params import MachineParams
 from cnc.planner.geometry import Arc, Line, Piece, Vec3
+from cnc.planner.native import mypyc_attr
 
 RHO_KINK_A: Final = 0.01
 RHO_JUMP: Final = 0.05
@@ -29,6 +30,7 @@ POSE_AXES = ("X", "Y", "Z")
 INF: Final = float("inf")
 
 
+@mypyc_attr(acyclic=True)
 class AxisLimits:
     """Limits per pose index (X, Y, Z) in mm/s, mm/s^2, mm/s^3, plus the IPO cycle.
 

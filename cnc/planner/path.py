@@ -9,13 +9,14 @@ is then an exact stop.
 
 from __future__ import annotations
 
-from math import isfinite
+from collections.abc import Iterable
+from math import isinf, isnan
 from typing import Final
 
 from cnc.canon import ArcFeed, PathMode, SetPathMode, StraightFeed, StraightTraverse
 from cnc.errors import NcError
 from cnc.params import MachineParams
-from cnc.planner.geometry import Arc, Line, Piece, Vec, Vec3, arc_from_canon, blend
+from cnc.planner.geometry import Arc, Line, Piece, Vec, Vec3, arc_from_canon, blend_arc
 from cnc.planner.limits import (
     INF,
     AxisLimits,
@@ -26,11 +27,13 @@ from cnc.planner.limits import (
     junction_cap,
     line_limits,
 )
+from cnc.planner.native import mypyc_attr
 
 KINK_SPAN_BREAK: Final = 1e-9  # tangent jumps above this end a velocity span (a = 0 there)
 MotionCommand = StraightTraverse | StraightFeed | ArcFeed
 
 
+@mypyc_attr(acyclic=True)
 class Segment:
     """One piece of the path with its static limits and its end junction."""
 
@@ -84,7 +87,7 @@ class Segment:
     jdk: Vec3
     next_geom: Piece | None
     break_end: bool
-    sync_after: list
+    sync_after: tuple  # sync commands hanging on the segment's end (immutable: shared ())
     exact: bool
     tolerance: float
     lim_v: float
@@ -137,7 +140,7 @@ class Segment:
         self.jdu = self.jdk = (0.0, 0.0, 0.0)
         self.next_geom = None
         self.break_end = True
-        self.sync_after = []
+        self.sync_after = ()
         self.exact = exact
         self.tolerance = tolerance
         self.lim = lim
@@ -183,13 +186,19 @@ class Segment:
         return v if v < self.vphys else self.vphys
 
 
+@mypyc_attr(acyclic=True)
 class Path:
     """Segments not yet executed, in order, with absolute path coordinates."""
 
     params: MachineParams
     lim: AxisLimits
     _segs: list[Segment]
-    _pending: tuple[Segment, Segment] | None
+    # the end junction of the second-last piece into the last one, not yet computed:
+    # the next blend usually uses the last line up and replaces that junction, so it
+    # is computed only when someone looks (see `segs`) or the next block keeps it
+    _pend_a: Segment | None
+    _pend_b: Segment | None
+    _exact_mode: bool  # mode is PathMode.EXACT_STOP
     changed_s: float
     base: int
     end_pose: Vec3
@@ -204,10 +213,7 @@ class Path:
         self.params = params
         self.lim = lim
         self._segs = []
-        # the end junction of the second-last piece into the last one, not yet computed:
-        # the next blend usually uses the last line up and replaces that junction, so it
-        # is computed only when someone looks (see `segs`) or the next block keeps it
-        self._pending = None
+        self._pend_a = self._pend_b = None
         # lowest path position of a piece added or changed since the planner last reset
         # it (profile.partition_again takes earlier parts of its last cut as they were)
         self.changed_s = INF
@@ -217,6 +223,7 @@ class Path:
         self.end_pose = (float(start[0]), float(start[1]), float(start[2]))
         self.end_s = 0.0
         self.mode = PathMode.CONTINUOUS
+        self._exact_mode = False
         self.tolerance = params.default_path_tolerance
         self.blocks = 0
         self.max_feed = params.max_feed / 60.0
@@ -225,13 +232,14 @@ class Path:
     @property
     def segs(self) -> list[Segment]:
         """The pieces not yet executed, every junction computed."""
-        if self._pending is not None:
+        if self._pend_a is not None:
             self._settle()
         return self._segs
 
     # -- building -----------------------------------------------------------------------
     def set_path_mode(self, cmd: SetPathMode) -> None:
         self.mode = cmd.mode
+        self._exact_mode = cmd.mode is PathMode.EXACT_STOP
         tol = cmd.tolerance
         self.tolerance = tol if tol > 0.0 else self.params.default_path_tolerance
 
@@ -241,13 +249,15 @@ class Path:
         `join=False` makes the junction with the previous block an exact stop (single block).
         """
         start = self.end_pose
-        cmd_end = cmd.end
+        raw_end: Iterable[float] = cmd.end  # a tuple, but a list must not be a TypeError
+        cmd_end = raw_end if isinstance(raw_end, tuple) else tuple(raw_end)
         if len(cmd_end) != 3:
             raise NcError(f"pose has {len(cmd_end)} axes, machine has 3", cmd.line)
-        end = (float(cmd_end[0]), float(cmd_end[1]), float(cmd_end[2]))
-        if not (isfinite(end[0]) and isfinite(end[1]) and isfinite(end[2])):
+        x, y, z = float(cmd_end[0]), float(cmd_end[1]), float(cmd_end[2])
+        end = (x, y, z)
+        if not _finite(x) or not _finite(y) or not _finite(z):
             raise NcError(f"end point {end} is not a finite position", cmd.line)
-        exact = self.mode is PathMode.EXACT_STOP or cmd.exact_stop
+        exact = self._exact_mode or bool(cmd.exact_stop)
         geom: Piece
         feed: float | None
         if isinstance(cmd, StraightTraverse):
@@ -260,8 +270,8 @@ class Path:
             normal = -1
         elif isinstance(cmd, ArcFeed):
             normal = cmd.plane.value
-            center = tuple([float(x) for x in cmd.center])
-            if not all(isfinite(x) for x in center):
+            center = tuple([float(c) for c in cmd.center])
+            if not all(_finite(c) for c in center):
                 raise NcError(f"arc centre {center} is not a finite position", cmd.line)
             if len(center) != 3:
                 raise NcError(f"arc centre has {len(center)} axes, machine has 3", cmd.line)
@@ -292,18 +302,25 @@ class Path:
             self.changed_s = seg.s0
 
     def _feed(self, cmd: StraightFeed | ArcFeed) -> float:
-        if not cmd.feed or cmd.feed <= 0.0:
+        raw: object = cmd.feed  # None when the program never set F
+        if not raw:
             raise NcError("feed move without a feed rate (F)", cmd.line)
-        if not isfinite(cmd.feed):
-            raise NcError(f"feed rate {cmd.feed} is not finite", cmd.line)
-        f = cmd.feed / 60.0
+        if not isinstance(raw, float | int):
+            raise NcError(f"feed rate {raw!r} is not a number", cmd.line)
+        feed = float(raw)
+        if feed <= 0.0:
+            raise NcError("feed move without a feed rate (F)", cmd.line)
+        if not _finite(feed):
+            raise NcError(f"feed rate {raw} is not finite", cmd.line)
+        f = feed / 60.0
         return f if f < self.max_feed else self.max_feed
 
     def add_sync(self, cmd: object) -> None:
-        if self._pending is not None:
+        if self._pend_a is not None:
             self._settle()
         if self._segs:
-            self._segs[-1].sync_after.append(cmd)
+            last = self._segs[-1]
+            last.sync_after = (*last.sync_after, cmd)
             if self._segs[-1].s0 < self.changed_s:
                 self.changed_s = self._segs[-1].s0
             self._finalised(len(self._segs) - 1)
@@ -312,7 +329,7 @@ class Path:
 
     def finish(self) -> None:
         """End of program: the last segment keeps its length."""
-        if self._pending is not None:
+        if self._pend_a is not None:
             self._settle()
         if self._segs:
             self._finalised(len(self._segs) - 1)
@@ -342,9 +359,9 @@ class Path:
             # half, the other half being kept for seg's own end
             rest = min(pg.length, prev.s1 - max(protect_s, prev.s0))
             avail2 = rest if rest <= 0.75 * sg.length else 0.5 * sg.length
-            res = blend(pg.end, pg.u, sg.u, prev.tolerance, rest, avail2) if rest > 0 else None
-            if res is not None:
-                arc, d = res
+            arc = blend_arc(pg.end, pg.u, sg.u, prev.tolerance, rest, avail2) if rest > 0 else None
+            if arc is not None:
+                d = arc.trim
                 lim = self.lim
                 bseg = Segment(
                     arc, prev.line, prev.block, prev.feed, -1, lim, False, prev.tolerance
@@ -358,11 +375,10 @@ class Path:
                     bseg.block_last = prev.block_last
                     before = self._segs[-1] if self._segs else None
                     bseg.s0 = prev.s0
-                    pending = self._pending
-                    if pending is not None and pending[1] is prev:
+                    if self._pend_a is not None and self._pend_b is prev:
                         # the junction before -> prev was never computed: replaced here
                         # (a pending junction has its first piece before prev)
-                        self._pending = None
+                        self._pend_a = self._pend_b = None
                         assert before is not None
                         self._set_junction(before, bseg, True)
                     elif before is not None and not before.stop_end:
@@ -378,7 +394,8 @@ class Path:
                     self._set_junction(prev, bseg, True)
                 bseg.s1 = bseg.s0 + arc.length
                 self._segs.append(bseg)
-                seg.geom = sg.with_ends(arc.end, sg.end)
+                # (in place: seg's own line, nothing else refers to it yet)
+                sg.move_start(arc.end)
                 seg.s0 = bseg.s1
                 self._defer_junction(bseg, seg)
                 return
@@ -387,21 +404,20 @@ class Path:
 
     def _defer_junction(self, a: Segment, b: Segment) -> None:
         """Junction a -> b with b the new last piece (b_final False), computed later."""
-        if self._pending is not None:
+        if self._pend_a is not None:
             self._settle()
-        self._pending = (a, b)
+        self._pend_a = a
+        self._pend_b = b
 
     def _settle(self) -> None:
-        pending = self._pending
-        assert pending is not None
-        a, b = pending
-        self._pending = None
+        a, b = self._pend_a, self._pend_b
+        assert a is not None and b is not None
+        self._pend_a = self._pend_b = None
         self._set_junction(a, b, False)
 
     def _set_junction(self, a: Segment, b: Segment, b_final: bool) -> None:
-        pending = self._pending
-        if pending is not None and pending[0] is a:
-            self._pending = None  # superseded
+        if self._pend_a is a:
+            self._pend_a = self._pend_b = None  # superseded
         if a.s0 < self.changed_s:
             self.changed_s = a.s0
         ga, gb = a.geom, b.geom
@@ -433,6 +449,11 @@ class Path:
         a.jump_end = jump
         a.break_end = big
         a.stop_end = cap <= 0.0
+
+
+def _finite(x: float) -> bool:
+    """math.isfinite (which mypyc would call through Python; these two are native)."""
+    return not (isinf(x) or isnan(x))
 
 
 def _plane_dist(p: Vec, c: Vec, normal: int) -> float:

@@ -15,6 +15,7 @@ from bisect import bisect_left
 from math import sqrt
 from typing import Final
 
+from cnc.planner.native import mypyc_attr
 from cnc.planner.path import Segment
 from cnc.planner.scurve import change_distance, change_phases, min_reach, reach
 
@@ -24,6 +25,7 @@ INF: Final = float("inf")
 Row = tuple[float, float, float, float, float, float]  # (t0, dt, s, v, a, j) of a phase
 
 
+@mypyc_attr(acyclic=True)
 class Part:
     """One stretch of the path planned as one span, as `partition` cuts it.
 
@@ -107,6 +109,7 @@ class Part:
         return f"Part({self.as_list()!r})"
 
 
+@mypyc_attr(acyclic=True)
 class PlanMemo:
     """What one plan leaves for the next (see `solve` and `partition_again`): its parts,
     its spans and its S-curve reach results, each by what it depends on."""
@@ -128,6 +131,7 @@ class PlanMemo:
         self.part_ends = {}
 
 
+@mypyc_attr(acyclic=True)
 class Span:
     """One planned stretch [s0, s1] of the path: phases (t0, dt, s, v, a, j), s relative."""
 
@@ -204,10 +208,69 @@ class Span:
         return self.s0 + sa, va, aa, i
 
 
+@mypyc_attr(acyclic=True, free_list_len=1)
+class _Rows:
+    """Phases (dt, jerk) integrated into rows (t0, dt, s, v, a, j) as they are made, times
+    and s relative to the span start: no list of phases in between."""
+
+    __slots__ = ("rows", "tt", "ss", "vv", "aa")
+
+    rows: list[Row]
+    tt: float
+    ss: float
+    vv: float
+    aa: float
+
+    def __init__(self, v: float) -> None:
+        self.rows = []
+        self.tt = self.ss = self.aa = 0.0
+        self.vv = v
+
+    def add(self, dt: float, j: float) -> None:
+        if dt <= 0.0:
+            return
+        vv, aa = self.vv, self.aa
+        self.rows.append((self.tt, dt, self.ss, vv, aa, j))
+        self.ss += dt * (vv + dt * (0.5 * aa + dt * j / 6.0))
+        self.vv = vv + dt * (aa + 0.5 * j * dt)
+        self.aa = aa + j * dt
+        self.tt += dt
+
+    def change(self, va: float, vb: float, a: float, j: float) -> None:
+        """The phases of scurve.change_phases(va, vb, a, j), in order."""
+        if vb == va:
+            return
+        sj = j if vb > va else -j
+        dv = vb - va if vb > va else va - vb
+        if dv * j >= a * a:
+            t1 = a / j
+            t2 = dv / a - t1
+            self.add(t1, sj)
+            if t2 > 0.0:
+                self.add(t2, 0.0)
+            self.add(t1, -sj)
+            return
+        t1 = sqrt(dv / j)
+        self.add(t1, sj)
+        self.add(t1, -sj)
+
+
 def span_phases(
     v0: float, v1: float, vmax: float, length: float, at: float, jt: float
 ) -> tuple[list[tuple[float, float]], float]:
     """(dt, jerk) phases covering `length` from v0 to v1 under vmax; returns peak too."""
+    vp, cruise = _span_peak(v0, v1, vmax, length, at, jt)
+    phases = change_phases(v0, vp, at, jt)
+    if cruise > 0.0 and vp > 0.0:
+        phases.append((cruise / vp, 0.0))
+    phases += change_phases(vp, v1, at, jt)
+    return phases, vp
+
+
+def _span_peak(
+    v0: float, v1: float, vmax: float, length: float, at: float, jt: float
+) -> tuple[float, float]:
+    """Peak speed and cruise length of the span_phases profile."""
     if v0 <= vmax:
         lo = v0 if v0 > v1 else v1
     else:
@@ -224,12 +287,7 @@ def span_phases(
             d2 = change_distance(vp, v1, at, jt)
         else:
             vp, d1, d2 = _peak_search(v0, v1, length, at, jt, lo, hi, d1 + d2 - length)
-    cruise = length - d1 - d2
-    phases = change_phases(v0, vp, at, jt)
-    if cruise > 0.0 and vp > 0.0:
-        phases.append((cruise / vp, 0.0))
-    phases += change_phases(vp, v1, at, jt)
-    return phases, vp
+    return vp, length - d1 - d2
 
 
 def _peak_acc_limited(v0: float, v1: float, length: float, a: float, j: float) -> float:
@@ -312,28 +370,23 @@ def _span(
 ) -> Span:
     """The S-curve of one part: from v to v1 under vmax, coasts of cin/cout seconds."""
     middle = s1 - s0 - cin * v - cout * v1
-    phases, _vp = span_phases(v, v1, vmax, middle if middle > 0.0 else 0.0, at, jt)
-    if cout:
-        phases.append((cout, 0.0))
-    # the phases integrated into rows (t0, dt, s, v, a, j), times and s relative
-    rows: list[Row] = []
-    tt = ss = aa = 0.0
-    vv = v
+    # the phases of span_phases, integrated into rows as they come
+    out = _Rows(v)
     if cin:  # the leading coast: constant speed
-        rows.append((0.0, cin, 0.0, v, 0.0, 0.0))
-        ss = cin * v
-        tt = cin
-    for dt, j in phases:
-        if dt <= 0.0:
-            continue
-        rows.append((tt, dt, ss, vv, aa, j))
-        ss += dt * (vv + dt * (0.5 * aa + dt * j / 6.0))
-        vv += dt * (aa + 0.5 * j * dt)
-        aa += j * dt
-        tt += dt
+        out.rows.append((0.0, cin, 0.0, v, 0.0, 0.0))
+        out.ss = cin * v
+        out.tt = cin
+    vp, cruise = _span_peak(v, v1, vmax, middle if middle > 0.0 else 0.0, at, jt)
+    out.change(v, vp, at, jt)
+    if cruise > 0.0 and vp > 0.0:
+        out.add(cruise / vp, 0.0)
+    out.change(vp, v1, at, jt)
+    if cout:
+        out.add(cout, 0.0)
+    rows = out.rows
     if not rows:
         rows = [(0.0, 0.0, 0.0, v, 0.0, 0.0)]
-    sp = Span(s0, s1, rows, tt, v, v1, stop, vmax, jt)
+    sp = Span(s0, s1, rows, out.tt, v, v1, stop, vmax, jt)
     sp.coast_in_t = cin
     sp.coast_out_t = cout
     return sp
