@@ -27,6 +27,7 @@ import time
 import warnings
 from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
+from functools import partial
 
 import can
 import canopen
@@ -201,7 +202,9 @@ class AxisGroup:
         boot_timeout_s: float = 2.0,
         paced: bool = False,
     ) -> None:
-        bus_list = list(buses) if isinstance(buses, list | tuple) else [buses]
+        bus_list: list[can.BusABC] = (
+            list(buses) if isinstance(buses, list | tuple) else [buses]  # type: ignore[list-item]
+        )
         if not bus_list:
             raise ValueError("axis group: no CAN bus given")
         self.axes_config = tuple(axes)
@@ -247,7 +250,11 @@ class AxisGroup:
         self._hb_elapsed = 0.0
         self._waiting = 0
         self._lines = [_Line(i, b, self.lockstep) for i, b in enumerate(bus_list)]
-        self._hubs = list(dict.fromkeys(line.hub for line in self._lines if line.lockstep))
+        self._hubs: list[CanHub] = list(
+            dict.fromkeys(
+                line.hub for line in self._lines if line.hub is not None and line.lockstep
+            )
+        )
         self._axes: dict[str, _Axis] = {}
         seen_nodes: set[tuple[int, int]] = set()
         for cfg in self.axes_config:
@@ -307,17 +314,17 @@ class AxisGroup:
     # ------------------------------------------------------------------ bus callbacks
     def _subscribe(self, axis: _Axis) -> None:
         net, n = axis.line.network, axis.node_id
-        axis.line.cyclic[0x180 + n] = lambda data, a=axis: self._on_tpdo1(a, data)
-        axis.line.cyclic[0x280 + n] = lambda data, a=axis: self._on_tpdo2(a, data)
-        net.subscribe(0x180 + n, lambda cob, data, ts, a=axis: self._on_tpdo1(a, data))
-        net.subscribe(0x280 + n, lambda cob, data, ts, a=axis: self._on_tpdo2(a, data))
-        net.subscribe(0x080 + n, lambda cob, data, ts, a=axis: self._on_emcy(a, data))
-        net.subscribe(0x700 + n, lambda cob, data, ts, a=axis: self._on_heartbeat(a, data))
+        axis.line.cyclic[0x180 + n] = partial(self._on_tpdo1, axis)
+        axis.line.cyclic[0x280 + n] = partial(self._on_tpdo2, axis)
+        net.subscribe(0x180 + n, partial(_from_network, self._on_tpdo1, axis))
+        net.subscribe(0x280 + n, partial(_from_network, self._on_tpdo2, axis))
+        net.subscribe(0x080 + n, partial(_from_network, self._on_emcy, axis))
+        net.subscribe(0x700 + n, partial(_from_network, self._on_heartbeat, axis))
 
     def _now(self) -> float:
         return self.time if self.lockstep else time.perf_counter() - self._t0
 
-    def _on_tpdo1(self, axis: _Axis, data: bytes) -> None:
+    def _on_tpdo1(self, axis: _Axis, data: bytes | bytearray) -> None:
         if len(data) < 6:
             return
         sw, pos = _TPDO1.unpack_from(data)
@@ -330,11 +337,11 @@ class AxisGroup:
                 if self._waiting <= 0:
                     self._cond.notify_all()
 
-    def _on_tpdo2(self, axis: _Axis, data: bytes) -> None:
+    def _on_tpdo2(self, axis: _Axis, data: bytes | bytearray) -> None:
         if len(data) >= 4:
             axis.fe = _I32.unpack_from(data)[0]
 
-    def _on_emcy(self, axis: _Axis, data: bytes) -> None:
+    def _on_emcy(self, axis: _Axis, data: bytes | bytearray) -> None:
         if len(data) < 3:
             return
         code, register = _EMCY.unpack_from(data)
@@ -344,7 +351,7 @@ class AxisGroup:
                 return
             self._report(axis, code, register, power.emcy_text(code), "emcy")
 
-    def _on_heartbeat(self, axis: _Axis, data: bytes) -> None:
+    def _on_heartbeat(self, axis: _Axis, data: bytes | bytearray) -> None:
         if not data:
             return
         state = data[0] & 0x7F
@@ -533,7 +540,9 @@ class AxisGroup:
                 (axis.name,),
             ) from exc
 
-    def sdo_read(self, axis: str, index: int, sub: int = 0) -> int:
+    def sdo_read(
+        self, axis: str, index: int, sub: int = 0
+    ) -> int | float | str | bytes | bytearray:
         """Read an object of an axis's drive by SDO (diagnostics: 0x603F, 0x1001, ...)."""
         a = self._axis(axis)
         obj = a.node.object_dictionary[index]
@@ -588,7 +597,7 @@ class AxisGroup:
                 done = time.perf_counter()
                 self.stats.cycles += 1
                 self.stats.tpdo_latency_s.append(done - self._sync_sent_at)
-                if done > self._slot + self.ipo_cycle_s:
+                if self._slot is not None and done > self._slot + self.ipo_cycle_s:
                     self.stats.late_cycles += 1
         else:
             self._await_tpdos(n)
@@ -774,7 +783,8 @@ class AxisGroup:
 
     def _error_code(self, axis: _Axis) -> str:
         try:
-            return f"0x{self.sdo_read(axis.name, 0x603F):04X}"
+            code = self.sdo_read(axis.name, 0x603F)
+            return f"0x{code:04X}" if isinstance(code, int) else "unreadable"
         except Exception:  # diagnostics only: the message must still come out
             return "unreadable"
 
@@ -937,3 +947,14 @@ class AxisGroup:
 
     def __exit__(self, *exc: object) -> None:
         self.close()
+
+
+def _from_network(
+    handler: Callable[[_Axis, bytes | bytearray], None],
+    axis: _Axis,
+    cob_id: int,
+    data: bytes | bytearray,
+    timestamp: float,
+) -> None:
+    """A canopen Network subscriber (cob_id, data, timestamp) calling `handler(axis, data)`."""
+    handler(axis, data)
