@@ -178,8 +178,11 @@ class FaultSchedule:
         return tuple(self._pending)
 
     def due(self, t_s: float) -> list[FaultSpec]:
-        n = 0
+        pending = self._pending
         # half a microsecond of slack: t is a multiple of the IPO cycle in floating point
+        if not pending or pending[0].at_s > t_s + 5e-7:
+            return []  # every cycle but the one a fault is due in: no list slicing
+        n = 0
         while n < len(self._pending) and self._pending[n].at_s <= t_s + 5e-7:
             n += 1
         out, self._pending = self._pending[:n], self._pending[n:]

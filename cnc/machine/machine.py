@@ -199,11 +199,12 @@ class Machine:
         if status.execution != "ACTIVE" or not fb.enabled:
             self._path.clear()
             return
-        point = tuple(self.last_targets.get(a, 0.0) for a in self.axis_names)
+        names, targets, fb_actual = self.axis_names, self.last_targets, fb.actual
+        point = tuple([targets.get(a, 0.0) for a in names])
         path = self._path
         if not path or path[-1] != point:
             path.append(point)
-        actual = tuple(fb.actual.get(a, 0.0) for a in self.axis_names)
+        actual = tuple([fb_actual.get(a, 0.0) for a in names])
         # the axes lag behind the newest setpoint: walk back from it to the first local
         # minimum of the distance (a path that comes back on itself is not mistaken for it)
         j = len(path) - 1
