@@ -9,7 +9,7 @@ from collections.abc import Callable, Iterable, Iterator
 
 from dnc.errors import DncError, NotFound
 from dnc.library import Library, RevisionInfo
-from dnc.transfer import DncClient, TransferError
+from dnc.transfer import CHUNK, DncClient, TransferError
 
 _SEQUENCE = re.compile(r"^\s*/?\s*N(\d+)", re.I)
 
@@ -29,7 +29,7 @@ def client_for(library: Library, machine: str, **overrides) -> DncClient:
         parity=bool(profile.get("parity", False)),
         timeout_s=float(profile.get("timeout_s", 10.0)),
         xoff_timeout_s=float(profile.get("xoff_timeout_s", 30.0)),
-        chunk=int(profile.get("chunk", 1024)),
+        chunk=int(profile.get("chunk", CHUNK)),
     )
 
 

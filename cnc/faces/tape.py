@@ -42,14 +42,12 @@ def add_parity(data: bytes) -> bytes:
 
 def parity_error_at(data: bytes) -> int | None:
     """Offset of the first byte with odd parity, or None."""
-    for i, b in enumerate(data):
-        if _ONES[b] % 2:
-            return i
-    return None
+    i = data.translate(_ODD_MARK).find(1)
+    return None if i < 0 else i
 
 
 def strip_parity(data: bytes) -> bytes:
-    return bytes(b & 0x7F for b in data)
+    return data.translate(_STRIP)
 
 
 def encode_program(text: str, *, parity: bool = False, leader: int = 0) -> bytes:
