@@ -11,13 +11,13 @@ candump byte for byte. `cnc.machine.runner.RealtimeRunner` paces `step` to the w
 from __future__ import annotations
 
 import dataclasses
-import math
 import queue
 from collections import deque
 from collections.abc import Callable
 from typing import TextIO
 
 from cnc.machine.axes import CanopenAxes, IdealAxes
+from cnc.machine.contour import contour_error
 from cnc.machine.contract import CommandRefused, CycleInputs, controller_class
 from cnc.machine.faults import FaultSchedule, FaultSpec, parse_fault_spec
 from cnc.machine.records import EventLog, TraceWriter
@@ -204,16 +204,7 @@ class Machine:
         path = self._path
         if not path or path[-1] != point:
             path.append(point)
-        actual = tuple([fb_actual.get(a, 0.0) for a in names])
-        # the axes lag behind the newest setpoint: walk back from it to the first local
-        # minimum of the distance (a path that comes back on itself is not mistaken for it)
-        j = len(path) - 1
-        best = _seg_dist(path, j, actual)
-        while j > 0:
-            d = _seg_dist(path, j - 1, actual)
-            if d > best:
-                break
-            best, j = d, j - 1
+        best = contour_error(path, tuple([fb_actual.get(a, 0.0) for a in names]))
         if best > self.max_contour_error:
             self.max_contour_error = best
 
@@ -391,25 +382,6 @@ class Machine:
             self.faces = None
         self.axes.close()
         self.events.close()
-
-
-def _seg_dist(path, j: int, p: tuple[float, ...]) -> float:
-    """Distance from p to the path segment ending at point j (a point for j = 0)."""
-    b = path[j]
-    if j == 0:
-        return math.dist(p, b)
-    a = path[j - 1]
-    den = dot = ap2 = 0.0
-    for ai, bi, pi in zip(a, b, p, strict=True):
-        d, e = bi - ai, pi - ai
-        den += d * d
-        dot += d * e
-        ap2 += e * e
-    if den == 0.0 or dot <= 0.0:
-        return math.sqrt(ap2)
-    if dot >= den:
-        return math.dist(p, b)
-    return math.sqrt(max(0.0, ap2 - dot * dot / den))
 
 
 def _plain(args: dict) -> dict:
