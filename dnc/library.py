@@ -357,7 +357,13 @@ class Library:
             stmt = stmt.where(m.Program.number == number)
         if query:
             like = f"%{_escape_like(query.lower())}%"
-            conds = [func.lower(m.Program.name).like(like, escape="\\")]
+            name = m.Program.name
+            bind = self._sessions.kw.get("bind")
+            if bind is None or bind.dialect.name != "sqlite":
+                # SQLite's LIKE folds ASCII case itself, exactly as its lower() would (both
+                # leave other letters alone); lower() on every name doubled the scan's cost.
+                name = func.lower(name)
+            conds = [name.like(like, escape="\\")]
             digits = query.upper().removeprefix("O")
             if digits.isdigit():
                 conds.append(m.Program.number == int(digits))

@@ -289,3 +289,9 @@ def test_text_search_pages_alike_whether_from_the_index_or_by_walking_programs(l
     assert pages(text="G0 X", query="p") == pages(text="G0 X")
     assert pages(text="(OP0", number=6) == [[6]]
     assert pages(text="(OP0", machine_kind="lathe") == [[]]
+
+
+def test_name_search_ignores_case_on_every_backend(library):
+    library.create_program(number=1, name="Bracket LEFT", text=PROG.replace("O1000", "O1"))
+    assert [p.number for p in library.search(query="bracket left").items] == [1]
+    assert [p.number for p in library.search(query="BRACKET l").items] == [1]
