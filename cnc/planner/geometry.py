@@ -13,6 +13,7 @@ C values. The source is the reference and must give the same floats when run as 
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from math import atan2, cos, pi, sin, sqrt, tan
 from math import pow as fpow
 
@@ -250,7 +251,12 @@ class Arc(Piece):
 
 
 def arc_from_canon(
-    start: Vec, end: Vec, center: Vec, normal_axis: int, clockwise: bool, turns: int
+    start: Sequence[float],
+    end: Sequence[float],
+    center: Sequence[float],
+    normal_axis: int,
+    clockwise: bool,
+    turns: int,
 ) -> Arc:
     """Build the closed-form arc of a G2/G3 block (plane given by its normal axis index)."""
     k = normal_axis
@@ -325,12 +331,13 @@ def blend_arc(
     return arc
 
 
-def _dist(a: Vec, b: Vec) -> float:
+def _dist(a: Vec3, b: Vec3) -> float:
     return sqrt((a[0] - b[0]) ** 2 + (a[1] - b[1]) ** 2 + (a[2] - b[2]) ** 2)
 
 
-def distance_to_piece(p: Vec, piece: Piece) -> float:
+def distance_to_piece(pose: Sequence[float], piece: Piece) -> float:
     """Distance from p to a programmed piece (used by tests and the plan report)."""
+    p = (float(pose[0]), float(pose[1]), float(pose[2]))
     if isinstance(piece, Line):
         u = piece.u
         st = piece.start
