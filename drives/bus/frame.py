@@ -8,10 +8,11 @@ is kept for load planning, where the payload is not known yet.
 from __future__ import annotations
 
 from functools import lru_cache
+from typing import Final
 
-CRC15_POLY = 0x4599
+CRC15_POLY: Final = 0x4599
 # CRC delimiter 1 + ACK slot 1 + ACK delimiter 1 + EOF 7 + intermission 3: never stuffed.
-TRAILER_BITS = 13
+TRAILER_BITS: Final = 13
 
 
 def crc15(bits: list[int]) -> int:
@@ -111,7 +112,7 @@ def _crc15_table() -> list[int]:
     return table
 
 
-_CRC_TABLE = _crc15_table()
+_CRC_TABLE: Final = _crc15_table()
 
 
 def _stuff_table(width: int) -> list[int]:
@@ -139,9 +140,9 @@ def _stuff_table(width: int) -> list[int]:
     return table
 
 
-_STUFF8 = _stuff_table(8)
-_STUFF7 = _stuff_table(7)
-_STUFF1 = _stuff_table(1)
+_STUFF8: Final = _stuff_table(8)
+_STUFF7: Final = _stuff_table(7)
+_STUFF1: Final = _stuff_table(1)
 
 
 def _header_state(can_id: int, extended: bool, remote: bool, dlc: int) -> tuple[int, int, int, int]:
@@ -175,7 +176,7 @@ def _header_state(can_id: int, extended: bool, remote: bool, dlc: int) -> tuple[
     return crc, state, stuff, header_bits
 
 
-_HEADERS: dict[tuple[int, bool, bool, int], tuple[int, int, int, int]] = {}
+_HEADERS: Final[dict[tuple[int, bool, bool, int], tuple[int, int, int, int]]] = {}
 
 
 @lru_cache(maxsize=8192)
@@ -250,4 +251,6 @@ def worst_case_bits(data_len: int, *, extended: bool = False) -> int:
     return nominal_bits(data_len, extended=extended) + (g + 8 * data_len - 1) // 4
 
 
-ERROR_FRAME_BITS = 6 + 8 + 3  # error flag, error delimiter, intermission (superposition ignored)
+ERROR_FRAME_BITS: Final = (
+    6 + 8 + 3
+)  # error flag, error delimiter, intermission (superposition ignored)

@@ -242,8 +242,13 @@ class PdoService:
     # ------------------------------------------------------------------ data
     def unpack(self, channel: PdoChannel, data: bytes | bytearray) -> None:
         """Write received RPDO data to its mapped objects."""
-        codec = _codec_of(channel)
-        for write, value in zip(channel.writers, codec.unpack_from(data), strict=True):
+        values = _codec_of(channel).unpack_from(data)
+        writers = channel.writers
+        if len(values) != len(writers):
+            raise ValueError(f"PDO {channel.number}: {len(values)} values, {len(writers)} writers")
+        # indexed, not zip(strict=True): compiled, the keyword argument costs a string per call
+        for i in range(len(writers)):
+            write, value = writers[i], values[i]
             if write is None:
                 continue
             try:

@@ -14,6 +14,7 @@ import threading
 import time
 from collections.abc import Callable
 from functools import partial
+from typing import Final
 
 import can
 import canopen
@@ -42,13 +43,13 @@ from drives.realtime import RealtimeProcess
 
 logger = logging.getLogger(__name__)
 
-EMCY_HEARTBEAT_LOST = 0x8130
-EMCY_BUS_OFF_RECOVERED = 0x8140
-EMCY_RPDO_TIMEOUT = 0x8250
-EMCY_SYNC_TIMEOUT = 0x8100
-EMCY_PDO_LENGTH = 0x8210
-EMCY_PDO_LENGTH_EXCEEDED = 0x8220
-EMCY_SYNC_LENGTH = 0x8240
+EMCY_HEARTBEAT_LOST: Final = 0x8130
+EMCY_BUS_OFF_RECOVERED: Final = 0x8140
+EMCY_RPDO_TIMEOUT: Final = 0x8250
+EMCY_SYNC_TIMEOUT: Final = 0x8100
+EMCY_PDO_LENGTH: Final = 0x8210
+EMCY_PDO_LENGTH_EXCEEDED: Final = 0x8220
+EMCY_SYNC_LENGTH: Final = 0x8240
 
 
 class CanopenSlave:

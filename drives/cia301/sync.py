@@ -2,10 +2,12 @@
 
 from __future__ import annotations
 
+from typing import Final
+
 from drives.application import ABORT_DEVICE_STATE, ABORT_VALUE_RANGE, ObjectAccessError
 from drives.cia301.od import Entry, ObjectDictionary
 
-SYNC_TIMEOUT_FACTOR = 1.5  # CANopenNode: SYNC lost after 1.5 x 0x1006
+SYNC_TIMEOUT_FACTOR: Final = 1.5  # CANopenNode: SYNC lost after 1.5 x 0x1006
 
 
 class SyncConsumer:

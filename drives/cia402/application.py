@@ -16,6 +16,7 @@ from __future__ import annotations
 import math
 import struct
 from dataclasses import replace
+from typing import Final
 
 from drives.application import (
     ABORT_DEVICE_STATE,
@@ -57,8 +58,8 @@ from drives.plant import OFF, POSITION, VELOCITY, Plant, PlantParams
 from drives.plant.plant import FOLLOWING_ERROR
 
 PP, PV, HOMING, CSP, CSV = 1, 3, 6, 8, 9
-_ENERGIZED = (State.OPERATION_ENABLED, State.QUICK_STOP_ACTIVE, State.FAULT_REACTION_ACTIVE)
-_STRUCT = {
+_ENERGIZED: Final = (State.OPERATION_ENABLED, State.QUICK_STOP_ACTIVE, State.FAULT_REACTION_ACTIVE)
+_STRUCT: Final = {
     ("i8", 1): "<b",
     ("u8", 1): "<B",
     ("i16", 2): "<h",
@@ -68,7 +69,7 @@ _STRUCT = {
 }
 
 
-_KEYS = frozenset((index, sub) for index, subs in OBJECTS.items() for sub in subs)
+_KEYS: Final = frozenset((index, sub) for index, subs in OBJECTS.items() for sub in subs)
 
 
 def _plain_write_limits() -> dict[tuple[int, int], tuple[int, int, frozenset[int] | None]]:
@@ -88,7 +89,7 @@ def _plain_write_limits() -> dict[tuple[int, int], tuple[int, int, frozenset[int
     return out
 
 
-_PLAIN_WRITES = _plain_write_limits()
+_PLAIN_WRITES: Final = _plain_write_limits()
 
 
 class Drive402:

@@ -28,6 +28,7 @@ import warnings
 from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
 from functools import partial
+from typing import Final
 
 import can
 import canopen
@@ -43,12 +44,13 @@ from drives.realtime import Pacer, RealtimeProcess
 
 logger = logging.getLogger(__name__)
 
-_RPDO = struct.Struct("<Hi")  # controlword, target position
-_TPDO1 = struct.Struct("<Hi")  # statusword, position actual
-_I32 = struct.Struct("<i")
-_EMCY = struct.Struct("<HB")
-_OE_MASK, _OE = 0x6F, 0x27
-_STATE_NAMES: dict[int, str] = {}  # statusword -> power state name (at most 65536 entries)
+_RPDO: Final = struct.Struct("<Hi")  # controlword, target position
+_TPDO1: Final = struct.Struct("<Hi")  # statusword, position actual
+_I32: Final = struct.Struct("<i")
+_EMCY: Final = struct.Struct("<HB")
+_OE_MASK: Final = 0x6F
+_OE: Final = 0x27
+_STATE_NAMES: Final[dict[int, str]] = {}  # statusword -> power state name (at most 65536 entries)
 
 
 @dataclass
