@@ -21,6 +21,9 @@ from cnc.planner.scurve import change_distance, change_phases, min_reach, reach
 
 SPAN_RATIO: Final = 0.95
 INF: Final = float("inf")
+# The S-curve reach results are memoised only when this module runs as Python: compiled,
+# `reach` costs less than hashing its four floats into a dict key (same results either way).
+REACH_MEMO: Final = __file__.endswith(".py")
 
 Row = tuple[float, float, float, float, float, float]  # (t0, dt, s, v, a, j) of a phase
 
@@ -116,7 +119,7 @@ class PlanMemo:
 
     __slots__ = ("spans", "reach", "part_key", "part_raw", "part_ends")
 
-    spans: dict[tuple, Span]
+    spans: dict[float, Span]  # by start position; the other inputs are checked on the span
     reach: dict[tuple[float, float, float, float], float]
     part_key: tuple[float, float] | None
     part_raw: list[Part]
@@ -148,6 +151,7 @@ class Span:
         "single_block_stop",
         "coast_in_t",
         "coast_out_t",
+        "accel_limit",
     )
 
     s0: float
@@ -162,6 +166,7 @@ class Span:
     single_block_stop: bool
     coast_in_t: float
     coast_out_t: float
+    accel_limit: float  # the tangential acceleration limit it was planned with
 
     def __init__(
         self,
@@ -187,6 +192,7 @@ class Span:
         self.single_block_stop = False
         self.coast_in_t = 0.0  # leading/trailing constant-speed time around a junction
         self.coast_out_t = 0.0
+        self.accel_limit = 0.0
 
     def state(self, t: float, hint: int = 0) -> tuple[float, float, float, int]:
         """(s, v, a, phase index) at time t into the span; s is absolute and clamped."""
@@ -389,6 +395,7 @@ def _span(
     sp = Span(s0, s1, rows, out.tt, v, v1, stop, vmax, jt)
     sp.coast_in_t = cin
     sp.coast_out_t = cout
+    sp.accel_limit = at
     return sp
 
 
@@ -627,11 +634,13 @@ def solve(
     vb = [0.0] * (n + 1)
     vb[n] = 0.0 if parts[-1].stop else parts[-1].end_cap
     rmemo: dict[tuple[float, float, float, float], float] | None = None
-    smemo: dict[tuple, Span] | None = None
+    smemo: dict[float, Span] | None = None
     rfresh: dict[tuple[float, float, float, float], float] = {}
-    fresh: dict[tuple, Span] = {}
+    fresh: dict[float, Span] = {}
     if memo is not None:
-        rmemo, smemo = memo.reach, memo.spans
+        smemo = memo.spans
+        if REACH_MEMO:
+            rmemo = memo.reach
     # reach(v, ...) >= v, so when the speed to meet already reaches the caps the caps
     # decide and the S-curve reach need not be computed (most spans of a capped path)
     for i in range(n - 1, -1, -1):
@@ -684,13 +693,25 @@ def solve(
         if smemo is None:
             sp = _span(p.s0, p.s1, p.vmax, at, jt, v, v1, cin, cout, stop)
         else:
-            skey = (p.s0, p.s1, p.vmax, at, jt, v, v1, cin, cout, stop)
-            got = smemo.get(skey)
-            if got is None:
-                sp = _span(p.s0, p.s1, p.vmax, at, jt, v, v1, cin, cout, stop)
-            else:
+            # a span of the last plan that starts here, if all its inputs are these
+            # (compared one by one: cheaper than hashing all of them into the key)
+            got = smemo.get(p.s0)
+            if (
+                got is not None
+                and got.s1 == p.s1
+                and got.vmax == p.vmax
+                and got.accel_limit == at
+                and got.jerk_limit == jt
+                and got.v0 == v
+                and got.v1 == v1
+                and got.coast_in_t == cin
+                and got.coast_out_t == cout
+                and got.stop == stop
+            ):
                 sp = got
-            fresh[skey] = sp
+            else:
+                sp = _span(p.s0, p.s1, p.vmax, at, jt, v, v1, cin, cout, stop)
+            fresh[p.s0] = sp
         spans.append(sp)
         v = v1
     if memo is not None:
