@@ -15,6 +15,7 @@ import os
 import time
 import warnings
 
+import drives.plant.plant as plant_module
 from drives import VirtualDrive
 from drives.bus import BusLoadWarning, CanHub
 from drives.master import AxisConfig, AxisGroup
@@ -86,6 +87,8 @@ def main() -> None:
                 "default_substep": default,
                 "coarse_substep": coarse,
                 "load_average_1min": round(os.getloadavg()[0], 2),
+                # mypyc extensions (drives/*/mypyc.list) or the plain Python sources
+                "compiled": not plant_module.__file__.endswith(".py"),
             }
         )
     )

@@ -159,7 +159,13 @@ def main() -> None:
     import logging
 
     logging.disable(logging.WARNING)
-    out: dict = {"cpus": os.cpu_count(), "load_average_before": os.getloadavg()[0]}
+    out: dict = {
+        "cpus": os.cpu_count(),
+        "load_average_before": os.getloadavg()[0],
+        # mypyc extensions of the drive modules (setup.py) or their plain Python sources
+        "compiled_drives": _compiled("drives.plant.plant"),
+        "compiled_planner": _compiled("cnc.planner.profile"),
+    }
     out["single_2ms"] = lockstep(2.0, args.seconds)
     out["single_1ms"] = lockstep(1.0, args.seconds / 2)
     # the drives' plant at a 1 ms sub-step instead of 125 us (docs/drives.md, "coarse")
@@ -178,7 +184,14 @@ def main() -> None:
         "cell_8x3_axes_1ms_rtf": out["cell_1ms"]["rtf"] >= 2.0,
         "realtime_8_machines_2ms": (out["realtime_2ms"]["late_percent"] or 0) < 0.1,
     }
+    out["load_average_after"] = os.getloadavg()[0]
     print(json.dumps(out))
+
+
+def _compiled(module: str) -> bool:
+    import importlib
+
+    return not importlib.import_module(module).__file__.endswith(".py")
 
 
 if __name__ == "__main__":
