@@ -126,6 +126,8 @@ def peer_no_work(seconds: float) -> dict:
         "lateness_p50_us": round(percentile(ordered, 0.50) * 1e6, 1),
         "lateness_p99_us": round(percentile(ordered, 0.99) * 1e6, 1),
         "lateness_max_us": round(ordered[-1] * 1e6 if ordered else 0.0, 1),
+        # as the drives run counts them: a stall of half a period or more in the wait
+        "woke_late_cycles": sum(1 for x in lateness if x > PERIOD_S / 2),
         "cpu_s": round(cpu, 3),
         "wall_s": round(wall, 3),
         **where,
