@@ -58,7 +58,12 @@ from drives.plant import OFF, POSITION, VELOCITY, Plant, PlantParams
 from drives.plant.plant import FOLLOWING_ERROR
 
 PP, PV, HOMING, CSP, CSV = 1, 3, 6, 8, 9
-_ENERGIZED: Final = (State.OPERATION_ENABLED, State.QUICK_STOP_ACTIVE, State.FAULT_REACTION_ACTIVE)
+# the power states read every SYNC and sub-step, as constants (compiled: C statics, not a
+# class attribute lookup on the enum each time)
+_OPERATION_ENABLED: Final = State.OPERATION_ENABLED
+_QUICK_STOP_ACTIVE: Final = State.QUICK_STOP_ACTIVE
+_NOT_READY_TO_SWITCH_ON: Final = State.NOT_READY_TO_SWITCH_ON
+_ENERGIZED: Final = (_OPERATION_ENABLED, _QUICK_STOP_ACTIVE, State.FAULT_REACTION_ACTIVE)
 _STRUCT: Final = {
     ("i8", 1): "<b",
     ("u8", 1): "<B",
@@ -112,6 +117,13 @@ class Drive402:
     ) -> None:
         self.params = params or PlantParams()
         self.plant = Plant(self.params)
+        # parameters read every cycle, as plain floats (the parameter set is immutable)
+        p = self.params
+        self._max_substep = p.loops.substep
+        self._rated_current = p.motor.rated_current
+        self._voltage_present = p.dc_link.voltage_present
+        self._warning_temp = p.thermal.warning
+        self._i2t_warning_fraction = p.thermal.i2t_warning_fraction
         self._initial_objects = dict(objects or {})
         self._emcy: list[EmcyRequest] = []
         self.nmt_state = "PRE-OPERATIONAL"
@@ -259,7 +271,7 @@ class Drive402:
             period = (self.time - self._last_sync) if self._last_sync is not None else 0.002
         self._last_sync = self.time
         power = self._power
-        if power.state != State.OPERATION_ENABLED or power.stop is not None:
+        if power.state != _OPERATION_ENABLED or power.stop is not None:
             return
         if self._mode == CSP:
             tgt = self._clamp_position(od[(0x607A, 0)])
@@ -274,12 +286,12 @@ class Drive402:
     def advance(self, dt_s: float) -> None:
         if dt_s <= 0.0:
             return
-        if self._power.state == State.NOT_READY_TO_SWITCH_ON:
+        if self._power.state == _NOT_READY_TO_SWITCH_ON:
             self._sm(None)  # transition 1: self-test passed
         if dt_s == self._split_dt:  # the same tick length every cycle: split it once
             n, h = self._split
         else:
-            n = max(1, math.ceil(dt_s / self.params.loops.substep - 1e-9))
+            n = max(1, math.ceil(dt_s / self._max_substep - 1e-9))
             h = dt_s / n
             self._split_dt, self._split = dt_s, (n, h)
         # objects that cannot change inside advance(): convert them once per call
@@ -287,7 +299,7 @@ class Drive402:
         window = od[(0x6065, 0)]
         self._fe_window = None if window == 0xFFFFFFFF else window * self._rpu
         self._fe_timeout = od[(0x6066, 0)] * 1e-3
-        self._ilim = od[(0x6072, 0)] * 1e-3 * self.params.motor.rated_current  # _current_limit
+        self._ilim = od[(0x6072, 0)] * 1e-3 * self._rated_current  # `_current_limit`
         done = self._csp_substeps(h, n) if self._mode == CSP and self.csp_fast_path else 0
         for _ in range(n - done):
             self._substep(h)
@@ -304,7 +316,7 @@ class Drive402:
         a fault or a changed switch input.
         """
         power = self._power
-        if power.state != State.OPERATION_ENABLED or power.stop is not None or self._hm is not None:
+        if power.state != _OPERATION_ENABLED or power.stop is not None or self._hm is not None:
             return 0
         d = self._dem
         inputs = self._inputs
@@ -614,7 +626,7 @@ class Drive402:
                 self._fault_code = 0
                 self._fe_latched = False
                 self._emcy.append(EmcyRequest(0x0000, 0))
-        entered = before.state != State.OPERATION_ENABLED == power.state
+        entered = before.state != _OPERATION_ENABLED == power.state
         if entered and 4 not in res.transitions:
             self._on_enable(keep=True)
 
@@ -632,7 +644,7 @@ class Drive402:
         if mode == self._mode:
             return
         self._mode = mode
-        if self._power.state == State.OPERATION_ENABLED:
+        if self._power.state == _OPERATION_ENABLED:
             self._start_mode()
 
     def _start_mode(self) -> None:
@@ -650,7 +662,7 @@ class Drive402:
         self._window_timer = math.inf  # standing on its own position: target reached
 
     def _raise_fault(self, code: int, emcy: bool = True) -> None:
-        if self._power.state == State.NOT_READY_TO_SWITCH_ON:
+        if self._power.state == _NOT_READY_TO_SWITCH_ON:
             self._sm(None)  # the self-test finishes before a fault can be reported
         if self._power.state == State.FAULT_REACTION_ACTIVE:
             if F.spec(code).forced_coast and self._power.stop != Stop.COAST:
@@ -668,12 +680,12 @@ class Drive402:
 
     def _on_controlword(self, cw: int) -> None:
         prev = self._power.last_controlword
-        if cw == prev and self._power.state == State.OPERATION_ENABLED:
+        if cw == prev and self._power.state == _OPERATION_ENABLED:
             return  # the same word in every RPDO while enabled: no edge, nothing to do
         # (other states re-evaluate a repeated word: e.g. Switch on succeeds once the DC
         # link is charged)
         self._sm(cw)
-        if self._power.state != State.OPERATION_ENABLED or self._power.stop is not None:
+        if self._power.state != _OPERATION_ENABLED or self._power.stop is not None:
             return
         rising = cw & ~prev
         falling = prev & ~cw
@@ -790,7 +802,7 @@ class Drive402:
                 # standstill). A ramp of the position demand would leave the motor to run
                 # out its v/Kv following error for ~4/Kv (250 ms at Kv 16.7) after the ramp.
                 ctl, stopped = self._stop_control(power.stop, h, True)
-            elif st == State.OPERATION_ENABLED:
+            elif st == _OPERATION_ENABLED:
                 ctl = self._mode_step(h)
             else:
                 ctl = VELOCITY if vel_mode else POSITION  # QSA 5..8 after standstill: hold
@@ -807,7 +819,7 @@ class Drive402:
         if ctl == VELOCITY:
             d.pos = p.theta_meas
         # following error monitor (position control in OPERATION ENABLED)
-        if ctl == POSITION and st == State.OPERATION_ENABLED and power.stop is None:
+        if ctl == POSITION and st == _OPERATION_ENABLED and power.stop is None:
             window = self._fe_window
             if window is not None and abs(d.pos - p.theta_meas) > window:
                 self._fe_timer += h
@@ -816,17 +828,17 @@ class Drive402:
                     fault = 0x8611
             else:
                 self._fe_timer = 0.0
-        if mode == PP and st == State.OPERATION_ENABLED and not self._pp_moving:
+        if mode == PP and st == _OPERATION_ENABLED and not self._pp_moving:
             near = abs(p.theta_meas - self._pp_target) <= self._od[(0x6067, 0)] * self.rad_per_unit
             self._window_timer = self._window_timer + h if near else 0.0
-        elif mode == PV and st == State.OPERATION_ENABLED:
+        elif mode == PV and st == _OPERATION_ENABLED:
             near = abs(p.vel_meas - self._pv_target()) <= self._od[(0x606D, 0)] * self._rpu
             self._window_timer = self._window_timer + h if near else 0.0
         # switches
         new_inputs = p.switch_inputs()
         rising = new_inputs & ~inputs
         self._inputs = new_inputs
-        if self._hm is not None and st == State.OPERATION_ENABLED:
+        if self._hm is not None and st == _OPERATION_ENABLED:
             self._observe_homing(inputs, new_inputs, th_prev, x_prev)
         if rising & 3 and st in _ENERGIZED and not fault:
             hm_bits = (1 if self._homing_uses(1) else 0) | (2 if self._homing_uses(2) else 0)
@@ -840,11 +852,7 @@ class Drive402:
             self._raise_fault(fault)
         # `stopped` belongs to the stop that was running: a fault that just ended OPERATION
         # ENABLED starts a new one, a fault repeated during FAULT REACTION ACTIVE does not.
-        if (
-            stopped
-            and not (fault and st == State.OPERATION_ENABLED)
-            and self._power.stop is not None
-        ):
+        if stopped and not (fault and st == _OPERATION_ENABLED) and self._power.stop is not None:
             self._sm(None, stopped=True)
 
     def _current_limit(self) -> float:
@@ -948,20 +956,19 @@ class Drive402:
         st = power.state
         p = self.plant
         sw = STATE_BITS[st] | SW_REMOTE
-        params = p.params
-        if p.vdc >= params.dc_link.voltage_present:  # `p.voltage_present`, inlined
+        if p.vdc >= self._voltage_present:  # `p.voltage_present`, inlined
             sw |= SW_VOLTAGE_ENABLED
-        th = params.thermal  # `p.warnings`, inlined
-        if p.winding_temp > th.warning or p.i2t > th.i2t_warning_fraction * p._i2t_limit:
+        # `p.warnings`, inlined
+        if p.winding_temp > self._warning_temp or p.i2t > self._i2t_warning_fraction * p._i2t_limit:
             sw |= SW_WARNING
         if self._limit_active or p.velocity_limited:
             sw |= SW_INTERNAL_LIMIT
         mode = self._mode
         if self._fe_latched and mode in (PP, CSP, HOMING):
             sw |= SW_OMS13
-        if st == State.QUICK_STOP_ACTIVE and power.stop is None:
+        if st == _QUICK_STOP_ACTIVE and power.stop is None:
             sw |= SW_TARGET_REACHED
-        if st != State.OPERATION_ENABLED or power.stop is not None:
+        if st != _OPERATION_ENABLED or power.stop is not None:
             return sw
         if mode in (CSP, CSV):
             sw |= SW_OMS12  # drive follows the command value

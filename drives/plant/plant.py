@@ -57,6 +57,13 @@ class Plant:
         self._h_cached = -1.0
         self._decay = 0.0
         self._c: tuple[float, ...] = self._constants()
+        # the switch positions as a flag and a float (the parameter set is immutable): the
+        # sub-step loop compares plain floats, without attribute lookups on the parameters
+        sw = p.switches
+        self._has_neg, self._neg = sw.negative_limit is not None, sw.negative_limit or 0.0
+        self._has_pos, self._pos = sw.positive_limit is not None, sw.positive_limit or 0.0
+        self._has_home, self._home = sw.home_switch is not None, sw.home_switch or 0.0
+        self._home_below = sw.home_switch_active_below
         self.speed_limit = m.max_speed_rpm * _TWO_PI / 60.0  # rad/s, the drive's 0x6080
         self._i2t_limit = (m.peak_current**2 - m.rated_current**2) * p.thermal.i2t_peak_time
         # injections
@@ -464,15 +471,9 @@ class Plant:
         k = h / cap
         ambient = self.ambient
         i2t_limit = self._i2t_limit
-        sw = self.params.switches
-        # the optional switches and window as a flag and a float: the loop then compares
-        # plain floats (C doubles when compiled)
-        neg_limit, pos_limit, home = sw.negative_limit, sw.positive_limit, sw.home_switch
-        has_neg, has_pos, has_home = neg_limit is not None, pos_limit is not None, home is not None
-        neg = neg_limit if neg_limit is not None else 0.0
-        posl = pos_limit if pos_limit is not None else 0.0
-        home_x = home if home is not None else 0.0
-        home_below = sw.home_switch_active_below
+        has_neg, neg, has_pos, posl = self._has_neg, self._neg, self._has_pos, self._pos
+        has_home, home_x, home_below = self._has_home, self._home, self._home_below
+        # the optional window as a flag and a float: the loop compares plain floats
         check_fe = fe_window is not None
         fe_win = fe_window if fe_window is not None else 0.0
         # the state, in locals for the loop and written back once
