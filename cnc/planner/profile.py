@@ -50,6 +50,8 @@ class Part:
         "coast_cap",
         "coast_in",
         "coast_out",
+        "eff",
+        "v_back",
     )
 
     s0: float
@@ -63,6 +65,9 @@ class Part:
     coast_cap: float
     coast_in: bool
     coast_out: bool
+    # scratch of `solve`: the length without coasts, the backward pass's start speed
+    eff: float
+    v_back: float
 
     def __init__(self, s0: float, s1: float, vmax: float, at: float, jt: float) -> None:
         self.s0 = s0
@@ -76,6 +81,8 @@ class Part:
         self.coast_cap = 0.0
         self.coast_in = False
         self.coast_out = False
+        self.eff = 0.0
+        self.v_back = 0.0
 
     def copy(self) -> Part:
         p = Part(self.s0, self.s1, self.vmax, self.at, self.jt)
@@ -596,7 +603,15 @@ def _coasts(parts: list[Part], ipo: float) -> None:
         left, right = parts[i], parts[i + 1]
         room_l = (left.s1 - left.s0) * (0.5 if i > 0 and cand[i - 1] else 1.0)
         room_r = (right.s1 - right.s0) * (0.5 if cand[i + 1] and not right.stop else 1.0)
-        v = min(left.coast_cap, room_l / t3, room_r / t3)
+        # min(coast_cap, room_l / t3, room_r / t3), written out (builtin min of three is a
+        # generic call in the compiled module; the same first-smallest value)
+        v = left.coast_cap
+        x = room_l / t3
+        if x < v:
+            v = x
+        x = room_r / t3
+        if x < v:
+            v = x
         if v > left.end_cap:
             left.end_cap = v
             left.coast_out = True
@@ -622,7 +637,8 @@ def solve(
     if n == 0:
         return [], ok
     t3 = 3.0 * ipo
-    eff: list[float] = []
+    # per part: `eff`, its length without the coasts, and `v_back`, the highest speed at
+    # its start from which every later cap can be met (kept on the parts: native floats)
     for i in range(n):
         p = parts[i]
         length = p.s1 - p.s0
@@ -630,9 +646,8 @@ def solve(
             length -= t3 * parts[i - 1].end_cap
         if p.coast_out:
             length -= t3 * p.end_cap
-        eff.append(length if length > 0.0 else 0.0)
-    vb = [0.0] * (n + 1)
-    vb[n] = 0.0 if parts[-1].stop else parts[-1].end_cap
+        p.eff = length if length > 0.0 else 0.0
+    v_end = 0.0 if parts[-1].stop else parts[-1].end_cap
     rmemo: dict[tuple[float, float, float, float], float] | None = None
     smemo: dict[float, Span] | None = None
     rfresh: dict[tuple[float, float, float, float], float] = {}
@@ -648,29 +663,29 @@ def solve(
         cap = p.vmax
         if i > 0 and parts[i - 1].end_cap < cap:
             cap = parts[i - 1].end_cap
-        v = vb[i + 1]
+        v = parts[i + 1].v_back if i + 1 < n else v_end
         if v < cap:
             if rmemo is None:
-                v = reach(v, eff[i], p.at, p.jt)
+                v = reach(v, p.eff, p.at, p.jt)
             else:
-                rkey = (v, eff[i], p.at, p.jt)
+                rkey = (v, p.eff, p.at, p.jt)
                 x = rmemo.get(rkey)
                 if x is None:
-                    x = reach(v, eff[i], p.at, p.jt)
+                    x = reach(v, p.eff, p.at, p.jt)
                 rfresh[rkey] = x
                 v = x
             if v > cap:
                 v = cap
         else:
             v = cap
-        vb[i] = v
+        p.v_back = v
     spans: list[Span] = []
     v = v_start
     for i in range(n):
         p = parts[i]
         at, jt = p.at, p.jt
-        length = eff[i]
-        v1 = vb[i + 1]
+        length = p.eff
+        v1 = parts[i + 1].v_back if i + 1 < n else v_end
         if v < v1:
             if rmemo is None:
                 x = reach(v, length, at, jt)
