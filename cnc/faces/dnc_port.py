@@ -418,7 +418,9 @@ class _Conn:
         if self._pending:
             data, self._pending = self._pending, b""
             return data
-        return await asyncio.wait_for(self.reader.read(4096), timeout)
+        # asyncio.timeout, not wait_for: wait_for makes a task of every read.
+        async with asyncio.timeout(timeout):
+            return await self.reader.read(4096)
 
     async def read_command(self, timeout: float | None) -> tuple[str | None, str, bytes]:
         """The next command, or ("READ", "", tape bytes) when the peer starts with tape."""
@@ -485,7 +487,8 @@ class _Conn:
             if buffer.aborted:
                 raise DncError(ALARM_CUT_OFF, f"drip-feed ended by the machine: {buffer.aborted}")
             try:
-                data = await asyncio.wait_for(self.reader.read(4096), 0.002)
+                async with asyncio.timeout(0.002):
+                    data = await self.reader.read(4096)
             except TimeoutError:
                 if time.monotonic() - start > timeout:
                     raise DncError(ALARM_TIMEOUT, "the NC took no block for too long") from None

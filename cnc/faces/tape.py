@@ -12,7 +12,6 @@ uses: DC1 resume (XON), DC3 stop (XOFF), DC2 start of punch output, DC4 end of p
 
 from __future__ import annotations
 
-import re
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 
@@ -29,7 +28,6 @@ _ODD_MARK = bytes(_ONES[i] % 2 for i in range(256))  # 1 where a byte has odd pa
 _STRIP = bytes(i & 0x7F for i in range(256))
 # Bytes that need the byte-by-byte path inside a block: controls, NUL, CR and `%`.
 _SPECIAL = bytes([0x11, 0x12, 0x13, 0x14, 0x00, 0x0D, 0x25])
-_SPECIAL_BYTE = re.compile(rb"[\x00\x0d\x11-\x14%]")
 _WITH_PARITY = bytes(((i | 0x80) if _ONES[i] % 2 else i) & 0xFF for i in range(128)) + bytes(128)
 
 
@@ -178,10 +176,17 @@ class TapeDecoder:
         """Decode the complete blocks from `i` up to the next special character in one go;
         returns where decoding goes on. Does nothing if a block is too long (the slow path
         reports exactly where)."""
-        special = _SPECIAL_BYTE.search(data, i)
-        last_lf = data.rfind(b"\n", i, special.start() if special else len(data))
+        last_lf = data.rfind(b"\n", i)
         if last_lf < 0:
             return i
+        # The first special character before it, by one memchr per kind (a character class
+        # regex walked a 4 KB read at a tenth of the speed).
+        for code in _SPECIAL:
+            at = data.find(code, i, last_lf)
+            if at >= 0:
+                last_lf = data.rfind(b"\n", i, at)
+                if last_lf < 0:
+                    return i
         parts = data[i:last_lf].decode("ascii", "replace").split("\n")
         # One character per byte after decoding (a bad byte becomes one U+FFFD), so
         # character counts are the byte counts the block limit is about.
