@@ -73,14 +73,17 @@ class DripResult:
 
 def canonical_text(text: str) -> str:
     """The exact text a machine stores for `text`: what verification compares against."""
-    decoder = TapeDecoder()
-    lines = [ev.text for ev in decoder.feed(encode_program(text)) if ev.kind == "line"]
-    return "%\n" + "".join(f"{ln}\n" for ln in lines) + "%\n"
+    return stored_form(encode_program(text))
 
 
 def stored_form(tape: bytes) -> str:
     """A punched tape (parity already stripped) decoded to the form machines store."""
-    lines = [ev.text for ev in TapeDecoder().feed(tape) if ev.kind == "line"]
+    lines: list[str] = []
+    for ev in TapeDecoder().feed_runs(tape):
+        if ev.kind == "lines":
+            lines += ev.lines
+        elif ev.kind == "line":
+            lines.append(ev.text)
     return "%\n" + "".join(f"{ln}\n" for ln in lines) + "%\n"
 
 

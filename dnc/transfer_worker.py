@@ -84,11 +84,10 @@ class TransferWorker:
         self._recovered = False
         # content sha256 -> sha256 of the form a machine stores it in. Dispatching one
         # revision to twenty machines decodes it once, not twenty times.
-        self._stored_sha: OrderedDict[str, str] = OrderedDict()
-        self._stored_sha_lock = threading.Lock()
-        self._texts: OrderedDict[str, str] = OrderedDict()  # content sha256 -> text
-        self._texts_chars = 0
-        self._texts_lock = threading.Lock()
+        self._stored_sha = _Memo(4096)
+        # content sha256 -> text: content never changes under its sha256, so a text read
+        # once stays right; twenty dispatches of one revision read it once.
+        self._texts = _Memo(TEXT_CACHE_CHARS, weight=len)
 
     def recover(self) -> int:
         """After a restart: requeue interrupted transfers, fail interrupted starts."""
@@ -211,37 +210,16 @@ class TransferWorker:
         return True
 
     def _expected_sha(self, content_sha: str, text: str) -> str:
-        with self._stored_sha_lock:
-            if content_sha in self._stored_sha:
-                self._stored_sha.move_to_end(content_sha)
-                return self._stored_sha[content_sha]
-        expected = sha256_text(canonical_text(text))
-        with self._stored_sha_lock:
-            self._stored_sha[content_sha] = expected
-            if len(self._stored_sha) > 4096:
-                self._stored_sha.popitem(last=False)
-        return expected
+        return self._stored_sha.get(content_sha, lambda: sha256_text(canonical_text(text)))
 
     def _text(self, sha: str) -> str:
-        """The revision's text, read once for all the dispatches of it.
+        """The revision's text, read once for all the dispatches of it."""
 
-        Content is stored by its sha256 and never changes, so a text read once stays right;
-        the cache keeps the most recently dispatched texts up to TEXT_CACHE_CHARS.
-        """
-        with self._texts_lock:
-            text = self._texts.get(sha)
-            if text is not None:
-                self._texts.move_to_end(sha)
-                return text
-        with transaction(self._sessions) as s:
-            text = s.scalar(_CONTENT, dict(sha=sha))
-        with self._texts_lock:
-            if sha not in self._texts:
-                self._texts[sha] = text
-                self._texts_chars += len(text)
-            while self._texts_chars > TEXT_CACHE_CHARS and len(self._texts) > 1:
-                self._texts_chars -= len(self._texts.popitem(last=False)[1])
-        return text
+        def read() -> str:
+            with transaction(self._sessions) as s:
+                return s.scalar(_CONTENT, dict(sha=sha))
+
+        return self._texts.get(sha, read)
 
     def _fail(self, dispatch_id: int, attempts: int, exc: TransferError) -> str:
         now = self._now()
@@ -336,6 +314,42 @@ _EVENT_FIELDS = (
     "verified",
     "error",
 )
+
+
+class _Memo:
+    """Values computed once per key and kept, least recently used first out, up to `limit`
+    in total `weight`. Threads asking for a key being computed wait for that result: twenty
+    dispatches of a new revision start at once, and each working it out for itself cost a
+    first round twenty times the work."""
+
+    def __init__(self, limit: int, weight: Callable[[object], int] = lambda _: 1) -> None:
+        self._limit, self._weight = limit, weight
+        self._values: OrderedDict[str, object] = OrderedDict()
+        self._total = 0
+        self._lock = threading.Lock()
+        self._computing: dict[str, threading.Lock] = {}
+
+    def get(self, key: str, compute: Callable[[], object]):
+        with self._lock:
+            if key in self._values:
+                self._values.move_to_end(key)
+                return self._values[key]
+            gate = self._computing.setdefault(key, threading.Lock())
+        with gate:
+            with self._lock:
+                if key in self._values:
+                    return self._values[key]
+            try:
+                value = compute()
+            finally:
+                with self._lock:
+                    self._computing.pop(key, None)
+            with self._lock:
+                self._values[key] = value
+                self._total += self._weight(value)
+                while self._total > self._limit and len(self._values) > 1:
+                    self._total -= self._weight(self._values.popitem(last=False)[1])
+            return value
 
 
 def _event(s: Session, snap: dict, now: datetime) -> None:

@@ -230,3 +230,34 @@ def test_drip_feed_dispatch_streams_to_the_nc(library, sessions, released):
         stop.set()
         t.join()
         m.close()
+
+
+def test_a_value_many_dispatches_need_at_once_is_worked_out_once():
+    from dnc.transfer_worker import _Memo
+
+    memo, calls, results = _Memo(2), [], []
+    gate = threading.Barrier(8)
+
+    def compute():
+        calls.append(1)
+        return "sha"
+
+    def ask():
+        gate.wait()
+        results.append(memo.get("rev", compute))
+
+    threads = [threading.Thread(target=ask) for _ in range(8)]
+    for t in threads:
+        t.start()
+    for t in threads:
+        t.join()
+    assert results == ["sha"] * 8 and len(calls) == 1
+
+    def broken():
+        raise RuntimeError("database down")
+
+    with pytest.raises(RuntimeError):
+        memo.get("other", broken)
+    assert memo.get("other", lambda: "ok") == "ok"  # a failure is not remembered
+    memo.get("third", lambda: "x")
+    assert memo.get("rev", lambda: "again") == "again"  # the oldest went past the limit
