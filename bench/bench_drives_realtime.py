@@ -18,7 +18,8 @@ The peer: before each paced run the same `Pacer`, with the same scheduling, pace
 that does no work for as long (`peer_no_work_pacer`; `--peer-seconds 0` skips it). A late
 slot there is the box's (scheduler, other processes, the VM), not the drives' code: read the
 two side by side. `--c-peer` adds the same no-work pacer in C (`bench/rt_peer.c`, built with
-gcc at run time), which rules the interpreter out too.
+gcc at run time), which rules the interpreter out too; `--peer-busy-us N` a peer that spins
+N us per cycle (`peer_busy_pacer`): as long on a CPU as the drives, none of their code.
 
 Each run also reports where its pacing thread's time went (`/proc/thread-self/schedstat`):
 `runqueue_wait_ms` is time it was ready to run but another task had the CPU, with the
@@ -100,8 +101,12 @@ def percentile(ordered: list[float], q: float) -> float:
     return ordered[min(len(ordered) - 1, int(q * len(ordered)))] if ordered else 0.0
 
 
-def peer_no_work(seconds: float) -> dict:
-    """The drives' pacer and process settings with no work in the cycle: the box's share."""
+def peer_no_work(seconds: float, busy_s: float = 0.0) -> dict:
+    """The drives' pacer and process settings with no work in the cycle: the box's share.
+
+    `busy_s` > 0: the cycle spins that long instead (no allocation, no frames), as long on
+    the CPU as the drives' work but none of their code.
+    """
     RealtimeProcess.acquire()
     try:
         pacer = Pacer(PERIOD_S)  # the same scheduling request as the drives run (environment)
@@ -109,16 +114,23 @@ def peer_no_work(seconds: float) -> dict:
         lateness = []
         account = ThreadAccount().start()
         cpu0, wall0 = time.process_time(), time.perf_counter()
+        late, clock = 0, time.perf_counter
         for _ in range(round(seconds / PERIOD_S)):
             lateness.append(pacer.wait())
+            if busy_s:
+                end = clock() + busy_s
+                while clock() < end:
+                    pass
+            if clock() > pacer.slot + PERIOD_S:  # as the paced group counts a late cycle
+                late += 1
         cpu, wall = time.process_time() - cpu0, time.perf_counter() - wall0
         where = account.stop()
     finally:
         RealtimeProcess.release()
-    late = sum(1 for x in lateness if x > PERIOD_S)  # no work: the cycle ends when it wakes
     ordered = sorted(lateness)
     figures = slot_figures(len(lateness), late, pacer.skipped)
     return {
+        "busy_us": round(busy_s * 1e6, 1),
         "cycles": len(lateness),
         "late_cycles": late,
         "skipped_slots": pacer.skipped,
@@ -234,6 +246,8 @@ def paced_with_peer(args) -> dict:
     out = {}
     if args.peer_seconds:
         out["peer_no_work_pacer"] = peer_no_work(args.peer_seconds)
+        if args.peer_busy_us:
+            out["peer_busy_pacer"] = peer_no_work(args.peer_seconds, args.peer_busy_us * 1e-6)
     out.update(run("paced", args.seconds, args.substep))
     return out
 
@@ -262,6 +276,12 @@ def main() -> None:
         help="also pin the pacing thread of the SCHED_FIFO run to this CPU (FMSCELL_DRIVES_RT_CPU)",
     )
     parser.add_argument("--c-peer", action="store_true", help="also the no-work pacer in C")
+    parser.add_argument(
+        "--peer-busy-us",
+        type=float,
+        default=0.0,
+        help="also a peer that spins this long per cycle (e.g. the drives' cycle_work_p50_us)",
+    )
     args = parser.parse_args()
     if args.peer_seconds is None:
         args.peer_seconds = args.seconds
