@@ -40,6 +40,7 @@ from sqlalchemy.orm import Session, sessionmaker
 
 from dnc import models as m
 from dnc.db import transaction
+from dnc.events import OUTBOX_WRITTEN
 from dnc.outbox import Event, events_after
 
 log = logging.getLogger(__name__)
@@ -438,16 +439,16 @@ def outbox_hub(sessions: sessionmaker[Session], *, poll_s: float, capacity: int)
 
     def after_flush(session: Session, _context: object) -> None:
         if any(isinstance(obj, m.OutboxEvent) for obj in session.new):
-            session.info["fmscell_outbox_written"] = True
+            session.info[OUTBOX_WRITTEN] = True
 
     def after_commit(session: Session) -> None:
-        if session.info.pop("fmscell_outbox_written", False):
+        if session.info.pop(OUTBOX_WRITTEN, False):
             target = hub_ref()
             if target is not None:
                 target.nudge()
 
     def after_rollback(session: Session) -> None:
-        session.info.pop("fmscell_outbox_written", None)
+        session.info.pop(OUTBOX_WRITTEN, None)
 
     listeners = [
         ("after_flush", after_flush),
