@@ -150,7 +150,7 @@ class Drive402:
             self._store(index, sub, value)
         self._update_factor()
         self.plant.speed_limit = self._od[(0x6080, 0)] * 2.0 * math.pi / 60.0
-        self._power = PowerState()
+        self._set_power(PowerState())
         self._mode = self._od[(0x6060, 0)]
         self._dem = Demand(self.plant.theta_meas, 0.0)
         self._zero = 0.0  # measured angle (rad) of user position 0
@@ -270,8 +270,7 @@ class Drive402:
         if period <= 0.0:
             period = (self.time - self._last_sync) if self._last_sync is not None else 0.002
         self._last_sync = self.time
-        power = self._power
-        if power.state != _OPERATION_ENABLED or power.stop is not None:
+        if not self._following:
             return
         if self._mode == CSP:
             tgt = self._clamp_position(od[(0x607A, 0)])
@@ -286,7 +285,7 @@ class Drive402:
     def advance(self, dt_s: float) -> None:
         if dt_s <= 0.0:
             return
-        if self._power.state == _NOT_READY_TO_SWITCH_ON:
+        if self._power_state == _NOT_READY_TO_SWITCH_ON:
             self._sm(None)  # transition 1: self-test passed
         if dt_s == self._split_dt:  # the same tick length every cycle: split it once
             n, h = self._split
@@ -315,8 +314,7 @@ class Drive402:
         following-error and switch monitors) and hands over as soon as a sub-step ends with
         a fault or a changed switch input.
         """
-        power = self._power
-        if power.state != _OPERATION_ENABLED or power.stop is not None or self._hm is not None:
+        if not self._following or self._hm is not None:
             return 0
         d = self._dem
         inputs = self._inputs
@@ -618,7 +616,7 @@ class Drive402:
             )
             res = sm_step(before, controlword, cond, self._options())
             power = res.power
-        self._power = power
+        self._set_power(power)
         for t in res.transitions:
             if t == 4:
                 self._on_enable()
@@ -666,7 +664,7 @@ class Drive402:
             self._sm(None)  # the self-test finishes before a fault can be reported
         if self._power.state == State.FAULT_REACTION_ACTIVE:
             if F.spec(code).forced_coast and self._power.stop != Stop.COAST:
-                self._power = replace(self._power, pending=None, stop=Stop.COAST)
+                self._set_power(replace(self._power, pending=None, stop=Stop.COAST))
                 self._sm(None, stopped=True)  # coasting: the reaction is over at once
             return
         if self._power.state == State.FAULT:
@@ -678,14 +676,24 @@ class Drive402:
             self._emcy.append(EmcyRequest(code, F.spec(code).register))
         self._sm(None, fault=True, forced_coast=F.spec(code).forced_coast)
 
+    def _set_power(self, power: PowerState) -> None:
+        """The one place the power state changes; it keeps the plain copies the per-cycle
+        paths read (compiled, they are read without attribute lookups on the immutable
+        `PowerState`, an ordinary Python object)."""
+        self._power = power
+        self._power_state = power.state
+        self._last_cw = power.last_controlword
+        #: OPERATION ENABLED with no stop running: the drive follows its demand
+        self._following = power.state == _OPERATION_ENABLED and power.stop is None
+
     def _on_controlword(self, cw: int) -> None:
-        prev = self._power.last_controlword
-        if cw == prev and self._power.state == _OPERATION_ENABLED:
+        prev = self._last_cw
+        if cw == prev and self._power_state == _OPERATION_ENABLED:
             return  # the same word in every RPDO while enabled: no edge, nothing to do
         # (other states re-evaluate a repeated word: e.g. Switch on succeeds once the DC
         # link is charged)
         self._sm(cw)
-        if self._power.state != _OPERATION_ENABLED or self._power.stop is not None:
+        if not self._following:
             return
         rising = cw & ~prev
         falling = prev & ~cw
@@ -952,8 +960,7 @@ class Drive402:
 
     # ------------------------------------------------------------------ statusword
     def _statusword(self) -> int:
-        power = self._power
-        st = power.state
+        st = self._power_state
         p = self.plant
         sw = STATE_BITS[st] | SW_REMOTE
         if p.vdc >= self._voltage_present:  # `p.voltage_present`, inlined
@@ -966,9 +973,9 @@ class Drive402:
         mode = self._mode
         if self._fe_latched and mode in (PP, CSP, HOMING):
             sw |= SW_OMS13
-        if st == _QUICK_STOP_ACTIVE and power.stop is None:
+        if st == _QUICK_STOP_ACTIVE and self._power.stop is None:
             sw |= SW_TARGET_REACHED
-        if st != _OPERATION_ENABLED or power.stop is not None:
+        if not self._following:
             return sw
         if mode in (CSP, CSV):
             sw |= SW_OMS12  # drive follows the command value
