@@ -47,6 +47,41 @@ def record(
     s.info[OUTBOX_WRITTEN] = True
 
 
+def record_many(
+    s: Session,
+    *,
+    now: datetime,
+    actor: str,
+    entries: list[tuple[str, str, int | None, dict]],
+) -> None:
+    """`record` for many changes of one transaction: (action, entity, entity_id, detail)
+    each, written in that order by one insert per table (a scheduler tick records dozens)."""
+    audit, outbox = [], []
+    for action, entity, entity_id, detail in entries:
+        detail = json.loads(json.dumps(detail, default=str))
+        audit.append(
+            dict(
+                at=now,
+                actor=actor,
+                action=action,
+                entity=entity,
+                entity_id=entity_id,
+                detail=detail,
+            )
+        )
+        outbox.append(
+            dict(
+                at=now,
+                topic=f"fmscell/{entity}/{action.rsplit('.', 1)[-1]}",
+                payload={"action": action, "entity": entity, "id": entity_id, **detail},
+            )
+        )
+    if audit:
+        s.execute(_AUDIT, audit)
+        s.execute(_OUTBOX, outbox)
+        s.info[OUTBOX_WRITTEN] = True
+
+
 OUTBOX_WRITTEN = "fmscell_outbox_written"
 """Session.info key set when a transaction wrote outbox rows (read by web_api.event_hub)."""
 _AUDIT = insert(m.AuditEntry.__table__)

@@ -6,14 +6,14 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from datetime import UTC, datetime
 
-from sqlalchemy import func, select
+from sqlalchemy import bindparam, func, insert, select, update
 from sqlalchemy.orm import Session, sessionmaker
 
 from dnc import models as m
 from dnc.db import transaction
-from dnc.dispatch import FAILED, create_dispatch
+from dnc.dispatch import FAILED, DispatchRequest, create_dispatches
 from dnc.errors import InvalidUpload, NotFound, WorkflowError
-from dnc.events import record
+from dnc.events import record, record_many
 from dnc.rules import rule_named
 from dnc.scheduler import (
     Allocate,
@@ -199,30 +199,27 @@ class Scheduler:
         machines = self._status()
         now = self._now()
         with transaction(self._sessions) as s:
-            # Cancelled jobs stay in view only while a part of theirs is still on a machine.
-            running_jobs = select(m.Allocation.job_id).where(
-                m.Allocation.status.in_(ACTIVE_ALLOCATIONS)
-            )
-            jobs = s.scalars(
-                select(m.Job)
-                .where(m.Job.status.in_(OPEN_STATES) | m.Job.id.in_(running_jobs))
-                .order_by(m.Job.id)
-                .with_for_update()
-            ).all()
-            allocs = s.scalars(
-                select(m.Allocation).where(m.Allocation.status.in_(ACTIVE_ALLOCATIONS))
-            ).all()
-            failed = {
-                d.id
-                for d in s.scalars(
-                    select(m.Dispatch).where(
-                        m.Dispatch.id.in_([a.dispatch_id for a in allocs if a.dispatch_id]),
-                        m.Dispatch.state == FAILED,
-                    )
-                )
-            }
+            # Core reads and writes on the tables, a statement per kind of row for the whole
+            # tick: ORM objects for a thousand jobs and a unit of work per dispatch were most
+            # of a tick's time.
+            jobs = s.execute(_OPEN_JOBS).all()
+            allocs = s.execute(_ACTIVE_ALLOCATIONS).all()
             decisions = decide(
-                [_job_state(j) for j in jobs],
+                [
+                    JobState(
+                        j.id,
+                        j.machine_kind,
+                        j.machine_group,
+                        j.quantity,
+                        j.done,
+                        j.priority,
+                        j.created_at,
+                        j.due_at,
+                        j.cycle_time_s,
+                        j.status == CANCELLED,
+                    )
+                    for j in jobs
+                ],
                 [
                     AllocationState(
                         a.id,
@@ -230,7 +227,7 @@ class Scheduler:
                         a.machine,
                         a.parts_at_start,
                         a.status == "running",
-                        a.dispatch_id in failed,
+                        bool(a.dispatch_failed),
                     )
                     for a in allocs
                 ],
@@ -239,131 +236,135 @@ class Scheduler:
                 self.rule_name,
                 now,
             )
-            by_job = {j.id: j for j in jobs}
-            by_alloc = {a.id: a for a in allocs}
-            self._allocate(s, decisions.of(Allocate), by_job, now)
-            for action in decisions.actions:
-                self._apply(s, action, by_job, by_alloc, now)
-            self._settle_job_states(s, jobs, now)
+            _Tick(s, self.rule_name, now, jobs, allocs).apply(decisions)
         return decisions
 
-    def _allocate(self, s: Session, actions: list[Allocate], by_job, now: datetime) -> None:
-        """Allocations and their dispatches for a whole tick, in two flushes."""
+
+class _Tick:
+    """Writes one tick's decisions: rows gathered per kind, then one statement per kind.
+
+    Decision, audit and outbox rows keep the order the actions came in (allocations first),
+    and all of them are written in the tick's transaction.
+    """
+
+    def __init__(self, s: Session, rule: str, now: datetime, jobs, allocs) -> None:
+        self.s, self.rule, self.now = s, rule, now
+        self.jobs = {j.id: j for j in jobs}
+        self.allocs = {a.id: a for a in allocs}
+        self.done = {j.id: j.done for j in jobs}
+        self.decisions: list[dict] = []
+        self.events: list[tuple[str, str, int | None, dict]] = []
+
+    def apply(self, decisions: Decisions) -> None:
+        new_active = self._allocate(decisions.of(Allocate))
+        ended, alloc_updates = set(), []
+        for action in decisions.actions:
+            if isinstance(action, Complete):
+                alloc = self.allocs[action.allocation_id]
+                job = self.jobs[action.job_id]
+                ended.add(alloc.id)
+                alloc_updates.append(dict(b_id=alloc.id, b_status="completed", b_ended=self.now))
+                self.done[job.id] = min(job.quantity, self.done[job.id] + action.parts)
+                self._decision(
+                    "complete", job.id, alloc.machine, f"part counter of {alloc.machine} advanced"
+                )
+            elif isinstance(action, Interrupt):
+                alloc = self.allocs[action.allocation_id]
+                ended.add(alloc.id)
+                alloc_updates.append(dict(b_id=alloc.id, b_status="interrupted", b_ended=self.now))
+                self._decision("interrupt", action.job_id, alloc.machine, action.reason)
+                self.events.append(
+                    (
+                        "job.interrupt",
+                        "job",
+                        action.job_id,
+                        dict(machine=alloc.machine, reason=action.reason),
+                    )
+                )
+            elif isinstance(action, MarkRunning):
+                alloc_updates.append(
+                    dict(b_id=action.allocation_id, b_status="running", b_ended=None)
+                )
+        s = self.s
+        if alloc_updates:
+            s.execute(_SET_ALLOCATION, alloc_updates)
+        done_updates = [
+            dict(b_id=i, b_done=done) for i, done in self.done.items() if done != self.jobs[i].done
+        ]
+        if done_updates:
+            s.execute(_SET_DONE, done_updates)
+        active = {a.job_id for a in self.allocs.values() if a.id not in ended} | new_active
+        self._settle_job_states(active)
+        if self.decisions:
+            s.execute(_INSERT_DECISION, self.decisions)
+        record_many(s, now=self.now, actor="scheduler", entries=self.events)
+
+    def _allocate(self, actions: list[Allocate]) -> set[int]:
+        """Allocations and their dispatches for the whole tick; returns the jobs allocated."""
         if not actions:
-            return
-        made = []
+            return set()
+        s, now = self.s, self.now
         # The n-th allocation of a job gets key job-<id>-allocation-<n>: unique, and the same
         # again if a tick rolled back by a crash is taken up after a restart.
         counts = dict(
-            s.execute(
-                select(m.Allocation.job_id, func.count())
-                .where(m.Allocation.job_id.in_({a.job_id for a in actions}))
-                .group_by(m.Allocation.job_id)
-            ).all()
+            s.execute(_ALLOCATION_COUNTS, dict(ids=sorted({a.job_id for a in actions}))).all()
         )
-        with s.no_autoflush:
-            for action in actions:
-                job = by_job[action.job_id]
-                counts[job.id] = counts.get(job.id, 0) + 1
-                dispatch, _ = create_dispatch(
-                    s,
-                    key=f"job-{job.id}-allocation-{counts[job.id]}",
-                    revision_id=job.revision_id,
+        requests = []
+        for action in actions:
+            counts[action.job_id] = counts.get(action.job_id, 0) + 1
+            requests.append(
+                DispatchRequest(
+                    key=f"job-{action.job_id}-allocation-{counts[action.job_id]}",
+                    revision_id=self.jobs[action.job_id].revision_id,
                     machine=action.machine,
                     mode="memory",
                     start=True,
-                    requested_by="scheduler",
-                    now=now,
-                    flush=False,
                 )
-                made.append((action, job, dispatch))
-        s.flush()
-        allocations = [
-            m.Allocation(
-                job_id=job.id,
+            )
+        dispatches = create_dispatches(s, requests, requested_by="scheduler", now=now)
+        rows = [
+            dict(
+                job_id=action.job_id,
                 machine=action.machine,
                 parts_at_start=action.part_count,
                 status="dispatched",
-                dispatch_id=dispatch.id,
+                dispatch_id=dispatch_id,
                 reason=action.reason,
                 created_at=now,
+                ended_at=None,
             )
-            for action, job, dispatch in made
+            for action, (dispatch_id, _) in zip(actions, dispatches, strict=True)
         ]
-        s.add_all(allocations)
-        s.flush()
-        for (action, job, dispatch), alloc in zip(made, allocations, strict=True):
-            self._decision(
-                s, now, self.rule_name, "allocate", job.id, action.machine, action.reason
-            )
-            record(
-                s,
-                now=now,
-                actor="scheduler",
-                action="job.allocate",
-                entity="job",
-                entity_id=job.id,
-                machine=action.machine,
-                allocation_id=alloc.id,
-                dispatch_id=dispatch.id,
-                reason=action.reason,
-            )
-
-    def _apply(self, s: Session, action, by_job, by_alloc, now: datetime) -> None:
-        """Completions, interruptions and running marks (allocations are made in bulk)."""
-        rule = self.rule_name
-        if isinstance(action, Complete):
-            alloc, job = by_alloc[action.allocation_id], by_job[action.job_id]
-            alloc.status, alloc.ended_at = "completed", now
-            job.done = min(job.quantity, job.done + action.parts)
-            self._decision(
-                s,
-                now,
-                rule,
-                "complete",
-                job.id,
-                alloc.machine,
-                f"part counter of {alloc.machine} advanced",
-            )
-        elif isinstance(action, Interrupt):
-            alloc, job = by_alloc[action.allocation_id], by_job[action.job_id]
-            alloc.status, alloc.ended_at = "interrupted", now
-            self._decision(s, now, rule, "interrupt", job.id, alloc.machine, action.reason)
-            record(
-                s,
-                now=now,
-                actor="scheduler",
-                action="job.interrupt",
-                entity="job",
-                entity_id=job.id,
-                machine=alloc.machine,
-                reason=action.reason,
-            )
-        elif isinstance(action, MarkRunning):
-            by_alloc[action.allocation_id].status = "running"
-
-    def _settle_job_states(self, s: Session, jobs, now: datetime) -> None:
-        ids = [j.id for j in jobs]
-        active = {
-            a.job_id
-            for a in s.scalars(
-                select(m.Allocation).where(
-                    m.Allocation.job_id.in_(ids), m.Allocation.status.in_(ACTIVE_ALLOCATIONS)
+        alloc_ids = s.execute(_INSERT_ALLOCATION, rows).scalars().all()
+        for action, row, alloc_id in zip(actions, rows, alloc_ids, strict=True):
+            self._decision("allocate", action.job_id, action.machine, action.reason)
+            self.events.append(
+                (
+                    "job.allocate",
+                    "job",
+                    action.job_id,
+                    dict(
+                        machine=action.machine,
+                        allocation_id=alloc_id,
+                        dispatch_id=row["dispatch_id"],
+                        reason=action.reason,
+                    ),
                 )
             )
-        }
-        interrupted = {
-            a.job_id
-            for a in s.scalars(
-                select(m.Allocation).where(
-                    m.Allocation.job_id.in_(ids), m.Allocation.status == "interrupted"
-                )
-            )
-        }
-        for job in jobs:
+        return {a.job_id for a in actions}
+
+    def _settle_job_states(self, active: set[int]) -> None:
+        """Each job's status from its parts: completed, running, interrupted or queued."""
+        s, now = self.s, self.now
+        # Whether an idle job was ever interrupted is asked once for all open jobs (the
+        # interruptions of jobs long closed stay out of it).
+        interrupted = set(s.scalars(_INTERRUPTED_OPEN_JOBS))
+        updates = []
+        for job in self.jobs.values():
             if job.status == CANCELLED:
                 continue
-            if job.done >= job.quantity:
+            done = self.done[job.id]
+            if done >= job.quantity:
                 status = COMPLETED
             elif job.id in active:
                 status = RUNNING
@@ -372,40 +373,93 @@ class Scheduler:
             else:
                 status = QUEUED
             if status != job.status:
-                job.status, job.updated_at = status, now
-                record(
-                    s,
-                    now=now,
-                    actor="scheduler",
-                    action=f"job.{status}",
-                    entity="job",
-                    entity_id=job.id,
-                    done=job.done,
-                    quantity=job.quantity,
+                updates.append(dict(b_id=job.id, b_status=status, b_updated=now))
+                self.events.append(
+                    (f"job.{status}", "job", job.id, dict(done=done, quantity=job.quantity))
                 )
+        if updates:
+            s.execute(_SET_JOB_STATUS, updates)
 
-    @staticmethod
-    def _decision(s: Session, now, rule, action, job_id, machine, reason) -> None:
-        s.add(
-            m.Decision(
-                at=now, rule=rule, action=action, job_id=job_id, machine=machine, reason=reason
+    def _decision(self, action: str, job_id: int, machine: str, reason: str) -> None:
+        self.decisions.append(
+            dict(
+                at=self.now,
+                rule=self.rule,
+                action=action,
+                job_id=job_id,
+                machine=machine,
+                reason=reason,
             )
         )
 
 
-def _job_state(j: m.Job) -> JobState:
-    return JobState(
-        j.id,
-        j.machine_kind,
-        j.machine_group,
-        j.quantity,
-        j.done,
-        j.priority,
-        j.created_at,
-        j.due_at,
-        j.cycle_time_s,
-        j.status == CANCELLED,
+_JOBS = m.Job.__table__
+_ALLOCATIONS = m.Allocation.__table__
+_DISPATCHES = m.Dispatch.__table__
+# Cancelled jobs stay in view only while a part of theirs is still on a machine.
+_OPEN_JOBS = (
+    select(
+        _JOBS.c.id,
+        _JOBS.c.revision_id,
+        _JOBS.c.machine_kind,
+        _JOBS.c.machine_group,
+        _JOBS.c.quantity,
+        _JOBS.c.done,
+        _JOBS.c.priority,
+        _JOBS.c.created_at,
+        _JOBS.c.due_at,
+        _JOBS.c.cycle_time_s,
+        _JOBS.c.status,
     )
+    .where(
+        _JOBS.c.status.in_(OPEN_STATES)
+        | _JOBS.c.id.in_(
+            select(_ALLOCATIONS.c.job_id).where(_ALLOCATIONS.c.status.in_(ACTIVE_ALLOCATIONS))
+        )
+    )
+    .order_by(_JOBS.c.id)
+    .with_for_update()
+)
+# Active allocations with whether their dispatch failed, in one query.
+_ACTIVE_ALLOCATIONS = (
+    select(
+        _ALLOCATIONS.c.id,
+        _ALLOCATIONS.c.job_id,
+        _ALLOCATIONS.c.machine,
+        _ALLOCATIONS.c.parts_at_start,
+        _ALLOCATIONS.c.status,
+        (_DISPATCHES.c.state == FAILED).label("dispatch_failed"),
+    )
+    .select_from(
+        _ALLOCATIONS.outerjoin(_DISPATCHES, _DISPATCHES.c.id == _ALLOCATIONS.c.dispatch_id)
+    )
+    .where(_ALLOCATIONS.c.status.in_(ACTIVE_ALLOCATIONS))
+    .order_by(_ALLOCATIONS.c.id)
+)
+_ALLOCATION_COUNTS = (
+    select(_ALLOCATIONS.c.job_id, func.count())
+    .where(_ALLOCATIONS.c.job_id.in_(bindparam("ids", expanding=True)))
+    .group_by(_ALLOCATIONS.c.job_id)
+)
+_INTERRUPTED_OPEN_JOBS = (
+    select(_ALLOCATIONS.c.job_id)
+    .distinct()
+    .join(_JOBS, _JOBS.c.id == _ALLOCATIONS.c.job_id)
+    .where(_ALLOCATIONS.c.status == INTERRUPTED, _JOBS.c.status.in_(OPEN_STATES))
+)
+_INSERT_ALLOCATION = insert(_ALLOCATIONS).returning(_ALLOCATIONS.c.id, sort_by_parameter_order=True)
+_INSERT_DECISION = insert(m.Decision.__table__)
+_SET_ALLOCATION = (
+    update(_ALLOCATIONS)
+    .where(_ALLOCATIONS.c.id == bindparam("b_id"))
+    .values(status=bindparam("b_status"), ended_at=bindparam("b_ended"))
+)
+_SET_DONE = update(_JOBS).where(_JOBS.c.id == bindparam("b_id")).values(done=bindparam("b_done"))
+_SET_JOB_STATUS = (
+    update(_JOBS)
+    .where(_JOBS.c.id == bindparam("b_id"))
+    .values(status=bindparam("b_status"), updated_at=bindparam("b_updated"))
+)
 
 
 def job_info(j: m.Job) -> JobInfo:

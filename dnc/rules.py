@@ -9,7 +9,7 @@ within a class; the job id breaks ties, so decisions are deterministic.
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from datetime import datetime
 
 
@@ -31,7 +31,13 @@ class JobView:
 class Ranked:
     job: JobView
     key: float
-    reason: str
+    explain: Callable[[JobView, float], str] = field(repr=False, compare=False)
+
+    @property
+    def reason(self) -> str:
+        """Written when asked: a tick ranks every waiting job but records only the chosen."""
+        prefix = f"priority {self.job.priority}; " if self.job.priority else ""
+        return prefix + self.explain(self.job, self.key)
 
 
 Rule = Callable[[list[JobView], datetime], list[Ranked]]
@@ -95,13 +101,11 @@ def _rank(
     key: Callable[[JobView], float],
     why: Callable[[JobView, float], str],
 ) -> list[Ranked]:
-    ranked = [Ranked(j, key(j), "") for j in jobs]
-    ranked.sort(key=lambda r: (-r.job.priority, r.key, r.job.id))
-    return [
-        Ranked(
-            r.job,
-            r.key,
-            (f"priority {r.job.priority}; " if r.job.priority else "") + why(r.job, r.key),
-        )
-        for r in ranked
-    ]
+    # Each job's key is worked out once; the reason only for the jobs that are chosen.
+    ranked = [Ranked(j, key(j), why) for j in jobs]
+    ranked.sort(key=_order)
+    return ranked
+
+
+def _order(r: Ranked) -> tuple:
+    return (-r.job.priority, r.key, r.job.id)
