@@ -17,12 +17,14 @@ collects once and freezes what exists after setup (`gc.freeze`: the long-lived o
 dictionaries are never traversed again), raises the automatic collector's threshold to
 FORCED_THRESHOLD allocations and lets the pacers collect the young generation in the slack
 before a deadline as soon as YOUNG_THRESHOLD are pending (the middle one every 10th time,
-when the slack is larger). While the pacers run, the automatic collector never triggers;
-if they stop (an idle axis group that was never closed) it still does, at the higher
-threshold, so memory stays bounded. The old generation is not collected in the slack: its
-size is unknown (in a host that was busy before, a full collection takes 100s of ms), so
-cyclic garbage that survives two collections waits until the last shell stops. It also shortens the switch interval. Both are process-wide
-settings, so they are reference-counted and restored when the last shell stops.
+when the slack holds what it measured to take: see `collect_in_slack`). While the pacers
+run, the automatic collector never triggers; if they stop (an idle axis group that was
+never closed) it still does, at the higher threshold, so memory stays bounded. The old
+generation is not collected in the slack: its size is unknown (in a host that was busy
+before, a full collection takes 100s of ms), so cyclic garbage that survives a young
+collection may wait until the last shell stops. It also shortens the switch interval. Both
+are process-wide settings, so they are reference-counted and restored when the last shell
+stops.
 
 `Pacer` waits for absolute deadlines: it sleeps until `spin_s` before the deadline and
 spins the rest (calling `sleep(0)`, which releases the GIL but returns at once), so the
