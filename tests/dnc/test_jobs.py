@@ -178,3 +178,49 @@ def test_edd_rule_takes_the_earliest_due_job(sessions, cell):
     assert reason.startswith(
         "EDD chose job 2 for idle mill1 (rank 1 of 2 eligible): EDD: due 2026-11-21T09:00"
     )
+
+
+def test_a_tick_writes_its_events_in_its_transaction_and_flags_them(sessions, cell):
+    from sqlalchemy import event
+
+    from dnc.events import OUTBOX_WRITTEN
+    from dnc.outbox import events_after
+
+    jobs, status = Jobs(sessions), FakeCell()
+    job = jobs.create(revision_id=cell["released"], quantity=2)
+    last = events_after(sessions, 0)[-1].id
+    seen = []
+    event.listen(sessions, "after_commit", lambda s: seen.append(s.info.get(OUTBOX_WRITTEN)))
+    Scheduler(sessions, status, now=lambda: T0).tick()
+    assert seen == [True]  # the event hub wakes at this commit
+    topics = [(e.topic, e.payload["id"]) for e in events_after(sessions, last)]
+    assert topics == [
+        ("fmscell/job/allocate", job.id),
+        ("fmscell/job/allocate", job.id),
+        ("fmscell/job/running", job.id),
+    ]
+
+
+def test_batch_dispatches_reuse_keys_and_refuse_bad_targets(sessions, cell):
+    from dnc.db import transaction
+    from dnc.dispatch import DispatchRequest, create_dispatches
+
+    first, _ = Dispatches(sessions).request(
+        key="k1", revision_id=cell["released"], machine="mill1", start=True
+    )
+    ok = [
+        DispatchRequest("k1", cell["released"], "mill1", start=True),
+        DispatchRequest("k2", cell["released"], "mill2", start=True),
+    ]
+    with transaction(sessions) as s:
+        made = create_dispatches(s, ok, requested_by="t", now=T0)
+    assert made[0] == (first.id, False) and made[1][1] and made[1][0] != first.id
+    for bad, error, message in [
+        (DispatchRequest("k3", cell["released"], "mill9"), NotFound, "unknown machine 'mill9'"),
+        (DispatchRequest("k3", cell["draft"], "mill1"), WorkflowError, "is draft; only a released"),
+        (DispatchRequest("k3", 999, "mill1"), NotFound, "no revision with id 999"),
+        (DispatchRequest("k1", cell["released"], "mill2"), IdempotencyMismatch, "'k1' was already"),
+    ]:
+        with pytest.raises(error, match=message), transaction(sessions) as s:
+            create_dispatches(s, [ok[1], bad], requested_by="t", now=T0)
+    assert len(Dispatches(sessions).list()) == 2
