@@ -78,63 +78,55 @@ def create_dispatches(
     revisions, machines, the insert): a tick makes dozens at once, and a unit of work per
     dispatch was most of the tick. No event is written here; the caller records its own.
     """
-    digests = []
+    existing = (
+        {r.idempotency_key: r for r in s.execute(_BY_KEYS, dict(keys=[r.key for r in requests]))}
+        if requests
+        else {}
+    )
+    new: dict[str, tuple[DispatchRequest, dict]] = {}  # by key; the first request of a key
     for req in requests:
         _check_request(req.mode, req.key)
-        digests.append(request_hash(req.revision_id, req.machine, req.mode, req.start))
-    keys = [req.key for req in requests]
-    existing = {r.idempotency_key: r for r in s.execute(_BY_KEYS, dict(keys=keys))} if keys else {}
-    fresh = [
-        (req, digest)
-        for req, digest in zip(requests, digests, strict=True)
-        if req.key not in existing
-    ]
-    if fresh:
-        _check_targets(s, [req for req, _ in fresh])
-    ids: dict[str, int] = {}
-    rows = []
-    for req, digest in fresh:
-        if req.key in ids:  # the same key twice in one batch: the first one stands
-            continue
-        ids[req.key] = -1
-        rows.append(
-            dict(
-                idempotency_key=req.key,
-                request_hash=digest,
-                revision_id=req.revision_id,
-                machine=req.machine,
-                mode=req.mode,
-                start=req.start,
-                state=PENDING,
-                attempts=0,
-                bytes_sent=0,
-                verified=None,
-                error=None,
-                requested_by=requested_by,
-                created_at=now,
-                updated_at=now,
-            )
-        )
-    if rows:
-        made = s.execute(_INSERT_MANY, rows).scalars().all()
-        ids = {row["idempotency_key"]: i for row, i in zip(rows, made, strict=True)}
-    out = []
-    seen: dict[str, str] = {}
-    for req, digest in zip(requests, digests, strict=True):
+        digest = request_hash(req.revision_id, req.machine, req.mode, req.start)
         if req.key in existing:
             _same_request(existing[req.key], digest, req.key)
-            out.append((existing[req.key].id, False))
-        elif req.key in seen:
-            if seen[req.key] != digest:
+        elif req.key in new:
+            if new[req.key][1]["request_hash"] != digest:
                 raise IdempotencyMismatch(
                     f"Idempotency-Key {req.key!r} appears twice in one batch with different "
-                    "requests",
-                    dispatch_id=ids[req.key],
+                    "requests"
                 )
-            out.append((ids[req.key], False))
         else:
-            seen[req.key] = digest
-            out.append((ids[req.key], True))
+            new[req.key] = (
+                req,
+                dict(
+                    idempotency_key=req.key,
+                    request_hash=digest,
+                    revision_id=req.revision_id,
+                    machine=req.machine,
+                    mode=req.mode,
+                    start=req.start,
+                    state=PENDING,
+                    attempts=0,
+                    bytes_sent=0,
+                    verified=None,
+                    error=None,
+                    requested_by=requested_by,
+                    created_at=now,
+                    updated_at=now,
+                ),
+            )
+    ids: dict[str, int] = {}
+    if new:
+        _check_targets(s, [req for req, _ in new.values()])
+        made = s.execute(_INSERT_MANY, [row for _, row in new.values()]).scalars().all()
+        ids = dict(zip(new, made, strict=True))
+    out = []
+    for req in requests:
+        if req.key in existing:
+            out.append((existing[req.key].id, False))
+        else:
+            out.append((ids[req.key], req.key in new))
+            new.pop(req.key, None)  # a key's later requests in the batch found it made
     return out
 
 

@@ -6,7 +6,8 @@ from datetime import UTC, datetime, timedelta
 
 import pytest
 
-from dnc.dispatch import Dispatches
+from dnc.db import transaction
+from dnc.dispatch import Dispatches, DispatchRequest, create_dispatches
 from dnc.errors import IdempotencyMismatch, InvalidUpload, NotFound, WorkflowError
 from dnc.jobs import Jobs, Scheduler
 from dnc.scheduler import MachineView
@@ -202,9 +203,6 @@ def test_a_tick_writes_its_events_in_its_transaction_and_flags_them(sessions, ce
 
 
 def test_batch_dispatches_reuse_keys_and_refuse_bad_targets(sessions, cell):
-    from dnc.db import transaction
-    from dnc.dispatch import DispatchRequest, create_dispatches
-
     first, _ = Dispatches(sessions).request(
         key="k1", revision_id=cell["released"], machine="mill1", start=True
     )
@@ -224,3 +222,15 @@ def test_batch_dispatches_reuse_keys_and_refuse_bad_targets(sessions, cell):
         with pytest.raises(error, match=message), transaction(sessions) as s:
             create_dispatches(s, [ok[1], bad], requested_by="t", now=T0)
     assert len(Dispatches(sessions).list()) == 2
+    twice = DispatchRequest("k5", cell["released"], "mill2")
+    with transaction(sessions) as s:
+        (a, made_a), (b, made_b) = create_dispatches(s, [twice, twice], requested_by="t", now=T0)
+    assert a == b and made_a and not made_b
+    other = DispatchRequest("k6", cell["released"], "mill1")
+    with (
+        pytest.raises(IdempotencyMismatch, match="'k6' appears twice in one batch"),
+        transaction(sessions) as s,
+    ):
+        create_dispatches(
+            s, [other, DispatchRequest("k6", cell["released"], "mill2")], requested_by="t", now=T0
+        )
