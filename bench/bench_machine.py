@@ -7,7 +7,9 @@ PLC at 10 ms) in lockstep and in realtime. Prints ONE JSON object.
 * cell: 8 such machines at IPO 1 ms, one process each, all stepping at once on this box;
   real-time factor of the slowest; target >= 2x.
 * realtime: 8 machines at IPO 2 ms, each paced to the wall clock by `RealtimeRunner` in its
-  own process; late cycles (a cycle whose work ends after the next deadline); target < 0.1 %.
+  own process; late cycles (a cycle whose work ends after the next deadline) and missed
+  slots (skipped: no cycle ran); target < 0.1 % late or missed. Once with ordinary
+  scheduling, once with each stepping thread at SCHED_FIFO (`--rt-priority`).
 
 Boot, configuration and homing are excluded from the timed part. Usage:
     .venv/bin/python bench/bench_machine.py [--seconds 2] [--cell 8] [--realtime-s 3]
@@ -92,13 +94,33 @@ def _cell_worker(args):
         m.close()
 
 
+class _NoWork:
+    """The peer of the realtime runs: the same runner pacing a machine whose cycle does
+    nothing, so what it misses is the host's (scheduler, kernel, hypervisor), not ours."""
+
+    alarms: list = []
+
+    def __init__(self, ipo_ms: float) -> None:
+        self.ipo_s = ipo_ms / 1000
+        self.status = type("Status", (), {"execution": "ACTIVE"})()
+
+    def step(self, n: int) -> None:
+        pass
+
+    def service(self) -> None:
+        pass
+
+    def close(self) -> None:
+        pass
+
+
 def _realtime_worker(args):
     from cnc.machine import RealtimeRunner
 
-    ipo_ms, duration, ideal, barrier, index = args
-    m = _machine(ipo_ms, ideal, f"rt{index}")
+    ipo_ms, duration, ideal, rt_priority, barrier, index = args
+    m = _NoWork(ipo_ms) if ideal == "no_work" else _machine(ipo_ms, ideal, f"rt{index}")
     try:
-        runner = RealtimeRunner(m)
+        runner = RealtimeRunner(m, rt_priority=rt_priority)
         barrier.wait()
         summary = runner.run(duration)
         summary["alarms"] = [a.number for a in m.alarms]
@@ -132,10 +154,13 @@ def cell(n: int, ipo_ms: float, seconds: float, ideal: bool = False) -> dict:
     }
 
 
-def realtime(n: int, ipo_ms: float, duration: float, ideal: bool = False) -> dict:
-    results = _pool(_realtime_worker, n, ipo_ms, duration, ideal)
+def realtime(
+    n: int, ipo_ms: float, duration: float, ideal: bool | str = False, rt_priority: int = 0
+) -> dict:
+    results = _pool(_realtime_worker, n, ipo_ms, duration, ideal, rt_priority)
     cycles = sum(r["cycles"] for r in results)
     late = sum(r["late_cycles"] for r in results)
+    skipped = sum(r["skipped_slots"] for r in results)
     return {
         "machines": n,
         "ipo_ms": ipo_ms,
@@ -143,9 +168,15 @@ def realtime(n: int, ipo_ms: float, duration: float, ideal: bool = False) -> dic
         "cycles": cycles,
         "late_cycles": late,
         "late_percent": round(100.0 * late / cycles, 3) if cycles else None,
-        "skipped_slots": sum(r["skipped_slots"] for r in results),
+        "skipped_slots": skipped,
+        # a skipped slot is a cycle that never ran (as the drives' bench counts it): the
+        # target is judged on late or missed slots
+        "late_or_missed_percent": round(100.0 * (late + skipped) / (cycles + skipped), 3)
+        if cycles
+        else None,
         "lateness_ms_p99_worst": round(max(r["lateness_ms_p99"] for r in results), 3),
         "lateness_ms_max": round(max(r["lateness_ms_max"] for r in results), 3),
+        "scheduling": sorted({r["scheduling"] for r in results}),
     }
 
 
@@ -155,6 +186,7 @@ def main() -> None:
     ap.add_argument("--cell", type=int, default=8)
     ap.add_argument("--cell-seconds", type=float, default=0.5)
     ap.add_argument("--realtime-s", type=float, default=3.0)
+    ap.add_argument("--rt-priority", type=int, default=50, help="SCHED_FIFO of the fifo run")
     args = ap.parse_args()
     import logging
 
@@ -174,6 +206,16 @@ def main() -> None:
     out["cell_1ms"] = cell(args.cell, 1.0, args.cell_seconds)
     out["realtime_2ms"] = realtime(args.cell, 2.0, args.realtime_s)
     out["realtime_2ms_ideal_axes"] = realtime(args.cell, 2.0, args.realtime_s, ideal=True)
+    # opt-in, as on a real controller: each machine's stepping thread at SCHED_FIFO
+    # (FMSCELL_MACHINE_RT_PRIORITY); the ordinary run above is the default
+    out["realtime_2ms_fifo"] = realtime(
+        args.cell, 2.0, args.realtime_s, rt_priority=args.rt_priority
+    )
+    # the host's own share: 8 runners pacing machines that do nothing, both schedulings
+    out["realtime_2ms_no_work_peer"] = realtime(args.cell, 2.0, args.realtime_s, ideal="no_work")
+    out["realtime_2ms_no_work_peer_fifo"] = realtime(
+        args.cell, 2.0, args.realtime_s, ideal="no_work", rt_priority=args.rt_priority
+    )
     out["targets"] = {
         "single_2ms_rtf": 20.0,
         "cell_8x3_axes_1ms_rtf": 2.0,
@@ -182,7 +224,9 @@ def main() -> None:
     out["met"] = {
         "single_2ms_rtf": out["single_2ms"]["rtf"] >= 20.0,
         "cell_8x3_axes_1ms_rtf": out["cell_1ms"]["rtf"] >= 2.0,
-        "realtime_8_machines_2ms": (out["realtime_2ms"]["late_percent"] or 0) < 0.1,
+        "realtime_8_machines_2ms": (out["realtime_2ms"]["late_or_missed_percent"] or 0) < 0.1,
+        "realtime_8_machines_2ms_fifo": (out["realtime_2ms_fifo"]["late_or_missed_percent"] or 0)
+        < 0.1,
     }
     out["load_average_after"] = os.getloadavg()[0]
     print(json.dumps(out))

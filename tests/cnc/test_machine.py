@@ -329,3 +329,46 @@ def test_home_all_and_program_select_from_the_remote_panel_on_canopen_drives():
         assert m.alarms == () and rt.alarms == {}
     finally:
         m.close()
+
+
+@pytest.mark.parametrize(
+    ("env", "arg", "expected"),
+    [({}, None, 0), ({"FMSCELL_MACHINE_RT_PRIORITY": "30"}, None, 30), ({}, 12, 12)],
+)
+def test_realtime_runner_takes_its_fifo_priority_from_the_argument_or_the_environment(
+    monkeypatch, env, arg, expected
+):
+    from cnc.machine import RealtimeRunner
+
+    monkeypatch.delenv("FMSCELL_MACHINE_RT_PRIORITY", raising=False)
+    for key, value in env.items():
+        monkeypatch.setenv(key, value)
+    m = build(ideal=True)
+    try:
+        assert RealtimeRunner(m, rt_priority=arg).rt_priority == expected
+    finally:
+        m.close()
+
+
+@pytest.mark.parametrize("bad", ["-1", "100", "high"])
+def test_a_malformed_machine_rt_priority_is_refused_naming_the_variable(monkeypatch, bad):
+    from cnc.machine.runner import rt_priority_from_env
+
+    with pytest.raises(ValueError, match="FMSCELL_MACHINE_RT_PRIORITY"):
+        rt_priority_from_env({"FMSCELL_MACHINE_RT_PRIORITY": bad})
+
+
+def test_the_realtime_runner_reports_a_refused_fifo_and_runs_on(monkeypatch):
+    """Without the privilege the runner says so in its summary and still paces."""
+    import cnc.machine.runner as runner_mod
+    from cnc.machine import RealtimeRunner
+
+    refused = "SCHED_OTHER (SCHED_FIFO 20 refused: Operation not permitted)"
+    monkeypatch.setattr(runner_mod, "request_fifo", lambda priority: refused)
+    m = build(ideal=True)
+    try:
+        runner = RealtimeRunner(m, rt_priority=20, speed=100.0)
+        summary = runner.run(duration_s=0.05)
+        assert summary["scheduling"] == refused and summary["cycles"] > 0
+    finally:
+        m.close()
