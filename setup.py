@@ -44,9 +44,18 @@ def ext_modules() -> list:
     except ImportError:  # a build without mypy: the plain Python modules are used
         return []
     # Imported modules that are not compiled are read for their types only: their own type
-    # errors must not stop the build.
+    # errors must not stop the build. A compiled class whose base class mypy cannot see
+    # (a library missing from the build environment, so its type is Any) would be laid out
+    # as a native class and crash at run time: --disallow-subclassing-any makes that a build
+    # error. The libraries compiled classes derive from (python-can's BusABC, canopen) are
+    # therefore in pyproject's build requirements, pinned as in its dependencies.
     return mypycify(
-        ["--follow-imports=silent", "--ignore-missing-imports", *sources],
+        [
+            "--follow-imports=silent",
+            "--ignore-missing-imports",
+            "--disallow-subclassing-any",
+            *sources,
+        ],
         opt_level="3",
         debug_level="0",
     )
