@@ -39,7 +39,8 @@ _REQUEST = re.compile(r"/REQ\s*(\d{1,5})", re.I)
 
 
 class TransferError(Exception):
-    """kind: connect | refused | cut_off | xoff_timeout | timeout | protocol | verify."""
+    """kind: connect | refused | cut_off | xoff_timeout | timeout | protocol | verify | read
+    (the host could not read the revision's text from its database)."""
 
     def __init__(self, kind: str, message: str, *, alarm: int | None = None, sent: int = 0):
         super().__init__(message)
@@ -52,7 +53,8 @@ class TransferError(Exception):
         # number) will not cure itself by resending the same bytes.
         if self.kind == "refused":
             return self.alarm in LINE_ALARMS
-        return self.kind in ("connect", "cut_off", "timeout", "xoff_timeout", "verify")
+        # a failed read of the text on the host (a busy database) may pass on the next attempt
+        return self.kind in ("connect", "cut_off", "timeout", "xoff_timeout", "verify", "read")
 
 
 @dataclass(frozen=True, slots=True)

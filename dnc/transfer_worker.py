@@ -167,7 +167,13 @@ class TransferWorker:
                 sha=found.sha256,
                 number=found.number,
             )
-        text = self._text(found.sha256)
+        try:
+            # read after the claim committed: a failure here must still end in a recorded
+            # failure or retry, never leave the dispatch in `transferring`
+            text = self._text(found.sha256)
+        except Exception as exc:
+            failure = TransferError("read", f"revision text {found.sha256[:12]}: {exc}")
+            return self._fail(dispatch_id, job["attempts"], failure)
         try:
             host, port = _address(job["address"], dispatch_id)
             client = self._client(host, port, job["profile"])
@@ -341,12 +347,17 @@ class _Memo:
                     return self._values[key]
             try:
                 value = compute()
-            finally:
+                weight = self._weight(value)  # before storing: a value it rejects is not kept
+            except BaseException:
                 with self._lock:
                     self._computing.pop(key, None)
+                raise
             with self._lock:
+                # stored and the gate dropped under one lock: a thread arriving now finds
+                # either the value or the gate, never neither (which would compute again)
                 self._values[key] = value
-                self._total += self._weight(value)
+                self._total += weight
+                self._computing.pop(key, None)
                 while self._total > self._limit and len(self._values) > 1:
                     self._total -= self._weight(self._values.popitem(last=False)[1])
             return value

@@ -166,6 +166,30 @@ def test_machine_without_address_fails_clearly(library, sessions, released):
     assert "machine has no DNC address" in Dispatches(sessions).get(did).error
 
 
+def test_a_text_that_cannot_be_read_ends_in_a_recorded_retry_not_in_transferring(
+    library, sessions, machine, released, monkeypatch
+):
+    """The text is read after the claim committed: a database error there is a failure of
+    this attempt (retried later), never a dispatch left in `transferring`."""
+    register(library, machine.port.bound_port)
+    clock = Clock()
+    worker = TransferWorker(sessions, now=clock, retry=RetryPolicy(max_attempts=3, base_s=1))
+    did = dispatch(sessions, released)
+
+    def database_down(sha):
+        raise RuntimeError("connection pool exhausted")
+
+    monkeypatch.setattr(worker, "_text", database_down)
+    worker.run_once()
+    d = Dispatches(sessions).get(did)
+    assert d.state == "pending" and d.attempts == 1, (d.state, d.error)
+    assert d.error.startswith("read") and "connection pool exhausted" in d.error
+    monkeypatch.undo()
+    clock.advance(60)
+    worker.run_once()
+    assert Dispatches(sessions).get(did).state == "done"
+
+
 def test_start_goes_through_the_starter_after_verification(library, sessions, machine, released):
     register(library, machine.port.bound_port)
     started = []
@@ -259,5 +283,9 @@ def test_a_value_many_dispatches_need_at_once_is_worked_out_once():
     with pytest.raises(RuntimeError):
         memo.get("other", broken)
     assert memo.get("other", lambda: "ok") == "ok"  # a failure is not remembered
+    weighed = _Memo(10, weight=len)
+    with pytest.raises(TypeError):
+        weighed.get("none", lambda: None)  # len(None): refused before it is stored
+    assert weighed.get("none", lambda: "text") == "text"
     memo.get("third", lambda: "x")
     assert memo.get("rev", lambda: "again") == "again"  # the oldest went past the limit
