@@ -96,25 +96,7 @@ def create_dispatches(
                     "requests"
                 )
         else:
-            new[req.key] = (
-                req,
-                dict(
-                    idempotency_key=req.key,
-                    request_hash=digest,
-                    revision_id=req.revision_id,
-                    machine=req.machine,
-                    mode=req.mode,
-                    start=req.start,
-                    state=PENDING,
-                    attempts=0,
-                    bytes_sent=0,
-                    verified=None,
-                    error=None,
-                    requested_by=requested_by,
-                    created_at=now,
-                    updated_at=now,
-                ),
-            )
+            new[req.key] = (req, _new_row(req, digest, requested_by, now))
     ids: dict[str, int] = {}
     if new:
         _check_targets(s, [req for req, _ in new.values()])
@@ -137,17 +119,31 @@ def _check_request(mode: str, key: str) -> None:
         raise InvalidUpload("an idempotency key of 1..128 characters is required")
 
 
+def _new_row(req: DispatchRequest, digest: str, requested_by: str, now: datetime) -> dict:
+    """The dispatches row of a new request."""
+    return dict(
+        idempotency_key=req.key,
+        request_hash=digest,
+        revision_id=req.revision_id,
+        machine=req.machine,
+        mode=req.mode,
+        start=req.start,
+        state=PENDING,
+        attempts=0,
+        bytes_sent=0,
+        verified=None,
+        error=None,
+        requested_by=requested_by,
+        created_at=now,
+        updated_at=now,
+    )
+
+
 def _check_target(s: Session, revision_id: int, machine: str) -> None:
     """The revision exists and is released, and the machine is known (one query)."""
     found = s.execute(_TARGET, dict(revision_id=revision_id, machine=machine)).one_or_none()
-    if found is None:
-        raise NotFound(f"no revision with id {revision_id}")
-    if found.status != "released":
-        raise WorkflowError(
-            f"revision {revision_id} is {found.status}; only a released revision can be dispatched"
-        )
-    if found.machine_id is None:
-        raise NotFound(f"unknown machine {machine!r}")
+    status = None if found is None else found.status
+    _refuse_target(revision_id, status, machine, found is not None and found.machine_id is not None)
 
 
 def _check_targets(s: Session, requests: list[DispatchRequest]) -> None:
@@ -158,15 +154,19 @@ def _check_targets(s: Session, requests: list[DispatchRequest]) -> None:
     known = set(s.scalars(_KNOWN_MACHINES, dict(names=sorted({r.machine for r in requests}))))
     for req in requests:
         status = revisions.get(req.revision_id)
-        if status is None:
-            raise NotFound(f"no revision with id {req.revision_id}")
-        if status != "released":
-            raise WorkflowError(
-                f"revision {req.revision_id} is {status}; "
-                "only a released revision can be dispatched"
-            )
-        if req.machine not in known:
-            raise NotFound(f"unknown machine {req.machine!r}")
+        _refuse_target(req.revision_id, status, req.machine, req.machine in known)
+
+
+def _refuse_target(revision_id: int, status: str | None, machine: str, known: bool) -> None:
+    """A dispatch needs an existing, released revision and a registered machine."""
+    if status is None:
+        raise NotFound(f"no revision with id {revision_id}")
+    if status != "released":
+        raise WorkflowError(
+            f"revision {revision_id} is {status}; only a released revision can be dispatched"
+        )
+    if not known:
+        raise NotFound(f"unknown machine {machine!r}")
 
 
 def _same_request(existing: m.Dispatch, digest: str, key: str) -> None:
@@ -211,30 +211,19 @@ class Dispatches:
                     return dispatch_info(existing), False
                 _check_target(s, revision_id, machine)
                 now = self._now()
-                row = dict(
-                    idempotency_key=key,
-                    request_hash=digest,
-                    revision_id=revision_id,
-                    machine=machine,
-                    mode=mode,
-                    start=start,
-                    state=PENDING,
-                    attempts=0,
-                    bytes_sent=0,
-                    verified=None,
-                    error=None,
-                    requested_by=requested_by,
-                    created_at=now,
-                    updated_at=now,
-                )
+                req = DispatchRequest(key, revision_id, machine, mode, start)
+                row = _new_row(req, digest, requested_by, now)
                 row["id"] = s.execute(_INSERT, row).scalar_one()
                 info = DispatchInfo(**{k: row[k] for k in DispatchInfo.__slots__})
                 _record_dispatch_event(s, info, requested_by, "dispatch.request", now)
                 return info, True
         except IntegrityError:
             # A concurrent request with the same key won the insert: answer with its row.
+            # No such row: the constraint that failed was another one, which is the error.
             with transaction(self._sessions) as s:
-                existing = s.execute(_BY_KEY, dict(key=key)).one()
+                existing = s.execute(_BY_KEY, dict(key=key)).one_or_none()
+                if existing is None:
+                    raise
                 _same_request(existing, digest, key)
                 return dispatch_info(existing), False
 

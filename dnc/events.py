@@ -26,22 +26,12 @@ def record(
 
     The topic defaults to `fmscell/<entity>/<verb>` (the verb is the action's last part).
     """
-    detail = json.loads(json.dumps(detail, default=str))  # JSON columns take plain data only
     # Both rows by Core inserts on the tables (compiled once, reused): every change writes
     # them, and the ORM's unit of work, even an ORM-enabled insert, cost more CPU than the
     # rest of a small state change.
-    s.execute(
-        _AUDIT,
-        dict(at=now, actor=actor, action=action, entity=entity, entity_id=entity_id, detail=detail),
-    )
-    s.execute(
-        _OUTBOX,
-        dict(
-            at=now,
-            topic=topic or f"fmscell/{entity}/{action.rsplit('.', 1)[-1]}",
-            payload={"action": action, "entity": entity, "id": entity_id, **detail},
-        ),
-    )
+    audit, outbox = _rows(now, actor, action, entity, entity_id, detail, topic)
+    s.execute(_AUDIT, audit)
+    s.execute(_OUTBOX, outbox)
     # A Core insert is no ORM flush: tell the session's listeners (the event hub wakes its
     # readers at commit) that this transaction wrote events.
     s.info[OUTBOX_WRITTEN] = True
@@ -56,30 +46,33 @@ def record_many(
 ) -> None:
     """`record` for many changes of one transaction: (action, entity, entity_id, detail)
     each, written in that order by one insert per table (a scheduler tick records dozens)."""
-    audit, outbox = [], []
-    for action, entity, entity_id, detail in entries:
-        detail = json.loads(json.dumps(detail, default=str))
-        audit.append(
-            dict(
-                at=now,
-                actor=actor,
-                action=action,
-                entity=entity,
-                entity_id=entity_id,
-                detail=detail,
-            )
-        )
-        outbox.append(
-            dict(
-                at=now,
-                topic=f"fmscell/{entity}/{action.rsplit('.', 1)[-1]}",
-                payload={"action": action, "entity": entity, "id": entity_id, **detail},
-            )
-        )
-    if audit:
-        s.execute(_AUDIT, audit)
-        s.execute(_OUTBOX, outbox)
+    rows = [_rows(now, actor, *entry) for entry in entries]
+    if rows:
+        s.execute(_AUDIT, [audit for audit, _ in rows])
+        s.execute(_OUTBOX, [outbox for _, outbox in rows])
         s.info[OUTBOX_WRITTEN] = True
+
+
+def _rows(
+    now: datetime,
+    actor: str,
+    action: str,
+    entity: str,
+    entity_id: int | None,
+    detail: dict,
+    topic: str | None = None,
+) -> tuple[dict, dict]:
+    """The audit row and the outbox row of one change."""
+    detail = json.loads(json.dumps(detail, default=str))  # JSON columns take plain data only
+    audit = dict(
+        at=now, actor=actor, action=action, entity=entity, entity_id=entity_id, detail=detail
+    )
+    outbox = dict(
+        at=now,
+        topic=topic or f"fmscell/{entity}/{action.rsplit('.', 1)[-1]}",
+        payload={"action": action, "entity": entity, "id": entity_id, **detail},
+    )
+    return audit, outbox
 
 
 OUTBOX_WRITTEN = "fmscell_outbox_written"
