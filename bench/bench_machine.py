@@ -176,6 +176,9 @@ def realtime(
         else None,
         "lateness_ms_p99_worst": round(max(r["lateness_ms_p99"] for r in results), 3),
         "lateness_ms_max": round(max(r["lateness_ms_max"] for r in results), 3),
+        # the cycle's own work (wake-up to done): a late cycle with short work was the OS's
+        "work_ms_p99_worst": round(max(r["work_ms_p99"] for r in results), 3),
+        "work_ms_max": round(max(r["work_ms_max"] for r in results), 3),
         "scheduling": sorted({r["scheduling"] for r in results}),
     }
 

@@ -168,13 +168,14 @@ RT_PRIORITY_ENV = "FMSCELL_DRIVES_RT_PRIORITY"
 RT_CPU_ENV = "FMSCELL_DRIVES_RT_CPU"
 
 
-def rt_priority_from_env(environ=None) -> int:
-    """The SCHED_FIFO priority `FMSCELL_DRIVES_RT_PRIORITY` asks for; ValueError names it."""
-    raw = (os.environ if environ is None else environ).get(RT_PRIORITY_ENV, "").strip()
+def rt_priority_from_env(environ=None, variable: str = RT_PRIORITY_ENV) -> int:
+    """The SCHED_FIFO priority `variable` (`FMSCELL_DRIVES_RT_PRIORITY`) asks for;
+    ValueError names it."""
+    raw = (os.environ if environ is None else environ).get(variable, "").strip()
     if not raw:
         return 0
     if not raw.isdigit() or not 0 <= int(raw) <= 99:
-        raise ValueError(f"{RT_PRIORITY_ENV}={raw!r}: must be an integer 0..99 (0 = off)")
+        raise ValueError(f"{variable}={raw!r}: must be an integer 0..99 (0 = off)")
     return int(raw)
 
 

@@ -2,11 +2,12 @@
 
 from __future__ import annotations
 
-import os
+import gc
 import threading
 import time
 
 from drives.realtime import RealtimeProcess, request_fifo, sleep_until
+from drives.realtime import rt_priority_from_env as drives_rt_priority
 
 # the fast clock: a machine in a cycle runs at FAST_SPEED x real time (as fast as the CPU
 # allows), an idle one at IDLE_SPEED: it has nothing to hurry for and leaves the CPU to the
@@ -28,12 +29,14 @@ RT_PRIORITY_ENV = "FMSCELL_MACHINE_RT_PRIORITY"
 
 def rt_priority_from_env(environ=None) -> int:
     """The SCHED_FIFO priority `FMSCELL_MACHINE_RT_PRIORITY` asks for; ValueError names it."""
-    raw = (os.environ if environ is None else environ).get(RT_PRIORITY_ENV, "").strip()
-    if not raw:
-        return 0
-    if not raw.isdigit() or not 0 <= int(raw) <= 99:
-        raise ValueError(f"{RT_PRIORITY_ENV}={raw!r}: must be an integer 0..99 (0 = off)")
-    return int(raw)
+    return drives_rt_priority(environ, RT_PRIORITY_ENV)
+
+
+#: while a realtime runner is idle (no program running), the old generation of the garbage
+#: collector, which the pacing never collects in a cycle's slack, is collected this often:
+#: a long-running machine process must not keep its cyclic garbage forever, and a late
+#: cycle of an idle machine costs nothing (its axes stand still)
+OLD_GENERATION_EVERY_S = 60.0
 
 
 class RealtimeRunner:
@@ -46,12 +49,16 @@ class RealtimeRunner:
     `idle_speed`: the fast clock. When set, `speed` applies while a program is active
     (execution in `BUSY`) and `idle_speed` otherwise (`FAST_SPEED`, `IDLE_SPEED`).
 
-    Pacing is the drives' (`drives.realtime`): while `run()` runs, the process's garbage
-    collector is frozen after setup and collects only in the slack before a deadline, the
-    GIL switch interval is short, and the last stretch to a deadline is spun, not slept.
-    `rt_priority` N (None = `FMSCELL_MACHINE_RT_PRIORITY`, 0 = off) asks SCHED_FIFO N for
-    the stepping thread, as LinuxCNC's servo thread has; a refusal is reported in
-    `scheduling` and the runner goes on as it can.
+    Paced at real time (`speed` <= 1, no `idle_speed`), it paces as the drives' shells do
+    (`drives.realtime`): while `run()` runs, the process's garbage collector is frozen after
+    setup and collects only in the slack before a deadline (the old generation while the
+    machine is idle, every OLD_GENERATION_EVERY_S), the GIL switch interval is short, and it
+    sleeps to a deadline (`spin_s`, none by default, is spun). `rt_priority` N (None =
+    `FMSCELL_MACHINE_RT_PRIORITY`, 0 = off) asks SCHED_FIFO N for the stepping thread, as
+    LinuxCNC's servo thread has; a refusal is reported in `scheduling` and the runner goes
+    on as it can. The fast clock takes none of this: it never sleeps while cutting, so a
+    FIFO thread would take a whole CPU from the rest of the process, and the slack the
+    collector waits for never comes.
     """
 
     def __init__(
@@ -77,7 +84,9 @@ class RealtimeRunner:
         self.error: str | None = None
         self.late_cycles = 0
         self.skipped_slots = 0
+        self.old_collections = 0  # full collections run while idle (paced at real time)
         self.lateness_s: list[float] = []
+        self.work_s: list[float] = []
         self._stop = threading.Event()
         self._paused = threading.Event()
         self.paused_ack = threading.Event()  # set once the loop has stopped stepping
@@ -113,18 +122,26 @@ class RealtimeRunner:
 
     def run(self, duration_s: float | None = None) -> dict:
         """Run until `stop()` or `duration_s` of wall time; returns `summary()`."""
+        if self.idle_speed is not None or self.speed > 1.0:
+            if self.rt_priority:
+                self.scheduling = (
+                    f"SCHED_OTHER (SCHED_FIFO {self.rt_priority} not applied: "
+                    "the fast clock does not sleep)"
+                )
+            return self._run(duration_s, paced=False)
         if self.rt_priority:
             self.scheduling = request_fifo(self.rt_priority)
         RealtimeProcess.acquire()
         try:
-            return self._run(duration_s)
+            return self._run(duration_s, paced=True)
         finally:
             RealtimeProcess.release()
 
-    def _run(self, duration_s: float | None) -> dict:
+    def _run(self, duration_s: float | None, paced: bool) -> dict:
         m = self.machine
         start = time.perf_counter()
         slot = start
+        old_collected = start
         while not self._stop.is_set():
             now = time.perf_counter()
             if duration_s is not None and now - start >= duration_s:
@@ -153,15 +170,27 @@ class RealtimeRunner:
                 missed = int((now - slot) / period)
                 self.skipped_slots += missed
                 slot += missed * period
-            RealtimeProcess.collect_in_slack(slot - time.perf_counter())
+            if paced:
+                if m.status.execution not in BUSY and now - old_collected >= OLD_GENERATION_EVERY_S:
+                    gc.collect()  # idle: the old generation too (what is frozen stays out)
+                    self.old_collections += 1
+                    old_collected = time.perf_counter()
+                else:
+                    RealtimeProcess.collect_in_slack(slot - time.perf_counter())
             sleep_until(slot, self.spin_s)
-            self.lateness_s.append(time.perf_counter() - slot)
+            woke = time.perf_counter()
+            self.lateness_s.append(woke - slot)
             if len(self.lateness_s) > 200_000:
                 del self.lateness_s[:100_000]
+                del self.work_s[:100_000]
             if not self._step_safely(1):
                 break
             self.cycles += 1
-            if time.perf_counter() > slot + period:
+            done = time.perf_counter()
+            # the cycle's own work, wake-up to done: tells a late cycle that was ours (long
+            # work) from one the OS made late (a late wake-up, or descheduled mid-cycle)
+            self.work_s.append(done - woke)
+            if done > slot + period:
                 self.late_cycles += 1
         return self.summary()
 
@@ -178,9 +207,10 @@ class RealtimeRunner:
 
     def summary(self) -> dict:
         lat = sorted(self.lateness_s)
+        work = sorted(self.work_s)
 
-        def p(q: float) -> float:
-            return lat[min(len(lat) - 1, int(q * len(lat)))] * 1e3 if lat else 0.0
+        def p(q: float, values: list[float] = lat) -> float:
+            return values[min(len(values) - 1, int(q * len(values)))] * 1e3 if values else 0.0
 
         return {
             "cycles": self.cycles,
@@ -190,6 +220,10 @@ class RealtimeRunner:
             "lateness_ms_p50": p(0.5),
             "lateness_ms_p99": p(0.99),
             "lateness_ms_max": lat[-1] * 1e3 if lat else 0.0,
+            "work_ms_p50": p(0.5, work),
+            "work_ms_p99": p(0.99, work),
+            "work_ms_max": work[-1] * 1e3 if work else 0.0,
             "error": self.error,
             "scheduling": self.scheduling,
+            "old_generation_collections": self.old_collections,
         }

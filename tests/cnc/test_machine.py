@@ -367,8 +367,45 @@ def test_the_realtime_runner_reports_a_refused_fifo_and_runs_on(monkeypatch):
     monkeypatch.setattr(runner_mod, "request_fifo", lambda priority: refused)
     m = build(ideal=True)
     try:
-        runner = RealtimeRunner(m, rt_priority=20, speed=100.0)
+        runner = RealtimeRunner(m, rt_priority=20)
         summary = runner.run(duration_s=0.05)
         assert summary["scheduling"] == refused and summary["cycles"] > 0
+    finally:
+        m.close()
+
+
+@pytest.mark.parametrize("kwargs", [{"speed": 10.0}, {"speed": 1000.0, "idle_speed": 4.0}])
+def test_the_fast_clock_takes_no_fifo_and_leaves_the_collector_alone(monkeypatch, kwargs):
+    """A runner that does not sleep must not hold a CPU at SCHED_FIFO, nor freeze the
+    process's garbage collector waiting for a slack that never comes."""
+    import gc
+
+    import cnc.machine.runner as runner_mod
+    from cnc.machine import RealtimeRunner
+
+    asked = []
+    monkeypatch.setattr(runner_mod, "request_fifo", lambda priority: asked.append(priority))
+    m = build(ideal=True)
+    try:
+        threshold = gc.get_threshold()
+        summary = RealtimeRunner(m, rt_priority=20, **kwargs).run(duration_s=0.02)
+        assert asked == [] and "not applied" in summary["scheduling"]
+        assert gc.get_threshold() == threshold and summary["cycles"] > 0
+    finally:
+        m.close()
+
+
+def test_an_idle_machine_paced_at_real_time_collects_the_old_generation(monkeypatch):
+    """The pacing collects only young generations in a cycle's slack; an idle machine
+    also gets full collections, so a long-running machine process keeps no cyclic garbage."""
+    import cnc.machine.runner as runner_mod
+    from cnc.machine import RealtimeRunner
+
+    monkeypatch.setattr(runner_mod, "OLD_GENERATION_EVERY_S", 0.0)
+    m = build(ideal=True)
+    try:
+        assert m.status.execution not in runner_mod.BUSY
+        summary = RealtimeRunner(m).run(duration_s=0.02)
+        assert summary["old_generation_collections"] > 0
     finally:
         m.close()
