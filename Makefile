@@ -6,7 +6,7 @@ PY := $(VENV)/bin/python
 STAMP := $(VENV)/.installed
 # Modules compiled with mypyc (see setup.py): an edit to one of them rebuilds its extension.
 MYPYC_LISTS := $(wildcard */mypyc.list */*/mypyc.list)
-MYPYC_SOURCES := $(foreach f,$(MYPYC_LISTS),$(addprefix $(dir $(f)),$(shell grep -v '^\s*\#' $(f))))
+MYPYC_SOURCES := $(foreach f,$(MYPYC_LISTS),$(addprefix $(dir $(f)),$(shell sed 's/\#.*//' $(f))))
 
 .PHONY: run test bench lint clean
 

@@ -4,7 +4,9 @@
 reference cycle, so they are not tracked by the cyclic garbage collector: the planner
 makes a few such objects per path segment, and the collector's passes over them cost
 more than the planning itself. Only classes whose attributes hold numbers, tuples of
-numbers and other such objects use it (a cycle through one of them would never be freed).
+numbers and other such objects use it (a cycle through one of them would never be freed);
+`Segment.sync_after` also holds the canon commands to run after it, which are plain values
+(cnc/canon.py) that never refer back to the planner.
 This module is not compiled; in plain Python the decorator changes nothing.
 """
 

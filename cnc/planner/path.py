@@ -186,7 +186,8 @@ class Segment:
         return v if v < self.vphys else self.vphys
 
 
-@mypyc_attr(acyclic=True)
+# not acyclic: one per Motion (nothing to gain) and it holds the machine parameters and
+# the pending sync commands, objects the planner does not own
 class Path:
     """Segments not yet executed, in order, with absolute path coordinates."""
 

@@ -63,7 +63,8 @@ PP, PV, HOMING, CSP, CSV = 1, 3, 6, 8, 9
 _OPERATION_ENABLED: Final = State.OPERATION_ENABLED
 _QUICK_STOP_ACTIVE: Final = State.QUICK_STOP_ACTIVE
 _NOT_READY_TO_SWITCH_ON: Final = State.NOT_READY_TO_SWITCH_ON
-_ENERGIZED: Final = (_OPERATION_ENABLED, _QUICK_STOP_ACTIVE, State.FAULT_REACTION_ACTIVE)
+# not Final: mypyc can leave a Final tuple constant unset (as cnc/planner/geometry.py notes)
+_ENERGIZED = (_OPERATION_ENABLED, _QUICK_STOP_ACTIVE, State.FAULT_REACTION_ACTIVE)
 _STRUCT: Final = {
     ("i8", 1): "<b",
     ("u8", 1): "<B",

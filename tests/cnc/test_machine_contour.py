@@ -6,6 +6,7 @@ from __future__ import annotations
 import math
 from pathlib import Path
 
+import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
@@ -68,6 +69,8 @@ def test_the_compiled_contour_module_computes_what_its_source_computes():
 
     import cnc.machine.contour as loaded
 
+    if Path(loaded.__file__).suffix != ".so":
+        pytest.skip("contour.py runs as plain Python in this build: nothing to compare")
     spec = importlib.util.spec_from_file_location(
         "contour_source", Path(loaded.__file__).with_name("contour.py")
     )
