@@ -70,11 +70,15 @@ function explain(err, what) {
   return `${what}: ${err?.message || err}`;
 }
 
-async function attempt(what, fn) {
+// `background`: a refresh the page runs by itself. Once the user chose to go on without a
+// key, its 401 is expected and not news: notifying it on every poll would replace the "No API
+// key" hint within a second. What the user does (release, dispatch, ...) still says why.
+async function attempt(what, fn, { background = false } = {}) {
   try {
     return await fn();
   } catch (err) {
-    notify(explain(err, what));
+    const expected = background && auth.declined && err instanceof ApiError && err.status === 401;
+    if (!expected) notify(explain(err, what));
     return undefined;
   }
 }
@@ -367,8 +371,10 @@ async function injectFault(machine, tile) {
 
 async function loadPrograms() {
   const q = $("#program-search").value.trim();
-  const page = await attempt("program list", () =>
-    api(`/api/programs?limit=200${q ? `&q=${encodeURIComponent(q)}` : ""}`),
+  const page = await attempt(
+    "program list",
+    () => api(`/api/programs?limit=200${q ? `&q=${encodeURIComponent(q)}` : ""}`),
+    { background: true },
   );
   if (page === undefined) return;
   const programs = items(page);
@@ -533,7 +539,9 @@ function fillMachineSelects() {
 // ------------------------------------------------------------------------------ jobs, dispatches
 
 async function loadJobs() {
-  const page = await attempt("job list", () => api("/api/jobs?limit=200"));
+  const page = await attempt("job list", () => api("/api/jobs?limit=200"), {
+    background: true,
+  });
   if (page === undefined) return;
   $("#job-rows").replaceChildren(
     ...items(page).map((j) =>
@@ -576,7 +584,9 @@ async function createJob(ev) {
 }
 
 async function loadDispatches() {
-  const page = await attempt("dispatch history", () => api("/api/dispatches?limit=50"));
+  const page = await attempt("dispatch history", () => api("/api/dispatches?limit=50"), {
+    background: true,
+  });
   if (page === undefined) return;
   $("#dispatch-rows").replaceChildren(
     ...items(page).map((d) =>
