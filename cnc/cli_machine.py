@@ -91,6 +91,9 @@ def machine(
             except Exception as err:  # noqa: BLE001 - one clear line, not a traceback
                 typer.echo(f"{name}: power-on failed: {err}", err=True)
                 raise typer.Exit(1) from None
+        # the collection and freeze before the ready line, not in the first cycles: a cell
+        # starting its machines one after another keeps the running ones' cycles clear
+        runner.prepare()
         ready = {"machine": name, "ports": faces.ports(), "ipo_cycle_ms": cfg.ipo_cycle_ms}
         typer.echo(json.dumps(ready), nl=True)
         if ready_file is not None:

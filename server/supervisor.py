@@ -215,6 +215,7 @@ class InProcessMachine:
             self.error = exc
             self.ready.set()
             return
+        self.runner.prepare()  # setup's collection before the first cycle (runner.py)
         self.ready.set()
         self.runner.run()
 

@@ -6,7 +6,7 @@ import gc
 import threading
 import time
 
-from drives.realtime import RealtimeProcess, request_fifo, sleep_until
+from drives.realtime import RealtimeProcess, ThreadScheduling, request_fifo, sleep_until
 from drives.realtime import rt_priority_from_env as drives_rt_priority
 
 # the fast clock: a machine in a cycle runs at FAST_SPEED x real time (as fast as the CPU
@@ -55,10 +55,11 @@ class RealtimeRunner:
     machine is idle, every OLD_GENERATION_EVERY_S), the GIL switch interval is short, and it
     sleeps to a deadline (`spin_s`, none by default, is spun). `rt_priority` N (None =
     `FMSCELL_MACHINE_RT_PRIORITY`, 0 = off) asks SCHED_FIFO N for the stepping thread, as
-    LinuxCNC's servo thread has; a refusal is reported in `scheduling` and the runner goes
-    on as it can. The fast clock takes none of this: it never sleeps while cutting, so a
-    FIFO thread would take a whole CPU from the rest of the process, and the slack the
-    collector waits for never comes.
+    LinuxCNC's servo thread has, and puts the thread back to its old scheduling when `run()`
+    returns; a refusal is reported in `scheduling` and the runner goes on as it can.
+    `prepare()` collects and freezes ahead of `run()`. The fast clock takes none of this: it
+    never sleeps while cutting, so a FIFO thread would take a whole CPU from the rest of the
+    process, and the slack the collector waits for never comes.
     """
 
     def __init__(
@@ -93,6 +94,7 @@ class RealtimeRunner:
         self._steps = 0
         self._stepped = 0  # cycles run by step() requests
         self._lock = threading.Lock()
+        self._prepared = False  # RealtimeProcess held (prepare())
         machine.runner = self
 
     @property
@@ -120,24 +122,53 @@ class RealtimeRunner:
     def stop(self) -> None:
         self._stop.set()
 
+    @property
+    def paced(self) -> bool:
+        """Paced at real time (or slower): the realtime measures of `run()` apply."""
+        return self.idle_speed is None and self.speed <= 1.0
+
+    def prepare(self) -> None:
+        """Collect the process's garbage and freeze what setup left (`RealtimeProcess`) now,
+        before the first cycle. `run()` does it itself when it is not done; a host that starts
+        several machines at once calls it during their setup, so no machine's first cycles
+        wait for a sibling's collection (tens of ms of CPU each)."""
+        if self.paced and not self._prepared:
+            RealtimeProcess.acquire()
+            self._prepared = True
+
     def run(self, duration_s: float | None = None) -> dict:
         """Run until `stop()` or `duration_s` of wall time; returns `summary()`."""
-        if self.idle_speed is not None or self.speed > 1.0:
+        if not self.paced:
             if self.rt_priority:
                 self.scheduling = (
                     f"SCHED_OTHER (SCHED_FIFO {self.rt_priority} not applied: "
                     "the fast clock does not sleep)"
                 )
-            return self._run(duration_s, paced=False)
-        if self.rt_priority:
-            self.scheduling = request_fifo(self.rt_priority)
-        RealtimeProcess.acquire()
+            if self._prepared:  # prepared, then the clock control changed the speed
+                self._prepared = False
+                RealtimeProcess.release()
+            self._run(duration_s, paced=False)
+            return self.summary()
+        # the collection first, at the ordinary priority: at FIFO it would hold the CPU from
+        # the other machines' cycles; and back to that priority before the summary (sorting
+        # 10^5 samples) and whatever the thread does next (ThreadScheduling)
+        self.prepare()
         try:
-            return self._run(duration_s, paced=True)
+            saved = None
+            if self.rt_priority:
+                saved = ThreadScheduling()
+                self.scheduling = request_fifo(self.rt_priority)
+            try:
+                self._run(duration_s, paced=True)
+            finally:
+                if saved is not None:
+                    saved.restore()
         finally:
+            self._prepared = False
             RealtimeProcess.release()
+        return self.summary()
 
-    def _run(self, duration_s: float | None, paced: bool) -> dict:
+    def _run(self, duration_s: float | None, paced: bool) -> None:
         m = self.machine
         start = time.perf_counter()
         slot = start
@@ -192,7 +223,6 @@ class RealtimeRunner:
             self.work_s.append(done - woke)
             if done > slot + period:
                 self.late_cycles += 1
-        return self.summary()
 
     def _step_safely(self, n: int) -> bool:
         """Step; a failure inside the machine stops the runner with the reason kept in

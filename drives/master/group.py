@@ -938,6 +938,7 @@ class AxisGroup:
     def close(self) -> None:
         """Detach from the buses (the buses themselves stay open: they are the caller's)."""
         self._running = False
+        self._pacer.restore_scheduling()  # the paced thread goes on at its old priority
         if self._realtime_held:
             self._realtime_held = False
             RealtimeProcess.release()

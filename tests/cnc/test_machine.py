@@ -409,3 +409,67 @@ def test_an_idle_machine_paced_at_real_time_collects_the_old_generation(monkeypa
         assert summary["old_generation_collections"] > 0
     finally:
         m.close()
+
+
+def test_the_realtime_runner_collects_before_fifo_and_gives_fifo_back(monkeypatch):
+    """The setup's collection runs at the ordinary priority (at FIFO it would hold the CPU
+    from the other machines' cycles), and the thread leaves run() at the priority it came
+    with, so the summary and whatever follows do not run at FIFO."""
+    import os
+    import threading
+
+    import cnc.machine.runner as runner_mod
+    from cnc.machine import RealtimeRunner
+    from drives.realtime import RealtimeProcess, request_fifo
+
+    at_promotion = []
+
+    def promote(priority: int) -> str:
+        at_promotion.append((RealtimeProcess.active(), os.sched_getscheduler(0)))
+        return request_fifo(priority)
+
+    monkeypatch.setattr(runner_mod, "request_fifo", promote)
+    m = build(ideal=True)
+    out: dict = {}
+
+    def run() -> None:
+        out["summary"] = RealtimeRunner(m, rt_priority=20).run(duration_s=0.02)
+        out["after"] = os.sched_getscheduler(0)
+
+    try:
+        thread = threading.Thread(target=run)
+        thread.start()
+        thread.join(30)
+        assert at_promotion == [(True, os.SCHED_OTHER)]  # collected and frozen, not yet FIFO
+        assert out["summary"]["cycles"] > 0 and not RealtimeProcess.active()
+        if not out["summary"]["scheduling"].startswith("SCHED_FIFO"):
+            pytest.skip(f"no realtime privilege here: {out['summary']['scheduling']}")
+        assert out["after"] == os.SCHED_OTHER
+    finally:
+        m.close()
+
+
+@pytest.mark.parametrize("speed", [1.0, 10.0])
+def test_prepare_holds_the_realtime_settings_only_for_a_paced_run(speed):
+    """prepare() collects and freezes ahead of run(), once however often it is called; a
+    run that is not paced (the clock sped up meanwhile) lets them go, as a paced run does
+    when it ends."""
+    import gc
+
+    from cnc.machine import RealtimeRunner
+    from drives.realtime import RealtimeProcess
+
+    m = build(ideal=True)
+    try:
+        runner = RealtimeRunner(m)
+        runner.prepare()
+        runner.prepare()
+        assert RealtimeProcess.active() and gc.get_freeze_count() > 0
+        runner.speed = speed
+        assert runner.run(duration_s=0.02)["cycles"] > 0
+        assert not RealtimeProcess.active() and gc.get_freeze_count() == 0
+        fast = RealtimeRunner(m, speed=10.0)
+        fast.prepare()  # nothing to prepare for a sped-up clock
+        assert not RealtimeProcess.active()
+    finally:
+        m.close()

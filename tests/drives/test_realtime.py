@@ -305,3 +305,57 @@ def test_axis_group_reports_its_pacers_scheduling(monkeypatch):
     finally:
         group.close()
         hub.close()
+
+
+def _fifo_granted_or_skip(scheduling: str) -> None:
+    if not scheduling.startswith("SCHED_FIFO"):
+        pytest.skip(f"no realtime privilege here: {scheduling}")
+
+
+def test_pacer_puts_its_thread_back_to_its_old_scheduling_and_cpus():
+    """A paced thread left at SCHED_FIFO would do its later work (a summary, a result to
+    send) at the realtime priority, ahead of the shells that still pace: the pacer gives
+    the priority and the pinning back, from whichever thread closes it."""
+    import os
+    import threading
+
+    before_cpus = os.sched_getaffinity(0)
+    pacer = Pacer(0.001, rt_priority=10, cpu=min(before_cpus))
+    paced, release = threading.Event(), threading.Event()
+    seen: dict = {}
+
+    def pace() -> None:
+        seen["tid"] = threading.get_native_id()
+        for _ in range(3):
+            pacer.wait()
+        seen["during"] = (os.sched_getscheduler(0), os.sched_getaffinity(0))
+        paced.set()
+        release.wait(10)
+
+    thread = threading.Thread(target=pace)
+    thread.start()
+    try:
+        assert paced.wait(10)
+        _fifo_granted_or_skip(pacer.scheduling)
+        assert seen["during"] == (os.SCHED_FIFO, {min(before_cpus)})
+        pacer.restore_scheduling()  # from this thread, while the paced one still lives
+        assert os.sched_getscheduler(seen["tid"]) == os.SCHED_OTHER
+        assert os.sched_getaffinity(seen["tid"]) == before_cpus
+        pacer.restore_scheduling()  # a second call has nothing left to do
+    finally:
+        release.set()
+        thread.join(10)
+
+
+def test_restoring_a_thread_that_has_ended_touches_nothing():
+    """Its id may already name another thread: the snapshot does nothing then."""
+    import threading
+
+    from drives.realtime import ThreadScheduling
+
+    taken: list[ThreadScheduling] = []
+    thread = threading.Thread(target=lambda: taken.append(ThreadScheduling()))
+    thread.start()
+    thread.join(10)
+    taken[0].policy = (99, 99)  # would raise if it were applied to anything
+    taken[0].restore()
