@@ -219,8 +219,8 @@ class ThreadScheduling:
     send, the rest of a server) at the realtime priority and holds its CPU from the shells
     that still pace. Measured with 8 machines paced at FIFO for 20 s: 0.10-0.26 % of the
     slots late or missed, the late cycles all in the first and last 0.1 s, where siblings
-    collected garbage or sent their results at FIFO; 0.013-0.058 % once the collection ran
-    before the promotion and each thread was put back after its last cycle.
+    collected garbage or sent their results at FIFO; 0.013-0.058 % in four runs once the
+    collection ran before the promotion and each thread was put back after its last cycle.
     """
 
     def __init__(self) -> None:  # a snapshot of the calling thread
