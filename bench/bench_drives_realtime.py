@@ -107,9 +107,9 @@ def peer_no_work(seconds: float, busy_s: float = 0.0) -> dict:
     `busy_s` > 0: the cycle spins that long instead (no allocation, no frames), as long on
     the CPU as the drives' work but none of their code.
     """
+    pacer = Pacer(PERIOD_S)  # the same scheduling request as the drives run (environment)
     RealtimeProcess.acquire()
     try:
-        pacer = Pacer(PERIOD_S)  # the same scheduling request as the drives run (environment)
         pacer.wait()
         lateness = []
         account = ThreadAccount().start()
@@ -126,6 +126,7 @@ def peer_no_work(seconds: float, busy_s: float = 0.0) -> dict:
         cpu, wall = time.process_time() - cpu0, time.perf_counter() - wall0
         where = account.stop()
     finally:
+        pacer.restore_scheduling()
         RealtimeProcess.release()
     ordered = sorted(lateness)
     figures = slot_figures(len(lateness), late, pacer.skipped)
@@ -302,11 +303,10 @@ def main() -> None:
             out[mode] = run(mode, args.seconds, args.substep)
     if "paced" in modes and args.rt_priority:
         # the same with the pacing thread at SCHED_FIFO (opt-in in drives.realtime); the
-        # pacer promotes the calling thread, this one: put it back afterwards
+        # pacer promotes the calling thread, this one, and puts it back when it is done
         os.environ[RT_PRIORITY_ENV] = str(args.rt_priority)
         if args.rt_cpu is not None:
             os.environ[RT_CPU_ENV] = str(args.rt_cpu)
-        cpus = os.sched_getaffinity(0) if hasattr(os, "sched_getaffinity") else None
         try:
             if args.c_peer:
                 out["paced_sched_fifo_c_peer"] = c_peer(
@@ -316,10 +316,6 @@ def main() -> None:
         finally:
             os.environ.pop(RT_PRIORITY_ENV, None)
             os.environ.pop(RT_CPU_ENV, None)
-            if hasattr(os, "sched_setscheduler"):
-                os.sched_setscheduler(0, os.SCHED_OTHER, os.sched_param(0))
-            if cpus is not None:
-                os.sched_setaffinity(0, cpus)
     print(json.dumps(out))
 
 

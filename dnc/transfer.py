@@ -17,9 +17,8 @@ import time
 from collections.abc import Callable, Iterable, Iterator
 from dataclasses import dataclass
 
-from cnc.faces.tape import PUNCH_OFF, PUNCH_ON, XOFF, XON, TapeDecoder, encode_program
+from cnc.faces.tape import PUNCH_ON, XOFF, XON, TapeDecoder, encode_program
 
-_FLOW_BYTES = bytes([XON, XOFF, PUNCH_ON, PUNCH_OFF])
 _FLOW_BYTE = re.compile(rb"[\x11-\x14]")
 # Parity as whole-buffer translations: the host handles every byte of every transfer, so no
 # per-byte Python loop.

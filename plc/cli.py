@@ -150,7 +150,7 @@ def run(
     stop = threading.Event()
     previous = signal.signal(signal.SIGTERM, lambda *_: stop.set())
     try:
-        face.start_in_thread(rt_priority=max(0, rt_priority - 1) if rt_priority else 0)
+        face.start_in_thread(rt_priority=max(0, rt_priority - 1))
     except OSError as exc:
         typer.echo(f"error: Modbus TCP on {modbus_host}:{modbus_port}: {exc.strerror}", err=True)
         raise typer.Exit(2) from None

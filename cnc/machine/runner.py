@@ -192,7 +192,8 @@ class RealtimeRunner:
                 slot = time.perf_counter()
                 continue
             speed = self.speed
-            if self.idle_speed is not None and m.status.execution not in BUSY:
+            idle = m.status.execution not in BUSY
+            if self.idle_speed is not None and idle:
                 speed = self.idle_speed
             period = m.ipo_s / speed
             slot += period
@@ -202,7 +203,7 @@ class RealtimeRunner:
                 self.skipped_slots += missed
                 slot += missed * period
             if paced:
-                if m.status.execution not in BUSY and now - old_collected >= OLD_GENERATION_EVERY_S:
+                if idle and now - old_collected >= OLD_GENERATION_EVERY_S:
                     gc.collect()  # idle: the old generation too (what is frozen stays out)
                     self.old_collections += 1
                     old_collected = time.perf_counter()

@@ -284,18 +284,6 @@ def arc_from_canon(
     return Arc((s0, s1, s2), (p0, p1, p2), c, e1, e2, w, r0, r1, sweep, rise)
 
 
-def blend(
-    corner: Vec3, u1: Vec3, u2: Vec3, tolerance: float, avail1: float, avail2: float
-) -> tuple[Arc, float] | None:
-    """Circular blend of the corner between two lines, deviating at most `tolerance`.
-
-    Returns (arc, d) where d is the length trimmed from each line, or None when the lines
-    are collinear (no blend needed) or reverse (no blend possible).
-    """
-    arc = blend_arc(corner, u1, u2, tolerance, avail1, avail2)
-    return None if arc is None else (arc, arc.trim)
-
-
 def blend_arc(
     corner: Vec3, u1: Vec3, u2: Vec3, tolerance: float, avail1: float, avail2: float
 ) -> Arc | None:

@@ -526,8 +526,9 @@ class CanopenSlave:
         next_tick += tick_s
         while self._running:
             # garbage collection in the slack before the tick, not while a frame waits
-            RealtimeProcess.collect_in_slack(next_tick - time.perf_counter())
-            msg = self.bus.recv(timeout=max(0.0, next_tick - time.perf_counter()))
+            slack = next_tick - time.perf_counter()
+            RealtimeProcess.collect_in_slack(slack)
+            msg = self.bus.recv(timeout=max(0.0, slack))
             if msg is not None:
                 self.handle(msg)
             now = time.perf_counter()

@@ -299,7 +299,7 @@ class Drive402:
         window = od[(0x6065, 0)]
         self._fe_window = None if window == 0xFFFFFFFF else window * self._rpu
         self._fe_timeout = od[(0x6066, 0)] * 1e-3
-        self._ilim = od[(0x6072, 0)] * 1e-3 * self._rated_current  # `_current_limit`
+        self._ilim = od[(0x6072, 0)] * 1e-3 * self._rated_current  # 6072h in per mille of rated
         done = self._csp_substeps(h, n) if self._mode == CSP and self.csp_fast_path else 0
         for _ in range(n - done):
             self._substep(h)
@@ -863,9 +863,6 @@ class Drive402:
         # ENABLED starts a new one, a fault repeated during FAULT REACTION ACTIVE does not.
         if stopped and not (fault and st == _OPERATION_ENABLED) and self._power.stop is not None:
             self._sm(None, stopped=True)
-
-    def _current_limit(self) -> float:
-        return self._od[(0x6072, 0)] * 1e-3 * self.params.motor.rated_current
 
     def _homing_uses(self, bit: int) -> bool:
         if self._hm is None or self._mode != HOMING:

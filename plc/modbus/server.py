@@ -11,7 +11,6 @@ import asyncio
 import contextlib
 import ipaddress
 import logging
-import os
 import struct
 import threading
 import time
@@ -32,6 +31,7 @@ from plc.modbus.pdu import (
     PduHandler,
     PduSizeError,
 )
+from plc.runtime.realtime import promote_current_thread
 
 log = logging.getLogger("plc.modbus")
 audit = logging.getLogger("plc.modbus.write")
@@ -252,7 +252,9 @@ class ModbusFace:
 
         def run() -> None:
             asyncio.set_event_loop(loop)
-            self.thread_scheduling = _promote_thread(rt_priority)
+            granted, self.thread_scheduling = promote_current_thread(rt_priority)
+            if rt_priority and not granted:
+                log.warning("Modbus face thread: %s", self.thread_scheduling)
             try:
                 loop.run_until_complete(self.start())
             except BaseException as e:  # noqa: BLE001 - handed to the caller below
@@ -309,26 +311,6 @@ class ModbusFace:
                     self.stats.idle_timeouts += 1
                     log.info("%s: idle for %.3g s, closing", conn.peer, self.idle_timeout)
                     conn.close()
-
-
-def _set_thread_fifo(priority: int) -> None:
-    # pid 0 = the calling thread on Linux (a thread's scheduling policy is its own)
-    os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(priority))
-
-
-def _promote_thread(priority: int) -> str:
-    """SCHED_FIFO `priority` for the calling thread, best effort; what it got, as text."""
-    if priority == 0:
-        return "SCHED_OTHER (rt_priority 0)"
-    if not hasattr(os, "sched_setscheduler"):
-        return f"SCHED_OTHER (SCHED_FIFO {priority} not available on this OS)"
-    try:
-        _set_thread_fifo(priority)
-    except OSError as exc:
-        text = f"SCHED_OTHER (SCHED_FIFO {priority} refused: {exc.strerror or exc})"
-        log.warning("Modbus face thread: %s", text)
-        return text
-    return f"SCHED_FIFO {priority}"
 
 
 def _peer_allowed(peer, networks) -> bool:

@@ -94,7 +94,6 @@ def test_streaming_plans_with_memo_equal_plans_from_scratch():
         assert again == parts
         before = set(map(id, memo.spans.values()))
         with_memo, ok1 = solve(again, v0, IPO, memo)
-        parts = partition(segs, k, s0, 1.0, 1.0, False, None, ipo=IPO)
         scratch, ok2 = solve(parts, v0, IPO)
         assert ok1 == ok2
         assert span_data(with_memo) == span_data(scratch)

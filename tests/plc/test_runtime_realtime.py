@@ -250,12 +250,12 @@ def test_face_steps_aside_before_answering_when_the_gate_says_a_scan_is_due(step
 
 
 def test_face_thread_priority_granted_refused_and_checked(monkeypatch):
-    from plc.modbus import server
+    from plc.runtime import realtime
 
     size = ImageSize(ix=8, qx=8, mx=8, iw=8, qw=8, mw=8)
     snap = ProcessImage(size).snapshot(1)
     asked = []
-    monkeypatch.setattr(server, "_set_thread_fifo", asked.append)
+    monkeypatch.setattr(realtime, "_set_fifo", asked.append)
     face = ModbusFace(lambda: snap, None, size, port=0)  # type: ignore[arg-type]
     face.start_in_thread(rt_priority=9)
     face.stop_thread()
@@ -265,7 +265,7 @@ def test_face_thread_priority_granted_refused_and_checked(monkeypatch):
     def refuse(priority: int) -> None:
         raise PermissionError(1, "Operation not permitted")
 
-    monkeypatch.setattr(server, "_set_thread_fifo", refuse)
+    monkeypatch.setattr(realtime, "_set_fifo", refuse)
     face = ModbusFace(lambda: snap, None, size, port=0)  # type: ignore[arg-type]
     face.start_in_thread(rt_priority=9)
     try:
