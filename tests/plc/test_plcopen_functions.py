@@ -9,8 +9,7 @@ import itertools
 
 import pytest
 
-from plc.ladder import check_file, compile_program, format_program, load_file
-from plc.ladder import import_plcopen
+from plc.ladder import check_file, compile_program, format_program, import_plcopen, load_file
 from plc.runtime import Runtime
 from tests.reference import MISSING, PLCOPEN_CORPUS
 
