@@ -7,7 +7,7 @@ Public API::
     check_text(text, file, size=None, watchdog_ms=None) -> list[Diagnostic]
     check_file(path, size=None, watchdog_ms=None) -> list[Diagnostic]
     parse_program(text, file) -> (Program, DiagnosticSink)
-    import_plcopen(path_or_text, file=None) -> (Program, DiagnosticSink)
+    import_plcopen(path_or_text, file=None, pou=None) -> (Program, DiagnosticSink)
     format_program(Program) -> str           (neutral text export)
 """
 
@@ -42,11 +42,12 @@ def check_file(
         return check_text(f.read(), str(path), size, watchdog_ms)
 
 
-def import_plcopen(source: str, file: str | None = None):
-    """Import a PLCopen TC6 XML project's LD body (lazy import keeps startup fast)."""
+def import_plcopen(source: str, file: str | None = None, pou: str | None = None):
+    """Import a PLCopen TC6 XML project's LD body: the first program POU, or the POU named
+    `pou` (lazy import keeps startup fast)."""
     from plc.ladder.plcopen import import_plcopen as _imp
 
-    return _imp(source, file)
+    return _imp(source, file, pou)
 
 
 __all__ = [

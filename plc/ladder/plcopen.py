@@ -21,6 +21,13 @@ from dataclasses import dataclass, field
 from plc.ladder.ast import Branch, Element, Instr, Operand, Program, Rung, TagDecl
 from plc.ladder.diagnostics import DiagnosticSink
 from plc.ladder.parser import parse_int, parse_time_ms
+from plc.ladder.plcopen_functions import (
+    FUNCTION_BLOCKS,
+    STANDARD_FUNCTIONS,
+    FunctionSpec,
+    formal_inputs,
+    supported_blocks_text,
+)
 
 _INT_TYPES = {
     "INT",
@@ -36,7 +43,15 @@ _INT_TYPES = {
     "TIME",
 }
 _TYPE_MAP = {"BOOL": "BOOL", "TON": "TIMER", "TOF": "TIMER", "CTU": "COUNTER"}
-_VAR_SECTIONS = {"localVars", "inputVars", "outputVars", "inOutVars", "globalVars", "tempVars"}
+_VAR_SECTIONS = {
+    "localVars",
+    "inputVars",
+    "outputVars",
+    "inOutVars",
+    "globalVars",
+    "tempVars",
+    "externalVars",
+}
 
 
 @dataclass(slots=True)
@@ -124,6 +139,9 @@ class _Importer:
         self.visiting: set[tuple[str, str]] = set()
         self.edge_rungs: list[tuple[list[Element], Instr, str]] = []
         self.declared: set[str] = set()
+        self.global_names: set[str] = set()
+        self.unsupported: dict[str, str] = {}  # upper-case name -> IEC type left out
+        self.types: dict[str, str] = {}  # upper-case name -> tag type
 
     def error(self, node: Node, msg: str) -> None:
         self.sink.error(node.line, node.col, msg)
@@ -142,7 +160,19 @@ class _Importer:
         try:
             return Operand("int", text, node.line, node.col, parse_int(text))
         except ValueError:
-            return Operand("tag", text, node.line, node.col)
+            pass
+        if text.startswith("'") or text.startswith('"'):
+            self.error(
+                node, f"string literal {text} needs a STRING, which the ladder runtime lacks"
+            )
+        elif text.split(".")[0].upper() in self.unsupported:
+            kind = self.unsupported[text.split(".")[0].upper()]
+            self.error(
+                node,
+                f"{text!r} is a {kind} variable, which the ladder runtime does not support "
+                "(BOOL, the integer types, TIME, TON, TOF, CTU)",
+            )
+        return Operand("tag", text, node.line, node.col)
 
     def instr(self, mnemonic: str, operands: list[str | Operand], node: Node) -> Instr:
         ops = [o if isinstance(o, Operand) else self.op(o, node) for o in operands]
@@ -150,25 +180,29 @@ class _Importer:
 
     # -- variables -------------------------------------------------------------------------
     def variables(self, pou: Node) -> None:
-        sections: list[Node] = []
-        iface = pou.find("interface")
-        if iface is not None:
-            sections += [c for c in iface.children if c.tag in _VAR_SECTIONS]
+        # The configuration's globals first: an `externalVars` entry of the POU names one of
+        # them (same variable, declared once with the global's address and initial value).
+        globals_: list[Node] = []
         for conf in self.root.iter("configuration"):
-            sections += conf.findall("globalVars")
+            globals_ += conf.findall("globalVars")
             for res in conf.findall("resource"):
-                sections += res.findall("globalVars")
-        for section in sections:
-            retain = (
-                section.attrib.get("retain") == "true" or section.attrib.get("persistent") == "true"
-            )
+                globals_ += res.findall("globalVars")
+        for section in globals_:
             for var in section.findall("variable"):
-                self.variable(var, retain)
+                self.variable(var, _retained(section))
+        self.global_names = set(self.declared)
+        iface = pou.find("interface")
+        sections = (
+            [c for c in iface.children if c.tag in _VAR_SECTIONS] if iface is not None else []
+        )
+        for section in sections:
+            for var in section.findall("variable"):
+                self.variable(var, _retained(section), external=section.tag == "externalVars")
 
-    def variable(self, var: Node, retain: bool) -> None:
+    def variable(self, var: Node, retain: bool, external: bool = False) -> None:
         name = var.attrib.get("name", "")
-        if name.upper() in self.declared:
-            return  # an externalVar seen again as the global it refers to
+        if name.upper() in self.declared or name.upper() in self.unsupported:
+            return  # an externalVar naming a global declared above
         type_node = var.find("type")
         kind = ""
         if type_node is not None and type_node.children:
@@ -177,6 +211,7 @@ class _Importer:
         kind = kind.upper()
         tag_type = _TYPE_MAP.get(kind) or ("INT" if kind in _INT_TYPES else None)
         if tag_type is None:
+            self.unsupported[name.upper()] = kind or "?"
             self.sink.warning(
                 var.line,
                 var.col,
@@ -184,6 +219,16 @@ class _Importer:
                 "supported by the ladder runtime and was left out",
             )
             return
+        if external:
+            # OpenPLC shares such a variable with code outside the program (an Arduino
+            # sketch, another POU); with no global of that name in the file it is a tag of
+            # this program, as in a project that declares it in the resource.
+            self.sink.warning(
+                var.line,
+                var.col,
+                f"external variable {name!r} has no global declaration in this file: "
+                "declared as a tag of the program",
+            )
         decl = TagDecl(name, tag_type, var.line, var.col, retain=retain)
         address = var.attrib.get("address")
         if address:
@@ -206,6 +251,7 @@ class _Importer:
             decl.comment = " ".join(doc.all_text().split())
         self.program.tags.append(decl)
         self.declared.add(name.upper())
+        self.types[name.upper()] = tag_type
 
     # -- the graph -----------------------------------------------------------------------------
     def sources(self, point: Node | None) -> list[tuple[str, str]]:
@@ -271,12 +317,7 @@ class _Importer:
         if t == "coil":
             return self.power_in(node.find("connectionPointIn"), node)
         if t == "block":
-            type_name = node.attrib.get("typeName", "").upper()
-            inst = node.attrib.get("instanceName", "")
-            if type_name in ("TON", "TOF", "CTU") and formal == "Q":
-                return ("leaf", self.instr("XIC", [f"{inst}.DN"], node))
-            self.error(node, f"block output {formal or '?'} of {type_name} cannot drive power flow")
-            return TRUE
+            return self.block_power(node, formal)
         if t in ("inVariable", "inOutVariable"):
             text = self.expr_text(node)
             negated = node.attrib.get("negated", "false") == "true"
@@ -301,6 +342,7 @@ class _Importer:
         return text
 
     def value_in(self, block: Node, formal: str, required: bool = True) -> Operand | None:
+        """A value input: a constant or variable, a function's OUT, a timer's ET / counter's CV."""
         srcs = self.sources(self.block_input(block, formal))
         if not srcs:
             if required:
@@ -308,12 +350,93 @@ class _Importer:
                     block, f"input {formal} of {block.attrib.get('typeName')} is not connected"
                 )
             return None
-        ref, _ = srcs[0]
+        value = self.value_of(*srcs[0])
+        if value is None:
+            self.error(
+                block, f"input {formal} must come from a variable, a constant or a value output"
+            )
+        return value
+
+    def value_of(self, ref: str, formal: str) -> Operand | None:
+        """The operand a value connection carries (None: it carries power flow, not a value)."""
         src = self.nodes.get(ref)
-        if src is None or src.tag not in ("inVariable", "inOutVariable"):
-            self.error(block, f"input {formal} must come from a variable or constant")
+        if src is None:
             return None
-        return self.op(self.expr_text(src), src)
+        if src.tag in ("inVariable", "inOutVariable"):
+            return self.op(self.expr_text(src), src)
+        if src.tag == "block":
+            type_name = src.attrib.get("typeName", "").upper()
+            spec = STANDARD_FUNCTIONS.get(type_name)
+            if spec is not None and spec.kind != "compare" and formal.upper() == "OUT":
+                return Operand("tag", self.result_tag(src), src.line, src.col)
+            if type_name in FUNCTION_BLOCKS and formal.upper() in ("ET", "CV"):
+                inst = src.attrib.get("instanceName", "")
+                return Operand("tag", f"{inst}.ACC", src.line, src.col)
+        return None
+
+    def carries_value(self, ref: str, formal: str) -> bool:
+        """Whether a connection is data flow (an INT) rather than power flow (a BOOL)."""
+        src = self.nodes.get(ref)
+        if src is None:
+            return False
+        if src.tag == "block":
+            return self.value_of(ref, formal) is not None
+        if src.tag in ("inVariable", "inOutVariable"):
+            srcs = self.sources(src.find("connectionPointIn"))
+            if src.tag == "inOutVariable" and srcs:
+                return self.carries_value(*srcs[0])
+            text = self.expr_text(src)
+            try:
+                parse_int(text)
+                return True
+            except ValueError:
+                return self.types.get(text.split(".")[0].upper()) == "INT"
+        return False
+
+    def assignment(self, node: Node, target: str) -> list[list[Element]] | None:
+        """An outVariable / inOutVariable fed by a value: `MOV value target`, under the
+        feeding function's ENO (OpenPLC assigns a function's OUT only when ENO is true)."""
+        ref, formal = self.sources(node.find("connectionPointIn"))[0]
+        value = self.value_of(ref, formal)
+        if value is None:
+            return None
+        src = self.nodes[ref]
+        enable = self.elements(self.enable(src)) if src.tag == "block" else []
+        return [[*enable, self.instr("MOV", [value, target], node)]]
+
+    def condition_in(self, block: Node, formal: str) -> tuple:
+        """A BOOL input of a function (SEL's G): a variable, or whatever power flow feeds it."""
+        point = self.block_input(block, formal)
+        srcs = self.sources(point)
+        if len(srcs) == 1:
+            src = self.nodes.get(srcs[0][0])
+            if src is not None and src.tag in ("inVariable", "inOutVariable"):
+                text = self.expr_text(src)
+                if text.upper() in ("TRUE", "FALSE"):
+                    return TRUE if text.upper() == "TRUE" else ("leaf", self.never(src))
+                return ("leaf", self.instr("XIC", [text], src))
+        return self.power_in(point, block)
+
+    def never(self, node: Node) -> Instr:
+        """A condition that is always false (a FALSE constant on a BOOL input)."""
+        return self.instr("NEQ", ["0", "0"], node)
+
+    def enable(self, block: Node) -> tuple:
+        """A function's EN: its power flow, or TRUE when EN is not wired (FBD style)."""
+        point = self.block_input(block, "EN")
+        return self.power_in(point, block) if self.sources(point) else TRUE
+
+    def result_tag(self, block: Node) -> str:
+        """The hidden INT tag a value function writes its OUT to."""
+        lid = block.attrib.get("localId", "0")
+        name = f"_F{lid}"
+        if name.upper() not in self.declared:
+            type_name = block.attrib.get("typeName", "").upper()
+            self.program.tags.append(
+                TagDecl(name, "INT", block.line, block.col, comment=f"OUT of {type_name} {lid}")
+            )
+            self.declared.add(name.upper())
+        return name
 
     def edge_helper(self, node: Node, var: str, edge: str) -> str:
         lid = node.attrib.get("localId", "0")
@@ -364,7 +487,9 @@ class _Importer:
                 out.append((node, self.coil(node)))
             elif t == "block":
                 out.append((node, self.block(node)))
-            elif t == "outVariable":
+            elif t == "outVariable" or (
+                t == "inOutVariable" and self.sources(node.find("connectionPointIn"))
+            ):
                 out.append((node, self.out_variable(node)))
             elif t not in (
                 "leftPowerRail",
@@ -406,11 +531,62 @@ class _Importer:
             out = self.instr("OTN" if negated else "OTE", [var], node)
         return [[*self.elements(power), out]]
 
+    def block_power(self, node: Node, formal: str):
+        """The power flow out of a block's BOOL output."""
+        type_name = node.attrib.get("typeName", "").upper()
+        inst = node.attrib.get("instanceName", "")
+        if type_name in FUNCTION_BLOCKS and formal == "Q":
+            return ("leaf", self.instr("XIC", [f"{inst}.DN"], node))
+        if formal == "ENO" and (type_name in FUNCTION_BLOCKS or type_name in STANDARD_FUNCTIONS):
+            return self.enable(node)
+        spec = STANDARD_FUNCTIONS.get(type_name)
+        if spec is not None and spec.kind == "compare" and formal == "OUT":
+            return _and([self.enable(node), *self.comparison(node, spec)])
+        self.error(node, f"block output {formal or '?'} of {type_name} cannot drive power flow")
+        return TRUE
+
+    def wired_inputs(self, node: Node) -> list[str]:
+        iv = node.find("inputVariables")
+        if iv is None:
+            return []
+        return [
+            v.attrib.get("formalParameter", "").upper()
+            for v in iv.findall("variable")
+            if self.sources(v.find("connectionPointIn"))
+        ]
+
+    def call_inputs(self, node: Node, spec: FunctionSpec) -> list[Operand] | None:
+        formals = formal_inputs(spec, self.wired_inputs(node))
+        # SEL's G is a BOOL condition (condition_in), not a value
+        values = [self.value_in(node, f) for f in formals if f != "G"]
+        if any(v is None for v in values):
+            return None
+        return values  # type: ignore[return-value]
+
+    def comparison(self, node: Node, spec: FunctionSpec) -> list[tuple]:
+        values = self.call_inputs(node, spec)
+        if values is None:
+            return []
+        if len(values) < 2:
+            self.error(node, f"{spec.name} needs at least two inputs, got {len(values)}")
+            return []
+        return [
+            ("leaf", self.instr(spec.mnemonic, [a, b], node))
+            for a, b in zip(values, values[1:], strict=False)
+        ]
+
     def block(self, node: Node) -> list[list[Element]] | None:
         type_name = node.attrib.get("typeName", "").upper()
         inst = node.attrib.get("instanceName", "")
-        if type_name not in ("TON", "TOF", "CTU"):
-            self.error(node, f"unsupported block {type_name!r} (TON, TOF and CTU are imported)")
+        spec = STANDARD_FUNCTIONS.get(type_name)
+        if spec is not None:
+            return self.function(node, spec)
+        if type_name not in FUNCTION_BLOCKS:
+            self.error(
+                node,
+                f"unsupported block {type_name!r} (the import knows the {supported_blocks_text()}"
+                "; other blocks belong to a target's or vendor's library)",
+            )
             return None
         if not inst:
             self.error(node, f"{type_name} block without instanceName")
@@ -421,29 +597,106 @@ class _Importer:
             if preset is None:
                 return None
             return [[*self.elements(power), self.instr(type_name, [inst, preset], node)]]
-        rungs: list[list[Element]] = []
-        reset_point = self.block_input(node, "R")
-        if self.sources(reset_point):
-            reset = self.power_in(reset_point, node)
-            rungs.append([*self.elements(reset), self.instr("RES", [inst], node)])
-        power = self.power_in(self.block_input(node, "CU"), node)
+        # IEC CTU: R has priority over CU, and CU counts on its own rising edge (its edge
+        # memory is not touched by R). A ladder CTU counts on the rising of its whole rung
+        # and RES clears that memory, so CU's edge and R are made helper bits first:
+        # `<CU> ONS _C<id>_S OTE _C<id>`, `<R> OTE _R<id>`, `XIC _R<id> RES inst`,
+        # `XIC _C<id> XIO _R<id> CTU inst PV`.
         pv = self.value_in(node, "PV")
         if pv is None:
             return None
-        rungs.append([*self.elements(power), self.instr("CTU", [inst, pv], node)])
+        lid = node.attrib.get("localId", "0")
+        pulse, store, reset_bit = f"_C{lid}", f"_C{lid}_S", f"_R{lid}"
+        power = self.power_in(self.block_input(node, "CU"), node)
+        rungs: list[list[Element]] = []
+        count = [self.instr("XIC", [pulse], node)]
+        reset_point = self.block_input(node, "R")
+        if self.sources(reset_point):
+            self.helper_bit(node, reset_bit, f"R of {inst} (imported)")
+            reset = self.power_in(reset_point, node)
+            rungs.append([*self.elements(reset), self.instr("OTE", [reset_bit], node)])
+            rungs.append([self.instr("XIC", [reset_bit], node), self.instr("RES", [inst], node)])
+            count.append(self.instr("XIO", [reset_bit], node))
+        self.helper_bit(node, pulse, f"rising edge of CU of {inst} (imported)")
+        self.helper_bit(node, store, f"CU of {inst} last scan (imported)")
+        cu_edge = [self.instr("ONS", [store], node), self.instr("OTE", [pulse], node)]
+        rungs.append([*self.elements(power), *cu_edge])
+        rungs.append([*count, self.instr("CTU", [inst, pv], node)])
         return rungs
 
+    def helper_bit(self, node: Node, name: str, comment: str) -> None:
+        if name.upper() not in self.declared:
+            self.program.tags.append(TagDecl(name, "BOOL", node.line, node.col, comment=comment))
+            self.declared.add(name.upper())
+
+    def function(self, node: Node, spec: FunctionSpec) -> list[list[Element]] | None:
+        """The rungs that compute a value function's OUT into its hidden tag (none for a
+        comparison, which is evaluated inline where its OUT is used)."""
+        if spec.kind == "compare":
+            if not self.feeds_anything(node):
+                self.sink.warning(node.line, node.col, f"the OUT of {spec.name} is not connected")
+            return []
+        values = self.call_inputs(node, spec)
+        if values is None:
+            return None
+        en = self.elements(self.enable(node))
+        out = self.result_tag(node)
+
+        def rung(*instrs: Instr, cond: tuple = TRUE) -> list[Element]:
+            return [*en, *self.elements(cond), *instrs]
+
+        def ins(mnemonic: str, *ops: Operand | str) -> Instr:
+            return self.instr(mnemonic, list(ops), node)
+
+        if spec.kind == "move":
+            return [rung(ins("MOV", values[0], out))]
+        if spec.kind == "arith":
+            if len(values) < 2:
+                self.error(node, f"{spec.name} needs at least two inputs, got {len(values)}")
+                return None
+            rungs = [rung(ins(spec.mnemonic, values[0], values[1], out))]
+            rungs += [rung(ins(spec.mnemonic, out, v, out)) for v in values[2:]]
+            return rungs
+        if spec.name == "SEL":
+            g = self.condition_in(node, "G")
+            return [rung(ins("MOV", values[0], out)), rung(ins("MOV", values[1], out), cond=g)]
+        if spec.name in ("MAX", "MIN"):
+            if not values:
+                self.error(node, f"{spec.name} needs at least one input")
+                return None
+            rungs = [rung(ins("MOV", values[0], out))]
+            for v in values[1:]:
+                rungs.append(rung(ins(spec.mnemonic, v, out), ins("MOV", v, out)))
+            return rungs
+        if spec.name == "LIMIT":
+            mn, value, mx = values
+            return [
+                rung(ins("MOV", value, out)),
+                rung(ins("LES", out, mn), ins("MOV", mn, out)),
+                rung(ins("GRT", out, mx), ins("MOV", mx, out)),
+            ]
+        # MUX: OUT = IN<K>; a K with no input leaves OUT as it was (IEC calls it an error)
+        k, inputs = values[0], values[1:]
+        return [rung(ins("EQU", k, str(i)), ins("MOV", v, out)) for i, v in enumerate(inputs)]
+
+    def feeds_anything(self, node: Node) -> bool:
+        lid = node.attrib.get("localId")
+        return any(
+            c.attrib.get("refLocalId") == lid
+            for other in self.nodes.values()
+            for c in other.iter("connection")
+        )
+
     def out_variable(self, node: Node) -> list[list[Element]] | None:
+        """An outVariable, or an inOutVariable wired on its input side: an assignment of a
+        value, or a coil-like `OTE` of the power flow."""
         srcs = self.sources(node.find("connectionPointIn"))
         target = self.expr_text(node)
         if len(srcs) != 1:
-            self.error(node, "outVariable needs exactly one connection")
+            self.error(node, f"{node.tag} needs exactly one connection")
             return None
-        ref, formal = srcs[0]
-        src = self.nodes.get(ref)
-        if src is not None and src.tag == "block" and formal.upper() in ("ET", "CV"):
-            inst = src.attrib.get("instanceName", "")
-            return [[self.instr("MOV", [f"{inst}.ACC", target], node)]]
+        if self.carries_value(*srcs[0]):
+            return self.assignment(node, target)
         power = self.power_in(node.find("connectionPointIn"), node)
         return [[*self.elements(power), self.instr("OTE", [target], node)]]
 
@@ -463,7 +716,11 @@ class _Importer:
                 break
         if chosen is None:
             what = f"POU {pou_name!r}" if pou_name else "program POU"
-            self.sink.error(self.root.line, self.root.col, f"no {what} with an LD body in the file")
+            self.sink.error(
+                self.root.line,
+                self.root.col,
+                f"no {what} with an LD body in the file{_languages(pous)}",
+            )
             return self.program
         self.program.name = chosen.attrib.get("name", "main")
         self.variables(chosen)
@@ -476,17 +733,8 @@ class _Importer:
                 self.nodes[lid] = node
         made = self.sinks(ld)
         ordered = sorted(made, key=lambda s: _order_key(s[0]))
-        # blocks first when a later-placed rung reads their output: stable topological order
-        rungs_in_order: list[tuple[Node, list[Element]]] = []
-        for node, rungs, _ in ordered:
-            for elements in rungs:
-                rungs_in_order.append((node, elements))
-        instances = {
-            n.attrib.get("instanceName", "").upper(): i
-            for i, (n, _) in enumerate(rungs_in_order)
-            if n.tag == "block"
-        }
-        rungs_in_order = _blocks_before_readers(rungs_in_order, instances)
+        groups = _producers_before_readers([(node, rungs) for node, rungs, _ in ordered])
+        rungs_in_order = [(node, elements) for node, rungs in groups for elements in rungs]
         number = 0
         for elements, out, comment in self.edge_rungs:
             self.program.rungs.append(Rung(number, [*elements, out], out.line, out.col, comment))
@@ -498,6 +746,20 @@ class _Importer:
         return self.program
 
 
+def _languages(pous: list[Node]) -> str:
+    """What the file's POUs are written in, for the 'no LD program' error."""
+    seen = []
+    for pou in pous:
+        body = pou.find("body")
+        lang = body.children[0].tag if body is not None and body.children else "no body"
+        seen.append(f"{pou.attrib.get('pouType', '?')} {pou.attrib.get('name', '?')!r}: {lang}")
+    return " (only LD bodies are imported; " + "; ".join(seen) + ")" if seen else ""
+
+
+def _retained(section: Node) -> bool:
+    return section.attrib.get("retain") == "true" or section.attrib.get("persistent") == "true"
+
+
 def _order_key(node: Node) -> tuple[int, int, int]:
     order = int(node.attrib.get("executionOrderId", "0") or 0)
     pos = node.find("position")
@@ -507,6 +769,7 @@ def _order_key(node: Node) -> tuple[int, int, int]:
 
 
 def _reads(elements: list[Element]) -> set[str]:
+    """Upper-case tag names (timer/counter instances without their member) a rung reads."""
     names: set[str] = set()
     for el in elements:
         if isinstance(el, Branch):
@@ -514,36 +777,62 @@ def _reads(elements: list[Element]) -> set[str]:
                 names |= _reads(leg)
         else:
             for op in el.operands:
-                if "." in op.text:
+                if op.kind == "tag":
                     names.add(op.text.split(".")[0].upper())
     return names
 
 
-def _blocks_before_readers(rungs, instances):
-    """Move each block rung before the first rung that reads its instance (same scan)."""
-    result = list(rungs)
-    for name in instances:
-        block_idx = next(
-            (
-                i
-                for i, (n, _) in enumerate(result)
-                if n.tag == "block" and n.attrib.get("instanceName", "").upper() == name
-            ),
-            None,
-        )
-        if block_idx is None:
-            continue
-        reader = next(
-            (
-                i
-                for i, (n, el) in enumerate(result)
-                if i < block_idx and n.tag != "block" and name in _reads(el)
-            ),
-            None,
-        )
-        if reader is not None:
-            item = result.pop(block_idx)
-            result.insert(reader, item)
+def _produces(node: Node) -> str | None:
+    """What a sink makes that others read in the same scan: a function block's instance,
+    a value function's hidden `_F<localId>`, an inOutVariable's variable."""
+    if node.tag == "inOutVariable":
+        e = node.find("expression")
+        return e.all_text().strip().upper() if e is not None else None
+    if node.tag != "block":
+        return None
+    type_name = node.attrib.get("typeName", "").upper()
+    if type_name in FUNCTION_BLOCKS:
+        return node.attrib.get("instanceName", "").upper() or None
+    spec = STANDARD_FUNCTIONS.get(type_name)
+    if spec is not None and spec.kind != "compare":
+        return f"_F{node.attrib.get('localId', '0')}".upper()
+    return None
+
+
+def _producers_before_readers(groups):
+    """Each block's rungs before the first rungs that read its outputs, the rest in drawing
+    order. A block reading a variable that an inOutVariable assigns sees its value from
+    before the assignment: that variable is the loop's feedback variable (IEC 61131-3 FBD),
+    so `Cnt := SEL(Reset, ADD(1, Cnt), Init)` adds to the last scan's count. Any other
+    loop keeps drawing order."""
+    producer = {}
+    for i, (node, _) in enumerate(groups):
+        name = _produces(node)
+        if name:
+            producer[name] = i
+    reads = [set().union(*(_reads(r) for r in rungs)) if rungs else set() for _, rungs in groups]
+    done: set[int] = set()
+    on_path: set[int] = set()
+    result = []
+
+    def visit(i: int) -> None:
+        if i in done or i in on_path:
+            return
+        on_path.add(i)
+        reader_is_block = groups[i][0].tag == "block"
+        for name in sorted(reads[i], key=lambda n: producer.get(n, -1)):
+            j = producer.get(name)
+            if j is None or j == i:
+                continue
+            if reader_is_block and groups[j][0].tag == "inOutVariable":
+                continue  # the feedback variable
+            visit(j)
+        on_path.discard(i)
+        done.add(i)
+        result.append(groups[i])
+
+    for i in range(len(groups)):
+        visit(i)
     return result
 
 
