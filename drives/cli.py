@@ -57,6 +57,11 @@ def serve(
     bitrate: int = typer.Option(1_000_000, help="bitrate (sim only; set real ones with ip link)"),
     substep_us: float = typer.Option(125.0, help="plant integration sub-step, us"),
     seconds: float = typer.Option(0.0, help="stop after this many seconds (0 = until Ctrl-C)"),
+    socketcand: str = typer.Option(
+        "",
+        help="also serve the bus over TCP at [HOST:]PORT for python-can's `socketcand` "
+        "interface (a master in another process or host; HOST defaults to 127.0.0.1)",
+    ),
 ) -> None:
     """Run virtual CiA 402 drives in realtime for your own CANopen master."""
     import time
@@ -84,16 +89,36 @@ def serve(
     except (ValueError, OSError) as exc:
         typer.echo(f"serve: cannot open {interface}:{channel}: {exc}", err=True)
         raise typer.Exit(2) from None
+    server = None
+    if socketcand:
+        from drives.bus.socketcand import SocketcandServer, parse_address
+
+        def open_endpoint(name: str):
+            return hub.endpoint(name) if interface == "sim" else open_bus(config)
+
+        try:
+            host, port = parse_address(socketcand)
+            server = SocketcandServer(open_endpoint, channel, host=host, port=port).start()
+        except (ValueError, OSError) as exc:
+            typer.echo(f"serve: cannot serve socketcand at {socketcand}: {exc}", err=True)
+            raise typer.Exit(2) from None
+        if host not in ("127.0.0.1", "localhost", "::1"):
+            typer.echo(
+                f"serve: WARNING: socketcand on {host} lets anyone who reaches it command "
+                "the drives (no authentication, no encryption)",
+                err=True,
+            )
     drives = []
     for n in ids:
         drive_bus = hub.endpoint(f"node{n}") if interface == "sim" else bus
         if interface == "virtual" and n != ids[0]:
             drive_bus = open_bus(config)  # python-can virtual: one endpoint per receiver
         drives.append(VirtualDrive(n, drive_bus, substep=substep_us * 1e-6).start())
-    typer.echo(
-        f"serving CiA 402 drive(s) {ids} on {interface}:{channel}; EDS: "
-        f"{__import__('drives').EDS_PATH}"
-    )
+    where = f"{interface}:{channel}"
+    if server is not None:
+        where += f" and socketcand {server.address[0]}:{server.address[1]}"
+    # a parent process (a test, a supervisor) waits for this line before it connects
+    typer.echo(f"serving CiA 402 drive(s) {ids} on {where}; EDS: {__import__('drives').EDS_PATH}")
     try:
         deadline = time.monotonic() + seconds if seconds > 0 else None
         while deadline is None or time.monotonic() < deadline:
@@ -101,5 +126,7 @@ def serve(
     except KeyboardInterrupt:
         pass
     finally:
+        if server is not None:
+            server.close()
         for d in drives:
             d.stop()

@@ -107,13 +107,17 @@ def communication_objects() -> list[Obj]:
         },
         RECORD,
     )
-    # (COB-ID base, valid, transmission type, mapping): CiA 402-style defaults, type 255 so
-    # that canopen.BaseNode402 works without SYNC; a cyclic master remaps to type 1.
+    # (COB-ID base, valid, transmission type, mapping): type 255 so that canopen.BaseNode402
+    # works without SYNC; a cyclic master remaps to type 1. Each RPDO carries one object: a
+    # master that transmits a PDO to change one object (BaseNode402's controlword and op_mode
+    # setters do) must never send a stale copy of another with it. CiA 402's suggested
+    # layouts repeat the controlword in RPDO2-4, so `op_mode = ...` sent controlword 0
+    # (Disable voltage) and a controlword change sent target position 0.
     rpdos = [
-        (0x200, True, 255, ["0x60400010", "0x607A0020"]),
-        (0x300, True, 255, ["0x60400010", "0x60600008"]),
-        (0x400, True, 255, ["0x60400010", "0x60FF0020"]),
-        (0x500, False, 255, ["0x60400010", "0x60710010"]),
+        (0x200, True, 255, ["0x60400010"]),
+        (0x300, True, 255, ["0x60600008"]),
+        (0x400, True, 255, ["0x607A0020"]),
+        (0x500, True, 255, ["0x60FF0020"]),
     ]
     tpdos = [
         (0x180, True, 255, ["0x60410010", "0x60640020"]),

@@ -38,11 +38,11 @@ def test_rpdo_deadline_0x8250(cell, app, slave):
     cell.send("605#2300140105020000")  # valid
     cell.send("000#0105")
     assert run(cell, 50) == ["185#5002E8030000", "285#500200"]  # not monitored before 1st
-    cell.send("205#0F00E8030000")
+    cell.send("205#0F00")
     out = run(cell, 25)
     assert "085#5082110000000000" in out
     assert ("fault", 0x8250) in app.calls
-    assert cell.send("205#0F00E8030000") == ["085#0000000000000000"]
+    assert cell.send("205#0F00") == ["085#0000000000000000"]
 
 
 def test_other_01_store_with_wrong_signature_aborts(cell, slave):

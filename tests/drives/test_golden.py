@@ -202,8 +202,12 @@ def test_sync_rpdo_is_applied_at_the_next_sync(cell, app, slave):
     assert cell.send("605#2300140105020080") == ["585#6000140100000000"]  # RPDO1 invalid
     assert cell.send("605#2F00140201000000") == ["585#6000140200000000"]  # type 1
     assert cell.send("605#2300140105020000") == ["585#6000140100000000"]  # valid again
+    assert cell.send("605#2302140105040080") == ["585#6002140100000000"]  # RPDO3 likewise
+    assert cell.send("605#2F02140201000000") == ["585#6002140200000000"]
+    assert cell.send("605#2302140105040000") == ["585#6002140100000000"]
     cell.send("000#0105")
-    cell.send("205#0F00E8030000")
+    cell.send("205#0F00")
+    cell.send("405#E8030000")
     assert ("write", 0x6040, 0, 15) not in app.calls
     cell.send("080#")
     assert app.calls[-3:] == [("write", 0x6040, 0, 15), ("write", 0x607A, 0, 1000), ("sync",)]
@@ -229,9 +233,9 @@ def test_emergency_02_writing_zero_clears_1003_other_values_abort(cell, app, sla
 def test_pdo_length_error_raises_emcy_8210(cell, app, slave):
     cell.send("000#0105")
     cell.advance(0.001)
-    assert cell.send("205#0F00") == ["085#1082110000000000"]
+    assert cell.send("205#0F") == ["085#1082110000000000"]
     assert ("fault", 0x8210) in app.calls
-    cell.send("205#0F00E8030000")
+    cell.send("205#0F00")
     assert cell.seen()[-1] == "085#0000000000000000"
 
 

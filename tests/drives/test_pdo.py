@@ -138,7 +138,7 @@ def test_rtr_on_tpdo_returns_fresh_data(cell, app, slave):
 def test_rpdo_too_long_raises_8220_but_applies(cell, app, slave):
     cell.send("000#0105")
     cell.advance(0.001)
-    assert cell.send("205#0F00E803000000") == ["085#2082110000000000"]
+    assert cell.send("405#E803000000") == ["085#2082110000000000"]  # RPDO3: target, 5 bytes
     assert app.values[(0x607A, 0)] == 1000
     assert ("fault", 0x8220) in app.calls
 
@@ -148,20 +148,25 @@ def test_rpdo_length_error_is_signalled_once_until_cleared(cell, app, slave):
     cell.advance(0.001)
     assert cell.send("205#0F") == ["085#1082110000000000"]
     assert cell.send("205#0F") == []
-    assert cell.send("205#0F00E8030000") == ["085#0000000000000000"]
+    assert cell.send("205#0F00") == ["085#0000000000000000"]
     assert app.calls.count(("fault", 0x8210)) == 1
 
 
 def test_application_refusing_an_rpdo_value_keeps_the_node_alive(cell, app, slave):
     cell.send("000#0105")
-    cell.send("205#FF01E8030000")  # controlword 0x01FF refused by the application
+    cell.send("205#FF01")  # controlword 0x01FF refused by the application
     assert slave.pdo.refused_writes == 1
+    cell.send("405#E8030000")  # the next RPDO is still processed
     assert app.values[(0x607A, 0)] == 1000
 
 
 def test_default_mapping_of_the_eds(slave):
     rpdo1, tpdo1 = slave.pdo.rpdos[0], slave.pdo.tpdos[0]
-    assert [(e.index, e.subindex) for e in rpdo1.targets] == [(0x6040, 0), (0x607A, 0)]
+    # one object per RPDO (a master changing one never sends a stale copy of another)
+    rpdo_objects = [[(e.index, e.subindex) for e in c.targets] for c in slave.pdo.rpdos]
+    assert rpdo_objects == [[(0x6040, 0)], [(0x6060, 0)], [(0x607A, 0)], [(0x60FF, 0)]]
+    assert [c.cob_id for c in slave.pdo.rpdos] == [0x205, 0x305, 0x405, 0x505]
+    assert all(c.valid for c in slave.pdo.rpdos)
     assert [(e.index, e.subindex) for e in tpdo1.targets] == [(0x6041, 0), (0x6064, 0)]
     assert rpdo1.cob_id == 0x205 and tpdo1.cob_id == 0x185
     assert [c.valid for c in slave.pdo.tpdos] == [True, True, False, False]
@@ -171,4 +176,4 @@ def test_event_tpdo_answers_an_event_rpdo_at_once(cell, app, slave):
     cell.send("000#0105")
     cell.advance(0.001)
     app.values[(0x6041, 0)] = 0x0221  # what a profile would do on "shutdown"
-    assert cell.send("205#0600E8030000") == ["185#2102E8030000", "285#210200"]
+    assert cell.send("205#0600") == ["185#2102E8030000", "285#210200"]

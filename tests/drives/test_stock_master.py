@@ -45,12 +45,9 @@ def _boot_and_enable(network, node):
     node.nmt.send_command(0x81)  # reset node
     node.nmt.wait_for_bootup(timeout=2.0)
     node.sdo[0x1017].raw = 50
-    # Stock reconfiguration: RPDO2 (controlword + mode) off, so that op_mode goes by SDO (the
-    # default layout would send a stale controlword with every mode change); TPDOs also
-    # every 50 ms (event timer).
+    # The default RPDOs carry one object each, so op_mode goes out in RPDO2 on its own and
+    # a controlword change never carries a stale target. TPDOs every 50 ms (event timer).
     node.pdo.read()
-    node.rpdo[2].enabled = False
-    node.rpdo.save()
     for n in (1, 2):
         node.tpdo[n].event_timer = 50
     node.tpdo.save()
@@ -85,7 +82,8 @@ def test_stock_master_boots_enables_homes_moves_and_follows(stock):
     node.op_mode = "PROFILED POSITION"
     assert node.op_mode == "PROFILED POSITION"
     node.sdo[0x6081].raw = 50_000  # 50 mm/s
-    node.rpdo_pointers[0x607A].raw = 5_000  # RPDO1 carries controlword + target
+    node.rpdo_pointers[0x607A].raw = 5_000  # RPDO3 carries the target position alone
+    node.rpdo_pointers[0x607A].pdo_parent.transmit()
     node.controlword = 0x0F
     node.controlword = 0x1F  # new set-point
     deadline = time.monotonic() + 3.0
@@ -103,15 +101,14 @@ def test_stock_master_boots_enables_homes_moves_and_follows(stock):
     node.op_mode = "CYCLIC SYNCHRONOUS POSITION"
     assert node.op_mode == "CYCLIC SYNCHRONOUS POSITION"
     node.sdo[0x60C2][1].raw = 5  # 5 ms interpolation period
-    node.rpdo[1].trans_type = 1
+    node.rpdo[3].trans_type = 1  # target position applied at each SYNC
     node.rpdo.save()
     node.tpdo[1].trans_type = 1
     node.tpdo[1].event_timer = 0
     node.tpdo.save()
     seen = []
     node.tpdo[1].add_callback(lambda m: seen.append(m["Position actual value"].raw))
-    rpdo = node.rpdo[1]
-    rpdo["Controlword"].raw = 0x0F
+    rpdo = node.rpdo[3]
     start = 5_000
     next_t = time.perf_counter()
     for k in range(1, 201):  # 1 s at 5 ms: 10 mm/s ramp from 5 mm
