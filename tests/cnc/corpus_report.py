@@ -94,6 +94,14 @@ def check_argv(path: Path, kind: str) -> list[str]:
     return ["check", "--kind", "lathe", str(path)] if kind == "lathe" else ["check", str(path)]
 
 
+def split_output(text: str) -> tuple[list[str], list[str]]:
+    """The checker's output lines as (errors, warnings); a warning says `warning` after its
+    location (`FILE:LINE:COL: warning: ...`) or at the start of the line."""
+    lines = [ln for ln in text.splitlines() if ln.strip()]
+    warnings = [ln for ln in lines if _WARNING.search(ln)]
+    return [ln for ln in lines if not _WARNING.search(ln)], warnings
+
+
 def check_file(path: Path, kind: str) -> Result:
     from typer.testing import CliRunner
 
@@ -107,9 +115,7 @@ def check_file(path: Path, kind: str) -> Result:
         exc = out.exception
         return Result(path.name, kind, False, f"0:0: crash: {type(exc).__name__}: {exc}", 1, 0,
                       seconds)  # fmt: skip
-    lines = [ln for ln in (out.stdout + out.stderr).splitlines() if ln.strip()]
-    warnings = [ln for ln in lines if _WARNING.search(ln)]
-    errors = [ln for ln in lines if not _WARNING.search(ln)]
+    errors, warnings = split_output(out.stdout + out.stderr)
     first = errors[0] if errors else ""
     prefix = f"{path}:"
     if first.startswith(prefix):

@@ -46,6 +46,19 @@ def test_compare_table(expected, result, problem, says):
         assert f.problem is problem and says in f.text, f
 
 
+def test_output_splits_into_errors_and_warnings():
+    text = (
+        "p.nc:1:1: warning: no G20/G21: inch assumed (power-on unit)\n"
+        "p.nc:9:4: axis X move to 12.0000 mm is beyond the soft limit\n"
+        "\n"
+        "Warning: 2 tools unused\n"
+        "p.nc:10:1: feed move without F (warning words inside a message do not count)\n"
+    )
+    errors, warnings = cr.split_output(text)
+    assert [e.split(":")[1] for e in errors] == ["9", "10"]
+    assert len(warnings) == 2
+
+
 def test_compare_reports_a_baseline_file_missing_from_the_corpus():
     (f,) = cr.compare([], {"gone.nc": E("pass")})
     assert f.problem and "not in the corpus" in f.text
