@@ -1,8 +1,8 @@
 """The controller's part program memory: programs by O number within a capacity in bytes.
 
-O numbers run 1..99999999: a Fanuc with the 8-digit program number option (Fanuc 0i-F /
-30i parameter 11304#0, Haas NGC) stores O00000001..O99999999; 4-digit controls stop at
-O9999. The whole chain (check, memory, select, DNC port, PLC, DNC host, REST) takes 8 digits.
+O numbers run 1..99999999: a Fanuc with the 8-digit program number option stores
+O00000001..O99999999 (Haas NGC takes 5 digits and more too); 4-digit controls stop at O9999.
+The whole chain (check, memory, select, DNC port, PLC, DNC host, REST) takes 8 digits.
 """
 
 from __future__ import annotations
