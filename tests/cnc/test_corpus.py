@@ -52,11 +52,12 @@ def test_output_splits_into_errors_and_warnings():
         "p.nc:9:4: axis X move to 12.0000 mm is beyond the soft limit\n"
         "\n"
         "Warning: 2 tools unused\n"
+        "p.nc: warning: no G20/G21 in the program: read in mm, the power-on unit\n"
         "p.nc:10:1: feed move without F (warning words inside a message do not count)\n"
     )
     errors, warnings = cr.split_output(text)
     assert [e.split(":")[1] for e in errors] == ["9", "10"]
-    assert len(warnings) == 2
+    assert len(warnings) == 3
 
 
 def test_compare_reports_a_baseline_file_missing_from_the_corpus():
