@@ -8,7 +8,7 @@ STAMP := $(VENV)/.installed
 MYPYC_LISTS := $(wildcard */mypyc.list */*/mypyc.list)
 MYPYC_SOURCES := $(foreach f,$(MYPYC_LISTS),$(addprefix $(dir $(f)),$(shell sed 's/\#.*//' $(f))))
 
-.PHONY: run test bench lint clean
+.PHONY: run test bench lint clean corpus corpus-baseline
 
 $(STAMP): pyproject.toml setup.py $(MYPYC_LISTS) $(MYPYC_SOURCES)
 	test -x $(PY) || $(PYTHON) -m venv $(VENV)
@@ -21,6 +21,15 @@ run: $(STAMP)
 
 test: $(STAMP)
 	$(PY) -m pytest -n 2 -q
+
+# The corpus of real part programs (../shared/reference/corpus/gcode, never copied here):
+# a per-file table and `N passed, M failed` against tests/cnc/corpus_expected.yaml.
+corpus: $(STAMP)
+	$(PY) -m tests.cnc.corpus_report
+
+# Regenerate that baseline from today's results (expected-invalid entries are kept).
+corpus-baseline: $(STAMP)
+	$(PY) -m tests.cnc.corpus_report --write
 
 bench: $(STAMP)
 	$(PY) bench/run_all.py

@@ -1,10 +1,24 @@
-"""The controller's part program memory: programs by O number within a capacity in bytes."""
+"""The controller's part program memory: programs by O number within a capacity in bytes.
+
+O numbers run 1..99999999: a Fanuc with the 8-digit program number option stores
+O00000001..O99999999 (Haas NGC takes 5 digits and more too); 4-digit controls stop at O9999.
+The whole chain (check, memory, select, DNC port, PLC, DNC host, REST) takes 8 digits.
+"""
 
 from __future__ import annotations
 
 import hashlib
 import threading
 from dataclasses import dataclass
+
+MAX_PROGRAM_NUMBER = 99_999_999
+
+
+def program_number_error(number: int) -> str | None:
+    """Why `number` is not a storable O number, or None."""
+    if not 1 <= number <= MAX_PROGRAM_NUMBER:
+        return f"program number O{number} outside O1..O{MAX_PROGRAM_NUMBER}"
+    return None
 
 
 @dataclass(frozen=True, slots=True)
@@ -49,6 +63,9 @@ class ProgramMemory:
         return others + size <= self.capacity
 
     def store(self, number: int, text: str) -> ProgramEntry:
+        why = program_number_error(number)
+        if why is not None:
+            raise ValueError(why)
         size = _size(text)
         with self._lock:
             others = sum(_size(t) for n, t in self._programs.items() if n != number)

@@ -73,6 +73,10 @@ def _program_number(text: str) -> int:
     digits = text.upper().removeprefix("O")
     if not digits.isdigit():
         raise typer.BadParameter(f"{text!r} is not a program number (O1234 or 1234)")
+    from dnc.tape import MAX_PROGRAM_NUMBER
+
+    if not 1 <= int(digits) <= MAX_PROGRAM_NUMBER:
+        raise typer.BadParameter(f"{text!r} is outside O1..O{MAX_PROGRAM_NUMBER}")
     return int(digits)
 
 

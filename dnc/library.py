@@ -29,6 +29,7 @@ from dnc.diff import unified_diff
 from dnc.errors import Conflict, InvalidUpload, NotFound, WorkflowError
 from dnc.events import record
 from dnc.tape import (
+    MAX_PROGRAM_NUMBER,
     check_size,
     count_lines,
     decode_program,
@@ -121,8 +122,10 @@ class Library:
         source: str = "upload",
     ) -> tuple[ProgramInfo, RevisionInfo]:
         """A new program with its first revision (a draft)."""
-        if not 1 <= number <= 99999:
-            raise InvalidUpload(f"program number must be 1..99999 (O number), got {number}")
+        if not 1 <= number <= MAX_PROGRAM_NUMBER:
+            raise InvalidUpload(
+                f"program number must be 1..{MAX_PROGRAM_NUMBER} (O number), got {number}"
+            )
         if not name.strip():
             raise InvalidUpload("program name must not be empty")
         text = self._decode(text, name)
@@ -365,7 +368,7 @@ class Library:
                 name = func.lower(name)
             conds = [name.like(like, escape="\\")]
             digits = query.upper().removeprefix("O")
-            if digits.isdigit():
+            if digits.isdigit() and int(digits) <= MAX_PROGRAM_NUMBER:  # beyond: no such O
                 conds.append(m.Program.number == int(digits))
             stmt = stmt.where(or_(*conds))
         if tag:

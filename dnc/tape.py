@@ -11,7 +11,10 @@ import hashlib
 import re
 from dataclasses import dataclass
 
+from cnc.program_memory import MAX_PROGRAM_NUMBER
 from dnc.errors import InvalidUpload
+
+__all__ = ["MAX_PROGRAM_NUMBER"]  # the O number range 1..99999999, for the REST schemas
 
 # Control characters a tape may legitimately carry: TAB, LF, CR, and DC1-DC4 (XON/XOFF and
 # tape reader control) which we strip. Anything else below 0x20 means binary data.
@@ -82,7 +85,7 @@ class TapeHeader:
     title: str  # the comment on that block, if any
 
 
-_O_BLOCK = re.compile(r"^\s*(?:N\d+\s*)?[O:]\s*(\d{1,5})\s*(?:\((?P<title>[^)]*)\))?", re.I)
+_O_BLOCK = re.compile(r"^\s*(?:N\d+\s*)?[O:]\s*(\d+)\s*(?:\((?P<title>[^)]*)\))?", re.I)
 
 
 def read_header(text: str) -> TapeHeader:

@@ -34,7 +34,7 @@ _EVEN = bytes((i | 0x80) if bin(i).count("1") % 2 else i for i in range(128)) + 
 CHUNK = 2048
 WINDOW = 4096
 LINE_ALARMS = frozenset({2001, 2004, 2007, 2010})  # parity, cut off, time-out, overrun
-_REQUEST = re.compile(r"/REQ\s*(\d{1,5})", re.I)
+_REQUEST = re.compile(r"/REQ\s*(\d+)", re.I)
 
 
 class TransferError(Exception):

@@ -32,16 +32,19 @@ from collections.abc import Callable
 from plc.signals import (
     AXIS_BITS,
     HOST_TO_PLC,
+    MAX_PROGRAM_NUMBER,
     NC_TO_PLC,
     PLC_TO_HOST,
     PLC_TO_NC,
     REFUSAL_TEXTS,
+    dword_value,
+    dword_words,
     signal,
     signals,
 )
 
 # everything the host may write, and nothing else
-WRITABLE = "%MX0.0-%MX0.4,%MW0-%MW4"
+WRITABLE = "%MX0.0-%MX0.4,%MW0-%MW5"
 
 COMMAND_COILS = {s.name: s.modbus[1] for s in signals(HOST_TO_PLC) if s.area == "MX"}
 COMMAND_REGISTERS = {s.name: s.modbus[1] for s in signals(HOST_TO_PLC) if s.area == "MW"}
@@ -171,9 +174,20 @@ class RemotePanel:
         self._check(f"write coil {name}", self.client.write_coil(COMMAND_COILS[name], value))
 
     def select_program(self, number: int, timeout_s: float = 5.0) -> None:
-        """Program select of O`number` (1..9999) through the PLC to the NC; returns once the
-        NC selected it. PanelRefused (not in memory, a program active ...) says why not."""
-        self._register("RemProgNumber", number)
+        """Program select of O`number` (1..99999999) through the PLC to the NC; returns once
+        the NC selected it. PanelRefused (not in memory, a program active ...) says why not.
+
+        The O number goes as 32 bits in holding registers 1028 (low word) and 1029 (high
+        word), both in ONE write so the PLC never sees half of a new number."""
+        if not 1 <= number <= MAX_PROGRAM_NUMBER:
+            raise ValueError(f"O{number} outside O1..O{MAX_PROGRAM_NUMBER}")
+        low, high = dword_words(number)
+        addr = COMMAND_REGISTERS["RemProgNumber"]
+        assert COMMAND_REGISTERS["RemProgNumberHigh"] == addr + 1
+        self._check(
+            "write registers RemProgNumber, RemProgNumberHigh",
+            self.client.write_registers(addr, [low & 0xFFFF, high & 0xFFFF]),
+        )
         self._handshake(
             "RemProgSelect",
             "ProgSelected",
@@ -194,7 +208,10 @@ class RemotePanel:
         """What the NC reports to the PLC: NcMode, NcInCycle, ActiveProgram, HomingActive,
         AllReferenced, ReferencedAxes ... (discrete inputs and input registers)."""
         out: dict[str, bool | int] = dict(self._bits(NC_INPUTS, "NC inputs", inputs=True))
-        out.update(self._words(NC_REGISTERS, "NC registers", inputs=True))
+        words = self._words(NC_REGISTERS, "NC registers", inputs=True)
+        # the selected O number is 32 bits in two input registers (low word first)
+        words["ActiveProgram"] = dword_value(words["ActiveProgram"], words.pop("ActiveProgramHigh"))
+        out.update(words)
         return out
 
     def referenced(self) -> dict[str, bool]:

@@ -58,7 +58,7 @@ REFUSE_ABORTED = 10
 REFUSAL_TEXTS = {
     REFUSE_NOT_IN_MEMORY: "program not in memory",
     REFUSE_PROGRAM_ACTIVE: "a program is active (running or held)",
-    REFUSE_BAD_NUMBER: "program number outside 1..9999",
+    REFUSE_BAD_NUMBER: "program number outside 1..99999999",
     REFUSE_NO_ANSWER: "the NC did not answer within 1 s (PLC alarm 1050/1051)",
     REFUSE_NOT_REF_MODE: "mode is not REF",
     REFUSE_ESTOP: "emergency stop active",
@@ -124,6 +124,30 @@ class Signal:
         }[self.area]
 
 
+# An O number has up to 8 digits (1..99999999): more than a 16-bit word holds. It travels as
+# a 32-bit unsigned value in two words, low word first (a Fanuc PMC keeps 4-byte data low
+# byte first), e.g. RemProgNumber (holding register 1028) + RemProgNumberHigh (1029). O
+# numbers up to 65535 have a high word of 0, so a host that writes only the low word keeps
+# working as long as it leaves the high word at 0.
+MAX_PROGRAM_NUMBER = 99_999_999
+
+
+def dword_words(value: int) -> tuple[int, int]:
+    """A 32-bit unsigned value as (low, high) words, each as the IEC INT the image holds."""
+    if not 0 <= value <= 0xFFFF_FFFF:
+        raise ValueError(f"{value} does not fit 32 bits unsigned")
+    return _int16(value & 0xFFFF), _int16(value >> 16)
+
+
+def dword_value(low: int, high: int) -> int:
+    """The 32-bit unsigned value of two words (low, high), each INT or unsigned 16-bit."""
+    return ((int(high) & 0xFFFF) << 16) | (int(low) & 0xFFFF)
+
+
+def _int16(v: int) -> int:
+    return v - 0x10000 if v & 0x8000 else v
+
+
 def _s(name: str, direction: str, address: str, meaning: str) -> Signal:
     return Signal(name, direction, address, "BOOL" if "X" in address[:3] else "INT", meaning)
 
@@ -149,8 +173,9 @@ SIGNALS: tuple[Signal, ...] = (
     _s("AllReferenced", NC_TO_PLC, "%IX1.4", "every axis referenced since power-on / E-stop"),
     _s("ProgSelectFailCode", NC_TO_PLC, "%IW4", "why the NC refused the program select (code)"),
     _s("HomeFailCode", NC_TO_PLC, "%IW5", "why the NC refused the zero return (code)"),
-    _s("ActiveProgram", NC_TO_PLC, "%IW6", "selected program O number, 0 = none"),
+    _s("ActiveProgram", NC_TO_PLC, "%IW6", "selected program O number, low word; 0 = none"),
     _s("ReferencedAxes", NC_TO_PLC, "%IW7", "referenced axes: bit 0 X, 1 Y, 2 Z, 3 A, 4 B, 5 C"),
+    _s("ActiveProgramHigh", NC_TO_PLC, "%IW10", "selected program O number, high word"),
     # --- PLC -> NC -----------------------------------------------------------------------
     _s("PlcReady", PLC_TO_NC, "%QX0.0", "PLC program running"),
     _s("MFinish", PLC_TO_NC, "%QX0.1", "M function finished (held until MStrobe drops)"),
@@ -174,7 +199,8 @@ SIGNALS: tuple[Signal, ...] = (
     _s("PreparedTool", PLC_TO_NC, "%QW6", "tool prepared by the last T function"),
     _s("ProgSelectReq", PLC_TO_NC, "%QX1.5", "program select request (held until answered)"),
     _s("HomeAllReq", PLC_TO_NC, "%QX1.6", "zero return request, all axes (held until answered)"),
-    _s("ProgSelectNumber", PLC_TO_NC, "%QW7", "O number of the program select request"),
+    _s("ProgSelectNumber", PLC_TO_NC, "%QW7", "O number of the program select, low word"),
+    _s("ProgSelectNumberHigh", PLC_TO_NC, "%QW10", "O number of the program select, high word"),
     # --- field -> PLC --------------------------------------------------------------------
     _s("EStopChainOk", FIELD_TO_PLC, "%IX2.0", "E-stop chain closed (NC wired: 0 = E-stop)"),
     _s("DoorClosedSw", FIELD_TO_PLC, "%IX2.1", "door switch: guard door closed"),
@@ -226,7 +252,8 @@ SIGNALS: tuple[Signal, ...] = (
     _s("RemModeReq", HOST_TO_PLC, "%MW3", "mode request 1..4 (PLC clears it when taken)"),
     _s("RemProgSelect", HOST_TO_PLC, "%MX0.3", "program select strobe (hold 1 until answered)"),
     _s("RemHomeAll", HOST_TO_PLC, "%MX0.4", "home all axes, REF mode (hold 1 until answered)"),
-    _s("RemProgNumber", HOST_TO_PLC, "%MW4", "O number for the program select (1..9999)"),
+    _s("RemProgNumber", HOST_TO_PLC, "%MW4", "O number for the program select, low word"),
+    _s("RemProgNumberHigh", HOST_TO_PLC, "%MW5", "O number, high word (0 up to O65535)"),
     _s("CycleStartRefused", PLC_TO_HOST, "%MX1.0", "last cycle start request was refused"),
     _s("ModeRefused", PLC_TO_HOST, "%MX1.1", "last mode request was refused"),
     _s("ProgSelected", PLC_TO_HOST, "%MX1.2", "program select done (valid while RemProgSelect)"),

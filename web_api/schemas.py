@@ -12,6 +12,8 @@ from typing import Annotated, Any, Literal
 
 from pydantic import AwareDatetime, BaseModel, ConfigDict, Field, StringConstraints
 
+from dnc.tape import MAX_PROGRAM_NUMBER  # O1..O99999999
+
 DbId = Annotated[int, Field(ge=1, le=2**31 - 1)]
 Name = Annotated[str, StringConstraints(pattern=r"^[^\x00-\x1f\x7f]*$", max_length=200)]
 Text = Annotated[str, StringConstraints(pattern=r"^[^\x00]*$", max_length=4000)]
@@ -34,7 +36,7 @@ class _In(BaseModel):
 class ProgramCreate(_In):
     """A new program with its first revision (JSON form of the upload)."""
 
-    number: int = Field(ge=1, le=99999, description="O number", examples=[1001])
+    number: int = Field(ge=1, le=MAX_PROGRAM_NUMBER, description="O number", examples=[1001])
     name: Annotated[Name, Field(min_length=1)]
     text: str = Field(description="the part program (ISO 6983 text)")
     machine_kind: MachineKind = "mill"

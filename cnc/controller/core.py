@@ -29,7 +29,7 @@ from cnc.errors import NcError
 from cnc.faces.drip import DripBuffer
 from cnc.interp import Interpreter
 from cnc.interpolator import Motion
-from cnc.program_memory import ProgramMemory
+from cnc.program_memory import ProgramMemory, program_number_error
 from cnc.status import AxisStatus, MachineStatus
 from plc.signals import (
     AXIS_BITS,
@@ -45,6 +45,8 @@ from plc.signals import (
     REFUSE_NOT_IN_MEMORY,
     REFUSE_NOT_REF_MODE,
     REFUSE_PROGRAM_ACTIVE,
+    dword_value,
+    dword_words,
 )
 
 MODES = ("AUTO", "MDI", "JOG", "REF", "EDIT")
@@ -359,8 +361,9 @@ class Controller:
         """Why program `number` cannot be selected now: (refusal code, text), or None."""
         if self._execution() in IN_CYCLE:
             return REFUSE_PROGRAM_ACTIVE, f"program select refused while {self._execution()}"
-        if not 1 <= number <= 9999:
-            return REFUSE_BAD_NUMBER, f"program select refused: O{number} outside 1..9999"
+        why = program_number_error(number)
+        if why is not None:
+            return REFUSE_BAD_NUMBER, f"program select refused: {why}"
         if number not in self.memory:
             return REFUSE_NOT_IN_MEMORY, f"program O{number:04d} not in memory"
         return None
@@ -699,7 +702,8 @@ class Controller:
         """The PLC's program select and zero return requests (remote operator panel): taken
         on the rising edge, answered with done/refused (and a code) until the request drops."""
         if self._rose("ProgSelectReq"):
-            number = int(plc.get("ProgSelectNumber", 0))
+            # 32 bits in two words, low word first (plc.signals)
+            number = dword_value(plc.get("ProgSelectNumber", 0), plc.get("ProgSelectNumberHigh", 0))
             why = self._select_refusal(number)
             if why is None:
                 self.selected = number
@@ -754,6 +758,7 @@ class Controller:
         for a in self.axes:
             if self._ref[a] and self._fb_homed(a):
                 referenced |= 1 << AXIS_BITS.index(a) if a in AXIS_BITS else 0
+        active = dword_words(self.selected or 0)  # the O number: 32 bits, low word first
         key = (
             self._ex in IN_CYCLE or self._run is not None,
             self._t < self._resetting_until,
@@ -787,7 +792,8 @@ class Controller:
             "HomeFailCode": self._home_answer[1] if self._home_answer else 0,
             "HomingActive": bool(self._homing),
             "AllReferenced": all(self._ref[a] and self._fb_homed(a) for a in self.axes),
-            "ActiveProgram": self.selected or 0,
+            "ActiveProgram": active[0],
+            "ActiveProgramHigh": active[1],
             "ReferencedAxes": referenced,
         }
         for h in hs.values():

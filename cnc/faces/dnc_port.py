@@ -47,7 +47,7 @@ from cnc.faces.tape import (
     strip_parity,
 )
 from cnc.faces.tcp_face import TcpFace
-from cnc.program_memory import MemoryFull, ProgramMemory
+from cnc.program_memory import MemoryFull, ProgramMemory, program_number_error
 
 log = logging.getLogger(__name__)
 
@@ -74,8 +74,10 @@ FATAL_TO_CONNECTION = {
 RAISES_ALARM = {ALARM_PARITY, ALARM_CUT_OFF, ALARM_MEMORY_FULL, ALARM_OVERRUN, ALARM_TIMEOUT}
 
 REMOTE_REQUEST_PROGRAM = 9999
-_O_WORD = re.compile(r"^\s*(?:N\d+\s*)?[O:]\s*(\d{1,5})\b", re.I)
-_NUMBER_ARG = re.compile(r"^[O:]?(\d{1,5})$", re.I)
+# Any count of digits is read, so that O123456789 is refused as out of range (1..99999999)
+# rather than read as "no program number".
+_O_WORD = re.compile(r"^\s*(?:N\d+\s*)?[O:]\s*(\d+)", re.I)
+_NUMBER_ARG = re.compile(r"^[O:]?(\d+)$", re.I)
 _COMMAND_MAX = 80
 LINE_BUFFER_BYTES = 4096
 # After XOFF, bytes still arriving within this time were on the wire before the sender could
@@ -317,6 +319,9 @@ class DncPort(TcpFace):
         number = number or program_number(lines)
         if number is None:
             raise DncError(ALARM_NO_NUMBER, "no program number: the first block needs an O word")
+        why = program_number_error(number)
+        if why is not None:
+            raise DncError(ALARM_NO_NUMBER, why)
         self._allow("READ", number)
         text = stored_text(lines)
         try:
@@ -569,7 +574,11 @@ def _number(arg: str) -> int:
     m = _NUMBER_ARG.match(arg.strip())
     if not m:
         raise DncError(ALARM_NO_NUMBER, f"not a program number: {arg!r} (expected Onnnn)")
-    return int(m.group(1))
+    number = int(m.group(1))
+    why = program_number_error(number)
+    if why is not None:
+        raise DncError(ALARM_NO_NUMBER, why)
+    return number
 
 
 def _required_number(arg: str) -> int:

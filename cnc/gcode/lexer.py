@@ -15,6 +15,7 @@ from __future__ import annotations
 import re
 
 from cnc.errors import NcError
+from cnc.program_memory import MAX_PROGRAM_NUMBER
 
 # A word is an address letter and a signed number; whitespace has no meaning inside a block
 # (DIN 66025 space/TAB formats), so the fast path squeezes it out first.
@@ -251,6 +252,13 @@ def _parse_marked(
         if not m:
             raise NcError("program number O needs digits", line, find_col(text, squeezed[0]), file)
         blk.program = int(m.group(1))
+        if blk.program > MAX_PROGRAM_NUMBER:  # 8 digits at most (Fanuc 8-digit O option)
+            raise NcError(
+                f"program number O{m.group(1)} has more than 8 digits (O1..O{MAX_PROGRAM_NUMBER})",
+                line,
+                find_col(text, squeezed[0]),
+                file,
+            )
         squeezed = squeezed[m.end() :]
     return _words(blk, squeezed, text, line, file, least_increment)
 

@@ -42,6 +42,7 @@ from cnc.interp.cycles import MAX_REPEAT, CannedCycles
 from cnc.interp.state import ModalState, ToolOffset
 from cnc.interp.transform import Transform
 from cnc.params import DecimalStyle, MachineParams
+from cnc.program_memory import MAX_PROGRAM_NUMBER
 
 INCH = 25.4
 ARC_TOLERANCE_MM = 0.01  # |start radius - end radius| allowed (000_nc_book TV-INT-3)
@@ -1438,10 +1439,14 @@ class Interpreter(CannedCycles):
         if "P" not in words:
             raise self._err("M98 needs P (program number)", blk, "M")
         p = self._int_word(blk, "P")
+        if p > MAX_PROGRAM_NUMBER or p < 1:
+            raise self._err(f"M98 P{p}: program number outside 1..{MAX_PROGRAM_NUMBER}", blk, "P")
         if "L" in words:
             reps = self._int_word(blk, "L")
             number = p
-        elif p >= 10000:
+        elif p >= 10000 and self._lib.open(p) is None:
+            # Fanuc's 4-digit format M98 Pxxxxnnnn: repeats xxxx, program Onnnn. An O number
+            # of 5 to 8 digits that exists is called as such (8-digit option: repeats by L).
             reps, number = p // 10000, p % 10000
         else:
             reps, number = 1, p

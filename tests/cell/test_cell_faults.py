@@ -139,6 +139,12 @@ def test_fault_endpoints_are_absent_when_disabled_and_the_auth_matrix_holds(make
     assert r.status_code == 404
     r = api("operator").post("/api/machines/mill1/commands", json={"command": "select_program"})
     assert r.status_code == 422
+    # 8-digit O numbers: REST -> Modbus (registers 1028 + 1029) -> PLC -> NC, which answers
+    sel = {"command": "select_program", "number": 80000001}
+    r = api("operator").post("/api/machines/mill1/commands", json=sel)
+    assert r.status_code == 409 and "O80000001 refused: program not in memory" in r.text, r.text
+    r = api("operator").post("/api/machines/mill1/commands", json={**sel, "number": 100000000})
+    assert r.status_code == 422 and "99999999" in r.text
     # E-stop has no face without the simulation face: a clear refusal, not a 5xx
     r = api("operator").post("/api/machines/mill1/commands", json={"command": "estop"})
     assert r.status_code == 409 and "simulation face" in r.json()["detail"]

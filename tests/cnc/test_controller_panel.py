@@ -16,6 +16,8 @@ from plc.signals import (
     REFUSE_NOT_IN_MEMORY,
     REFUSE_NOT_REF_MODE,
     REFUSE_PROGRAM_ACTIVE,
+    dword_value,
+    dword_words,
 )
 from tests.cnc.test_controller import SQUARE, Rig
 
@@ -138,11 +140,30 @@ def test_program_select_request_answers_done_and_drops_with_the_request():
     assert rig.outputs.plc["ActiveProgram"] == 1000
 
 
+@pytest.mark.parametrize("number", [65535, 65536, 80000001, 99999999])
+def test_eight_digit_o_numbers_are_selected_through_the_plc_words_and_by_command(number):
+    """The O number crosses the PLC as 32 bits in two words, low word first (plc.signals)."""
+    text = SQUARE.replace("O1000", f"O{number}")
+    rig = Rig(programs={number: text, 1000: SQUARE})
+    rig.step(10)
+    low, high = dword_words(number)
+    request(rig, ProgSelectReq=True, ProgSelectNumber=low, ProgSelectNumberHigh=high)
+    out = rig.outputs.plc
+    assert out["ProgSelectDone"] and not out["ProgSelectFail"], rig.ctl.events[-3:]
+    assert dword_value(out["ActiveProgram"], out["ActiveProgramHigh"]) == number
+    assert rig.ctl.selected == number and rig.outputs.status.program == f"O{number:04d}"
+    request(rig, ProgSelectReq=False)
+    rig.cmd("select_program", number=1000)
+    rig.cmd("select_program", number=number)
+    assert rig.ctl.selected == number
+
+
 @pytest.mark.parametrize(
     ("number", "running", "code"),
     [
         (7, False, REFUSE_NOT_IN_MEMORY),
         (0, False, REFUSE_BAD_NUMBER),
+        (100_000_000, False, REFUSE_BAD_NUMBER),
         (1000, True, REFUSE_PROGRAM_ACTIVE),
     ],
 )
@@ -154,7 +175,8 @@ def test_program_select_refusals_have_their_code(number, running, code):
         rig.cmd("cycle_start")
         rig.step()
         assert rig.ctl.execution == "ACTIVE"
-    request(rig, ProgSelectReq=True, ProgSelectNumber=number)
+    low, high = dword_words(number)
+    request(rig, ProgSelectReq=True, ProgSelectNumber=low, ProgSelectNumberHigh=high)
     out = rig.outputs.plc
     assert out["ProgSelectFail"] and not out["ProgSelectDone"]
     assert out["ProgSelectFailCode"] == code

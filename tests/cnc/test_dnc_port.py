@@ -113,6 +113,9 @@ def test_plain_tape_without_command_is_a_read(machine):
         (b"DELETE X1\n", b"ERR 2005 not a program number: 'X1'"),
         (b"READ\n%\nG0 X1\n%\n", b"ERR 2005 no program number"),
         (b"DIR\n", b"OK 0 programs, 4096 bytes free"),
+        (b"PUNCH O123456789\n", b"ERR 2005 program number O123456789 outside O1..O99999999"),
+        (b"READ O0\n%\nG0 X1\n%\n", b"ERR 2005 program number O0 outside O1..O99999999"),
+        (b"READ\n%\nO123456789\nG0 X1\n%\n", b"ERR 2005 program number O123456789 outside"),
     ],
 )
 def test_command_answers(machine, command, answer):
@@ -191,23 +194,60 @@ def test_sender_ignoring_xoff_gets_an_overrun_alarm(machine):
     assert machine.drip_buffers[0].aborted
 
 
-def test_remote_request_is_answered_with_the_program(machine):
+def test_eight_digit_o_numbers_round_trip_through_the_port(machine):
+    """READ, DIR, PUNCH and DELETE with 6- and 8-digit O numbers (Fanuc 8-digit option)."""
+    main = PROG.replace("O1234 (PLATE)", "O80000001 (MAIN)")
+    sub = PROG.replace("O1234 (PLATE)", "O410000 (SUB)")
+    with machine.client() as c:
+        assert c.send_program(main).number == 80000001
+        assert c.send_program(sub, number=410000).number == 410000
+        assert [n for n, _size, _sha in c.directory()] == [410000, 80000001]
+        assert c.punch(80000001) == canonical_text(main)
+        c.delete(410000)
+    assert 410000 not in machine.memory and 80000001 in machine.memory
+
+
+@pytest.mark.parametrize(
+    ("name", "number"), [("moji-o80000001-main.nc", 80000001), ("moji-o410000-sub.nc", 410000)]
+)
+def test_corpus_programs_with_long_o_numbers_are_stored_by_their_own_number(name, number):
+    """Real Fanuc production programs (8- and 6-digit O numbers) go in by their tape header."""
+    from dnc.tape import read_header
+    from tests.reference import GCODE_CORPUS, MISSING
+
+    path = GCODE_CORPUS / name
+    if not path.is_file():
+        pytest.skip(MISSING)
+    text = path.read_text(encoding="latin-1")
+    assert read_header(text).number == number
+    m = Machine(capacity=256 * 1024)
+    try:
+        with m.client() as c:
+            assert c.send_program(text).number == number
+            assert [n for n, _size, _sha in c.directory()] == [number]
+    finally:
+        m.close()
+
+
+@pytest.mark.parametrize("number", [1234, 80000001])
+def test_remote_request_is_answered_with_the_program(machine, number):
     served, stop = [], threading.Event()
+    prog = PROG.replace("O1234", f"O{number}")
 
     def host():
         with machine.client() as c:
-            served.append(c.listen(lambda n: PROG if n == 1234 else None, until=stop.is_set))
+            served.append(c.listen(lambda n: prog if n == number else None, until=stop.is_set))
 
     t = threading.Thread(target=host)
     t.start()
     deadline = time.monotonic() + 5
-    while machine.port.remote_request(1234) == 0 and time.monotonic() < deadline:
+    while machine.port.remote_request(number) == 0 and time.monotonic() < deadline:
         time.sleep(0.01)  # until the host's LISTEN is registered
-    while 1234 not in machine.memory and time.monotonic() < deadline:
+    while number not in machine.memory and time.monotonic() < deadline:
         time.sleep(0.01)
     stop.set()
     t.join(5)
-    assert machine.memory.get(1234) == canonical_text(PROG)
+    assert machine.memory.get(number) == canonical_text(prog)
     assert served[0] >= 1
 
 

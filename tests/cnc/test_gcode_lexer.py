@@ -44,6 +44,9 @@ def test_tape_mark_block_delete_and_program_numbers() -> None:
     assert parse_line("/2 X1", 1).delete
     assert parse_line("O1234 (MAIN)", 1).program == 1234
     assert parse_line(":0042", 1).program == 42
+    assert parse_line("O80000001(MAIN)", 1).program == 80000001  # 8 digits (Fanuc option)
+    assert parse_line("O410000", 1).program == 410000
+    assert parse_line("O99999999", 1).program == 99999999
 
 
 def test_least_increment_marks_words_without_point() -> None:
@@ -73,6 +76,7 @@ def test_least_increment_marks_words_without_point() -> None:
         ("G1.23 X1", 1, "unknown G code"),
         ("M3.5", 1, "malformed M code"),
         ("G1 O12", 4, "must start the block"),
+        ("  O123456789", 3, "more than 8 digits (O1..O99999999)"),
         ("G1 X" + "9" * 40, 4, "out of range"),
         ("M" + "9" * 40, 1, "malformed M code"),
     ],

@@ -99,6 +99,27 @@ def test_subprogram_errors(prog, programs, fragment, line, col) -> None:
     assert (ei.value.line, ei.value.col) == (line, col)
 
 
+@pytest.mark.parametrize(
+    ("main", "programs", "called"),
+    [
+        # an O number of 5 to 8 digits that exists is called as such
+        ("M98 P80000001\n", {80000001: "O80000001\nG91 G0 X1\nM99\n"}, [80000001]),
+        ("M98 P410000 L2\n", {410000: "O410000\nG91 G0 X1\nM99\n"}, [410000, 410000]),
+        # Fanuc's 4-digit format: P<repeats><O number> when no such long O number exists
+        ("M98 P20010\n", {10: "O10\nG91 G0 X1\nM99\n"}, [10, 10]),
+    ],
+)
+def test_m98_calls_eight_digit_programs(main, programs, called) -> None:
+    cmds = list(Interpreter(MILL, programs=programs).run(main))
+    # each call of the subprogram steps X by 1 (G91): one step per call
+    assert xs(cmds) == [float(i + 1) for i in range(len(called))]
+
+
+def test_m98_program_number_beyond_eight_digits_is_refused() -> None:
+    with pytest.raises(NcError, match=r"M98 P123456789: program number outside 1\.\.99999999"):
+        list(Interpreter(MILL).run("M98 P123456789\n"))
+
+
 def test_nesting_limit_allows_exactly_the_limit() -> None:
     progs = {n: f"O{n}\nM98 P{n + 1}\nM99\n" for n in range(1, MAX_SUB_NESTING)}
     progs[MAX_SUB_NESTING] = f"O{MAX_SUB_NESTING}\nG0 X1\nM99\n"

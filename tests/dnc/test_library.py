@@ -226,8 +226,11 @@ def test_not_found_errors_name_the_id(library):
 
 
 def test_program_number_and_name_are_validated(library):
-    with pytest.raises(InvalidUpload, match="1..99999"):
+    with pytest.raises(InvalidUpload, match=r"1\.\.99999999 \(O number\), got 0"):
         library.create_program(number=0, name="A", text=PROG)
+    with pytest.raises(InvalidUpload, match=r"1\.\.99999999 \(O number\), got 100000000"):
+        library.create_program(number=100_000_000, name="A", text=PROG)
+    assert library.create_program(number=80000001, name="A", text=PROG)[0].number == 80000001
     with pytest.raises(InvalidUpload, match="name must not be empty"):
         library.create_program(number=1, name=" ", text=PROG)
 

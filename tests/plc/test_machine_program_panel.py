@@ -20,6 +20,8 @@ from plc.signals import (
     REFUSE_NOT_IN_MEMORY,
     REFUSE_NOT_REF_MODE,
     REFUSE_PROGRAM_ACTIVE,
+    dword_value,
+    dword_words,
 )
 from tests.plc.test_machine_program import PERIOD, Plc
 
@@ -31,9 +33,16 @@ def plc() -> Plc:
     return p
 
 
-def select(plc: Plc, number: int) -> None:
-    plc.rt.write_once("RemProgNumber", number)
+def select(plc: Plc, number: int | tuple[int, int]) -> None:
+    """Write the O number (or raw (low, high) words) and raise the strobe."""
+    low, high = dword_words(number) if isinstance(number, int) else number
+    plc.rt.write_once("RemProgNumber", low)
+    plc.rt.write_once("RemProgNumberHigh", high)
     plc.rt.write_once("RemProgSelect", True)
+
+
+def selected_number(plc: Plc) -> int:
+    return dword_value(plc.nc.get("ProgSelectNumber"), plc.nc.get("ProgSelectNumberHigh"))
 
 
 def home(plc: Plc) -> None:
@@ -55,7 +64,7 @@ def test_program_select_is_passed_to_the_nc_and_its_answer_held_while_the_strobe
     select(plc, 1234)
     plc.scan()
     # the request goes to the NC with the number; no answer yet
-    assert plc.nc.get("ProgSelectReq") and plc.nc.get("ProgSelectNumber") == 1234
+    assert plc.nc.get("ProgSelectReq") and selected_number(plc) == 1234
     assert select_answer(plc) == (False, False, 0)
     assert plc.read("RemProgSelect"), "the strobe is the host's: the PLC leaves it"
     plc.nc.set("ProgSelectDone", True)
@@ -77,11 +86,15 @@ def test_program_select_is_passed_to_the_nc_and_its_answer_held_while_the_strobe
     ("in_cycle", "number", "nc_code", "code", "passed_to_nc"),
     [
         (True, 100, None, REFUSE_PROGRAM_ACTIVE, False),  # the PLC's own interlock
-        (False, 0, None, REFUSE_BAD_NUMBER, False),
-        (False, 10000, None, REFUSE_BAD_NUMBER, False),
-        (False, -5, None, REFUSE_BAD_NUMBER, False),
+        (False, 0, None, REFUSE_BAD_NUMBER, False),  # O0
+        (False, (0, 1526), None, REFUSE_BAD_NUMBER, False),  # high word above O99999999's
+        (False, (5, -1), None, REFUSE_BAD_NUMBER, False),  # high word 0xFFFF
         (False, 7, REFUSE_NOT_IN_MEMORY, REFUSE_NOT_IN_MEMORY, True),  # the NC's answer
         (False, 7, REFUSE_PROGRAM_ACTIVE, REFUSE_PROGRAM_ACTIVE, True),
+        (False, 10000, REFUSE_NOT_IN_MEMORY, REFUSE_NOT_IN_MEMORY, True),  # 5 digits
+        (False, 80000001, REFUSE_NOT_IN_MEMORY, REFUSE_NOT_IN_MEMORY, True),  # 8 digits
+        # high word 1525 passes the PLC's coarse test; the NC refuses the exact range
+        (False, 100_000_000, REFUSE_BAD_NUMBER, REFUSE_BAD_NUMBER, True),
     ],
 )
 def test_program_select_refusals(plc, in_cycle, number, nc_code, code, passed_to_nc):
@@ -90,6 +103,7 @@ def test_program_select_refusals(plc, in_cycle, number, nc_code, code, passed_to
     plc.scan()
     assert plc.nc.get("ProgSelectReq") is passed_to_nc
     if passed_to_nc:
+        assert selected_number(plc) == number, "both words reach the NC"
         plc.nc.set("ProgSelectFail", True)
         plc.nc.set("ProgSelectFailCode", nc_code)
         plc.scan()
@@ -217,14 +231,16 @@ class PlayedNc:
     def scan(self) -> None:
         nc, plc = self.plc.nc, self.plc
         req = nc.get("ProgSelectReq")
-        number = nc.get("ProgSelectNumber")
+        number = dword_value(nc.get("ProgSelectNumber"), nc.get("ProgSelectNumberHigh"))
         nc.set("ProgSelectDone", req and number in self.memory)
         nc.set("ProgSelectFail", req and number not in self.memory)
         nc.set(
             "ProgSelectFailCode", REFUSE_NOT_IN_MEMORY if req and number not in self.memory else 0
         )
         if req and number in self.memory:
-            nc.set("ActiveProgram", number)
+            low, high = dword_words(number)
+            nc.set("ActiveProgram", low)
+            nc.set("ActiveProgramHigh", high)
         nc.set("HomeAck", nc.get("HomeAllReq"))
         if nc.get("HomeAllReq"):
             nc.set("AllReferenced", True)
@@ -245,7 +261,7 @@ def panel(plc):
     face.start_in_thread()
     client = ModbusTcpClient("127.0.0.1", port=face.bound_port, timeout=3)
     assert client.connect()
-    nc = PlayedNc(plc, {1234})
+    nc = PlayedNc(plc, {1234, 65535, 80000001})
     # every poll of the panel's handshake is one PLC scan: lockstep through a real socket
     yield RemotePanel(client, sleep=lambda _s: nc.scan())
     client.close()
@@ -260,8 +276,22 @@ def test_remote_panel_program_select_over_modbus(plc, panel):
     assert panel.nc_state()["ActiveProgram"] == 1234
     with pytest.raises(PanelRefused, match=r"O0007 refused: program not in memory \(code 1\)"):
         panel.select_program(7)
-    with pytest.raises(PanelRefused, match="outside 1..9999") as refused:
-        panel.select_program(0)
+    with pytest.raises(ValueError, match="O0 outside O1..O99999999"):
+        panel.select_program(0)  # refused before anything is written
+    # 8 digits: 32 bits in holding registers 1028 (low) and 1029 (high), read back the same way
+    panel.select_program(80000001)
+    assert panel.nc_state()["ActiveProgram"] == 80000001
+    assert panel.client.read_holding_registers(1028, count=2).registers == [0xB401, 0x04C4]
+    # a host that writes only register 1028 (and leaves 1029 at 0) selects up to O65535
+    panel.client.write_register(1029, 0)
+    panel.client.write_register(1028, 65535)
+    raw_select = ("RemProgSelect", "ProgSelected", "ProgSelectRefused", "ProgRefuseCode")
+    panel._handshake(*raw_select, "select by register 1028 alone", 5.0)
+    assert panel.nc_state()["ActiveProgram"] == 65535
+    # the PLC refuses a high word no O number has, with code 3
+    panel.client.write_registers(1028, [0, 1526])
+    with pytest.raises(PanelRefused, match="outside 1..99999999") as refused:
+        panel._handshake(*raw_select, "select O1526*65536", 5.0)
     assert refused.value.code == REFUSE_BAD_NUMBER
     # the strobe is down after each handshake (the write lands in the next scan)
     plc.scan()

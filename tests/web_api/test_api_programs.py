@@ -76,6 +76,25 @@ def test_multipart_file_upload_takes_number_and_name_from_the_tape(api):
     assert text.text == GOOD
 
 
+def test_eight_digit_o_numbers_upload_list_and_search(api):
+    """O numbers run 1..99999999 (Fanuc 8-digit option): from the tape header and by JSON."""
+    tape = "%\nO80000001 (MAIN)\nG0 X10\nM30\n%\n"
+    r = api.post("/api/programs", role="programmer",
+                 files={"file": ("main.nc", tape.encode(), "text/plain")})  # fmt: skip
+    assert r.status_code == 201, r.text
+    assert r.json()["program"]["number"] == 80000001
+    assert api.upload(99999999, GOOD)["program"]["number"] == 99999999
+    assert [p["number"] for p in api.get("/api/programs?number=80000001").json()["items"]] == [
+        80000001
+    ]
+    assert [p["number"] for p in api.get("/api/programs?q=O99999999").json()["items"]] == [99999999]
+    # a longer digit string is no O number: no match, never a database error
+    assert api.get("/api/programs?q=O123456789012345678901").json()["items"] == []
+    r = api.post("/api/programs", role="programmer",
+                 files={"file": ("big.nc", b"O123456789\nM30\n", "text/plain")})  # fmt: skip
+    assert r.status_code == 422 and "#/number" in r.text and "99999999" in r.text, r.text
+
+
 @SQLITE_ONLY
 def test_multipart_fields_override_the_tape_header(api):
     r = api.post(
@@ -219,7 +238,7 @@ def test_malformed_bodies(api, content, ctype, status, kind, says):
     ("body", "pointer", "says"),
     [
         ({"number": "ten", "name": "x", "text": GOOD}, "#/number", "valid integer"),
-        ({"number": 100000, "name": "x", "text": GOOD}, "#/number", "less than or equal"),
+        ({"number": 100000000, "name": "x", "text": GOOD}, "#/number", "less than or equal"),
         ({"number": 1, "name": "", "text": GOOD}, "#/name", "at least 1"),
         ({"number": 1, "name": "a\x00b", "text": GOOD}, "#/name", "pattern"),
         ({"number": 1, "name": "x"}, "#/text", "required"),

@@ -13,6 +13,7 @@ from fastapi import APIRouter, Path, Request
 from fastapi.concurrency import run_in_threadpool
 from pydantic import BaseModel, ConfigDict, Field, model_validator
 
+from dnc.tape import MAX_PROGRAM_NUMBER
 from web_api.problems import ApiProblem, problem_doc
 from web_api.routers.auth import Operator
 from web_api.schemas import MachineName
@@ -27,7 +28,9 @@ class MachineCommand(BaseModel):
     model_config = ConfigDict(extra="forbid")
 
     command: Literal["cycle_start", "feed_hold", "reset", "estop", "home", "select_program", "mode"]
-    number: int | None = Field(default=None, ge=1, le=9999, description="O number")
+    number: int | None = Field(
+        default=None, ge=1, le=MAX_PROGRAM_NUMBER, description="O number (1..99999999)"
+    )
     mode: Literal["AUTO", "MDI", "JOG", "REF"] | None = None
     release: bool = False
 

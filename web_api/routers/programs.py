@@ -13,7 +13,7 @@ from fastapi.responses import JSONResponse
 from pydantic import BaseModel, ValidationError
 from starlette.datastructures import UploadFile
 
-from dnc.tape import read_header
+from dnc.tape import MAX_PROGRAM_NUMBER, read_header
 from web_api.problems import ApiProblem, problem_doc
 from web_api.routers import Services, decode_cursor, get_services, next_link
 from web_api.routers.auth import Programmer, Viewer
@@ -148,7 +148,7 @@ def _too_large(size: int, services: Services, at_least: bool = False) -> ApiProb
     openapi_extra=upload_body(
         ProgramCreate,
         {
-            "number": {"type": "integer", "minimum": 1, "maximum": 99999},
+            "number": {"type": "integer", "minimum": 1, "maximum": MAX_PROGRAM_NUMBER},
             "name": {"type": "string", "maxLength": 200},
             "machine_kind": {"type": "string", "pattern": "^[A-Za-z0-9_.-]+$"},
             "description": {"type": "string", "maxLength": 4000},
@@ -190,7 +190,7 @@ def list_programs(
     services: Svc,
     _: Viewer,
     q: Annotated[Name | None, Query(description="name contains, or O number")] = None,
-    number: Annotated[int | None, Query(ge=1, le=99999)] = None,
+    number: Annotated[int | None, Query(ge=1, le=MAX_PROGRAM_NUMBER)] = None,
     tag: Annotated[Tag | None, Query()] = None,
     text: Annotated[Name | None, Query(description="text in any revision")] = None,
     machine_kind: Annotated[MachineKind | None, Query()] = None,

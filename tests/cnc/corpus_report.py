@@ -1,0 +1,265 @@
+"""The corpus of real part programs as a test: `make corpus`, `make corpus-baseline`.
+
+Every file of `../shared/reference/corpus/gcode` (tests/reference.py GCODE_CORPUS; never
+copied into the repository) is checked exactly as a new user would check it:
+`fmscell nc check FILE`, or `fmscell nc check --kind lathe FILE` for the files whose
+SOURCES.md kind is lathe, with no other flag, so the shipped machines' defaults decide.
+The command line runs in this process (typer's runner) to spare 95 interpreter start-ups;
+its exit code and output are the ones a shell would see.
+
+The result is compared with the checked-in baseline tests/cnc/corpus_expected.yaml, one
+entry per file:
+
+    expect: pass                       the file must keep passing
+    expect: fail,    error: "L:C: ..." today's first error (a known gap, part 2's work)
+    expect: invalid, reason: "..."     another controller's language (Okuma, Siemens 840D
+                                       native, Marlin, ...): excluded from N passed / M failed
+
+A problem is a file that passed and now fails (a regression), a file marked fail or invalid
+that now passes (the baseline must be updated: the report prints the exact edit), and a
+file present on one side only. A fail file whose first error changed is reported, not a
+problem: other work moves first errors all the time.
+
+    python -m tests.cnc.corpus_report            # table + `N passed, M failed`; exit 1 on a problem
+    python -m tests.cnc.corpus_report --write    # regenerate the baseline from today's results
+                                                 # (invalid entries and their reasons are kept)
+"""
+
+from __future__ import annotations
+
+import argparse
+import re
+import sys
+import time
+from collections.abc import Iterable, Mapping
+from dataclasses import dataclass
+from pathlib import Path
+
+import yaml
+
+from tests.reference import GCODE_CORPUS, MISSING
+
+BASELINE = Path(__file__).with_name("corpus_expected.yaml")
+EXPECTS = ("pass", "fail", "invalid")
+# A warning line as the checker prints it: `FILE:LINE:COL: warning: ...` (or bare `warning: ...`).
+_WARNING = re.compile(r"(^|:\s)warning\b", re.IGNORECASE)
+
+
+@dataclass(frozen=True)
+class Expected:
+    expect: str  # pass | fail | invalid
+    note: str = ""  # the first error (fail) or why it is another controller's language (invalid)
+
+
+@dataclass(frozen=True)
+class Result:
+    file: str
+    kind: str
+    passed: bool
+    first_error: str  # "LINE:COL: message" without the path, "" when passed
+    errors: int
+    warnings: int
+    seconds: float
+
+
+@dataclass(frozen=True)
+class Finding:
+    file: str
+    problem: bool  # True: the test fails
+    text: str
+
+
+def corpus_kinds(sources_md: Path) -> dict[str, str]:
+    """file -> kind ('mill' | 'lathe') from the SOURCES.md table (`| file | repo | ... | kind |`)."""
+    kinds: dict[str, str] = {}
+    header: list[str] | None = None
+    for line in sources_md.read_text(encoding="utf-8").splitlines():
+        if not line.startswith("|"):
+            continue
+        cells = [c.strip() for c in line.strip().strip("|").split("|")]
+        if header is None:
+            header = cells
+            continue
+        if set(cells[0]) <= {"-", ":", " "}:
+            continue
+        row = dict(zip(header, cells, strict=False))
+        kinds[row["file"]] = row["kind"]
+    if not kinds:
+        raise ValueError(f"{sources_md}: no table with a file and a kind column")
+    return kinds
+
+
+def check_argv(path: Path, kind: str) -> list[str]:
+    """The `nc check` arguments a user gives: no flag beyond `--kind lathe`."""
+    return ["check", "--kind", "lathe", str(path)] if kind == "lathe" else ["check", str(path)]
+
+
+def split_output(text: str) -> tuple[list[str], list[str]]:
+    """The checker's output lines as (errors, warnings); a warning says `warning` after its
+    location (`FILE:LINE:COL: warning: ...`) or at the start of the line."""
+    lines = [ln for ln in text.splitlines() if ln.strip()]
+    warnings = [ln for ln in lines if _WARNING.search(ln)]
+    return [ln for ln in lines if not _WARNING.search(ln)], warnings
+
+
+def check_file(path: Path, kind: str) -> Result:
+    from typer.testing import CliRunner
+
+    from cnc.cli import nc_app
+
+    start = time.perf_counter()
+    out = CliRunner().invoke(nc_app, check_argv(path, kind))
+    seconds = time.perf_counter() - start
+    if out.exception is not None and not isinstance(out.exception, SystemExit):
+        # A crash of the checker is a failure with its own first error, never a pass.
+        exc = out.exception
+        return Result(path.name, kind, False, f"0:0: crash: {type(exc).__name__}: {exc}", 1, 0,
+                      seconds)  # fmt: skip
+    errors, warnings = split_output(out.stdout + out.stderr)
+    first = errors[0] if errors else ""
+    prefix = f"{path}:"
+    if first.startswith(prefix):
+        first = first[len(prefix) :]
+    passed = out.exit_code == 0
+    if not passed and not first:
+        first = f"0:0: exit code {out.exit_code} without a message"
+    return Result(path.name, kind, passed, first if not passed else "", len(errors), len(warnings),
+                  seconds)  # fmt: skip
+
+
+def run_corpus(corpus: Path = GCODE_CORPUS) -> list[Result]:
+    kinds = corpus_kinds(corpus / "SOURCES.md")
+    files = sorted(p for p in corpus.iterdir() if p.is_file() and p.name != "SOURCES.md")
+    unknown = [p.name for p in files if p.name not in kinds]
+    if unknown:
+        raise ValueError(f"{corpus}/SOURCES.md: no row (kind) for {', '.join(unknown)}")
+    return [check_file(p, kinds[p.name]) for p in files]
+
+
+def load_baseline(path: Path = BASELINE) -> dict[str, Expected]:
+    doc = yaml.safe_load(path.read_text(encoding="utf-8")) or {}
+    files = doc.get("files")
+    if not isinstance(files, dict):
+        raise ValueError(f"{path}: /files must be a mapping of file name -> expectation")
+    out: dict[str, Expected] = {}
+    for name, entry in files.items():
+        where = f"{path}: /files/{name}"
+        if not isinstance(entry, dict) or entry.get("expect") not in EXPECTS:
+            raise ValueError(f"{where}/expect must be one of {', '.join(EXPECTS)}")
+        expect = entry["expect"]
+        note = {"pass": "", "fail": entry.get("error"), "invalid": entry.get("reason")}[expect]
+        if expect != "pass" and not (isinstance(note, str) and note):
+            key = "error" if expect == "fail" else "reason"
+            raise ValueError(f"{where}/{key} is required for expect: {expect}")
+        out[str(name)] = Expected(expect, note or "")
+    return out
+
+
+def _entry(name: str, expected: Expected) -> str:
+    if expected.expect == "pass":
+        return f"  {name}: {{expect: pass}}"
+    key = "error" if expected.expect == "fail" else "reason"
+    return f"  {name}: {{expect: {expected.expect}, {key}: {_quote(expected.note)}}}"
+
+
+def _quote(text: str) -> str:
+    return '"' + text.replace("\\", "\\\\").replace('"', '\\"') + '"'
+
+
+def compare(results: Iterable[Result], baseline: Mapping[str, Expected]) -> list[Finding]:
+    findings: list[Finding] = []
+    seen: set[str] = set()
+    for r in results:
+        seen.add(r.file)
+        exp = baseline.get(r.file)
+        now = _entry(r.file, Expected("pass") if r.passed else Expected("fail", r.first_error))
+        if exp is None:
+            findings.append(Finding(r.file, True, f"not in the baseline: add `{now.strip()}`"))
+        elif exp.expect == "pass" and not r.passed:
+            findings.append(
+                Finding(r.file, True, f"REGRESSION: passed, now fails: {r.first_error}")
+            )
+        elif exp.expect in ("fail", "invalid") and r.passed:
+            what = "marked fail" if exp.expect == "fail" else f"marked invalid ({exp.note})"
+            findings.append(Finding(r.file, True, f"{what}, now passes: update the baseline to "
+                                                  f"`{now.strip()}`"))  # fmt: skip
+        elif exp.expect == "fail" and r.first_error != exp.note:
+            findings.append(Finding(r.file, False, f"first error changed: was {exp.note!r}, "
+                                                   f"now {r.first_error!r}"))  # fmt: skip
+    for name in sorted(set(baseline) - seen):
+        findings.append(Finding(name, True, "in the baseline but not in the corpus: remove it"))
+    return findings
+
+
+def summary(results: Iterable[Result], baseline: Mapping[str, Expected]) -> str:
+    counted = [r for r in results if baseline.get(r.file, Expected("fail")).expect != "invalid"]
+    passed = sum(r.passed for r in counted)
+    invalid = sum(1 for r in results if r.file not in {c.file for c in counted})
+    warnings = sum(r.warnings for r in results)
+    return (f"{passed} passed, {len(counted) - passed} failed "
+            f"({invalid} expected-invalid excluded; {warnings} warnings)")  # fmt: skip
+
+
+def table(results: Iterable[Result], baseline: Mapping[str, Expected]) -> str:
+    rows = []
+    for r in results:
+        exp = baseline.get(r.file)
+        got = "pass" if r.passed else "fail"
+        detail = r.first_error if not r.passed else ""
+        if exp is not None and exp.expect == "invalid":
+            got, detail = f"invalid/{got}", exp.note
+        rows.append(f"{r.file:34} {r.kind:5} {got:12} {r.errors:5} {r.warnings:4} "
+                    f"{r.seconds:6.2f}s  {detail[:110]}")  # fmt: skip
+    head = f"{'file':34} {'kind':5} {'result':12} {'errs':>5} {'warn':>4} {'time':>7}  first error / reason"
+    return "\n".join([head, *rows])
+
+
+def write_baseline(results: Iterable[Result], old: Mapping[str, Expected], path: Path) -> None:
+    """Regenerate from today's results; invalid entries (a judgement, not a result) are kept."""
+    lines = [
+        "# Expected result of `fmscell nc check [--kind lathe] FILE` on every corpus file",
+        "# (../shared/reference/corpus/gcode). Checked by tests/cnc/test_corpus.py and",
+        "# `make corpus`; regenerate with `make corpus-baseline` after a change that moves",
+        "# results. pass | fail (error: today's first error) | invalid (reason: another",
+        "# controller's language; kept by the regeneration, edit by hand).",
+        "files:",
+    ]
+    for r in results:
+        exp = old.get(r.file)
+        if exp is not None and exp.expect == "invalid":
+            lines.append(_entry(r.file, exp))
+        else:
+            lines.append(
+                _entry(r.file, Expected("pass") if r.passed else Expected("fail", r.first_error))
+            )
+    tmp = path.with_suffix(".tmp")
+    tmp.write_text("\n".join(lines) + "\n", encoding="utf-8")
+    tmp.replace(path)
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(prog="python -m tests.cnc.corpus_report", description=__doc__,
+                                 formatter_class=argparse.RawDescriptionHelpFormatter)  # fmt: skip
+    ap.add_argument("--write", action="store_true", help="regenerate the baseline file")
+    ap.add_argument("--baseline", type=Path, default=BASELINE)
+    ap.add_argument("--corpus", type=Path, default=GCODE_CORPUS)
+    args = ap.parse_args(argv)
+    if not (args.corpus / "SOURCES.md").is_file():
+        print(MISSING, file=sys.stderr)
+        return 2
+    results = run_corpus(args.corpus)
+    old = load_baseline(args.baseline) if args.baseline.is_file() else {}
+    if args.write:
+        write_baseline(results, old, args.baseline)
+        old = load_baseline(args.baseline)
+        print(f"wrote {args.baseline}")
+    print(table(results, old))
+    findings = compare(results, old)
+    for f in findings:
+        print(f"{'PROBLEM' if f.problem else 'note'}: {f.file}: {f.text}")
+    print(summary(results, old))
+    return 1 if any(f.problem for f in findings) else 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -1,0 +1,109 @@
+"""The corpus of real part programs against its baseline (tests/cnc/corpus_expected.yaml).
+
+The whole-corpus test fails when a file that passed regresses, when a file marked fail or
+invalid now passes (the message gives the baseline edit; `make corpus-baseline` regenerates
+it), and when the corpus and the baseline disagree on the files. The comparison itself is
+tested on a table of made-up results, so it is known to fail when it should.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+
+from tests.cnc import corpus_report as cr
+from tests.reference import GCODE_CORPUS, MISSING
+
+
+def _r(name: str, passed: bool, first: str = "") -> cr.Result:
+    return cr.Result(name, "mill", passed, "" if passed else first, 0 if passed else 1, 0, 0.0)
+
+
+E = cr.Expected
+
+
+@pytest.mark.parametrize(
+    ("expected", "result", "problem", "says"),
+    [
+        (E("pass"), _r("a.nc", True), None, ""),
+        (E("pass"), _r("a.nc", False, "3:1: boom"), True, "REGRESSION"),
+        (E("fail", "3:1: boom"), _r("a.nc", False, "3:1: boom"), None, ""),
+        (E("fail", "3:1: boom"), _r("a.nc", False, "4:1: other"), False, "first error changed"),
+        (E("fail", "3:1: boom"), _r("a.nc", True), True, "`a.nc: {expect: pass}`"),
+        (E("invalid", "Okuma"), _r("a.nc", False, "1:1: $"), None, ""),
+        (E("invalid", "Okuma"), _r("a.nc", True), True, "marked invalid (Okuma), now passes"),
+        (None, _r("a.nc", False, "1:1: x"), True, 'add `a.nc: {expect: fail, error: "1:1: x"}`'),
+    ],
+)
+def test_compare_table(expected, result, problem, says):
+    baseline = {} if expected is None else {"a.nc": expected}
+    findings = cr.compare([result], baseline)
+    if problem is None:
+        assert findings == []
+    else:
+        (f,) = findings
+        assert f.problem is problem and says in f.text, f
+
+
+def test_output_splits_into_errors_and_warnings():
+    text = (
+        "p.nc:1:1: warning: no G20/G21: inch assumed (power-on unit)\n"
+        "p.nc:9:4: axis X move to 12.0000 mm is beyond the soft limit\n"
+        "\n"
+        "Warning: 2 tools unused\n"
+        "p.nc: warning: no G20/G21 in the program: read in mm, the power-on unit\n"
+        "p.nc:10:1: feed move without F (warning words inside a message do not count)\n"
+    )
+    errors, warnings = cr.split_output(text)
+    assert [e.split(":")[1] for e in errors] == ["9", "10"]
+    assert len(warnings) == 3
+
+
+def test_compare_reports_a_baseline_file_missing_from_the_corpus():
+    (f,) = cr.compare([], {"gone.nc": E("pass")})
+    assert f.problem and "not in the corpus" in f.text
+
+
+def test_baseline_round_trips_through_write(tmp_path: Path):
+    old = {"b.nc": E("invalid", 'Siemens "840D" native')}
+    results = [_r("a.nc", False, '7:3: unsupported: "x"'), _r("b.nc", False, "1:1: %"),
+               _r("c.nc", True)]  # fmt: skip
+    path = tmp_path / "expected.yaml"
+    cr.write_baseline(results, old, path)
+    assert cr.load_baseline(path) == {"a.nc": E("fail", '7:3: unsupported: "x"'), "b.nc": old["b.nc"],
+                                      "c.nc": E("pass")}  # fmt: skip
+    assert cr.compare(results, cr.load_baseline(path)) == []
+
+
+def test_bad_baseline_entry_is_refused_with_its_pointer(tmp_path: Path):
+    path = tmp_path / "expected.yaml"
+    path.write_text("files:\n  a.nc: {expect: fail}\n", encoding="utf-8")
+    with pytest.raises(ValueError, match=r"/files/a.nc/error is required"):
+        cr.load_baseline(path)
+
+
+def test_sources_md_gives_every_corpus_file_a_kind():
+    if not (GCODE_CORPUS / "SOURCES.md").is_file():
+        pytest.skip(MISSING)
+    kinds = cr.corpus_kinds(GCODE_CORPUS / "SOURCES.md")
+    assert kinds["gcw-fanuc0t.nc"] == "lathe" and kinds["cline-rebels5.nc"] == "mill"
+    assert set(kinds.values()) == {"mill", "lathe"}
+
+
+def test_corpus_against_baseline(capsys):
+    if not (GCODE_CORPUS / "SOURCES.md").is_file():
+        pytest.skip(MISSING)
+    results = cr.run_corpus(GCODE_CORPUS)
+    baseline = cr.load_baseline()
+    findings = cr.compare(results, baseline)
+    line = cr.summary(results, baseline)
+    with capsys.disabled():
+        print(f"\ncorpus: {line}")
+    problems = [f"{f.file}: {f.text}" for f in findings if f.problem]
+    notes = [f"{f.file}: {f.text}" for f in findings if not f.problem]
+    assert not problems, (
+        f"corpus: {line}\n" + "\n".join(problems)
+        + ("\n(notes: " + "; ".join(notes) + ")" if notes else "")
+        + "\nregenerate with `make corpus-baseline` when the change is intended"
+    )  # fmt: skip
