@@ -24,7 +24,8 @@ TABLES = (
 )
 
 
-def _pg_admin_url() -> str | None:
+def _pg_admin_url() -> tuple[str | None, str]:
+    """(admin URL, "") when PostgreSQL answers, else (None, why not)."""
     url = os.environ.get("FMSCELL_TEST_PG_URL")
     candidate = normalise_url(url or DEFAULT_PG)
     try:
@@ -32,21 +33,24 @@ def _pg_admin_url() -> str | None:
         with eng.connect() as conn:
             conn.execute(text("select 1"))
         eng.dispose()
-    except Exception:
+    except Exception as exc:
         if url:  # explicitly asked for: a dead server is a failure, not a skip
             raise
-        return None
-    return candidate
+        first = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
+        return None, f"{DEFAULT_PG.replace('+psycopg', '')}: {first}"
+    return candidate, ""
 
 
-PG_ADMIN = _pg_admin_url()
-BACKENDS = ["sqlite"] + (["postgresql"] if PG_ADMIN else [])
+PG_ADMIN, PG_ABSENT = _pg_admin_url()
+# The PostgreSQL cases are always collected: without a server each one is a skip that says
+# why (pytest -ra lists it), never a case that silently vanishes from the run.
+BACKENDS = ["sqlite", "postgresql"]
 
 
 @pytest.fixture(scope="session")
 def pg_url():
     if not PG_ADMIN:
-        pytest.skip("PostgreSQL not available")
+        pytest.skip(f"PostgreSQL not reachable ({PG_ABSENT}); start it or set FMSCELL_TEST_PG_URL")
     name = f"fmscell_{uuid.uuid4().hex[:12]}"
     admin = create_engine(PG_ADMIN, isolation_level="AUTOCOMMIT")
     with admin.connect() as conn:

@@ -14,7 +14,7 @@ from dnc.errors import DatabaseUnavailable
 from dnc.library import Library
 from dnc.models import Base
 
-from .conftest import PG_ADMIN
+from .conftest import PG_ABSENT, PG_ADMIN
 
 PROG = "%\nO{n}\nG0 X0\nM30\n%\n"
 
@@ -58,7 +58,7 @@ def test_database_down_gives_a_clear_error_and_writes_nothing(tmp_path):
         lib.create_program(number=1, name="A", text=PROG.format(n=1))
 
 
-@pytest.mark.skipif(not PG_ADMIN, reason="PostgreSQL not available")
+@pytest.mark.skipif(not PG_ADMIN, reason=f"PostgreSQL not reachable ({PG_ABSENT})")
 def test_ten_concurrent_writers_on_postgres(pg_url):
     eng = make_engine(pg_url, pool_size=10, max_overflow=5)
     with eng.begin() as conn:
