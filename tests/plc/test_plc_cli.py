@@ -84,7 +84,7 @@ def test_run_serves_the_image_over_modbus_until_interrupted():
         line = proc.stdout.readline()
         m = re.search(r"Modbus TCP on 127\.0\.0\.1:(\d+)", line)
         assert m, line + proc.stderr.read()
-        client = ModbusTcpClient("127.0.0.1", port=int(m.group(1)), timeout=3)
+        client = ModbusTcpClient("127.0.0.1", port=int(m.group(1)), timeout=10)
         assert client.connect()
         try:
             assert not client.write_register(1024, 1500).isError()  # %MW0 = SetSpeed
@@ -103,7 +103,12 @@ def test_run_serves_the_image_over_modbus_until_interrupted():
             client.close()
     finally:
         proc.send_signal(signal.SIGINT)
-        out, err = proc.communicate(timeout=10)
+        try:
+            out, err = proc.communicate(timeout=60)
+        except subprocess.TimeoutExpired:
+            proc.kill()  # never leave the server running after a failed test
+            proc.communicate()
+            raise
     assert proc.returncode == 0, err
     assert "stopped after" in out and "mode RUN" in out
 
