@@ -20,6 +20,7 @@ from __future__ import annotations
 import contextlib
 import logging
 import os
+import secrets
 import threading
 import time
 from pathlib import Path
@@ -159,6 +160,7 @@ class Cell:
             self.scheduler = Scheduler(self.sessions, self.monitor.views, rule=self.rule)
             self.worker = TransferWorker(
                 self.sessions,
+                client_factory=self._dnc_client,
                 starter=make_starter(self.links, self.monitor),
                 retry=RetryPolicy(max_attempts=3, base_s=0.5, cap_s=5.0),
             )
@@ -177,6 +179,37 @@ class Cell:
         self.started = True
         return self
 
+    def _dnc_client(self, host: str, port: int, profile: dict):
+        """The transfer worker's DncClient: the registry's profile plus the port's shared
+        secret, which stays in the host's memory (the registry's profile is public)."""
+        from dnc.transfer_worker import _default_client
+
+        secret = next(
+            (lk.secret for lk in self.links.values() if lk.address("dnc") == f"{host}:{port}"),
+            None,
+        )
+        return _default_client(host, port, {**profile, "secret": secret})
+
+    def _secret(self, name: str, mcfg, *, persist: bool) -> str:
+        """The shared secret of a machine's DNC port and simulation face: the configured
+        `ports.secret`, else one generated for it. A machine process outlives its host, so
+        its generated secret is kept (owner-only) in the state directory for the next host
+        that adopts it; an in-process machine gets a fresh one each start."""
+        if mcfg.ports.secret is not None:
+            return mcfg.ports.secret
+        if not persist:
+            return secrets.token_urlsafe(24)
+        path = self.state_dir / f"{name}.machine.secret"
+        with contextlib.suppress(OSError):
+            kept = path.read_text().strip()
+            if len(kept) >= 16:
+                return kept
+        made = secrets.token_urlsafe(24)
+        fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o600)
+        with os.fdopen(fd, "w") as f:
+            f.write(made + "\n")
+        return made
+
     def _start_machines(self, timeout_s: float) -> None:
         fast = self.clock == "fast"
         if self.attach:
@@ -186,7 +219,13 @@ class Cell:
                 ports = {"dnc": p.dnc, "modbus": p.modbus, "shdr": p.shdr}
                 ports["simulation"] = p.simulation if self.faults_enabled else None
                 self.links[name] = MachineLink(
-                    name, mcfg.kind, p.host, ports, tuple(mcfg.axes), mcfg.program_memory_bytes
+                    name,
+                    mcfg.kind,
+                    p.host,
+                    ports,
+                    tuple(mcfg.axes),
+                    mcfg.program_memory_bytes,
+                    secret=p.secret,
                 )
             return
         if self.processes:
@@ -201,12 +240,17 @@ class Cell:
                     state_dir=self.state_dir,
                     ideal=self.ideal_axes,
                     timeout_s=timeout_s,
+                    secret=self._secret(name, mcfg, persist=True),
                 )
                 self.machines.append(proc)
             for proc in self.machines:
                 self.links[proc.name] = proc.wait_ready()
             return
         for name, mcfg in self.config.machines.items():
+            secret = self._secret(name, mcfg, persist=False)
+            mcfg = mcfg.model_copy(
+                update={"ports": mcfg.ports.model_copy(update={"secret": secret})}
+            )
             m = InProcessMachine(
                 name, mcfg, fast=fast, simulation=self.faults_enabled, ideal=self.ideal_axes
             )
@@ -226,7 +270,9 @@ class Cell:
             for n, m in self.config.machines.items()
         }
         path = self.state_dir / "fmscell-cell.yaml"
-        path.write_text(yaml.safe_dump({"machines": machines}))
+        fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o600)  # may hold secrets
+        with os.fdopen(fd, "w") as f:
+            f.write(yaml.safe_dump({"machines": machines}))
         return path
 
     def _wait_connected(self, timeout_s: float) -> None:
@@ -252,11 +298,17 @@ class Cell:
         self.loops.append(Loop("outbox-publisher", publisher.publish_pending, 0.2).start())
 
     def _start_remote_requests(self) -> None:
-        from dnc.machine_link import RemoteRequests
+        from dnc.machine_link import RemoteRequests, client_for
 
-        for name in self.links:
+        for name, link in self.links.items():
+
+            def client(name=name, secret=link.secret):
+                return client_for(self.library, name, secret=secret)
+
             with contextlib.suppress(Exception):
-                self.remote_requests.append(RemoteRequests(self.library, name).start())
+                self.remote_requests.append(
+                    RemoteRequests(self.library, name, client=client).start()
+                )
 
     def stop(self) -> None:
         """Finish the host loops' current writes, then stop machines and connections."""
@@ -465,12 +517,9 @@ def run_cell(
         from cnc.config import load_cell_config
 
         cfg = load_cell_config(config) if config else default_cell()
-        settings = ApiSettings.from_mapping(
-            {
-                **cfg.host.auth,
-                "insecure_open": insecure_open or cfg.host.auth.get("insecure_open", False),
-            }
-        )
+        settings = ApiSettings.from_mapping(cfg.host.auth)
+        if insecure_open:
+            settings = settings.model_copy(update={"insecure_open": True})
     except (NcError, ValueError, OSError) as err:
         echo(f"{config or 'default cell'}: {err}")
         return 2
@@ -479,6 +528,39 @@ def run_cell(
     )
     bind = host or cfg.host.bind
     port = cfg.host.port if port is None else port
+    tls = _tls_files(cfg.host.tls, config)
+    if isinstance(tls, str):
+        echo(tls)
+        return 2
+    exposed = not is_loopback(bind)
+    if exposed and settings.insecure_open:
+        echo(
+            f"WARNING: --insecure-open on {bind}, which is not loopback: ANYONE who can reach"
+            f" port {port} is an admin (uploads, dispatches, machine commands, faults)."
+            " Demo networks only."
+        )
+    elif exposed and not settings.api_keys:
+        echo(
+            f"refusing to serve on {bind}: it is not loopback and the cell has no API keys."
+            " Add keys under host.auth.api_keys in the cell file (docs/api.md), bind to"
+            " 127.0.0.1, or pass --insecure-open for a demo network (no authentication)."
+        )
+        return 2
+    elif exposed:
+        echo(
+            f"WARNING: serving on {bind}, which is not loopback: reachable from other hosts"
+            + ("" if tls else "; without host.tls, API keys cross the network in clear")
+        )
+    demo_key = None
+    if not settings.api_keys and not settings.insecure_open:
+        # loopback without keys (the built-in cell of `make run`): a one-run admin key,
+        # printed below, so the API and the README's tour work from the first start
+        from web_api.settings import ApiKey
+
+        demo_key = secrets.token_urlsafe(24)
+        settings = settings.model_copy(
+            update={"api_keys": (ApiKey(user="local-admin", role="admin", key=demo_key),)}
+        )
     cell = Cell(
         cfg,
         clock=clock,
@@ -523,18 +605,62 @@ def run_cell(
 
         server = CellServer(
             uvicorn.Config(
-                app, host=bind, port=port, log_level="warning", timeout_graceful_shutdown=10
+                app,
+                host=bind,
+                port=port,
+                log_level="warning",
+                timeout_graceful_shutdown=10,
+                ssl_certfile=tls[0] if tls else None,
+                ssl_keyfile=tls[1] if tls else None,
             )
         )
-        url = f"http://{bind}:{port}"
+        url = f"{'https' if tls else 'http'}://{bind}:{port}"
         echo(f"fmscell cell: {', '.join(cell.links)} ({clock} clock)")
         echo(f"dashboard:      {url}/")
         echo(f"API reference:  {url}/docs  (OpenAPI: {url}/openapi.json)")
         echo(f"MTConnect:      {url}/mtconnect/probe")
         if settings.insecure_open:
             echo("WARNING: --insecure-open: no API key needed, every caller is an admin")
+        if demo_key is not None:
+            echo("no API keys configured (host.auth.api_keys): this run's admin key is")
+            echo(f"export KEY={demo_key}")
         server.run()
     finally:
         cell.stop()
         echo("fmscell cell stopped")
     return 0
+
+
+def is_loopback(bind: str) -> bool:
+    """Whether a bind address is reachable from this host only (`0.0.0.0`, `::`, an
+    interface's address or a host name are not)."""
+    import ipaddress
+
+    if bind == "localhost":
+        return True
+    try:
+        return ipaddress.ip_address(bind).is_loopback
+    except ValueError:
+        return False
+
+
+def _tls_files(tls, config: Path | None) -> tuple[str, str] | str | None:
+    """(cert, key) paths of `host.tls` (relative ones from the cell file's folder), None
+    without TLS, or the message saying which file is missing."""
+    if tls is None:
+        return None
+    base = Path(config).resolve().parent if config else Path.cwd()
+    paths = []
+    for key in ("cert", "key"):
+        path = Path(getattr(tls, key)).expanduser()
+        path = path if path.is_absolute() else base / path
+        if not path.is_file():
+            return f"host.tls.{key}: no such file {path}"
+        paths.append(str(path))
+    import ssl
+
+    try:  # a bad pair is refused now, not after the machines have started
+        ssl.create_default_context(ssl.Purpose.CLIENT_AUTH).load_cert_chain(paths[0], paths[1])
+    except (ssl.SSLError, OSError) as err:
+        return f"host.tls: cannot load {paths[0]} with {paths[1]}: {err}"
+    return paths[0], paths[1]

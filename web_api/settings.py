@@ -64,7 +64,8 @@ class Principal(BaseModel):
 
 
 class ApiSettings(BaseModel):
-    """Settings of the REST API (the `host.api` section of the cell configuration)."""
+    """Settings of the REST API (the `host.auth` section of the cell configuration gives
+    `api_keys` and `insecure_open`; the limits are the app's own)."""
 
     model_config = ConfigDict(extra="forbid", frozen=True)
 
@@ -114,5 +115,8 @@ class ApiSettings(BaseModel):
 
     @classmethod
     def from_mapping(cls, data: Mapping[str, Any] | None) -> ApiSettings:
-        """Settings from the configuration file's mapping (a ValidationError names the key)."""
+        """Settings from the configuration file's `host.auth` (a mapping, or the loader's
+        section model); a ValidationError names the key."""
+        if hasattr(data, "model_dump"):
+            data = data.model_dump(exclude_none=True)
         return cls.model_validate(dict(data or {}))
