@@ -74,6 +74,13 @@ class ApiSettings(BaseModel):
         default=False,
         description="demo mode: no key needed, every caller is an admin named 'anonymous'",
     )
+    auth_failures_max: int = Field(
+        default=10,
+        ge=1,
+        description="failed authentications (unknown keys) per client address within "
+        "auth_failures_window_s before its requests get 429 with Retry-After",
+    )
+    auth_failures_window_s: float = Field(default=10.0, gt=0, le=3600)
     upload_limit_bytes: int = Field(default=16 * 1024 * 1024, ge=1)
     events_poll_s: float = Field(default=0.25, gt=0, le=10)
     events_keepalive_s: float = Field(default=15.0, ge=0, le=300)
