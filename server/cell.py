@@ -532,25 +532,12 @@ def run_cell(
     if isinstance(tls, str):
         echo(tls)
         return 2
-    exposed = not is_loopback(bind)
-    if exposed and settings.insecure_open:
-        echo(
-            f"WARNING: --insecure-open on {bind}, which is not loopback: ANYONE who can reach"
-            f" port {port} is an admin (uploads, dispatches, machine commands, faults)."
-            " Demo networks only."
-        )
-    elif exposed and not settings.api_keys:
-        echo(
-            f"refusing to serve on {bind}: it is not loopback and the cell has no API keys."
-            " Add keys under host.auth.api_keys in the cell file (docs/api.md), bind to"
-            " 127.0.0.1, or pass --insecure-open for a demo network (no authentication)."
-        )
+    refusal, warnings = exposure(bind, port, settings, tls=tls is not None)
+    for line in warnings:
+        echo(line)
+    if refusal:
+        echo(refusal)
         return 2
-    elif exposed:
-        echo(
-            f"WARNING: serving on {bind}, which is not loopback: reachable from other hosts"
-            + ("" if tls else "; without host.tls, API keys cross the network in clear")
-        )
     demo_key = None
     if not settings.api_keys and not settings.insecure_open:
         # loopback without keys (the built-in cell of `make run`): a one-run admin key,
@@ -629,6 +616,32 @@ def run_cell(
         cell.stop()
         echo("fmscell cell stopped")
     return 0
+
+
+def exposure(bind: str, port: int, settings, *, tls: bool) -> tuple[str | None, list[str]]:
+    """What serving the API on `bind` means: (the reason to refuse, or None; warnings).
+
+    Off loopback the API needs keys: without any, `fmscell run` refuses unless the
+    insecure-open demo mode is asked for, which it then announces loudly."""
+    if is_loopback(bind):
+        return None, []
+    if settings.insecure_open:
+        return None, [
+            f"WARNING: --insecure-open on {bind}, which is not loopback: ANYONE who can reach"
+            f" port {port} is an admin (uploads, dispatches, machine commands, faults)."
+            " Demo networks only."
+        ]
+    if not settings.api_keys:
+        return (
+            f"refusing to serve on {bind}: it is not loopback and the cell has no API keys."
+            " Add keys under host.auth.api_keys in the cell file (docs/api.md), bind to"
+            " 127.0.0.1, or pass --insecure-open for a demo network (no authentication).",
+            [],
+        )
+    return None, [
+        f"WARNING: serving on {bind}, which is not loopback: reachable from other hosts"
+        + ("" if tls else "; without host.tls, API keys cross the network in clear")
+    ]
 
 
 def is_loopback(bind: str) -> bool:
