@@ -26,6 +26,7 @@ import time
 from pathlib import Path
 from typing import Any
 
+from server.cycle_audit import CycleAudit, HostRequests
 from server.host import AlarmWatch, Loop, MonitoringModel, make_starter
 from server.supervisor import (
     InProcessMachine,
@@ -158,16 +159,19 @@ class Cell:
             self.monitor = MonitoringModel(self.agent, self.links)
             self._wait_connected(ready_timeout_s)
             self.scheduler = Scheduler(self.sessions, self.monitor.views, rule=self.rule)
+            self.host_requests = HostRequests()
             self.worker = TransferWorker(
                 self.sessions,
                 client_factory=self._dnc_client,
-                starter=make_starter(self.links, self.monitor),
+                starter=self._audited(make_starter(self.links, self.monitor)),
                 retry=RetryPolicy(max_attempts=3, base_s=0.5, cap_s=5.0),
             )
             self.worker.recover()
             self.alarm_watch = AlarmWatch(self.sessions, self.monitor)
+            self.cycle_audit = CycleAudit(self.sessions, self.monitor, self.host_requests)
             self.loops = [
                 Loop("alarm-watch", self.alarm_watch.check, self.tick_s).start(),
+                Loop("cycle-audit", self.cycle_audit.check, self.tick_s).start(),
                 Loop("scheduler", self.scheduler.tick, self.tick_s).start(),
                 Loop("transfer-worker", self.worker.run_once, self.tick_s).start(),
             ]
@@ -178,6 +182,17 @@ class Cell:
             raise
         self.started = True
         return self
+
+    def _audited(self, starter):
+        """The transfer worker's starter, announcing its select and cycle start so the
+        cycle audit gives them to the host (server/cycle_audit.py)."""
+
+        def start(machine: str, number: int) -> None:
+            self.host_requests.expect(machine, f"program_select O{number:04d}", "transfer worker")
+            self.host_requests.expect(machine, "cycle_start", "transfer worker")
+            starter(machine, number)
+
+        return start
 
     def _dnc_client(self, host: str, port: int, profile: dict):
         """The transfer worker's DncClient: the registry's profile plus the port's shared
@@ -363,6 +378,13 @@ class Cell:
 
         MachineUnavailable (refused, or no face carries it) says why not."""
         link = self.link(name)
+        requests = getattr(self, "host_requests", None)
+        if requests is not None and command == "cycle_start":
+            requests.expect(name, "cycle_start", "REST machine command")
+        if requests is not None and command == "select_program":
+            requests.expect(
+                name, f"program_select O{int(args['number']):04d}", "REST machine command"
+            )
         if command in ("cycle_start", "feed_hold", "reset"):
             link.panel(command)
             return f"{command} pressed on the Modbus remote panel"
