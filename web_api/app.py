@@ -17,6 +17,7 @@ from sqlalchemy.orm import Session, sessionmaker
 from dnc.dispatch import Dispatches
 from dnc.jobs import Jobs
 from dnc.library import Library
+from web_api.api_docs import install_api_docs
 from web_api.event_hub import outbox_hub
 from web_api.problems import BodySizeLimit, Problem, install_problem_handlers, problem_doc
 from web_api.ratelimit import AuthFailureLimiter
@@ -77,6 +78,9 @@ def create_app(
 
     app = FastAPI(
         lifespan=lifespan,
+        # /docs and /redoc from the package, not a CDN (web_api/api_docs.py)
+        docs_url=None,
+        redoc_url=None,
         title="fmscell",
         version=API_VERSION,
         description=DESCRIPTION,
@@ -127,6 +131,7 @@ def create_app(
     from web_api.dashboard import dashboard_router
 
     app.include_router(dashboard_router())
+    install_api_docs(app)
     app.openapi = lambda: _openapi(app)
     return app
 
