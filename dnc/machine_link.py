@@ -37,9 +37,11 @@ def client_for(library: Library, machine: str, **overrides) -> DncClient:
     )
 
 
-def upload_from_machine(library: Library, machine: str, number: int) -> RevisionInfo:
+def upload_from_machine(
+    library: Library, machine: str, number: int, *, secret: str | None = None
+) -> RevisionInfo:
     """Punch program `number` from the machine; it lands as a candidate (draft) revision."""
-    with client_for(library, machine) as client:
+    with client_for(library, machine, secret=secret) as client:
         text = client.punch(number)
     return library.receive_from_machine(machine, text)
 

@@ -200,3 +200,30 @@ def test_the_hosts_machine_link_authenticates_on_the_simulation_face(sim_machine
     none = MachineLink("mill1", "mill", "127.0.0.1", ports, ("X", "Y", "Z"), 0)
     with pytest.raises(MachineUnavailable, match="authentication required"):
         none.simulation("ESTOP PRESS")
+
+
+def test_the_dnc_command_line_sends_and_receives_with_the_secret(tmp_path, locked):
+    from typer.testing import CliRunner
+
+    from dnc.db import make_engine, session_factory
+    from dnc.library import Library
+    from server.cli import app
+
+    db = f"sqlite:///{tmp_path / 'cli.db'}"
+    args = ["--database-url", db]
+    (tmp_path / "p.nc").write_text(PROG.replace("O1234", "O0555"))
+    runner = CliRunner()
+    assert runner.invoke(app, ["dnc", "import", str(tmp_path / "p.nc"), *args]).exit_code == 0
+    address = f"127.0.0.1:{locked.port.bound_port}"
+    added = runner.invoke(app, ["dnc", "machine", "m1", "--kind", "mill", "--dnc", address, *args])
+    assert added.exit_code == 0, added.output
+    lib = Library(session_factory(make_engine(db)))
+    lib.release(lib.search(number=555).items[0].latest_revision_id, approver="a", comment="ok")
+    refused = runner.invoke(app, ["dnc", "send", "555", "-m", "m1", *args])
+    assert refused.exit_code == 1 and "machine alarm 2011" in refused.output, refused.output
+    env = {"FMSCELL_DNC_SECRET": SECRET}
+    sent = runner.invoke(app, ["dnc", "send", "555", "-m", "m1", *args], env=env)
+    assert sent.exit_code == 0 and "verified" in sent.output, sent.output
+    back = runner.invoke(app, ["dnc", "receive", "O0555", "-m", "m1", *args], env=env)
+    assert back.exit_code == 0, back.output
+    assert 555 in locked.memory
