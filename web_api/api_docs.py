@@ -10,7 +10,9 @@ validator badge (which would call validator.swagger.io) is off, and ReDoc loads 
 
 from __future__ import annotations
 
+import html
 import importlib.util
+import logging
 from pathlib import Path
 
 from fastapi import FastAPI
@@ -22,6 +24,7 @@ from fastapi.openapi.docs import (
 from fastapi.responses import HTMLResponse
 from fastapi.staticfiles import StaticFiles
 
+log = logging.getLogger(__name__)
 ASSETS_URL = "/docs-assets"
 ASSETS = ("swagger-ui-bundle.js", "swagger-ui.css", "redoc.standalone.js")
 
@@ -44,8 +47,21 @@ def assets_dir() -> Path:
 def install_api_docs(app: FastAPI) -> None:
     """Mount the assets and the two pages on an app created with docs_url=None,
     redoc_url=None."""
-    app.mount(ASSETS_URL, StaticFiles(directory=assets_dir()), name="docs-assets")
     openapi_url = app.openapi_url or "/openapi.json"
+    try:
+        folder = assets_dir()
+    except RuntimeError as exc:
+        # the API itself works without its reference pages: say why they are missing
+        log.warning("%s", exc)
+        missing = f"<p>{html.escape(str(exc))}</p><p>The API's document: {openapi_url}</p>"
+
+        @app.get("/docs", include_in_schema=False)
+        @app.get("/redoc", include_in_schema=False)
+        async def no_docs() -> HTMLResponse:
+            return HTMLResponse(missing, status_code=503)
+
+        return
+    app.mount(ASSETS_URL, StaticFiles(directory=folder), name="docs-assets")
     oauth2_redirect = app.swagger_ui_oauth2_redirect_url or "/docs/oauth2-redirect"
 
     @app.get("/docs", include_in_schema=False)

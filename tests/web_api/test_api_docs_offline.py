@@ -81,3 +81,20 @@ def test_swagger_ui_reads_our_openapi_document_without_the_validator(sessions):
     html = make_api(sessions).client.get("/docs").text
     assert "url: '/openapi.json'" in html
     assert '"validatorUrl": null' in html
+
+
+def test_without_the_assets_the_pages_say_what_is_missing_and_the_api_works(sessions, monkeypatch):
+    import importlib.util
+
+    real = importlib.util.find_spec
+    monkeypatch.setattr(
+        importlib.util,
+        "find_spec",
+        lambda name, *a: None if name == "fastapi_offline" else real(name, *a),
+    )
+    c = make_api(sessions).client
+    for page in ("/docs", "/redoc"):
+        r = c.get(page)
+        assert r.status_code == 503 and "fastapi-offline" in r.text
+        assert not re.search(r"https?://", r.text)
+    assert c.get("/api/health").status_code == 200
