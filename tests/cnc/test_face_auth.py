@@ -26,7 +26,7 @@ STORED = canonical_text(PROG)
 class Port:
     """A DncPort with program O1234 in memory, optionally with a secret."""
 
-    def __init__(self, secret: str | None) -> None:
+    def __init__(self, secret: str | None, *, parity: bool = False) -> None:
         self.memory = ProgramMemory(4096)
         self.memory.store(1234, STORED)
         self.alarms: list[tuple[int, str]] = []
@@ -34,6 +34,7 @@ class Port:
         self.port = DncPort(
             self.memory,
             secret=secret,
+            parity=parity,
             idle_timeout_s=5,
             on_alarm=lambda n, t: self.alarms.append((n, t)),
         )
@@ -50,7 +51,9 @@ class Port:
         return out.decode("ascii", "replace")
 
     def client(self, secret: str | None) -> DncClient:
-        return DncClient("127.0.0.1", self.port.bound_port, timeout_s=5, secret=secret)
+        return DncClient(
+            "127.0.0.1", self.port.bound_port, timeout_s=5, secret=secret, parity=self.port.parity
+        )
 
     def close(self) -> None:
         self.loop.run(self.port.stop)
@@ -121,6 +124,19 @@ def test_the_hosts_client_sends_the_secret(locked):
             c.directory()
         assert err.value.kind == "refused" and err.value.alarm == ALARM_AUTH
         assert not err.value.retryable  # a wrong secret does not cure itself
+
+
+def test_the_handshake_carries_parity_on_a_parity_port():
+    p = Port(SECRET, parity=True)
+    try:
+        with p.client(SECRET) as c:
+            assert c.send_program(PROG.replace("O1234", "O0042")).number == 42
+        with pytest.raises(TransferError) as err, p.client("not-the-secret-0123") as c:
+            c.directory()
+        assert err.value.alarm == ALARM_AUTH
+        assert p.alarms == []
+    finally:
+        p.close()
 
 
 def test_a_port_without_secret_still_takes_plain_tape_and_answers_auth(open_port):
