@@ -355,7 +355,8 @@ class AuthConfig(_Section):
     """REST API authentication (`host.auth`)."""
 
     api_keys: list[ApiKeyConfig] = Field(
-        default_factory=list, description="API keys, each `{user, role, key}` or `{user, role, key_sha256}`."
+        default_factory=list,
+        description="API keys, each `{user, role, key}` or `{user, role, key_sha256}`.",
     )
     insecure_open: bool = Field(
         False,
