@@ -163,3 +163,32 @@ def test_run_without_keys_prints_a_working_admin_key_and_serves_https(tmp_path):
             proc.wait(10)
         reader.join(10)
     assert "fmscell cell stopped" in lines, lines
+
+
+def test_machine_secrets_generated_kept_owner_only_and_configured_ones_win(tmp_path):
+    from cnc.config import load_cell_config
+    from server.cell import Cell
+
+    cfg = load_cell_config(
+        {
+            "machines": {
+                "m1": {"base": "mill3"},
+                "m2": {
+                    "base": "mill3",
+                    "ports": {"dnc": 0, "modbus": 0, "shdr": 0, "secret": "configured-secret-0001"},
+                },
+            }
+        }
+    )
+    cell = Cell(cfg, state_dir=tmp_path)
+    first = cell._secret("m1", cfg.machines["m1"], persist=True)
+    path = tmp_path / "m1.machine.secret"
+    assert path.stat().st_mode & 0o777 == 0o600
+    assert len(first) >= 16
+    # a host started again finds the secret of the machine process it adopts
+    assert Cell(cfg, state_dir=tmp_path)._secret("m1", cfg.machines["m1"], persist=True) == first
+    # an in-process machine gets a fresh one each start; a configured one is used as is
+    fresh = {cell._secret("m1", cfg.machines["m1"], persist=False) for _ in range(3)}
+    assert len(fresh) == 3 and first not in fresh
+    assert cell._secret("m2", cfg.machines["m2"], persist=True) == "configured-secret-0001"
+    assert not (tmp_path / "m2.machine.secret").exists()
