@@ -10,14 +10,27 @@ MYPYC_SOURCES := $(foreach f,$(MYPYC_LISTS),$(addprefix $(dir $(f)),$(shell sed 
 
 .PHONY: run test bench lint clean corpus corpus-baseline
 
+# The first build takes minutes (measured 5-16 on a busy 2-core box): say so, and what runs.
 $(STAMP): pyproject.toml setup.py $(MYPYC_LISTS) $(MYPYC_SOURCES)
+	@echo "==> fmscell: installing into $(VENV): about 5-15 minutes the first time (dependencies,"
+	@echo "    then mypyc compiles $(words $(MYPYC_SOURCES)) hot modules to C); later runs skip this."
+	@echo "    FMSCELL_PURE_PYTHON=1 make ... skips the compile (same behaviour, slower runs)."
+	@date +%s > $(VENV).build-start 2>/dev/null || true
+	@echo "==> [1/2] virtualenv $(VENV)"
 	test -x $(PY) || $(PYTHON) -m venv $(VENV)
 	$(PY) -m pip install --quiet --upgrade pip
-	$(PY) -m pip install --quiet -e '.[dev,bench]'
+	@echo "==> [2/2] dependencies, then 'Building editable for fmscell': the mypyc compile of"
+	@echo "    $(words $(MYPYC_SOURCES)) modules, the long part (minutes with little output)"
+	$(PY) -m pip install --progress-bar off -e '.[dev,bench]'
 	touch $(STAMP)
+	@echo "==> installed in $$(( $$(date +%s) - $$(cat $(VENV).build-start 2>/dev/null || date +%s) )) s"
+	@rm -f $(VENV).build-start
+
+# RUN_ARGS: options of `fmscell run` (docs/cell.md); fault injection is on for the tour.
+RUN_ARGS ?= --faults
 
 run: $(STAMP)
-	$(VENV)/bin/fmscell run
+	$(VENV)/bin/fmscell run $(RUN_ARGS)
 
 test: $(STAMP)
 	$(PY) -m pytest -n 2 -q

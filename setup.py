@@ -12,6 +12,7 @@ their sources, so an edit is never shadowed by a stale extension.
 from __future__ import annotations
 
 import os
+import sys
 from pathlib import Path
 
 from setuptools import setup
@@ -33,6 +34,14 @@ def compiled_sources() -> list[str]:
     return sources
 
 
+def compile_notice(sources: list[str]) -> str:
+    """What the build is about to do, and about how long it takes."""
+    return (
+        f"fmscell: compiling {len(sources)} modules with mypyc (typically 3-10 minutes;"
+        " FMSCELL_PURE_PYTHON=1 skips it): " + ", ".join(sources)
+    )
+
+
 def ext_modules() -> list:
     if os.environ.get("FMSCELL_PURE_PYTHON") == "1":
         return []
@@ -49,6 +58,8 @@ def ext_modules() -> list:
     # as a native class and crash at run time: --disallow-subclassing-any makes that a build
     # error. The libraries compiled classes derive from (python-can's BusABC, canopen) are
     # therefore in pyproject's build requirements, pinned as in its dependencies.
+    # pip shows this with -v (the Makefile says the same before it calls pip)
+    print(compile_notice(sources), file=sys.stderr, flush=True)
     return mypycify(
         [
             "--follow-imports=silent",

@@ -11,8 +11,10 @@ through its faces: DNC port, Modbus remote panel, simulation face.
 
 from __future__ import annotations
 
+import ipaddress
 import json
 import os
+import re
 from pathlib import Path
 
 import typer
@@ -61,6 +63,20 @@ def machine(
     except (NcError, ValueError, KeyError, OSError) as err:
         typer.echo(f"{config or name}: {err}", err=True)
         raise typer.Exit(2) from None
+    secret = os.environ.get("FMSCELL_MACHINE_SECRET")
+    if secret and cfg.ports.secret is None:
+        # the cell host that starts this process passes its generated secret this way
+        if not re.fullmatch(r"[!-~]{16,128}", secret):
+            typer.echo("FMSCELL_MACHINE_SECRET: 16-128 printable characters, no blanks", err=True)
+            raise typer.Exit(2)
+        cfg = cfg.model_copy(update={"ports": cfg.ports.model_copy(update={"secret": secret})})
+    if cfg.ports.secret is None and not _loopback(cfg.ports.host):
+        typer.echo(
+            f"{name}: WARNING: the DNC port and simulation face listen on {cfg.ports.host}"
+            " without a shared secret: anyone who reaches them can load, delete and punch"
+            " programs (and inject faults); set ports.secret (docs/dnc_port.md)",
+            err=True,
+        )
     if not 0.01 <= speed <= 100.0:
         typer.echo(f"--speed {speed}: must be 0.01..100", err=True)
         raise typer.Exit(2)
@@ -117,3 +133,13 @@ def _write_atomically(path: Path, data: dict) -> None:
     tmp = path.with_name(path.name + ".tmp")
     tmp.write_text(json.dumps(data))
     tmp.replace(path)
+
+
+def _loopback(host: str) -> bool:
+    """Whether a bind address is reachable from this host only."""
+    if host == "localhost":
+        return True
+    try:
+        return ipaddress.ip_address(host).is_loopback
+    except ValueError:
+        return False  # a host name: assume it resolves to a reachable interface

@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import dataclasses
 import difflib
+import hashlib
 import math
 import types
 import typing
@@ -33,6 +34,8 @@ from cnc.params import AxisParams, DecimalStyle, MachineParams
 __all__ = [
     "BUILTIN_MACHINES",
     "MACHINES_DIR",
+    "ApiKeyConfig",
+    "AuthConfig",
     "AxisConfig",
     "CanConfig",
     "CellConfig",
@@ -45,6 +48,7 @@ __all__ = [
     "PlcConfig",
     "PortsConfig",
     "SpindleConfig",
+    "TlsConfig",
     "ToolChangerConfig",
     "builtin_machine",
     "config_reference_markdown",
@@ -104,6 +108,9 @@ class _Section(BaseModel):
 Port = Annotated[int, Field(ge=0, le=65535)]
 Name = Annotated[str, StringConstraints(pattern=r"^[A-Za-z][A-Za-z0-9_-]{0,31}$")]
 AxisName = Annotated[str, StringConstraints(pattern=r"^[XYZABCUVW]$")]
+# A shared secret: printable ASCII without blanks (it travels on a command line), long
+# enough not to be guessed.
+Secret = Annotated[str, StringConstraints(pattern=r"^[!-~]{16,128}$")]
 PlantOverrides = dict[str, dict[str, Any]]  # values are checked against PlantParams
 
 
@@ -232,6 +239,12 @@ class PortsConfig(_Section):
     simulation: Port | None = Field(
         None, description="Simulation/fault-injection face; null = off (the default)."
     )
+    secret: Secret | None = Field(
+        None,
+        description="Shared secret of the DNC port and the simulation face: a client's first"
+        " line must be `AUTH <secret>` (docs/dnc_port.md); null = no handshake (a cell"
+        " started by `fmscell run` then generates one for the machines it starts).",
+    )
 
 
 class MachineConfig(_Section):
@@ -321,6 +334,43 @@ class MachineConfig(_Section):
         )
 
 
+class ApiKeyConfig(_Section):
+    """One REST API key (`host.auth.api_keys[]`): who uses it, with which role."""
+
+    user: str = Field(min_length=1, max_length=64, description="Who uses the key (audit).")
+    role: Literal["viewer", "operator", "programmer", "admin"] = Field(
+        description="`viewer` reads; `operator` dispatches, runs jobs, commands machines;"
+        " `programmer` uploads and releases; `admin` injects faults."
+    )
+    key: str | None = Field(None, min_length=16, description="The key in clear (>= 16 chars).")
+    key_sha256: str | None = Field(
+        None,
+        pattern=r"^[0-9a-f]{64}$",
+        description="Or the key's sha256 in hex (`sha256sum` of the key without a newline):"
+        " no usable secret in the file.",
+    )
+
+
+class AuthConfig(_Section):
+    """REST API authentication (`host.auth`)."""
+
+    api_keys: list[ApiKeyConfig] = Field(
+        default_factory=list,
+        description="API keys, each `{user, role, key}` or `{user, role, key_sha256}`.",
+    )
+    insecure_open: bool = Field(
+        False,
+        description="Demo only: no key checked, every caller is an admin (as `--insecure-open`).",
+    )
+
+
+class TlsConfig(_Section):
+    """HTTPS for the REST API and dashboard (`host.tls`)."""
+
+    cert: str = Field(min_length=1, description="PEM certificate (chain) file.")
+    key: str = Field(min_length=1, description="PEM private key file.")
+
+
 class HostConfig(_Section):
     """The DNC host and cell server (`host`)."""
 
@@ -329,8 +379,11 @@ class HostConfig(_Section):
     )
     bind: str = Field("127.0.0.1", min_length=1, description="REST/dashboard bind address.")
     port: Port = Field(8000, description="REST/dashboard TCP port.")
-    auth: dict[str, Any] = Field(
-        default_factory=dict, description="Authentication settings (free-form for now)."
+    auth: AuthConfig = Field(
+        default_factory=AuthConfig, description="REST API keys (see `host.auth` below)."
+    )
+    tls: TlsConfig | None = Field(
+        None, description="HTTPS certificate and key (see `host.tls`); null = plain HTTP."
     )
     faults: bool = Field(
         False,
@@ -833,6 +886,16 @@ def _check_plant(path: tuple[Any, ...], plant: PlantOverrides) -> list[tuple[tup
 def _check_cell(cell: _CellDocument) -> list[tuple[tuple, str]]:
     out: list[tuple[tuple, str]] = []
     used: dict[tuple[str, int], str] = {(cell.host.bind, cell.host.port): "host.port"}
+    digests: dict[str, int] = {}
+    for i, k in enumerate(cell.host.auth.api_keys):
+        where = ("host", "auth", "api_keys", i)
+        if (k.key is None) == (k.key_sha256 is None):
+            out.append((where, f"api key of {k.user!r}: give exactly one of key, key_sha256"))
+            continue
+        digest = k.key_sha256 or hashlib.sha256(k.key.encode()).hexdigest()  # type: ignore[union-attr]
+        if digest in digests:
+            out.append((where, f"the same key as api_keys[{digests[digest]}]"))
+        digests.setdefault(digest, i)
     for name, m in cell.machines.items():
         out.extend(_check_machine(("machines", name), m))
         for face in ("dnc", "modbus", "shdr", "simulation"):
@@ -941,6 +1004,9 @@ def config_reference_markdown() -> str:
         ("machines.<NAME>.can", CanConfig),
         ("machines.<NAME>.ports", PortsConfig),
         ("host", HostConfig),
+        ("host.auth", AuthConfig),
+        ("host.auth.api_keys[]", ApiKeyConfig),
+        ("host.tls", TlsConfig),
     ]
     out: list[str] = []
     for title, model in sections:

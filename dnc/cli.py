@@ -16,6 +16,15 @@ DB_OPTION = typer.Option(
 )
 
 
+SECRET_OPTION = typer.Option(
+    None,
+    "--secret",
+    envvar="FMSCELL_DNC_SECRET",
+    help="The machine's DNC port secret (ports.secret); better given in FMSCELL_DNC_SECRET,"
+    " which other users' `ps` does not show.",
+)
+
+
 def _library(database_url: str | None):
     from dnc.checker import nc_checker
     from dnc.db import make_engine, migrate, session_factory
@@ -103,6 +112,7 @@ def send(
     machine: str = typer.Option(..., "--machine", "-m", help="Registered machine name."),
     drip: bool = typer.Option(False, help="Drip-feed (BTR) instead of loading into memory."),
     database_url: str | None = DB_OPTION,
+    secret: str | None = SECRET_OPTION,
 ) -> None:
     """Send the released revision of PROGRAM to a machine, verified by reading it back."""
     import uuid
@@ -110,7 +120,7 @@ def send(
     from dnc.db import make_engine, migrate, session_factory
     from dnc.dispatch import Dispatches
     from dnc.errors import DncError
-    from dnc.transfer_worker import RetryPolicy, TransferWorker
+    from dnc.transfer_worker import RetryPolicy, TransferWorker, _default_client
 
     engine = make_engine(database_url)
     migrate(engine)
@@ -129,7 +139,13 @@ def send(
     except DncError as exc:
         typer.echo(f"refused: {exc.message}", err=True)
         raise typer.Exit(1) from None
-    state = TransferWorker(sessions, retry=RetryPolicy(max_attempts=1)).run(info.id)
+
+    def client(host: str, port: int, profile: dict):
+        return _default_client(host, port, {**profile, "secret": secret})
+
+    state = TransferWorker(sessions, client_factory=client, retry=RetryPolicy(max_attempts=1)).run(
+        info.id
+    )
     done = Dispatches(sessions).get(info.id)
     if state != "done":
         typer.echo(f"dispatch {done.id} {state}: {done.error}", err=True)
@@ -145,6 +161,7 @@ def receive(
     program: str = typer.Argument(..., help="Program number to punch from the machine."),
     machine: str = typer.Option(..., "--machine", "-m"),
     database_url: str | None = DB_OPTION,
+    secret: str | None = SECRET_OPTION,
 ) -> None:
     """Upload a program from a machine; it is stored as a candidate (draft) revision."""
     from dnc.errors import DncError
@@ -153,7 +170,7 @@ def receive(
 
     lib = _library(database_url)
     try:
-        rev = upload_from_machine(lib, machine, _program_number(program))
+        rev = upload_from_machine(lib, machine, _program_number(program), secret=secret)
     except (DncError, TransferError) as exc:
         typer.echo(f"refused: {exc.message}", err=True)
         raise typer.Exit(1) from None

@@ -17,7 +17,10 @@ ClientFactory = Callable[[], DncClient]
 
 
 def client_for(library: Library, machine: str, **overrides) -> DncClient:
-    """A DncClient for a registered machine, with its DNC profile (parity, time-outs)."""
+    """A DncClient for a registered machine, with its DNC profile (parity, time-outs).
+
+    The port's shared secret is not in the registry (the API shows profiles): the host
+    passes it as the override `secret=`."""
     info = library.machine(machine)
     host, _, port = info["dnc_address"].rpartition(":")
     if not host or not port.isdigit():
@@ -30,12 +33,15 @@ def client_for(library: Library, machine: str, **overrides) -> DncClient:
         timeout_s=float(profile.get("timeout_s", 10.0)),
         xoff_timeout_s=float(profile.get("xoff_timeout_s", 30.0)),
         chunk=int(profile.get("chunk", CHUNK)),
+        secret=profile.get("secret"),
     )
 
 
-def upload_from_machine(library: Library, machine: str, number: int) -> RevisionInfo:
+def upload_from_machine(
+    library: Library, machine: str, number: int, *, secret: str | None = None
+) -> RevisionInfo:
     """Punch program `number` from the machine; it lands as a candidate (draft) revision."""
-    with client_for(library, machine) as client:
+    with client_for(library, machine, secret=secret) as client:
         text = client.punch(number)
     return library.receive_from_machine(machine, text)
 

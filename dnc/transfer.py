@@ -102,8 +102,10 @@ class DncClient:
         timeout_s: float = 10.0,
         xoff_timeout_s: float = 30.0,
         chunk: int = CHUNK,
+        secret: str | None = None,
     ) -> None:
         self.host, self.port, self.parity = host, port, parity
+        self._secret = secret  # the machine's `ports.secret`: sent as `AUTH <secret>` first
         self.timeout_s, self.xoff_timeout_s, self.chunk = timeout_s, xoff_timeout_s, chunk
         self._sock: socket.socket | None = None
         self._inbox = b""  # reply lines
@@ -125,6 +127,15 @@ class DncClient:
             ) from exc
         self._sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
         self._sock.setsockopt(socket.SOL_SOCKET, socket.SO_SNDBUF, WINDOW)
+        if self._secret is not None:
+            try:
+                self._raw_send(f"AUTH {self._secret}\n".encode("ascii"))
+                self._reply()  # ERR 2011 raises TransferError("refused", alarm=2011)
+            except BaseException:
+                self._sock.close()
+                self._sock = None
+                raise
+            self.sent = 0  # the handshake is not tape
         return self
 
     def __exit__(self, *exc: object) -> None:

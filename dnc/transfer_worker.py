@@ -63,6 +63,7 @@ def _default_client(host: str, port: int, profile: dict) -> DncClient:
         timeout_s=float(profile.get("timeout_s", 10.0)),
         xoff_timeout_s=float(profile.get("xoff_timeout_s", 30.0)),
         chunk=int(profile.get("chunk", CHUNK)),
+        secret=profile.get("secret"),
     )
 
 

@@ -20,11 +20,13 @@ from __future__ import annotations
 import contextlib
 import logging
 import os
+import secrets
 import threading
 import time
 from pathlib import Path
 from typing import Any
 
+from server.cycle_audit import CycleAudit, HostRequests
 from server.host import AlarmWatch, Loop, MonitoringModel, make_starter
 from server.supervisor import (
     InProcessMachine,
@@ -157,15 +159,19 @@ class Cell:
             self.monitor = MonitoringModel(self.agent, self.links)
             self._wait_connected(ready_timeout_s)
             self.scheduler = Scheduler(self.sessions, self.monitor.views, rule=self.rule)
+            self.host_requests = HostRequests()
             self.worker = TransferWorker(
                 self.sessions,
-                starter=make_starter(self.links, self.monitor),
+                client_factory=self._dnc_client,
+                starter=self._audited(make_starter(self.links, self.monitor)),
                 retry=RetryPolicy(max_attempts=3, base_s=0.5, cap_s=5.0),
             )
             self.worker.recover()
             self.alarm_watch = AlarmWatch(self.sessions, self.monitor)
+            self.cycle_audit = CycleAudit(self.sessions, self.monitor, self.host_requests)
             self.loops = [
                 Loop("alarm-watch", self.alarm_watch.check, self.tick_s).start(),
+                Loop("cycle-audit", self.cycle_audit.check, self.tick_s).start(),
                 Loop("scheduler", self.scheduler.tick, self.tick_s).start(),
                 Loop("transfer-worker", self.worker.run_once, self.tick_s).start(),
             ]
@@ -177,6 +183,48 @@ class Cell:
         self.started = True
         return self
 
+    def _audited(self, starter):
+        """The transfer worker's starter, announcing its select and cycle start so the
+        cycle audit gives them to the host (server/cycle_audit.py)."""
+
+        def start(machine: str, number: int) -> None:
+            self.host_requests.expect(machine, f"program_select O{number:04d}", "transfer worker")
+            self.host_requests.expect(machine, "cycle_start", "transfer worker")
+            starter(machine, number)
+
+        return start
+
+    def _dnc_client(self, host: str, port: int, profile: dict):
+        """The transfer worker's DncClient: the registry's profile plus the port's shared
+        secret, which stays in the host's memory (the registry's profile is public)."""
+        from dnc.transfer_worker import _default_client
+
+        secret = next(
+            (lk.secret for lk in self.links.values() if lk.address("dnc") == f"{host}:{port}"),
+            None,
+        )
+        return _default_client(host, port, {**profile, "secret": secret})
+
+    def _secret(self, name: str, mcfg, *, persist: bool) -> str:
+        """The shared secret of a machine's DNC port and simulation face: the configured
+        `ports.secret`, else one generated for it. A machine process outlives its host, so
+        its generated secret is kept (owner-only) in the state directory for the next host
+        that adopts it; an in-process machine gets a fresh one each start."""
+        if mcfg.ports.secret is not None:
+            return mcfg.ports.secret
+        if not persist:
+            return secrets.token_urlsafe(24)
+        path = self.state_dir / f"{name}.machine.secret"
+        with contextlib.suppress(OSError):
+            kept = path.read_text().strip()
+            if len(kept) >= 16:
+                return kept
+        made = secrets.token_urlsafe(24)
+        fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o600)
+        with os.fdopen(fd, "w") as f:
+            f.write(made + "\n")
+        return made
+
     def _start_machines(self, timeout_s: float) -> None:
         fast = self.clock == "fast"
         if self.attach:
@@ -186,7 +234,13 @@ class Cell:
                 ports = {"dnc": p.dnc, "modbus": p.modbus, "shdr": p.shdr}
                 ports["simulation"] = p.simulation if self.faults_enabled else None
                 self.links[name] = MachineLink(
-                    name, mcfg.kind, p.host, ports, tuple(mcfg.axes), mcfg.program_memory_bytes
+                    name,
+                    mcfg.kind,
+                    p.host,
+                    ports,
+                    tuple(mcfg.axes),
+                    mcfg.program_memory_bytes,
+                    secret=p.secret,
                 )
             return
         if self.processes:
@@ -201,12 +255,17 @@ class Cell:
                     state_dir=self.state_dir,
                     ideal=self.ideal_axes,
                     timeout_s=timeout_s,
+                    secret=self._secret(name, mcfg, persist=True),
                 )
                 self.machines.append(proc)
             for proc in self.machines:
                 self.links[proc.name] = proc.wait_ready()
             return
         for name, mcfg in self.config.machines.items():
+            secret = self._secret(name, mcfg, persist=False)
+            mcfg = mcfg.model_copy(
+                update={"ports": mcfg.ports.model_copy(update={"secret": secret})}
+            )
             m = InProcessMachine(
                 name, mcfg, fast=fast, simulation=self.faults_enabled, ideal=self.ideal_axes
             )
@@ -226,7 +285,9 @@ class Cell:
             for n, m in self.config.machines.items()
         }
         path = self.state_dir / "fmscell-cell.yaml"
-        path.write_text(yaml.safe_dump({"machines": machines}))
+        fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o600)  # may hold secrets
+        with os.fdopen(fd, "w") as f:
+            f.write(yaml.safe_dump({"machines": machines}))
         return path
 
     def _wait_connected(self, timeout_s: float) -> None:
@@ -252,11 +313,17 @@ class Cell:
         self.loops.append(Loop("outbox-publisher", publisher.publish_pending, 0.2).start())
 
     def _start_remote_requests(self) -> None:
-        from dnc.machine_link import RemoteRequests
+        from dnc.machine_link import RemoteRequests, client_for
 
-        for name in self.links:
+        for name, link in self.links.items():
+
+            def client(name=name, secret=link.secret):
+                return client_for(self.library, name, secret=secret)
+
             with contextlib.suppress(Exception):
-                self.remote_requests.append(RemoteRequests(self.library, name).start())
+                self.remote_requests.append(
+                    RemoteRequests(self.library, name, client=client).start()
+                )
 
     def stop(self) -> None:
         """Finish the host loops' current writes, then stop machines and connections."""
@@ -311,6 +378,13 @@ class Cell:
 
         MachineUnavailable (refused, or no face carries it) says why not."""
         link = self.link(name)
+        requests = getattr(self, "host_requests", None)
+        if requests is not None and command == "cycle_start":
+            requests.expect(name, "cycle_start", "REST machine command")
+        if requests is not None and command == "select_program":
+            requests.expect(
+                name, f"program_select O{int(args['number']):04d}", "REST machine command"
+            )
         if command in ("cycle_start", "feed_hold", "reset"):
             link.panel(command)
             return f"{command} pressed on the Modbus remote panel"
@@ -465,12 +539,9 @@ def run_cell(
         from cnc.config import load_cell_config
 
         cfg = load_cell_config(config) if config else default_cell()
-        settings = ApiSettings.from_mapping(
-            {
-                **cfg.host.auth,
-                "insecure_open": insecure_open or cfg.host.auth.get("insecure_open", False),
-            }
-        )
+        settings = ApiSettings.from_mapping(cfg.host.auth)
+        if insecure_open:
+            settings = settings.model_copy(update={"insecure_open": True})
     except (NcError, ValueError, OSError) as err:
         echo(f"{config or 'default cell'}: {err}")
         return 2
@@ -479,6 +550,26 @@ def run_cell(
     )
     bind = host or cfg.host.bind
     port = cfg.host.port if port is None else port
+    tls = _tls_files(cfg.host.tls, config)
+    if isinstance(tls, str):
+        echo(tls)
+        return 2
+    refusal, warnings = exposure(bind, port, settings, tls=tls is not None)
+    for line in warnings:
+        echo(line)
+    if refusal:
+        echo(refusal)
+        return 2
+    demo_key = None
+    if not settings.api_keys and not settings.insecure_open:
+        # loopback without keys (the built-in cell of `make run`): a one-run admin key,
+        # printed below, so the API and the README's tour work from the first start
+        from web_api.settings import ApiKey
+
+        demo_key = secrets.token_urlsafe(24)
+        settings = settings.model_copy(
+            update={"api_keys": (ApiKey(user="local-admin", role="admin", key=demo_key),)}
+        )
     cell = Cell(
         cfg,
         clock=clock,
@@ -523,18 +614,88 @@ def run_cell(
 
         server = CellServer(
             uvicorn.Config(
-                app, host=bind, port=port, log_level="warning", timeout_graceful_shutdown=10
+                app,
+                host=bind,
+                port=port,
+                log_level="warning",
+                timeout_graceful_shutdown=10,
+                ssl_certfile=tls[0] if tls else None,
+                ssl_keyfile=tls[1] if tls else None,
             )
         )
-        url = f"http://{bind}:{port}"
+        url = f"{'https' if tls else 'http'}://{bind}:{port}"
         echo(f"fmscell cell: {', '.join(cell.links)} ({clock} clock)")
         echo(f"dashboard:      {url}/")
         echo(f"API reference:  {url}/docs  (OpenAPI: {url}/openapi.json)")
         echo(f"MTConnect:      {url}/mtconnect/probe")
         if settings.insecure_open:
             echo("WARNING: --insecure-open: no API key needed, every caller is an admin")
+        if demo_key is not None:
+            echo("no API keys configured (host.auth.api_keys): this run's admin key is")
+            echo(f"export KEY={demo_key}")
         server.run()
     finally:
         cell.stop()
         echo("fmscell cell stopped")
     return 0
+
+
+def exposure(bind: str, port: int, settings, *, tls: bool) -> tuple[str | None, list[str]]:
+    """What serving the API on `bind` means: (the reason to refuse, or None; warnings).
+
+    Off loopback the API needs keys: without any, `fmscell run` refuses unless the
+    insecure-open demo mode is asked for, which it then announces loudly."""
+    if is_loopback(bind):
+        return None, []
+    if settings.insecure_open:
+        return None, [
+            f"WARNING: --insecure-open on {bind}, which is not loopback: ANYONE who can reach"
+            f" port {port} is an admin (uploads, dispatches, machine commands, faults)."
+            " Demo networks only."
+        ]
+    if not settings.api_keys:
+        return (
+            f"refusing to serve on {bind}: it is not loopback and the cell has no API keys."
+            " Add keys under host.auth.api_keys in the cell file (docs/api.md), bind to"
+            " 127.0.0.1, or pass --insecure-open for a demo network (no authentication).",
+            [],
+        )
+    return None, [
+        f"WARNING: serving on {bind}, which is not loopback: reachable from other hosts"
+        + ("" if tls else "; without host.tls, API keys cross the network in clear")
+    ]
+
+
+def is_loopback(bind: str) -> bool:
+    """Whether a bind address is reachable from this host only (`0.0.0.0`, `::`, an
+    interface's address or a host name are not)."""
+    import ipaddress
+
+    if bind == "localhost":
+        return True
+    try:
+        return ipaddress.ip_address(bind).is_loopback
+    except ValueError:
+        return False
+
+
+def _tls_files(tls, config: Path | None) -> tuple[str, str] | str | None:
+    """(cert, key) paths of `host.tls` (relative ones from the cell file's folder), None
+    without TLS, or the message saying which file is missing."""
+    if tls is None:
+        return None
+    base = Path(config).resolve().parent if config else Path.cwd()
+    paths = []
+    for key in ("cert", "key"):
+        path = Path(getattr(tls, key)).expanduser()
+        path = path if path.is_absolute() else base / path
+        if not path.is_file():
+            return f"host.tls.{key}: no such file {path}"
+        paths.append(str(path))
+    import ssl
+
+    try:  # a bad pair is refused now, not after the machines have started
+        ssl.create_default_context(ssl.Purpose.CLIENT_AUTH).load_cert_chain(paths[0], paths[1])
+    except (ssl.SSLError, OSError) as err:
+        return f"host.tls: cannot load {paths[0]} with {paths[1]}: {err}"
+    return paths[0], paths[1]

@@ -22,6 +22,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 MODE_NUMBERS = {"AUTO": 1, "MDI": 2, "JOG": 3, "REF": 4}
+# `fmscell machine` takes its faces' shared secret from here when its config has none
+SECRET_ENV = "FMSCELL_MACHINE_SECRET"
 
 
 class MachineUnavailable(RuntimeError):
@@ -37,6 +39,8 @@ class MachineLink:
     axes: tuple[str, ...]
     memory_bytes: int
     local: object | None = field(default=None, repr=False)  # the Machine, in-process only
+    # shared secret of the DNC port and simulation face (`AUTH <secret>` first), None = none
+    secret: str | None = field(default=None, repr=False)
 
     def address(self, face: str) -> str:
         port = self.ports.get(face)
@@ -163,8 +167,16 @@ class MachineLink:
             )
         try:
             with socket.create_connection((self.host, port), timeout=timeout_s) as sock:
+                lines = sock.makefile("rb")
+                if self.secret is not None:
+                    sock.sendall(f"AUTH {self.secret}\n".encode("ascii"))
+                    answer = lines.readline().decode("ascii", "replace").strip()
+                    if not answer.startswith("OK"):
+                        raise MachineUnavailable(
+                            f"{self.name}: simulation face: {answer or 'no answer to AUTH'}"
+                        )
                 sock.sendall(line.encode("ascii") + b"\n")
-                answer = sock.makefile("rb").readline().decode("ascii", "replace").strip()
+                answer = lines.readline().decode("ascii", "replace").strip()
         except OSError as exc:
             raise MachineUnavailable(f"{self.name}: simulation face: {exc}") from None
         if answer.startswith("OK"):
@@ -200,6 +212,7 @@ class InProcessMachine:
             tuple(config.axes),
             config.program_memory_bytes,
             local=self.machine,
+            secret=config.ports.secret,
         )
         self.thread = threading.Thread(target=self._run, name=f"machine-{name}", daemon=True)
 
@@ -271,8 +284,10 @@ class SubprocessMachine:
         state_dir: Path,
         ideal: bool = False,
         timeout_s: float = 60.0,
+        secret: str | None = None,
     ) -> None:
         self.name = name
+        self.secret = secret if secret is not None else config.ports.secret
         self.state_file = Path(state_dir) / f"{name}.machine.json"
         self.log_path = Path(state_dir) / f"{name}.machine.log"
         self.proc: subprocess.Popen | None = None
@@ -290,8 +305,14 @@ class SubprocessMachine:
             )
             self.state_file.unlink(missing_ok=True)
             log_file = open(self.log_path, "ab")  # noqa: SIM115
+            env = dict(os.environ)
+            env.pop(SECRET_ENV, None)
+            if self.secret is not None:
+                # in the environment, not on the command line (`ps` shows that to everyone)
+                env[SECRET_ENV] = self.secret
             self.proc = subprocess.Popen(
                 cmd,
+                env=env,
                 stdin=subprocess.DEVNULL,
                 stdout=log_file,
                 stderr=log_file,
@@ -320,6 +341,7 @@ class SubprocessMachine:
             ports,
             tuple(config.axes),
             config.program_memory_bytes,
+            secret=self.secret,
         )
         return self.link
 

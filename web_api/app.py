@@ -17,8 +17,10 @@ from sqlalchemy.orm import Session, sessionmaker
 from dnc.dispatch import Dispatches
 from dnc.jobs import Jobs
 from dnc.library import Library
+from web_api.api_docs import install_api_docs
 from web_api.event_hub import outbox_hub
-from web_api.problems import BodySizeLimit, Problem, install_problem_handlers
+from web_api.problems import BodySizeLimit, Problem, install_problem_handlers, problem_doc
+from web_api.ratelimit import AuthFailureLimiter
 from web_api.routers import MachinesProvider, Services
 from web_api.routers import auth as auth_router
 from web_api.routers import dispatches as dispatches_router
@@ -76,6 +78,9 @@ def create_app(
 
     app = FastAPI(
         lifespan=lifespan,
+        # /docs and /redoc from the package, not a CDN (web_api/api_docs.py)
+        docs_url=None,
+        redoc_url=None,
         title="fmscell",
         version=API_VERSION,
         description=DESCRIPTION,
@@ -94,6 +99,9 @@ def create_app(
         faults_enabled=faults_enabled,
     )
     app.state.event_hub = hub
+    app.state.auth_failures = AuthFailureLimiter(
+        settings.auth_failures_max, settings.auth_failures_window_s
+    )
     install_problem_handlers(app, settings.problem_base)
     app.add_middleware(BodySizeLimit, limit=settings.request_body_limit, base=settings.problem_base)
     for module in (
@@ -123,6 +131,7 @@ def create_app(
     from web_api.dashboard import dashboard_router
 
     app.include_router(dashboard_router())
+    install_api_docs(app)
     app.openapi = lambda: _openapi(app)
     return app
 
@@ -144,5 +153,12 @@ def _openapi(app: FastAPI) -> dict:
         js = model.model_json_schema(ref_template="#/components/schemas/{model}")
         schemas.update(js.pop("$defs", {}))
         schemas[model.__name__] = js
+    # every route that authenticates may answer 429 to an address guessing keys
+    too_many = problem_doc(429)[429]
+    for operations in doc.get("paths", {}).values():
+        for op in operations.values():
+            responses = op.get("responses", {}) if isinstance(op, dict) else {}
+            if "401" in responses:
+                responses.setdefault("429", too_many)
     app.openapi_schema = doc
     return doc

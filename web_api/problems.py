@@ -48,6 +48,7 @@ TITLES = {
     "unsupported-media-type": "Unsupported media type",
     "internal": "Internal server error",
     "shutting-down": "The server is shutting down",
+    "too-many-auth-failures": "Too many failed authentications from this address",
 }
 _KIND_OF_STATUS = {
     400: "bad-request",

@@ -64,7 +64,8 @@ class Principal(BaseModel):
 
 
 class ApiSettings(BaseModel):
-    """Settings of the REST API (the `host.api` section of the cell configuration)."""
+    """Settings of the REST API (the `host.auth` section of the cell configuration gives
+    `api_keys` and `insecure_open`; the limits are the app's own)."""
 
     model_config = ConfigDict(extra="forbid", frozen=True)
 
@@ -73,6 +74,13 @@ class ApiSettings(BaseModel):
         default=False,
         description="demo mode: no key needed, every caller is an admin named 'anonymous'",
     )
+    auth_failures_max: int = Field(
+        default=10,
+        ge=1,
+        description="failed authentications (unknown keys) per client address within "
+        "auth_failures_window_s before its requests get 429 with Retry-After",
+    )
+    auth_failures_window_s: float = Field(default=10.0, gt=0, le=3600)
     upload_limit_bytes: int = Field(default=16 * 1024 * 1024, ge=1)
     events_poll_s: float = Field(default=0.25, gt=0, le=10)
     events_keepalive_s: float = Field(default=15.0, ge=0, le=300)
@@ -114,5 +122,8 @@ class ApiSettings(BaseModel):
 
     @classmethod
     def from_mapping(cls, data: Mapping[str, Any] | None) -> ApiSettings:
-        """Settings from the configuration file's mapping (a ValidationError names the key)."""
+        """Settings from the configuration file's `host.auth` (a mapping, or the loader's
+        section model); a ValidationError names the key."""
+        if hasattr(data, "model_dump"):
+            data = data.model_dump(exclude_none=True)
         return cls.model_validate(dict(data or {}))

@@ -13,7 +13,9 @@ command line; a connection may run several operations in turn:
     QUIT            close
 
 A connection that starts straight with tape (`%`, NUL leader, blank lines) is a READ, so a
-plain DNC package sending through a serial-to-TCP bridge works unchanged. Errors answer
+plain DNC package sending through a serial-to-TCP bridge works unchanged. A port given a
+shared `secret` takes nothing before `AUTH <secret>` (-> OK AUTH) as the connection's first
+line; anything else answers `ERR 2011 ...` and closes. Errors answer
 `ERR <alarm> <text>`; the ones the seed calls alarms (parity, transfer cut off, memory full,
 overrun) also raise the machine alarm through `on_alarm`.
 """
@@ -46,7 +48,7 @@ from cnc.faces.tape import (
     parity_error_at,
     strip_parity,
 )
-from cnc.faces.tcp_face import TcpFace
+from cnc.faces.tcp_face import TcpFace, secret_matches
 from cnc.program_memory import MemoryFull, ProgramMemory, program_number_error
 
 log = logging.getLogger(__name__)
@@ -62,6 +64,7 @@ ALARM_TIMEOUT = 2007
 ALARM_BLOCK_TOO_LONG = 2008
 ALARM_REFUSED = 2009
 ALARM_OVERRUN = 2010
+ALARM_AUTH = 2011  # no or a wrong AUTH line on a port with a shared secret
 FATAL_TO_CONNECTION = {
     ALARM_PARITY,
     ALARM_CUT_OFF,
@@ -70,6 +73,7 @@ FATAL_TO_CONNECTION = {
     ALARM_TIMEOUT,
     ALARM_BLOCK_TOO_LONG,
     ALARM_UNKNOWN_COMMAND,
+    ALARM_AUTH,
 }
 RAISES_ALARM = {ALARM_PARITY, ALARM_CUT_OFF, ALARM_MEMORY_FULL, ALARM_OVERRUN, ALARM_TIMEOUT}
 
@@ -125,6 +129,7 @@ class DncPortStats:
     programs_punched: int = 0
     drip_blocks: int = 0
     xoff_sent: int = 0
+    auth_refused: int = 0
     errors: dict[int, int] = field(default_factory=dict)
 
 
@@ -144,9 +149,11 @@ class DncPort(TcpFace):
         policy: Policy | None = None,
         xoff_slack_bytes: int = 256,
         max_block: int = 4096,
+        secret: str | None = None,
     ) -> None:
         super().__init__()
         self.memory = memory
+        self._secret = secret
         self.host, self.port, self.parity = host, port, parity
         self.idle_timeout_s = idle_timeout_s
         self._drip = drip
@@ -185,6 +192,8 @@ class DncPort(TcpFace):
             sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, LINE_BUFFER_BYTES)
         conn = _Conn(reader, writer, self.parity)
         try:
+            if self._secret is not None and not await self._authenticate(conn):
+                return
             while True:
                 try:
                     command, arg, pushback = await conn.read_command(self.idle_timeout_s)
@@ -213,6 +222,32 @@ class DncPort(TcpFace):
             with contextlib.suppress(Exception):
                 writer.close()
 
+    async def _authenticate(self, conn: _Conn) -> bool:
+        """The connection's first line must be `AUTH <secret>`: True when it is, else the
+        refusal is answered (no machine alarm: a stray client must not stop the machine)
+        and the connection closed."""
+        try:
+            command, arg, _ = await conn.read_command(self.idle_timeout_s)
+        except TimeoutError:
+            return False
+        except DncError as exc:
+            command, arg = "", exc.text
+        if command is None:
+            return False
+        if command == "AUTH" and secret_matches(arg, self._secret or ""):
+            await conn.reply("OK AUTH")
+            return True
+        self.stats.auth_refused += 1
+        self.stats.errors[ALARM_AUTH] = self.stats.errors.get(ALARM_AUTH, 0) + 1
+        if command == "AUTH":
+            why = "authentication failed: wrong secret"
+        else:
+            what = f"{command} refused" if command else arg
+            why = f"authentication required: the first line must be AUTH <secret> ({what})"
+        await conn.reply(f"ERR {ALARM_AUTH} {why}")
+        await conn.linger()
+        return False
+
     async def _dispatch(self, conn: _Conn, command: str, arg: str, pushback: bytes) -> None:
         if command == "READ":
             await self._read(conn, _number(arg) if arg else None, pushback)
@@ -234,6 +269,12 @@ class DncPort(TcpFace):
             await conn.reply(f"OK O{number:04d} deleted")
         elif command == "LISTEN":
             await self._listen(conn)
+        elif command == "AUTH":
+            # again after the handshake, or on a port without a secret: harmless, answered
+            # so a host that always authenticates works with either
+            if self._secret is not None and not secret_matches(arg, self._secret):
+                raise DncError(ALARM_AUTH, "authentication failed: wrong secret")
+            await conn.reply("OK AUTH" if self._secret is not None else "OK AUTH (no secret)")
         else:
             raise DncError(ALARM_UNKNOWN_COMMAND, f"unknown command {command!r}")
 

@@ -45,6 +45,7 @@ class MachineFaces:
                 drip=self._drip,
                 on_alarm=lambda n, text: m.raise_face_alarm(n, text, "DNC"),
                 policy=getattr(ctl, "policy", None),
+                secret=ports.secret,
             )
             self.loop.run(self.dnc.start)
         if ports.modbus is not None:
@@ -69,7 +70,7 @@ class MachineFaces:
         if self._want_sim is False:
             sim_port = None
         if sim_port is not None:
-            self.simulation = SimulationFace(m, host=ports.host, port=sim_port)
+            self.simulation = SimulationFace(m, host=ports.host, port=sim_port, secret=ports.secret)
             self.loop.run(self.simulation.start)
         return self
 

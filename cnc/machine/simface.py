@@ -13,6 +13,10 @@ one answer line per command, `OK ...` or `ERR <reason>`:
     SPECS                     the valid fault specs
     QUIT
 
+With a shared secret (`ports.secret`) the first line must be `AUTH <secret>` (-> `OK AUTH`);
+any other first line, or a wrong secret, answers `ERR authentication ...` and closes, so no
+fault, E-stop or clock command runs for a client that does not know it.
+
 Machine actions run on the machine's thread at the start of its next cycle, so the answer
 comes once the machine has taken them.
 """
@@ -21,7 +25,7 @@ from __future__ import annotations
 
 import asyncio
 
-from cnc.faces.tcp_face import TcpFace
+from cnc.faces.tcp_face import TcpFace, secret_matches
 from cnc.machine.faults import FaultSpecError, parse_fault_spec, valid_specs
 
 MAX_LINE = 1024
@@ -31,10 +35,18 @@ class SimulationFace(TcpFace):
     _what = "simulation face"
 
     def __init__(
-        self, machine, *, host: str = "127.0.0.1", port: int = 0, timeout_s: float = 10.0
+        self,
+        machine,
+        *,
+        host: str = "127.0.0.1",
+        port: int = 0,
+        timeout_s: float = 10.0,
+        secret: str | None = None,
     ) -> None:
         super().__init__()
         self.machine = machine
+        self._secret = secret
+        self.auth_refused = 0
         self.host, self.port = host, port
         self.timeout_s = timeout_s
 
@@ -42,6 +54,7 @@ class SimulationFace(TcpFace):
         await self._serve(self.host, self.port)
 
     async def _session(self, reader: asyncio.StreamReader, writer: asyncio.StreamWriter) -> None:
+        authenticated = self._secret is None
         try:
             while True:
                 try:
@@ -58,6 +71,24 @@ class SimulationFace(TcpFace):
                 if not line:
                     continue
                 if line.upper() == "QUIT":
+                    break
+                word, _, rest = line.partition(" ")
+                if word.upper() == "AUTH":
+                    if self._secret is not None and not secret_matches(rest.strip(), self._secret):
+                        self.auth_refused += 1
+                        writer.write(b"ERR authentication failed: wrong secret\n")
+                        await writer.drain()
+                        break
+                    authenticated = True
+                    writer.write(b"OK AUTH\n" if self._secret else b"OK AUTH (no secret)\n")
+                    await writer.drain()
+                    continue
+                if not authenticated:
+                    self.auth_refused += 1
+                    writer.write(
+                        b"ERR authentication required: the first line must be AUTH <secret>\n"
+                    )
+                    await writer.drain()
                     break
                 answer = await self.execute(line)
                 writer.write((answer + "\n").encode())

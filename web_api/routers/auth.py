@@ -2,7 +2,8 @@
 
 A key comes in the `X-API-Key` header or as `Authorization: Bearer <key>`. The event
 stream also takes `?api_key=` because a browser's EventSource and WebSocket cannot set
-headers. No key gives 401, a key whose role is too low gives 403 (both problem+json).
+headers. No key gives 401, a key whose role is too low gives 403 (both problem+json); an
+address that presented too many unknown keys gets 429 (web_api/ratelimit.py).
 """
 
 from __future__ import annotations
@@ -13,6 +14,7 @@ from fastapi import APIRouter, Depends, Request, WebSocket
 from fastapi.security import APIKeyHeader, HTTPAuthorizationCredentials, HTTPBearer
 
 from web_api.problems import ApiProblem, problem_doc
+from web_api.ratelimit import AuthFailureLimiter
 from web_api.routers import Services, get_services
 from web_api.schemas import WhoAmI
 from web_api.settings import ApiSettings, Principal, Role
@@ -23,8 +25,15 @@ ANONYMOUS = Principal(user="anonymous", role=Role.admin)
 CHALLENGE = {"WWW-Authenticate": 'Bearer realm="fmscell"'}
 
 
-def identify(settings: ApiSettings, presented: str | None) -> Principal:
-    """The caller behind `presented` (a key or None), or a 401 problem."""
+def identify(
+    settings: ApiSettings,
+    presented: str | None,
+    *,
+    limiter: AuthFailureLimiter | None = None,
+    address: str | None = None,
+) -> Principal:
+    """The caller behind `presented` (a key or None), or a 401 problem; a 429 problem while
+    `address` has too many failed authentications (web_api/ratelimit.py)."""
     if settings.insecure_open:
         return ANONYMOUS
     if not presented:
@@ -34,10 +43,26 @@ def identify(settings: ApiSettings, presented: str | None) -> Principal:
             "no API key: send it as X-API-Key or Authorization: Bearer",
             headers=CHALLENGE,
         )
+    address = address or "unknown"
+    if limiter is not None and (wait := limiter.retry_after(address)) is not None:
+        raise ApiProblem(
+            429,
+            "too-many-auth-failures",
+            f"{limiter.limit} failed authentications from {address} within"
+            f" {limiter.window_s:g} s: try again in {wait} s",
+            headers={"Retry-After": str(wait)},
+            retry_after_s=wait,
+        )
     principal = settings.authenticate(presented)
     if principal is None:
+        if limiter is not None:
+            limiter.failed(address)
         raise ApiProblem(401, "unauthenticated", "the API key is not known", headers=CHALLENGE)
     return principal
+
+
+def _limiter(app) -> AuthFailureLimiter | None:
+    return getattr(app.state, "auth_failures", None)
 
 
 def authorise(principal: Principal, needed: Role, action: str) -> Principal:
@@ -64,7 +89,13 @@ def require(needed: Role, action: str):
         presented = api_key or (bearer.credentials if bearer else None)
         if presented is None and request.url.path.startswith("/api/events"):
             presented = request.query_params.get("api_key")
-        return authorise(identify(services.settings, presented), needed, action)
+        principal = identify(
+            services.settings,
+            presented,
+            limiter=_limiter(request.app),
+            address=request.client.host if request.client else None,
+        )
+        return authorise(principal, needed, action)
 
     return dependency
 
@@ -75,7 +106,13 @@ def websocket_principal(websocket: WebSocket, settings: ApiSettings, needed: Rol
     auth = websocket.headers.get("authorization", "")
     if not presented and auth.lower().startswith("bearer "):
         presented = auth[7:].strip()
-    return authorise(identify(settings, presented), needed, "reading events")
+    principal = identify(
+        settings,
+        presented,
+        limiter=_limiter(websocket.app),
+        address=websocket.client.host if websocket.client else None,
+    )
+    return authorise(principal, needed, "reading events")
 
 
 Viewer = Annotated[Principal, Depends(require(Role.viewer, "reading"))]

@@ -1,0 +1,102 @@
+"""The README's tour works as written from `make run`: the key it prints, and the fault
+example's request and the MTConnect path that shows its alarm."""
+
+from __future__ import annotations
+
+import json
+import re
+import subprocess
+import time
+import urllib.parse
+from pathlib import Path
+
+import pytest
+from fastapi.testclient import TestClient
+
+from server.cell import Cell, default_cell
+from web_api.settings import ApiKey, ApiSettings
+
+ROOT = Path(__file__).resolve().parents[2]
+README = (ROOT / "README.md").read_text()
+TOUR = README[README.index("## A five-minute tour") : README.index("## The Modbus map")]
+
+
+def test_make_run_starts_the_cell_the_tour_needs():
+    """`make run` is `fmscell run` with fault injection; the tour takes the key it prints."""
+    out = subprocess.run(
+        ["make", "-n", "-o", ".venv/.installed", "run"],
+        cwd=ROOT,
+        capture_output=True,
+        text=True,
+        timeout=60,
+    ).stdout
+    assert re.search(r"^\.venv/bin/fmscell run --faults$", out, re.M), out
+    assert "export KEY=" in TOUR and "KEY=operator-key" not in TOUR
+    assert "make run" in TOUR
+
+
+def test_first_build_says_what_it_does_and_how_long(tmp_path):
+    out = subprocess.run(
+        ["make", "-n", "-B", ".venv/.installed"],
+        cwd=ROOT,
+        capture_output=True,
+        text=True,
+        timeout=60,
+    ).stdout
+    modules = sum(
+        1
+        for listing in ROOT.glob("*/**/mypyc.list")
+        for line in listing.read_text().splitlines()
+        if line.split("#", 1)[0].strip()
+    )
+    assert "minutes" in out
+    assert f"mypyc compiles {modules} hot modules" in out
+    assert "--quiet -e" not in out  # pip shows its own steps for the long install
+
+
+def fault_request() -> dict:
+    body = re.search(r"/api/machines/mill1/faults \\\n\s+-d '(\{.*?\})'", TOUR).group(1)
+    return json.loads(body)
+
+
+def mtconnect_path() -> str:
+    url = re.search(r'curl -s "\$API(/mtconnect/mill1/current\?path=[^"]+)"', TOUR).group(1)
+    return urllib.parse.unquote(url.split("path=", 1)[1])
+
+
+@pytest.mark.timeout(180)
+def test_the_fault_example_shows_its_alarm_where_the_readme_looks(tmp_path):
+    request = fault_request()
+    path = mtconnect_path()
+    assert request["target"] == "drive:Y" and path == '//Linear[@name="Y"]'
+    cell = Cell(
+        default_cell(free_ports=True),
+        clock="fast",
+        database_url=f"sqlite:///{tmp_path}/cell.db",
+        faults=True,
+        state_dir=tmp_path,
+    ).start()
+    try:
+        key = "tour-admin-key-0123456789"
+        settings = ApiSettings(api_keys=(ApiKey(user="local-admin", role="admin", key=key),))
+        c = TestClient(cell.app(settings), headers={"X-API-Key": key})
+        r = c.post("/api/machines/mill1/faults", json=request)
+        assert r.status_code == 201, r.text
+        assert r.json()["spec"] == "drive:Y:encoder_break"
+        deadline = time.monotonic() + 60
+        while not (alarms := c.get("/api/machines/mill1").json()["status"]["alarms"]):
+            assert time.monotonic() < deadline, "no alarm"
+            time.sleep(0.05)
+        assert alarms[0]["condition"] == "Yservo" and alarms[0]["code"] == "3040"
+        assert "drive fault 0x7305 on Y" in alarms[0]["text"]
+        where = c.get("/mtconnect/mill1/current", params={"path": path}).text
+        fault = re.search(r"<Fault [^>]*>[^<]*</Fault>", where)
+        assert fault, where
+        for attr in ('name="Yservo"', 'type="ACTUATOR"', 'nativeCode="3040"'):
+            assert attr in fault.group(0)
+        assert "<Fault" in c.get("/mtconnect/mill1/current", params={"path": "//Axes"}).text
+        # where the README used to look: the controller's conditions stay Normal
+        controller = c.get("/mtconnect/mill1/current", params={"path": "//Controller"}).text
+        assert "<Fault" not in controller
+    finally:
+        cell.stop()
