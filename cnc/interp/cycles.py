@@ -32,7 +32,7 @@ class CannedCycles:
             self._cyc_init = None
             self._motion_block(blk, words, exact, None)
             return
-        if self._comp is not None and self._comp.active:
+        if self._comp_engaged():
             raise self._err("canned cycle with cutter compensation active", blk, "G")
         w = self._pw
         if code is not None:

@@ -593,7 +593,7 @@ class Interpreter(CannedCycles):
         # --- plane, compensation, offsets, modes ---
         pl = gset.get("plane")
         if pl is not None and pl != self._plane:
-            if self._comp is not None:
+            if self._comp_engaged():
                 raise self._err("plane change while cutter compensation is active", blk, "G")
             if self._xf.rot:
                 raise self._err("plane change while G68 rotation is active", blk, "G")
@@ -664,8 +664,16 @@ class Interpreter(CannedCycles):
                 self._coordinate_set(blk)
             elif nonmodal == 530:
                 self._g53(blk, gset.get("motion"), exact)
-        if consumed and nonmodal != 530 and ("motion" in gset or "cycle" in gset):
-            raise self._err("a motion G code cannot share a block with this G code", blk, "G")
+        cy = gset.get("cycle")
+        if consumed and nonmodal != 530 and ("motion" in gset or cy is not None):
+            # With G4/G10/G28/G30/G92 the axis words are theirs: G0..G3 or G80 beside them
+            # only set the modal motion (`G0 G91 G28 Z0`); a canned cycle or a transform
+            # would need the same words.
+            if nonmodal is None or cy not in (None, 800):
+                raise self._err("a motion G code cannot share a block with this G code", blk, "G")
+            if cy == 800:
+                self._cycle = 800
+                self._cyc_init = None
         # --- motion ---
         mo = gset.get("motion")
         if mo is not None:
@@ -673,7 +681,6 @@ class Interpreter(CannedCycles):
             if self._cycle != 800:
                 self._cycle = 800
                 self._cyc_init = None
-        cy = gset.get("cycle")
         if not consumed:
             if cy is not None or (self._cycle != 800 and mo is None):
                 self._cycle_block(blk, cy, exact)
@@ -1243,6 +1250,22 @@ class Interpreter(CannedCycles):
                 out.append(StraightFeed(line, m, feed, exact))
             self._mach = m
 
+    def _comp_engaged(self) -> bool:
+        """Whether G41/G42 is in effect; a G40 still waiting for its cancel move ends here.
+
+        G40 programmed with no in-plane move leaves the compensator waiting for a cancel
+        move; a block that needs compensation over (G28/G30/G53, a plane change, a canned
+        cycle, a transform) completes it instead: the last element ends at its
+        perpendicular offset and the next move leaves from there, uncompensated.
+        """
+        comp = self._comp
+        if comp is None or not comp.active:
+            return False
+        if comp.cancelling:
+            self._comp_out(comp.finish())
+            return False
+        return True
+
     def _flush_comp(self) -> None:
         if self._comp is not None:
             self._comp_out(self._comp.flush())
@@ -1319,7 +1342,7 @@ class Interpreter(CannedCycles):
 
     def _xf_changed(self) -> None:
         self._xf_on = self._xf.active
-        if self._comp is not None and self._comp.active:
+        if self._comp_engaged():
             raise NcError(
                 "mirror/scaling/rotation change while cutter compensation is active",
                 self._line,
@@ -1361,7 +1384,7 @@ class Interpreter(CannedCycles):
             raise self._err(f"G10 L{lv} is not supported", blk, "L")
 
     def _reference_return(self, blk: Block, code: int, exact: bool) -> None:
-        if self._comp is not None and self._comp.active:
+        if self._comp_engaged():
             raise self._err("G28/G30 with cutter compensation active (cancel with G40)", blk, "G")
         if code == 300 and "P" in blk.words and int(blk.words["P"]) not in (1, 2):
             raise self._err("G30 P3/P4 (third/fourth reference) is not configured", blk, "P")
@@ -1409,7 +1432,7 @@ class Interpreter(CannedCycles):
     def _g53(self, blk: Block, motion: int | None, exact: bool) -> None:
         if not self._abs:
             raise self._err("G53 needs absolute mode (G90)", blk, "G")
-        if self._comp is not None and self._comp.active:
+        if self._comp_engaged():
             raise self._err("G53 with cutter compensation active", blk, "G")
         mo = motion if motion is not None else self._motion
         if mo not in (0, 10):
