@@ -19,52 +19,18 @@ from __future__ import annotations
 import functools
 from collections.abc import Callable
 from dataclasses import dataclass
-from enum import IntEnum
 from typing import TYPE_CHECKING
 
 from cnc.interp import auxiliary, compensation, flow, modes, motion, offsets
 from cnc.interp import transform_codes as xf
+from cnc.interp.context import Step
 
 if TYPE_CHECKING:
     from cnc.interp.context import BlockRun, Context
 
+__all__ = ["CODES", "Code", "Step", "for_kind", "fmt_g", "render_g_table", "render_m_table"]
+
 Handler = Callable[["Context", "BlockRun"], None]
-
-
-class Step(IntEnum):
-    """Order of execution within a block (RS274/NGC and Fanuc), first to last.
-
-    Units come first because they decide how every number of the block is read (F, S, axis
-    words): `G20 F10` feeds 10 in/min, as on a Fanuc control.
-    """
-
-    EXACT_STOP = 0  # G9 marks the block's moves
-    UNITS = 1
-    FEED_MODE = 2
-    FEED = 3  # F word
-    SPINDLE_MODE = 4
-    SPEED = 5  # S word
-    TOOL_SELECT = 6  # T word
-    TOOL_CHANGE = 7  # M6
-    SPINDLE = 8  # M3 M4 M5 M19; an S change re-issues a turning spindle
-    COOLANT = 9
-    AUX = 10  # any other M code (override switches, clamps...): handed to the PLC
-    DWELL = 11
-    PLANE = 12
-    CUTTER_COMP = 13  # G40 G41 G42, or a D word alone
-    LENGTH_COMP = 14  # G43 G44 G49, or an H word alone
-    COORDINATE_SYSTEM = 15  # G54..G59, G54.1 P
-    PATH_CONTROL = 16  # G61 G64
-    DISTANCE = 17  # G90 G91, G90.1 G91.1
-    RETRACT = 18  # G98 G99 (mill)
-    POLAR = 19  # G15 G16
-    MIRROR = 20  # G50.1 G51.1 (Fanuc: mirror, then scaling, then rotation)
-    SCALING = 21  # G50 G51
-    ROTATION = 22  # G68 G69
-    NON_MODAL = 23  # G10 G28 G30 G53 G92 (lathe G50)
-    MOTION = 24  # G0..G3, canned cycles, G80
-    STOP = 25  # M0 M1 M2 M30
-    SUBPROGRAM = 26  # M98 M99
 
 
 _STEP_TEXT = {
@@ -322,7 +288,7 @@ CODES: tuple[Code, ...] = (
     _g("M8", "coolant", Step.COOLANT, auxiliary.coolant, doc="flood coolant on"),
     _g("M9", "coolant", Step.COOLANT, auxiliary.coolant, doc="coolant off"),
     _g("M98", "sub", Step.SUBPROGRAM, flow.call, words="PL", needs=("P",),
-       doc="call program P, L times (or P<rrrr><nnnn>)"),
+       doc="call program P, L times (or `P<rrrr><nnnn>`)"),
     _g("M99", "sub", Step.SUBPROGRAM, flow.return_, words="P", doc="return to the caller"),
 )
 # fmt: on
@@ -402,6 +368,21 @@ def _words_text(row: Code) -> str:
     )
 
 
+def _needs_text(row: Code) -> str:
+    kinds = sorted(row.kinds)
+    texts = {" and ".join(_alternatives(a) for a in row.needs_for(k)) for k in kinds}
+    if len(texts) == 1:
+        return texts.pop()
+    return "; ".join(
+        f"{k}: {' and '.join(_alternatives(a) for a in row.needs_for(k))}" for k in kinds
+    )
+
+
+def _alternatives(alt: str) -> str:
+    """ "PX" -> "P or X", "PXU" -> "P, X or U" (also the interpreter's error wording)."""
+    return " or ".join(alt) if len(alt) <= 2 else f"{', '.join(alt[:-1])} or {alt[-1]}"
+
+
 def _sort_key(row: Code) -> tuple:
     return (row.number, sorted(row.kinds))
 
@@ -409,24 +390,30 @@ def _sort_key(row: Code) -> tuple:
 def render_g_table() -> str:
     """The G code table of docs/gcode.md (markdown), one line per row of CODES."""
     lines = [
-        "| Code | Group | Machines | Words | Meaning |",
-        "|---|---|---|---|---|",
+        "| Code | Group | Machines | Words | Needs | Meaning |",
+        "|---|---|---|---|---|---|",
     ]
     for row in sorted((r for r in CODES if r.letter == "G"), key=_sort_key):
         name = f"**{row.name}**" if row.default else row.name
         group = "refused" if row.refused else _group_text(row.group)
         lines.append(
-            f"| {name} | {group} | {_kinds_text(row.kinds)} | {_words_text(row)} | {row.doc} |"
+            f"| {name} | {group} | {_kinds_text(row.kinds)} | {_words_text(row)} "
+            f"| {_needs_text(row)} | {row.doc} |"
         )
     return "\n".join(lines) + "\n"
 
 
 def render_m_table() -> str:
     """The M code table of docs/gcode.md (markdown)."""
-    lines = ["| Code | Group | Words | Meaning |", "|---|---|---|---|"]
+    lines = ["| Code | Group | Words | Needs | Meaning |", "|---|---|---|---|---|"]
     for row in sorted((r for r in CODES if r.letter == "M"), key=_sort_key):
-        lines.append(f"| {row.name} | {row.group} | {_words_text(row)} | {row.doc} |")
-    lines.append("| any other | | | `AuxFunction(code)`, handed to the PLC with wait-for-finish |")
+        lines.append(
+            f"| {row.name} | {row.group} | {_words_text(row)} | {_needs_text(row)} | {row.doc} |"
+        )
+    lines.append(
+        "| any other | | | | `AuxFunction(code)`, handed to the PLC with wait-for-finish; "
+        "a word beside it is refused (no code uses it) |"
+    )
     return "\n".join(lines) + "\n"
 
 

@@ -9,6 +9,7 @@ classification found in it.
 
 from __future__ import annotations
 
+from enum import IntEnum
 from typing import TYPE_CHECKING, Protocol
 
 from cnc.gcode.lexer import Block
@@ -20,6 +21,42 @@ if TYPE_CHECKING:
     from cnc.interp.state import ToolOffset
     from cnc.interp.transform import Transform
     from cnc.params import MachineParams
+
+
+class Step(IntEnum):
+    """Order of execution within a block (RS274/NGC and Fanuc), first to last.
+
+    Units come first because they decide how every number of the block is read (F, S, axis
+    words): `G20 F10` feeds 10 in/min, as on a Fanuc control.
+    """
+
+    EXACT_STOP = 0  # G9 marks the block's moves
+    UNITS = 1
+    FEED_MODE = 2
+    FEED = 3  # F word
+    SPINDLE_MODE = 4
+    SPEED = 5  # S word
+    TOOL_SELECT = 6  # T word
+    TOOL_CHANGE = 7  # M6
+    SPINDLE = 8  # M3 M4 M5 M19; an S change re-issues a turning spindle
+    COOLANT = 9
+    AUX = 10  # any other M code (override switches, clamps...): handed to the PLC
+    DWELL = 11
+    PLANE = 12
+    CUTTER_COMP = 13  # G40 G41 G42, or a D word alone
+    LENGTH_COMP = 14  # G43 G44 G49, or an H word alone
+    COORDINATE_SYSTEM = 15  # G54..G59, G54.1 P
+    PATH_CONTROL = 16  # G61 G64
+    DISTANCE = 17  # G90 G91, G90.1 G91.1
+    RETRACT = 18  # G98 G99 (mill)
+    POLAR = 19  # G15 G16
+    MIRROR = 20  # G50.1 G51.1 (Fanuc: mirror, then scaling, then rotation)
+    SCALING = 21  # G50 G51
+    ROTATION = 22  # G68 G69
+    NON_MODAL = 23  # G10 G28 G30 G53 G92 (lathe G50)
+    MOTION = 24  # G0..G3, canned cycles, G80
+    STOP = 25  # M0 M1 M2 M30
+    SUBPROGRAM = 26  # M98 M99
 
 
 class Classified:

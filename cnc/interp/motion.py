@@ -2,7 +2,7 @@
 
 The motion step runs once per block: it sets the modal motion from the block's G0..G3 or
 cycle code and moves with the modal motion (or the modal cycle) unless a code of the block
-owns its axis words (G4, G10, G28, G30, G92, G53, transforms). With G10/G28/G30/G92/G4 a
+owns its axis words (G4, G10, G28, G30, G92, G53, transforms). With G10/G28/G30/G92 a
 G0..G3 or G80 only sets the mode (`G0 G91 G28 Z0`); a canned cycle or a transform there
 would need the same words and is refused.
 """
@@ -12,6 +12,7 @@ from __future__ import annotations
 from typing import TYPE_CHECKING
 
 from cnc.interp import cycles
+from cnc.interp.context import Step
 
 if TYPE_CHECKING:
     from cnc.interp.context import BlockRun, Context
@@ -29,7 +30,7 @@ def motion(ip: Context, run: BlockRun) -> None:
     nonmodal = run.rows.get("nonmodal")
     g53 = nonmodal is not None and nonmodal.name == "G53"  # G53 moves with the G0/G1
     if owner is not None and not g53 and (mo is not None or cy is not None):
-        if nonmodal is None or cy not in (None, 800):
+        if nonmodal is None or nonmodal.step is not Step.NON_MODAL or cy not in (None, 800):
             raise ip._err("a motion G code cannot share a block with this G code", run.blk, "G")
         if cy == 800:
             cycles.cancel(ip)
