@@ -5,6 +5,7 @@ from __future__ import annotations
 from typing import TYPE_CHECKING
 
 from cnc.canon import AuxFunction, Coolant, SpindleDirection, ToolChange
+from cnc.interp.gnum import M7, M8, M9
 
 if TYPE_CHECKING:
     from cnc.interp.context import BlockRun, Context
@@ -43,11 +44,11 @@ def spindle_speed_change(ip: Context, run: BlockRun) -> None:
 
 def coolant(ip: Context, run: BlockRun) -> None:
     code = run.m["coolant"]
-    if code == 9:
+    if code == M9:
         ip._mist = ip._flood = False
-    elif code == 7:
+    elif code == M7:
         ip._mist = True
-    elif code == 8:
+    elif code == M8:
         ip._flood = True
     else:  # M7 and M8 in one block
         ip._mist = ip._flood = True

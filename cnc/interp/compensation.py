@@ -8,6 +8,8 @@ from __future__ import annotations
 
 from typing import TYPE_CHECKING
 
+from cnc.interp.gnum import G43, G49
+
 if TYPE_CHECKING:
     from cnc.gcode.lexer import Block
     from cnc.interp.context import BlockRun, Context
@@ -31,7 +33,7 @@ def h_word(ip: Context, run: BlockRun) -> None:
     if "length_comp" in run.g:
         return
     ip._h = ip._int_word(run.blk, "H")
-    if ip._tlo_code != 490:
+    if ip._tlo_code != G49:
         apply_length(ip, run.blk, ip._tlo_code)
 
 
@@ -39,9 +41,9 @@ def apply_length(ip: Context, blk: Block, code: int) -> None:
     if "H" in blk.words:
         ip._h = ip._int_word(blk, "H")
     ip._tlo_code = code
-    if code == 490:
+    if code == G49:
         ip._tlo = (0.0, 0.0, 0.0)
     else:
         length = ip._offset_entry(blk, "H", ip._h).length
-        ip._tlo = (0.0, 0.0, length if code == 430 else -length)
+        ip._tlo = (0.0, 0.0, length if code == G43 else -length)
     ip._refresh_offsets(resync=False)

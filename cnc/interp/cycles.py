@@ -13,6 +13,7 @@ from typing import TYPE_CHECKING
 
 from cnc.canon import Dwell, ProgramStop, Spindle, SpindleDirection, StopKind
 from cnc.gcode.lexer import Block
+from cnc.interp.gnum import G73, G74, G76, G80, G82, G83, G84, G85, G86, G87, G88, G89, G98
 
 if TYPE_CHECKING:
     from cnc.interp.context import Context
@@ -41,7 +42,7 @@ class CycleData:
 
 def cancel(ip: Context) -> None:
     """G80, or G0..G3: the cycle mode ends (its R, Z, Q, P stay for the next cycle)."""
-    ip._cycle = 800
+    ip._cycle = G80
     ip.cyc.init = None
 
 
@@ -49,7 +50,7 @@ def cycle_block(ip: Context, blk: Block, code: int | None, exact: bool) -> None:
     """A block in the cycle group or under a modal cycle: set the cycle data, drill."""
     words = blk.words
     cd: CycleData = ip.cyc
-    if code == 800:
+    if code == G80:
         cancel(ip)
         ip._motion_block(blk, words, exact, None)
         return
@@ -57,7 +58,7 @@ def cycle_block(ip: Context, blk: Block, code: int | None, exact: bool) -> None:
         raise ip._err("canned cycle with cutter compensation active", blk, "G")
     w = ip._pw
     if code is not None:
-        if ip._cycle == 800 or cd.init is None:
+        if ip._cycle == G80 or cd.init is None:
             cd.init = ip._pos[w]
         ip._cycle = code
     wn = _AXIS_NAME[w]
@@ -94,15 +95,15 @@ def cycle_block(ip: Context, blk: Block, code: int | None, exact: bool) -> None:
         raise ip._err("canned cycle needs the R level", blk, "G")
     cyc = ip._cycle
     rr, zz = cd.r, cd.z
-    if cyc != 870 and rr < zz - _EPS:
+    if cyc != G87 and rr < zz - _EPS:
         raise ip._err(f"R level below the hole bottom {wn}", blk, "R")
-    if cyc == 870 and rr > zz + _EPS:
+    if cyc == G87 and rr > zz + _EPS:
         raise ip._err(f"G87 back boring needs R below the bore top {wn}", blk, "R")
     if init < rr:
         init = rr  # LinuxCNC: from below R the cycle starts at R
-    if cyc in (730, 830) and cd.q <= 0:
+    if cyc in (G73, G83) and cd.q <= 0:
         raise ip._err("peck drilling needs Q > 0 (peck depth)", blk, "Q")
-    pecks = abs(zz - rr) / cd.q if cyc in (730, 830) else 1.0
+    pecks = abs(zz - rr) / cd.q if cyc in (G73, G83) else 1.0
     if pecks > MAX_PECKS:
         raise ip._err(f"more than {MAX_PECKS} pecks per hole", blk, "Q")
     if reps * pecks > MAX_CYCLE_STEPS:
@@ -134,10 +135,10 @@ def _drill(ip: Context, blk: Block, cyc: int, init: float, r: float, z: float) -
     line = blk.line
     w = ip._pw
     feed = ip._feed(blk)
-    back = init if ip._retract == 980 or cyc == 870 else r
+    back = init if ip._retract == G98 or cyc == G87 else r
     rapid, lin = ip._line_to, ip._line_to
-    d = 1.0 if cyc == 870 else -1.0  # direction into the hole (tool axis points up)
-    if cyc == 870:  # back boring: orient, shift, go below the part, cut upwards
+    d = 1.0 if cyc == G87 else -1.0  # direction into the hole (tool axis points up)
+    if cyc == G87:  # back boring: orient, shift, go below the part, cut upwards
         q = cd.q
         _orient_shift(ip, blk, q)
         rapid(_at_w(ip, r), None, blk, True)
@@ -151,28 +152,28 @@ def _drill(ip: Context, blk: Block, cyc: int, init: float, r: float, z: float) -
         return
     if abs(ip._pos[w] - r) > _EPS:
         rapid(_at_w(ip, r), None, blk, True)
-    if cyc in (730, 830):
+    if cyc in (G73, G83):
         q = cd.q
         depth = r
         while True:
             nxt = depth + d * q
             if (nxt - z) * d > 0:
                 nxt = z
-            if cyc == 830 and depth != r:
+            if cyc == G83 and depth != r:
                 rapid(_at_w(ip, depth - d * PECK_CLEARANCE_MM), None, blk, True)
             lin(_at_w(ip, nxt), feed, blk, True)
             depth = nxt
             if abs(depth - z) < _EPS:
                 break
-            if cyc == 730:
+            if cyc == G73:
                 rapid(_at_w(ip, depth - d * PECK_RETRACT_MM), None, blk, True)
             else:
                 rapid(_at_w(ip, r), None, blk, True)
         rapid(_at_w(ip, back), None, blk, True)
         return
-    if cyc in (740, 840):
-        fwd = SpindleDirection.CW if cyc == 840 else SpindleDirection.CCW
-        rev = SpindleDirection.CCW if cyc == 840 else SpindleDirection.CW
+    if cyc in (G74, G84):
+        fwd = SpindleDirection.CW if cyc == G84 else SpindleDirection.CCW
+        rev = SpindleDirection.CCW if cyc == G84 else SpindleDirection.CW
         _spin(ip, line, fwd)
         lin(_at_w(ip, z), feed, blk, True)
         if cd.p > 0:
@@ -184,28 +185,28 @@ def _drill(ip: Context, blk: Block, cyc: int, init: float, r: float, z: float) -
             rapid(_at_w(ip, back), None, blk, True)
         return
     lin(_at_w(ip, z), feed, blk, True)
-    if cyc in (820, 880, 890, 760) and cd.p > 0:
+    if cyc in (G82, G88, G89, G76) and cd.p > 0:
         ip._emit(Dwell(line, cd.p))
-    if cyc == 760:
+    if cyc == G76:
         q = cd.q
         _orient_shift(ip, blk, q)
         rapid(_at_w(ip, back), None, blk, True)
         rapid(_shifted(ip, _at_w(ip, back), -q), None, blk, True)
         _spin(ip, line, SpindleDirection.CW)
-    elif cyc in (850, 890):
+    elif cyc in (G85, G89):
         lin(_at_w(ip, r), feed, blk, True)
         if back != r:
             rapid(_at_w(ip, back), None, blk, True)
-    elif cyc == 860:
+    elif cyc == G86:
         _spin(ip, line, SpindleDirection.STOP)
         rapid(_at_w(ip, back), None, blk, True)
         _spin(ip, line, SpindleDirection.CW)
-    elif cyc == 880:
+    elif cyc == G88:
         _spin(ip, line, SpindleDirection.STOP)
         ip._emit(ProgramStop(line, StopKind.PROGRAM_STOP))  # manual retract
         rapid(_at_w(ip, back), None, blk, True)
         _spin(ip, line, SpindleDirection.CW)
-    else:  # 810, 820
+    else:  # G81, G82
         rapid(_at_w(ip, back), None, blk, True)
 
 

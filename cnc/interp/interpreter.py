@@ -36,6 +36,25 @@ from cnc.interp import codes
 from cnc.interp.codes import fmt_g
 from cnc.interp.context import BlockRun, Classified
 from cnc.interp.cycles import MAX_REPEAT, CycleData
+from cnc.interp.gnum import (
+    G0,
+    G1,
+    G2,
+    G3,
+    G17,
+    G18,
+    G19,
+    G40,
+    G41,
+    G49,
+    G54,
+    G64,
+    G80,
+    G98,
+    M7,
+    M7_M8,
+    M8,
+)
 from cnc.interp.state import ModalState, ToolOffset
 from cnc.interp.transform import Transform
 from cnc.params import DecimalStyle, MachineParams
@@ -54,12 +73,12 @@ _AXIS_NAME = "XYZ"
 
 # Plane: (u, v, normal) axis indices and the centre words for u and v.
 _PLANES = {
-    170: (0, 1, 2, "I", "J", Plane.XY),
-    180: (2, 0, 1, "K", "I", Plane.ZX),
-    190: (1, 2, 0, "J", "K", Plane.YZ),
+    G17: (0, 1, 2, "I", "J", Plane.XY),
+    G18: (2, 0, 1, "K", "I", Plane.ZX),
+    G19: (1, 2, 0, "J", "K", Plane.YZ),
 }
 
-_MOTION_CODES = frozenset((0, 10, 20, 30))
+_MOTION_CODES = frozenset((G0, G1, G2, G3))
 _step_of = itemgetter(0)
 # words with an execution step of their own (F, S, T, D, H), as bits of a plan's key
 _STEP_BITS = tuple(1 << i for i in range(len(codes.WORD_STEPS)))
@@ -171,23 +190,23 @@ class Interpreter:
     def _reset_modal(self) -> None:
         lathe = self._lathe
         self._motion = 0
-        self._cycle = 800
-        self._plane = 180 if lathe else 170
+        self._cycle = G80
+        self._plane = G18 if lathe else G17
         self._set_plane(self._plane)
         self._abs = True
         self._arc_abs = False
         self._per_rev = lathe  # lathe power-on G99 (feed per revolution)
         self._inch = False
         self._scale = 1.0
-        self._comp_code = 400
-        self._tlo_code = 490
+        self._comp_code = G40
+        self._tlo_code = G49
         self._tlo = (0.0, 0.0, 0.0)
         self._h = 0
         self._d = 0
         self._wcs = 1
         self._g92 = [0.0, 0.0, 0.0]
-        self._path = 640
-        self._retract = 980
+        self._path = G64
+        self._retract = G98
         self._polar = False
         self._xf = Transform()
         self._xf_on = False
@@ -245,7 +264,7 @@ class Interpreter:
             "units": "G20" if self._inch else "G21",
             "cutter_comp": fmt_g(self._comp_code),
             "length_comp": fmt_g(self._tlo_code),
-            "work_offset": fmt_g(530 + 10 * self._wcs) if self._wcs <= 6 else "G54.1",
+            "work_offset": fmt_g(G54 + 10 * (self._wcs - 1)) if self._wcs <= 6 else "G54.1",
             "path_mode": fmt_g(self._path),
             "return_level": fmt_g(self._retract),
             "spindle_mode": "G96" if self._css else "G97",
@@ -381,13 +400,13 @@ class Interpreter:
         # without any other modal change
         if self._simple and not blk.m and (not g or (len(g) == 1 and g[0] in _MOTION_CODES)):
             mo = g[0] if g else self._motion
-            if words.keys() <= (self._fast_arc if mo >= 20 else self._fast_line):
+            if words.keys() <= (self._fast_arc if mo >= G2 else self._fast_line):
                 self._motion = mo
                 if "N" in words:
                     self._nword = int(words["N"])
                 if "F" in words:
                     self._set_feed(blk, words["F"])
-                if mo < 20 and self._plainxyz and blk.nopoint is None:
+                if mo < G2 and self._plainxyz and blk.nopoint is None:
                     # the commonest block of all: G0/G1 X Y Z in G90, mm, no transforms
                     if not ("X" in words or "Y" in words or "Z" in words):
                         return
@@ -400,7 +419,7 @@ class Interpreter:
                         lo[0] <= m[0] <= hi[0] and lo[1] <= m[1] <= hi[1] and lo[2] <= m[2] <= hi[2]
                     ):
                         self._check(m, blk, line)
-                    if mo == 0:
+                    if mo == G0:
                         self._out.append(StraightTraverse(line, m, False))
                     else:
                         f = self._f
@@ -454,8 +473,8 @@ class Interpreter:
                 continue
             if (
                 grp in gset
-                or (grp == "cycle" and code != 800 and "motion" in gset)
-                or (grp == "motion" and gset.get("cycle", 800) != 800)
+                or (grp == "cycle" and code != G80 and "motion" in gset)
+                or (grp == "motion" and gset.get("cycle", G80) != G80)
             ):
                 raise self._err(
                     f"{fmt_g(code)} and another G code of modal group '{grp}' in one block",
@@ -482,11 +501,11 @@ class Interpreter:
                 continue
             grp = row.group
             prev = mset.get(grp)
-            if prev is not None and not (grp == "coolant" and {prev, code} == {7, 8}):
+            if prev is not None and not (grp == "coolant" and {prev, code} == {M7, M8}):
                 raise self._err(
                     f"M{code} and M{prev} of one M group '{grp}' in one block", blk, "M", i + 1
                 )
-            mset[grp] = code if prev is None else 78  # M7 with M8: both coolants
+            mset[grp] = code if prev is None else M7_M8  # M7 with M8: both coolants
             used |= kt.m_words[code]
             alts = kt.m_needs.get(code)
             if alts:
@@ -498,7 +517,7 @@ class Interpreter:
         cls.steps.extend(codes.ALWAYS_STEPS)
         cls.used = frozenset(used)
         cy = gset.get("cycle")
-        cls.modal = cls.owner is None and "motion" not in gset and cy in (None, 800)
+        cls.modal = cls.owner is None and "motion" not in gset and cy in (None, G80)
         return cls
 
     def _check_words(self, blk: Block, cls: Classified) -> None:
@@ -520,7 +539,7 @@ class Interpreter:
             if cls.modal:
                 # no motion code and no code owning the axis words: the modal motion moves
                 # (or, without G80 in the block, the modal cycle drills)
-                modal = self._cycle if self._cycle != 800 and "cycle" not in cls.g else self._motion
+                modal = self._cycle if self._cycle != G80 and "cycle" not in cls.g else self._motion
                 with_modal = cls.used_with.get(modal)
                 if with_modal is None:
                     with_modal = cls.used_with[modal] = used | self._codes.g_words[modal]
@@ -554,7 +573,7 @@ class Interpreter:
     def _update_simple(self) -> None:
         """Whether the next plain motion block may take the fast path."""
         comp = self._comp
-        self._simple = self._cycle == 800 and not self._xf_on and (comp is None or not comp.active)
+        self._simple = self._cycle == G80 and not self._xf_on and (comp is None or not comp.active)
         self._plainxyz = (
             self._simple and self._abs and not self._polar and not self._inch and not self._lathe
         )
@@ -796,17 +815,17 @@ class Interpreter:
             or (self._lathe and ("U" in words or "W" in words))
         )
         mo = self._motion
-        if mo >= 20:
+        if mo >= G2:
             if not has_axis and not (self._ci in words or self._cj in words or "R" in words):
-                if explicit is not None and explicit >= 20:
+                if explicit is not None and explicit >= G2:
                     raise self._err("arc without end point or centre", blk, "G")
                 return
-            self._arc(blk, words, mo == 20, exact)
+            self._arc(blk, words, mo == G2, exact)
             return
         if not has_axis:
             return
         target = self._target(blk, words)
-        if mo == 0:
+        if mo == G0:
             self._line_to(target, None, blk, exact)
         else:
             self._line_to(target, self._feed(blk), blk, exact)
@@ -1001,11 +1020,11 @@ class Interpreter:
 
     def _cutter_comp(self, blk: Block, code: int) -> None:
         self._comp_code = code
-        if code == 400:
+        if code == G40:
             if self._comp is not None and self._comp.active:
                 self._comp.cancel()
             return
-        if self._plane == 190:
+        if self._plane == G19:
             raise self._err("cutter compensation in the G19 plane is not supported", blk, "G")
         try:
             from cnc.cutter_comp import CutterCompensation, Segment
@@ -1018,7 +1037,7 @@ class Interpreter:
         if "D" in blk.words:
             self._d = self._int_word(blk, "D")
         radius = self._offset_entry(blk, "D", self._d).radius if self._d else 0.0
-        side = "left" if code == 410 else "right"
+        side = "left" if code == G41 else "right"
         if self._xf_on and self._xf.handedness(self._pu, self._pv) < 0:
             side = "right" if side == "left" else "left"
         if self._comp is None:
@@ -1038,7 +1057,7 @@ class Interpreter:
         self._comp_uv = uv
         self._comp_w = t[w]
         self._comp_out(self._comp.push(seg))
-        if self._comp_code == 400 and not self._comp.active:
+        if self._comp_code == G40 and not self._comp.active:
             self._comp_out(self._comp.flush())
 
     def _comp_arc(self, st, et, ct, cw, feed, turns, blk: Block, exact: bool) -> None:

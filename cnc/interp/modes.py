@@ -9,6 +9,7 @@ from __future__ import annotations
 from typing import TYPE_CHECKING
 
 from cnc.canon import PathMode, SetPathMode
+from cnc.interp.gnum import G20, G61, G90, G90_1, G95, G96, G99
 
 if TYPE_CHECKING:
     from cnc.interp.context import BlockRun, Context
@@ -18,7 +19,7 @@ INCH = 25.4
 
 def units(ip: Context, run: BlockRun) -> None:
     code = run.g["units"]
-    inch = code == 200
+    inch = code == G20
     if inch != ip._inch:
         if ip._moved:
             raise ip._err(
@@ -32,7 +33,7 @@ def units(ip: Context, run: BlockRun) -> None:
 
 
 def feed_mode(ip: Context, run: BlockRun) -> None:
-    ip._per_rev = run.g["feed_mode"] in (950, 990)  # G95, lathe G99
+    ip._per_rev = run.g["feed_mode"] in (G95, G99)  # lathe G99: per revolution
 
 
 def feed_word(ip: Context, run: BlockRun) -> None:
@@ -40,7 +41,7 @@ def feed_word(ip: Context, run: BlockRun) -> None:
 
 
 def spindle_mode(ip: Context, run: BlockRun) -> None:
-    css = run.g["spindle_mode"] == 960
+    css = run.g["spindle_mode"] == G96
     if css != ip._css:
         ip._css = css
         run.spindle_changed = True
@@ -74,11 +75,11 @@ def distance(ip: Context, run: BlockRun) -> None:
     g = run.g
     d = g.get("distance")
     if d is not None:
-        ip._abs = d == 900
+        ip._abs = d == G90
 
 
 def arc_distance(ip: Context, run: BlockRun) -> None:
-    ip._arc_abs = run.g["arc_distance"] == 901
+    ip._arc_abs = run.g["arc_distance"] == G90_1
 
 
 def return_level(ip: Context, run: BlockRun) -> None:
@@ -88,7 +89,7 @@ def return_level(ip: Context, run: BlockRun) -> None:
 def path_mode(ip: Context, run: BlockRun) -> None:
     code = run.g["path_mode"]
     ip._path = code
-    if code == 610:
+    if code == G61:
         ip._emit(SetPathMode(run.line, PathMode.EXACT_STOP))
         return
     tol = ip.params.default_path_tolerance

@@ -13,6 +13,7 @@ from typing import TYPE_CHECKING
 
 from cnc.interp import cycles
 from cnc.interp.context import Step
+from cnc.interp.gnum import G80
 
 if TYPE_CHECKING:
     from cnc.interp.context import BlockRun, Context
@@ -30,17 +31,17 @@ def motion(ip: Context, run: BlockRun) -> None:
     nonmodal = run.rows.get("nonmodal")
     g53 = nonmodal is not None and nonmodal.name == "G53"  # G53 moves with the G0/G1
     if owner is not None and not g53 and (mo is not None or cy is not None):
-        if nonmodal is None or nonmodal.step is not Step.NON_MODAL or cy not in (None, 800):
+        if nonmodal is None or nonmodal.step is not Step.NON_MODAL or cy not in (None, G80):
             raise ip._err("a motion G code cannot share a block with this G code", run.blk, "G")
-        if cy == 800:
+        if cy == G80:
             cycles.cancel(ip)
     if mo is not None:
         ip._motion = mo
-        if ip._cycle != 800:
+        if ip._cycle != G80:
             cycles.cancel(ip)
     if owner is not None:
         return
-    if cy is not None or (ip._cycle != 800 and mo is None):
+    if cy is not None or (ip._cycle != G80 and mo is None):
         cycles.cycle_block(ip, run.blk, cy, run.exact)
     else:
         ip._motion_block(run.blk, run.words, run.exact, mo)

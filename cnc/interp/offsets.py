@@ -10,6 +10,7 @@ from __future__ import annotations
 from typing import TYPE_CHECKING
 
 from cnc.canon import StraightFeed, StraightTraverse
+from cnc.interp.gnum import G0, G1, G28, G30, G54, G54_1
 
 if TYPE_CHECKING:
     from cnc.interp.context import BlockRun, Context
@@ -19,7 +20,7 @@ EXTENDED_OFFSETS = 48  # G54.1 P1..P48 (Fanuc option "additional workpiece coord
 
 def select_work_offset(ip: Context, run: BlockRun) -> None:
     code = run.g["work_offset"]
-    if code == 541:
+    if code == G54_1:
         blk = run.blk
         p = run.words["P"]
         if p != int(p) or not 1 <= p <= EXTENDED_OFFSETS:
@@ -28,7 +29,7 @@ def select_work_offset(ip: Context, run: BlockRun) -> None:
             )
         wcs = 6 + int(p)
     else:
-        wcs = code // 10 - 53
+        wcs = (code - G54) // 10 + 1
     if wcs != ip._wcs:
         ip._wcs = wcs
         ip._refresh_offsets(resync=True)
@@ -48,7 +49,7 @@ def reference_return(ip: Context, run: BlockRun) -> None:
     code = run.g["nonmodal"]
     if ip._comp_engaged():
         raise ip._err("G28/G30 with cutter compensation active (cancel with G40)", blk, "G")
-    if code == 300 and "P" in words and int(words["P"]) not in (1, 2):
+    if code == G30 and "P" in words and int(words["P"]) not in (1, 2):
         raise ip._err("G30 P3/P4 (third/fourth reference) is not configured", blk, "P")
     named = [i for i, letter in enumerate("XYZ") if letter in words]
     if ip._lathe:
@@ -56,7 +57,7 @@ def reference_return(ip: Context, run: BlockRun) -> None:
             named.append(0)
         if "W" in words:
             named.append(2)
-    ref = ip._home if code == 280 else ip._second_ref
+    ref = ip._home if code == G28 else ip._second_ref
     if named:
         mid = ip._target(blk, words)
         ip._line_to(mid, None, blk, run.exact)
@@ -82,7 +83,7 @@ def machine_move(ip: Context, run: BlockRun) -> None:
     if ip._comp_engaged():
         raise ip._err("G53 with cutter compensation active", blk, "G")
     mo = motion if motion is not None else ip._motion
-    if mo not in (0, 10):
+    if mo not in (G0, G1):
         raise ip._err("G53 moves only with G0 or G1", blk, "G")
     m = list(ip._mach)
     for i, letter in enumerate("XYZ"):
@@ -91,7 +92,7 @@ def machine_move(ip: Context, run: BlockRun) -> None:
             m[i] = val
     mt = (m[0], 0.0 if ip._lathe else m[1], m[2])
     ip._check(mt, blk, blk.line)
-    if mo == 0:
+    if mo == G0:
         ip._out.append(StraightTraverse(blk.line, mt, run.exact))
     else:
         ip._out.append(StraightFeed(blk.line, mt, ip._feed(blk), run.exact))

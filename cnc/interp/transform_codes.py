@@ -8,6 +8,8 @@ from __future__ import annotations
 
 from typing import TYPE_CHECKING
 
+from cnc.interp.gnum import G16, G50, G50_1, G69
+
 if TYPE_CHECKING:
     from cnc.interp.context import BlockRun, Context
 
@@ -16,14 +18,14 @@ _AXIS_NAME = "XYZ"
 
 
 def polar(ip: Context, run: BlockRun) -> None:
-    ip._polar = run.g["polar"] == 160
+    ip._polar = run.g["polar"] == G16
 
 
 def mirror(ip: Context, run: BlockRun) -> None:
     blk = run.blk
     xf = ip._xf
     named = [letter for letter in "XYZ" if letter in blk.words]
-    if run.g["mirror"] == 501:
+    if run.g["mirror"] == G50_1:
         for letter in named or "XYZ":
             xf.mirror[_AXIS_OF[letter]] = False
     else:
@@ -39,7 +41,7 @@ def mirror(ip: Context, run: BlockRun) -> None:
 def scaling(ip: Context, run: BlockRun) -> None:
     blk = run.blk
     xf = ip._xf
-    if run.g["scaling"] == 500:
+    if run.g["scaling"] == G50:
         xf.scale = None
         ip._xf_changed()
         return
@@ -66,7 +68,7 @@ def scaling(ip: Context, run: BlockRun) -> None:
 def rotation(ip: Context, run: BlockRun) -> None:
     blk = run.blk
     xf = ip._xf
-    if run.g["rotation"] == 690:
+    if run.g["rotation"] == G69:
         xf.rot = False
         xf.cos, xf.sin = 1.0, 0.0
         ip._xf_changed()

@@ -200,3 +200,15 @@ def test_a_new_code_is_one_row(monkeypatch) -> None:
         codes.for_kind.cache_clear()
     with pytest.raises(NcError, match="unsupported G code G7"):
         run("G7 P2\n")
+
+
+def test_named_numbers_are_the_table_rows() -> None:
+    from cnc.interp import gnum
+
+    rows = {(r.name, r.number) for r in codes.CODES}
+    names = {r.name for r in codes.CODES}
+    for attr in dir(gnum):
+        if attr[0] in "GM" and attr[1:2].isdigit() and attr != "M7_M8":
+            name = attr.replace("_", ".")
+            assert name in names, name
+            assert (name, getattr(gnum, attr)) in rows, attr
