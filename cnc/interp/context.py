@@ -65,7 +65,7 @@ class Classified:
     `g` / `m`: modal group -> code number (M7 with M8: 78); `rows`: group -> its G row;
     `gcol`: group -> which G of the block it is (for error columns); `aux`: M codes outside
     the table, in order; `owner`: the first code owning the block's axis words (then no
-    motion uses them); `exact`: G9; `needs`: (alternatives, row, nth) of codes needing a
+    motion uses them); `needs`: (alternatives, row, nth) of codes needing a
     word; `used`: the words the codes use; `modal`: whether the modal motion (or cycle) uses
     the block's words too; `steps`: (step, handler) of the codes; `plans`: handler lists by
     the mask of words with a step of their own (filled as met).
@@ -78,7 +78,6 @@ class Classified:
         "m",
         "aux",
         "owner",
-        "exact",
         "needs",
         "used",
         "modal",
@@ -94,7 +93,6 @@ class Classified:
         self.m: dict[str, int] = {}
         self.aux: list[int] = []
         self.owner: Code | None = None
-        self.exact = False
         self.needs: list[tuple[tuple[str, ...], Code, int]] = []
         self.used: frozenset[str] = frozenset()
         self.modal = False
@@ -106,8 +104,9 @@ class Classified:
 class BlockRun:
     """One block in execution: its words, its classification and the flags steps pass on.
 
-    `g`, `rows`, `gcol`, `m`, `aux`, `owner`, `exact`: from its `Classified` (shared, read
-    only); `spindle_changed`: G96/G97 or S changed the speed (a turning spindle is re-issued).
+    `g`, `rows`, `gcol`, `m`, `aux`, `owner`: from its `Classified` (shared, read only);
+    `exact`: G9 is in the block (set at its step, the first); `spindle_changed`: G96/G97
+    or S changed the speed (a turning spindle is re-issued).
     """
 
     __slots__ = (
@@ -134,7 +133,7 @@ class BlockRun:
         self.m = cls.m
         self.aux = cls.aux
         self.owner = cls.owner
-        self.exact = cls.exact
+        self.exact = False
         self.spindle_changed = False
 
 

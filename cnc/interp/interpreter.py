@@ -468,9 +468,6 @@ class Interpreter:
             if row.refused:
                 raise self._err(row.refused, blk, "G", i + 1)
             grp = row.group
-            if grp == "exact_stop":
-                cls.exact = True
-                continue
             if (
                 grp in gset
                 or (grp == "cycle" and code != G80 and "motion" in gset)
