@@ -262,6 +262,26 @@ class CutterCompensation:
         self._released = None
         return self._release()
 
+    @property
+    def cancelling(self) -> bool:
+        """True after G40 until the cancel move: compensation is programmed off."""
+        return self._mode is _Mode.CANCEL
+
+    def finish(self) -> list[Segment]:
+        """End a pending G40 without a cancel move: emit everything held and switch off.
+
+        For a block that needs compensation over (G28/G30/G53, a plane change, a canned
+        cycle) when G40 came without an in-plane move: the last element ends at its
+        perpendicular offset, as before a cancel move, and the tool stays there; the next
+        move leaves that point uncompensated. Outside CANCEL it is `flush()`.
+        """
+        out = self.flush()
+        if self._mode is _Mode.CANCEL:
+            self._mode = _Mode.INACTIVE
+            self._released = None
+            self._window.clear()  # the next G41/G42 starts a new contour
+        return out
+
     def flush(self) -> list[Segment]:
         """End of program or a synchronisation point: emit everything held back.
 

@@ -2,6 +2,11 @@
 
 Public API: `Interpreter(params, ...)`, `Interpreter.run(lines)`, `Interpreter.state`,
 `check(lines, params, file=...)`, `ToolOffset`, `ModalState`.
+
+The G and M codes are declared in `cnc.interp.codes` (one row per code: modal group,
+machine kinds, words, execution step, handler); the handlers live in family modules
+(modes, motion, offsets, compensation, transform_codes, cycles, flow, auxiliary) and take
+the interpreter context explicitly (`cnc.interp.context`).
 """
 
 from cnc.interp.interpreter import ARC_TOLERANCE_MM, MAX_SUB_NESTING, Interpreter, check

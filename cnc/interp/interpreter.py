@@ -15,21 +15,15 @@ from __future__ import annotations
 
 import math
 from collections.abc import Iterable, Iterator, Mapping
+from operator import itemgetter
 
 from cnc.canon import (
     ArcFeed,
-    AuxFunction,
     CanonCommand,
-    Coolant,
-    Dwell,
-    PathMode,
     Plane,
     Pose,
-    ProgramStop,
-    SetPathMode,
     Spindle,
     SpindleDirection,
-    StopKind,
     StraightFeed,
     StraightTraverse,
     ToolChange,
@@ -38,7 +32,29 @@ from cnc.canon import (
 from cnc.errors import NcError
 from cnc.gcode.lexer import Block, MarkedBlock, parse_line
 from cnc.gcode.source import Lines, ProgramLibrary, main_lines, skip_leader
-from cnc.interp.cycles import MAX_REPEAT, CannedCycles
+from cnc.interp import codes
+from cnc.interp.codes import fmt_g
+from cnc.interp.context import BlockRun, Classified
+from cnc.interp.cycles import MAX_REPEAT, CycleData
+from cnc.interp.gnum import (
+    G0,
+    G1,
+    G2,
+    G3,
+    G17,
+    G18,
+    G19,
+    G40,
+    G41,
+    G49,
+    G54,
+    G64,
+    G80,
+    G98,
+    M7,
+    M7_M8,
+    M8,
+)
 from cnc.interp.state import ModalState, ToolOffset
 from cnc.interp.transform import Transform
 from cnc.params import DecimalStyle, MachineParams
@@ -58,66 +74,17 @@ _AXIS_NAME = "XYZ"
 
 # Plane: (u, v, normal) axis indices and the centre words for u and v.
 _PLANES = {
-    170: (0, 1, 2, "I", "J", Plane.XY),
-    180: (2, 0, 1, "K", "I", Plane.ZX),
-    190: (1, 2, 0, "J", "K", Plane.YZ),
+    G17: (0, 1, 2, "I", "J", Plane.XY),
+    G18: (2, 0, 1, "K", "I", Plane.ZX),
+    G19: (1, 2, 0, "J", "K", Plane.YZ),
 }
 
-# Modal groups by G code (int(10 x G)); "nonmodal" codes act in their own block only.
-_GROUP = {
-    0: "motion", 10: "motion", 20: "motion", 30: "motion",
-    40: "nonmodal", 100: "nonmodal", 280: "nonmodal", 300: "nonmodal", 530: "nonmodal",
-    920: "nonmodal",
-    90: "exact_stop",
-    150: "polar", 160: "polar",
-    170: "plane", 180: "plane", 190: "plane",
-    200: "units", 210: "units",
-    400: "cutter_comp", 410: "cutter_comp", 420: "cutter_comp",
-    430: "length_comp", 440: "length_comp", 490: "length_comp",
-    500: "scaling", 510: "scaling",
-    501: "mirror", 511: "mirror",
-    540: "work_offset", 550: "work_offset", 560: "work_offset", 570: "work_offset",
-    580: "work_offset", 590: "work_offset",
-    610: "path_mode", 640: "path_mode",
-    680: "rotation", 690: "rotation",
-    730: "cycle", 740: "cycle", 760: "cycle", 800: "cycle", 810: "cycle", 820: "cycle",
-    830: "cycle", 840: "cycle", 850: "cycle", 860: "cycle", 870: "cycle", 880: "cycle",
-    890: "cycle",
-    900: "distance", 910: "distance",
-    901: "arc_distance", 911: "arc_distance",
-    940: "feed_mode", 950: "feed_mode",
-    960: "spindle_mode", 970: "spindle_mode",
-    980: "return_level", 990: "return_level",
-}  # fmt: skip
-# Fanuc lathe G-code system A: different meanings for several numbers.
-_LATHE_GROUP = {
-    k: v
-    for k, v in _GROUP.items()
-    if k not in (500, 510, 501, 511, 730, 740, 760, 800, 810, 820, 830, 840, 850, 860, 870,
-                 880, 890, 900, 910, 920, 940, 950, 980, 990, 150, 160, 680, 690)
-}  # fmt: skip
-_LATHE_GROUP.update({500: "nonmodal", 980: "feed_mode", 990: "feed_mode"})
-_UNSUPPORTED_G = {
-    650: "unsupported: Fanuc Macro B (G65 macro call)",
-    660: "unsupported: Fanuc Macro B (G66 modal macro call)",
-    670: "unsupported: Fanuc Macro B (G67 macro call cancel)",
-}
-_MOTION_CODES = frozenset((0, 10, 20, 30))
-_CYCLE_NAMES = {730, 740, 760, 810, 820, 830, 840, 850, 860, 870, 880, 890}
-_LATHE_UNSUPPORTED = {
-    **{c: "lathe canned cycle" for c in (700, 710, 720, 730, 740, 750, 760)},
-    900: "lathe turning cycle (G90, system A)",
-    920: "lathe threading cycle (G92, system A)",
-    940: "lathe facing cycle (G94, system A)",
-    320: "lathe threading (G32)",
-}
-_M_GROUP = {0: "stop", 1: "stop", 2: "stop", 30: "stop", 3: "spindle", 4: "spindle",
-            5: "spindle", 19: "spindle", 6: "tool", 7: "coolant", 8: "coolant", 9: "coolant",
-            98: "sub", 99: "sub"}  # fmt: skip
-
-
-def _fmt_g(code: int) -> str:
-    return f"G{code // 10}" if code % 10 == 0 else f"G{code // 10}.{code % 10}"
+_MOTION_CODES = frozenset((G0, G1, G2, G3))
+_step_of = itemgetter(0)
+# words with an execution step of their own (F, S, T, D, H), as bits of a plan's key
+_STEP_BITS = tuple(1 << i for i in range(len(codes.WORD_STEPS)))
+_STEP_WORDS = tuple(zip(_STEP_BITS, (w[0] for w in codes.WORD_STEPS), strict=True))
+_CLASSIFIED_MAX = 4096  # distinct G/M combinations remembered per interpreter
 
 
 class _Frame:
@@ -133,7 +100,7 @@ class _Frame:
         self.body_started = False
 
 
-class Interpreter(CannedCycles):
+class Interpreter:
     """Interprets Fanuc-dialect part programs into canonical machine commands.
 
     `programs` maps program numbers to program text (str or lines) for M98 calls;
@@ -169,8 +136,13 @@ class Interpreter(CannedCycles):
         self._diam = self._lathe and params.lathe_diameter_mode
         self._li = params.decimal_style is DecimalStyle.LEAST_INCREMENT
         self._words_ok = _LATHE_WORDS if self._lathe else _MILL_WORDS
-        self._fast_words = frozenset("XZUWIKRFN" if self._lathe else "XYZIJKRFN")
-        self._groups = _LATHE_GROUP if self._lathe else _GROUP
+        # fast-path words of a G0/G1 and of a G2/G3 block (others take the checked path)
+        self._fast_line = frozenset("XZUWFN" if self._lathe else "XYZFN")
+        self._fast_arc = frozenset("XZUWIKRFN" if self._lathe else "XYZIJKRFN")
+        self._codes = kt = codes.for_kind(params.kind)
+        self._gtab = kt.g
+        self._mtab = kt.m
+        self._classified: dict[tuple[int, ...], Classified] = {}
         self._lib = ProgramLibrary(programs)
         self._tools: dict[int, ToolOffset] = dict(tools or {})
         self._tools_known = tools is not None
@@ -195,8 +167,8 @@ class Interpreter(CannedCycles):
         self._mach: tuple[float, float, float] = (
             (float(start[0]), float(start[1]), float(start[2])) if start else self._home
         )
-        # work offsets: index 0 = common (EXT), 1..6 = G54..G59
-        self._wofs: list[list[float]] = [[0.0, 0.0, 0.0] for _ in range(7)]
+        # work offsets: index 0 = common (EXT), 1..6 = G54..G59, 7..54 = G54.1 P1..P48
+        self._wofs: list[list[float]] = [[0.0, 0.0, 0.0] for _ in range(55)]
         for k, v in (work_offsets or {}).items():
             if not 0 <= k <= 6:
                 raise NcError(f"work offset number {k} is not 0..6", 0, 0, file)
@@ -219,23 +191,23 @@ class Interpreter(CannedCycles):
     def _reset_modal(self) -> None:
         lathe = self._lathe
         self._motion = 0
-        self._cycle = 800
-        self._plane = 180 if lathe else 170
-        self._pu, self._pv, self._pw, self._ci, self._cj, self._plane_enum = _PLANES[self._plane]
+        self._cycle = G80
+        self._plane = G18 if lathe else G17
+        self._set_plane(self._plane)
         self._abs = True
         self._arc_abs = False
         self._per_rev = lathe  # lathe power-on G99 (feed per revolution)
         self._inch = False
         self._scale = 1.0
-        self._comp_code = 400
-        self._tlo_code = 490
+        self._comp_code = G40
+        self._tlo_code = G49
         self._tlo = (0.0, 0.0, 0.0)
         self._h = 0
         self._d = 0
         self._wcs = 1
         self._g92 = [0.0, 0.0, 0.0]
-        self._path = 640
-        self._retract = 980
+        self._path = G64
+        self._retract = G98
         self._polar = False
         self._xf = Transform()
         self._xf_on = False
@@ -248,11 +220,7 @@ class Interpreter(CannedCycles):
         self._flood = False
         self._tool = 0
         self._tool_in = 0
-        self._cyc_r: float | None = None
-        self._cyc_z: float | None = None
-        self._cyc_q = 0.0
-        self._cyc_p = 0.0
-        self._cyc_init: float | None = None
+        self.cyc = CycleData()
         self._comp = None
         self._comp_uv = (0.0, 0.0)
         self._comp_w = 0.0
@@ -260,6 +228,10 @@ class Interpreter(CannedCycles):
         self._simple = True
         self._switch = False
         self._plainxyz = not self._lathe
+
+    def _set_plane(self, code: int) -> None:
+        self._plane = code
+        self._pu, self._pv, self._pw, self._ci, self._cj, self._plane_enum = _PLANES[code]
 
     def _compute_off(self) -> tuple[float, float, float]:
         w = self._wofs[self._wcs]
@@ -282,20 +254,20 @@ class Interpreter(CannedCycles):
         if self._diam:
             pos[0] *= 2.0
         g = {
-            "motion": _fmt_g(self._motion),
-            "cycle": _fmt_g(self._cycle),
-            "plane": _fmt_g(self._plane),
+            "motion": fmt_g(self._motion),
+            "cycle": fmt_g(self._cycle),
+            "plane": fmt_g(self._plane),
             "distance": "G90" if self._abs else "G91",
             "arc_distance": "G90.1" if self._arc_abs else "G91.1",
             "feed_mode": ("G99" if self._per_rev else "G98")
             if self._lathe
             else ("G95" if self._per_rev else "G94"),
             "units": "G20" if self._inch else "G21",
-            "cutter_comp": _fmt_g(self._comp_code),
-            "length_comp": _fmt_g(self._tlo_code),
-            "work_offset": _fmt_g(530 + 10 * self._wcs),
-            "path_mode": _fmt_g(self._path),
-            "return_level": _fmt_g(self._retract),
+            "cutter_comp": fmt_g(self._comp_code),
+            "length_comp": fmt_g(self._tlo_code),
+            "work_offset": fmt_g(G54 + 10 * (self._wcs - 1)) if self._wcs <= 6 else "G54.1",
+            "path_mode": fmt_g(self._path),
+            "return_level": fmt_g(self._retract),
             "spindle_mode": "G96" if self._css else "G97",
             "polar": "G16" if self._polar else "G15",
             "scaling": "G51" if self._xf.scale is not None else "G50",
@@ -311,7 +283,7 @@ class Interpreter(CannedCycles):
             subprogram_depth=max(0, len(self._frames) - 1),
             gcodes=g,
             units="inch" if self._inch else "mm",
-            work_offset=g["work_offset"],
+            work_offset=g["work_offset"] if self._wcs <= 6 else f"G54.1 P{self._wcs - 6}",
             tool_selected=self._tool,
             tool_in_spindle=self._tool_in,
             length_offset=self._h,
@@ -425,279 +397,181 @@ class Interpreter(CannedCycles):
         self._executed += 1
         if self.max_blocks is not None and self._executed > self.max_blocks:
             raise self._err(f"program executes more than {self.max_blocks} blocks", blk)
-        # fast path: a motion block (G0..G3 at most) without any other modal change
-        if (
-            self._simple
-            and not blk.m
-            and (not g or (len(g) == 1 and g[0] in _MOTION_CODES))
-            and words.keys() <= self._fast_words
-        ):
-            if g:
-                mo = self._motion = g[0]
-            else:
-                mo = self._motion
-            if "N" in words:
-                self._nword = int(words["N"])
-            if "F" in words:
-                self._set_feed(blk, words["F"])
-            if mo < 20 and self._plainxyz and blk.nopoint is None:
-                # the commonest block of all: G0/G1 X Y Z in G90, mm, no transforms
-                if not ("X" in words or "Y" in words or "Z" in words):
+        # fast path: a motion block (G0..G3 at most, with only the words of its motion)
+        # without any other modal change
+        if self._simple and not blk.m and (not g or (len(g) == 1 and g[0] in _MOTION_CODES)):
+            mo = g[0] if g else self._motion
+            if words.keys() <= (self._fast_arc if mo >= G2 else self._fast_line):
+                self._motion = mo
+                if "N" in words:
+                    self._nword = int(words["N"])
+                if "F" in words:
+                    self._set_feed(blk, words["F"])
+                if mo < G2 and self._plainxyz and blk.nopoint is None:
+                    # the commonest block of all: G0/G1 X Y Z in G90, mm, no transforms
+                    if not ("X" in words or "Y" in words or "Z" in words):
+                        return
+                    p = self._pos
+                    t = (words.get("X", p[0]), words.get("Y", p[1]), words.get("Z", p[2]))
+                    o = self._off
+                    m = (t[0] + o[0], t[1] + o[1], t[2] + o[2])
+                    lo, hi = self._lo, self._hi
+                    if not (
+                        lo[0] <= m[0] <= hi[0] and lo[1] <= m[1] <= hi[1] and lo[2] <= m[2] <= hi[2]
+                    ):
+                        self._check(m, blk, line)
+                    if mo == G0:
+                        self._out.append(StraightTraverse(line, m, False))
+                    else:
+                        f = self._f
+                        if f is None or f <= 0.0 or self._per_rev:
+                            f = self._feed(blk)
+                        self._out.append(StraightFeed(line, m, f, False))
+                    self._pos = t
+                    self._mach = m
+                    self._moved = True
                     return
-                p = self._pos
-                t = (words.get("X", p[0]), words.get("Y", p[1]), words.get("Z", p[2]))
-                o = self._off
-                m = (t[0] + o[0], t[1] + o[1], t[2] + o[2])
-                lo, hi = self._lo, self._hi
-                if not (
-                    lo[0] <= m[0] <= hi[0] and lo[1] <= m[1] <= hi[1] and lo[2] <= m[2] <= hi[2]
-                ):
-                    self._check(m, blk, line)
-                if mo == 0:
-                    self._out.append(StraightTraverse(line, m, False))
-                else:
-                    f = self._f
-                    if f is None or f <= 0.0 or self._per_rev:
-                        f = self._feed(blk)
-                    self._out.append(StraightFeed(line, m, f, False))
-                self._pos = t
-                self._mach = m
-                self._moved = True
+                self._motion_block(blk, words, False, g[0] if g else None)
                 return
-            self._motion_block(blk, words, False, g[0] if g else None)
-            return
-        for i, code in enumerate(g):
-            if code in _UNSUPPORTED_G:
-                raise self._err(_UNSUPPORTED_G[code], blk, "G", i + 1)
-        if not words.keys() <= self._words_ok:
-            for k in words:
-                if k not in self._words_ok:
-                    if k == "Y" and self._lathe:
-                        raise self._err("a lathe has no Y axis", blk, k)
-                    if k in "ABCUVW" and not self._lathe:
-                        raise self._err(f"unknown address {k} (axis {k} is not configured)", blk, k)
-                    raise self._err(f"unknown address {k}", blk, k)
+        key = (*blk.g, -1, *blk.m)
+        cls = self._classified.get(key)
+        if cls is None:
+            cls = self._classify(blk)
+            if len(self._classified) < _CLASSIFIED_MAX:
+                self._classified[key] = cls
+        self._check_words(blk, cls)
         n = words.get("N")
         if n is not None:
             self._nword = int(n)
+        mask = 0
+        for bit, letter in _STEP_WORDS:
+            if letter in words:
+                mask |= bit
+        plan = cls.plans.get(mask)
+        if plan is None:
+            plan = cls.plans[mask] = self._plan(cls, mask)
+        run = BlockRun(blk, cls)
+        for handler in plan:
+            handler(self, run)
+        self._update_simple()
 
-        # --- classify G codes by modal group ---
-        groups = self._groups
-        gset: dict[str, int] = {}
-        exact = False
+    def _classify(self, blk: Block) -> Classified:
+        """The block's codes -> table rows by modal group; two codes of a group are refused."""
+        cls = Classified()
+        gset = cls.g
+        gtab = self._gtab
+        kt = self._codes
+        used = set(codes.BLOCK_WORDS)
         for i, code in enumerate(blk.g):
-            grp = groups.get(code)
-            if grp is None:
-                msg = _UNSUPPORTED_G.get(code)
-                if msg is None and self._lathe and code in _LATHE_UNSUPPORTED:
-                    msg = f"unsupported: {_LATHE_UNSUPPORTED[code]}"
-                raise self._err(msg or f"unsupported G code {_fmt_g(code)}", blk, "G", i + 1)
-            if grp == "exact_stop":
-                exact = True
-                continue
+            row = gtab.get(code)
+            if row is None:
+                raise self._err(f"unsupported G code {fmt_g(code)}", blk, "G", i + 1)
+            if row.refused:
+                raise self._err(row.refused, blk, "G", i + 1)
+            grp = row.group
             if (
                 grp in gset
-                or (grp == "cycle" and code != 800 and "motion" in gset)
-                or (grp == "motion" and gset.get("cycle", 800) != 800)
+                or (grp == "cycle" and code != G80 and "motion" in gset)
+                or (grp == "motion" and gset.get("cycle", G80) != G80)
             ):
                 raise self._err(
-                    f"{_fmt_g(code)} and another G code of modal group '{grp}' in one block",
+                    f"{fmt_g(code)} and another G code of modal group '{grp}' in one block",
                     blk,
                     "G",
                     i + 1,
                 )
             gset[grp] = code
-        mset: dict[str, int] = {}
-        aux: list[int] = []
+            cls.rows[grp] = row
+            cls.gcol[grp] = i + 1
+            used |= kt.g_words[code]
+            if row.owns_axes and cls.owner is None:
+                cls.owner = row
+            alts = kt.g_needs.get(code)
+            if alts:
+                cls.needs.append((alts, row, i + 1))
+            cls.steps.append((row.step, row.handler))
+        mset = cls.m
+        mtab = self._mtab
         for i, code in enumerate(blk.m):
-            grp = _M_GROUP.get(code)
-            if grp is None:
-                aux.append(code)
+            row = mtab.get(code)
+            if row is None:
+                cls.aux.append(code)  # not the kernel's: handed to the PLC
                 continue
+            grp = row.group
             prev = mset.get(grp)
-            if prev is not None and not (grp == "coolant" and {prev, code} == {7, 8}):
+            if prev is not None and not (grp == "coolant" and {prev, code} == {M7, M8}):
                 raise self._err(
                     f"M{code} and M{prev} of one M group '{grp}' in one block", blk, "M", i + 1
                 )
-            mset[grp] = code if grp != "coolant" or prev is None else 78
-
-        # --- units first: they decide how every number in the block is read ---
-        u = gset.get("units")
-        if u is not None:
-            inch = u == 200
-            if inch != self._inch:
-                if self._moved:
-                    raise self._err(
-                        "G20/G21 unit change after motion (use one unit per program)",
-                        blk,
-                        "G",
-                        blk.g.index(u) + 1,
-                    )
-                self._inch = inch
-                self._scale = INCH if inch else 1.0
-        fm = gset.get("feed_mode")
-        if fm is not None:
-            self._per_rev = fm in (950, 990)
-        if "F" in words:
-            self._set_feed(blk, words["F"])
-        # --- spindle speed mode and S ---
-        sm = gset.get("spindle_mode")
-        spindle_changed = False
-        if sm is not None:
-            css = sm == 960
-            if css != self._css:
-                self._css = css
-                spindle_changed = True
-                if not css and "S" not in words:
-                    self._s = self._rpm_now_from(self._s, True)
-        if "S" in words and not ("nonmodal" in gset and gset["nonmodal"] in (920, 500)):
-            s = words["S"]
-            if s < 0:
-                raise self._err("S must not be negative", blk, "S")
-            self._s = s * (0.3048 if self._inch and self._css else 1.0)
-            spindle_changed = True
-        if "T" in words:
-            self._tool_word(blk, words["T"])
-        if mset.get("tool") == 6:
-            self._emit(ToolChange(line, self._tool))
-            self._tool_in = self._tool
-        sp = mset.get("spindle")
-        if sp is not None:
-            self._spindle = (
-                SpindleDirection.CW
-                if sp == 3
-                else SpindleDirection.CCW
-                if sp == 4
-                else SpindleDirection.STOP
-                if sp == 5
-                else SpindleDirection.ORIENT
-            )
-            self._emit_spindle(line)
-        elif spindle_changed and self._spindle in (SpindleDirection.CW, SpindleDirection.CCW):
-            self._emit_spindle(line)
-        cool = mset.get("coolant")
-        if cool is not None:
-            if cool == 9:
-                self._mist = self._flood = False
-            elif cool == 7:
-                self._mist = True
-            elif cool == 8:
-                self._flood = True
-            else:
-                self._mist = self._flood = True
-            self._emit(Coolant(line, self._mist, self._flood))
-        for code in aux:
-            self._emit(AuxFunction(line, code))
-        nonmodal = gset.get("nonmodal")
-        if nonmodal == 40:
-            self._dwell(blk, words)  # its X/P words are the time, not a target
-        # --- plane, compensation, offsets, modes ---
-        pl = gset.get("plane")
-        if pl is not None and pl != self._plane:
-            if self._comp is not None:
-                raise self._err("plane change while cutter compensation is active", blk, "G")
-            if self._xf.rot:
-                raise self._err("plane change while G68 rotation is active", blk, "G")
-            self._plane = pl
-            self._pu, self._pv, self._pw, self._ci, self._cj, self._plane_enum = _PLANES[pl]
-        d = gset.get("distance")
-        if d is not None:
-            self._abs = d == 900
-        ad = gset.get("arc_distance")
-        if ad is not None:
-            self._arc_abs = ad == 901
-        rl = gset.get("return_level")
-        if rl is not None:
-            self._retract = rl
-        if "D" in words and gset.get("cutter_comp") is None:
-            self._d = self._int_word(blk, "D")
-        cc = gset.get("cutter_comp")
-        if cc is not None:
-            self._cutter_comp(blk, cc)
-        lc = gset.get("length_comp")
-        if lc is not None:
-            self._length_comp(blk, lc)
-        elif "H" in words:
-            self._h = self._int_word(blk, "H")
-            if self._tlo_code != 490:
-                self._length_comp(blk, self._tlo_code)
-        wo = gset.get("work_offset")
-        if wo is not None and wo // 10 - 53 != self._wcs:
-            self._wcs = wo // 10 - 53
-            self._refresh_offsets(resync=True)
-        pm = gset.get("path_mode")
-        if pm is not None:
-            self._path = pm
-            if pm == 610:
-                self._emit(SetPathMode(line, PathMode.EXACT_STOP))
-            else:
-                tol = self.params.default_path_tolerance
-                if "P" in words:
-                    tol = self._dim(blk, "P")
-                    if tol < 0:
-                        raise self._err("G64 P tolerance must not be negative", blk, "P")
-                self._emit(SetPathMode(line, PathMode.CONTINUOUS, tol))
-        # --- transforms (their axis words are centres, not targets) ---
-        consumed = False
-        polar = gset.get("polar")
-        if polar is not None:
-            self._polar = polar == 160
-        mir = gset.get("mirror")
-        if mir is not None:
-            self._mirror(blk, mir)
-            consumed = True
-        sc = gset.get("scaling")
-        if sc is not None:
-            self._scaling(blk, sc)
-            consumed = True
-        rot = gset.get("rotation")
-        if rot is not None:
-            self._rotation(blk, rot)
-            consumed = True
-        # --- non-modal codes using axis words ---
-        if nonmodal is not None:
-            consumed = True
-            if nonmodal == 100:
-                self._g10(blk)
-            elif nonmodal in (280, 300):
-                self._reference_return(blk, nonmodal, exact)
-            elif nonmodal in (920, 500):
-                self._coordinate_set(blk)
-            elif nonmodal == 530:
-                self._g53(blk, gset.get("motion"), exact)
-        if consumed and nonmodal != 530 and ("motion" in gset or "cycle" in gset):
-            raise self._err("a motion G code cannot share a block with this G code", blk, "G")
-        # --- motion ---
-        mo = gset.get("motion")
-        if mo is not None:
-            self._motion = mo
-            if self._cycle != 800:
-                self._cycle = 800
-                self._cyc_init = None
+            mset[grp] = code if prev is None else M7_M8  # M7 with M8: both coolants
+            used |= kt.m_words[code]
+            alts = kt.m_needs.get(code)
+            if alts:
+                cls.needs.append((alts, row, i + 1))
+            if prev is None:
+                cls.steps.append((row.step, row.handler))
+        if cls.aux:
+            cls.steps.append(codes.AUX_STEP)
+        cls.steps.extend(codes.ALWAYS_STEPS)
+        cls.used = frozenset(used)
         cy = gset.get("cycle")
-        if not consumed:
-            if cy is not None or (self._cycle != 800 and mo is None):
-                self._cycle_block(blk, cy, exact)
-            else:
-                self._motion_block(blk, words, exact, mo)
-        # --- program flow ---
-        stop = mset.get("stop")
-        if stop is not None:
-            self._emit(ProgramStop(line, _STOPS[stop]))
-            if stop in (2, 30):
-                self._flush_comp()
-                self._ended = self._switch = True
-        sub = mset.get("sub")
-        if sub == 98:
-            self._call(blk)
-        elif sub == 99:
-            self._return(blk)
-        self._update_simple()
+        cls.modal = cls.owner is None and "motion" not in gset and cy in (None, G80)
+        return cls
+
+    def _check_words(self, blk: Block, cls: Classified) -> None:
+        """Every word must be one a code of the block (or the modal motion) uses."""
+        words = blk.words
+        if not words.keys() <= codes.BLOCK_WORDS:
+            ok = self._words_ok
+            if not words.keys() <= ok:
+                for k in words:
+                    if k not in ok:
+                        if k == "Y" and self._lathe:
+                            raise self._err("a lathe has no Y axis", blk, k)
+                        if k in "ABCUVW" and not self._lathe:
+                            raise self._err(
+                                f"unknown address {k} (axis {k} is not configured)", blk, k
+                            )
+                        raise self._err(f"unknown address {k}", blk, k)
+            used = cls.used
+            if cls.modal:
+                # no motion code and no code owning the axis words: the modal motion moves
+                # (or, without G80 in the block, the modal cycle drills)
+                modal = self._cycle if self._cycle != G80 and "cycle" not in cls.g else self._motion
+                with_modal = cls.used_with.get(modal)
+                if with_modal is None:
+                    with_modal = cls.used_with[modal] = used | self._codes.g_words[modal]
+                used = with_modal
+            if not words.keys() <= used:
+                for k in words:
+                    if k not in used:
+                        raise self._err(f"{k} word with no code in this block that uses it", blk, k)
+        for alts, row, nth in cls.needs:
+            for alt in alts:
+                if not any(letter in words for letter in alt):
+                    need = (
+                        " or ".join(alt) if len(alt) <= 2 else f"{', '.join(alt[:-1])} or {alt[-1]}"
+                    )
+                    raise self._err(f"{row.name} needs {need}", blk, row.letter, nth)
+
+    @staticmethod
+    def _plan(cls: Classified, mask: int) -> list:
+        """The block's handlers in the order of execution (codes.Step), each once."""
+        todo = list(cls.steps)
+        for bit, (_, step, handler) in zip(_STEP_BITS, codes.WORD_STEPS, strict=True):
+            if mask & bit:
+                todo.append((step, handler))
+        todo.sort(key=_step_of)
+        out = []
+        for _, handler in todo:
+            if handler not in out:  # G0..G3 and the cycles share the motion step
+                out.append(handler)
+        return out
 
     def _update_simple(self) -> None:
         """Whether the next plain motion block may take the fast path."""
         comp = self._comp
-        self._simple = self._cycle == 800 and not self._xf_on and (comp is None or not comp.active)
+        self._simple = self._cycle == G80 and not self._xf_on and (comp is None or not comp.active)
         self._plainxyz = (
             self._simple and self._abs and not self._polar and not self._inch and not self._lathe
         )
@@ -939,17 +813,17 @@ class Interpreter(CannedCycles):
             or (self._lathe and ("U" in words or "W" in words))
         )
         mo = self._motion
-        if mo >= 20:
+        if mo >= G2:
             if not has_axis and not (self._ci in words or self._cj in words or "R" in words):
-                if explicit is not None and explicit >= 20:
+                if explicit is not None and explicit >= G2:
                     raise self._err("arc without end point or centre", blk, "G")
                 return
-            self._arc(blk, words, mo == 20, exact)
+            self._arc(blk, words, mo == G2, exact)
             return
         if not has_axis:
             return
         target = self._target(blk, words)
-        if mo == 0:
+        if mo == G0:
             self._line_to(target, None, blk, exact)
         else:
             self._line_to(target, self._feed(blk), blk, exact)
@@ -1135,22 +1009,6 @@ class Interpreter(CannedCycles):
                         "arc extent: " + err.message, blk.line, blk.col("G"), err.file
                     ) from None
 
-    def _dwell(self, blk: Block, words: dict[str, float]) -> None:
-        if "P" in words:
-            p = words["P"]
-            if p != int(p):
-                raise self._err("G4 P is in milliseconds (an integer)", blk, "P")
-            sec = p / 1000.0
-        elif "X" in words:
-            sec = self._plain(blk, "X")
-        elif "U" in words:
-            sec = self._plain(blk, "U")
-        else:
-            raise self._err("G4 dwell needs P (ms) or X (s)", blk, "G")
-        if sec < 0:
-            raise self._err("negative dwell time", blk, "P" if "P" in words else "X")
-        self._emit(Dwell(blk.line, sec))
-
     # --- modes with axis words ---------------------------------------------------------
 
     def _refresh_offsets(self, resync: bool) -> None:
@@ -1160,11 +1018,11 @@ class Interpreter(CannedCycles):
 
     def _cutter_comp(self, blk: Block, code: int) -> None:
         self._comp_code = code
-        if code == 400:
+        if code == G40:
             if self._comp is not None and self._comp.active:
                 self._comp.cancel()
             return
-        if self._plane == 190:
+        if self._plane == G19:
             raise self._err("cutter compensation in the G19 plane is not supported", blk, "G")
         try:
             from cnc.cutter_comp import CutterCompensation, Segment
@@ -1177,7 +1035,7 @@ class Interpreter(CannedCycles):
         if "D" in blk.words:
             self._d = self._int_word(blk, "D")
         radius = self._offset_entry(blk, "D", self._d).radius if self._d else 0.0
-        side = "left" if code == 410 else "right"
+        side = "left" if code == G41 else "right"
         if self._xf_on and self._xf.handedness(self._pu, self._pv) < 0:
             side = "right" if side == "left" else "left"
         if self._comp is None:
@@ -1197,7 +1055,7 @@ class Interpreter(CannedCycles):
         self._comp_uv = uv
         self._comp_w = t[w]
         self._comp_out(self._comp.push(seg))
-        if self._comp_code == 400 and not self._comp.active:
+        if self._comp_code == G40 and not self._comp.active:
             self._comp_out(self._comp.flush())
 
     def _comp_arc(self, st, et, ct, cw, feed, turns, blk: Block, exact: bool) -> None:
@@ -1244,83 +1102,29 @@ class Interpreter(CannedCycles):
                 out.append(StraightFeed(line, m, feed, exact))
             self._mach = m
 
+    def _comp_engaged(self) -> bool:
+        """Whether G41/G42 is in effect; a G40 still waiting for its cancel move ends here.
+
+        G40 programmed with no in-plane move leaves the compensator waiting for a cancel
+        move; a block that needs compensation over (G28/G30/G53, a plane change, a canned
+        cycle, a transform) completes it instead: the last element ends at its
+        perpendicular offset and the next move leaves from there, uncompensated.
+        """
+        comp = self._comp
+        if comp is None or not comp.active:
+            return False
+        if comp.cancelling:
+            self._comp_out(comp.finish())
+            return False
+        return True
+
     def _flush_comp(self) -> None:
         if self._comp is not None:
             self._comp_out(self._comp.flush())
 
-    def _length_comp(self, blk: Block, code: int) -> None:
-        if "H" in blk.words:
-            self._h = self._int_word(blk, "H")
-        self._tlo_code = code
-        if code == 490:
-            self._tlo = (0.0, 0.0, 0.0)
-        else:
-            length = self._offset_entry(blk, "H", self._h).length
-            self._tlo = (0.0, 0.0, length if code == 430 else -length)
-        self._refresh_offsets(resync=False)
-
-    def _mirror(self, blk: Block, code: int) -> None:
-        xf = self._xf
-        named = [letter for letter in "XYZ" if letter in blk.words]
-        if code == 501:
-            for letter in named or "XYZ":
-                xf.mirror[_AXIS_OF[letter]] = False
-        else:
-            if not named:
-                raise self._err("G51.1 needs the mirror axis position (X/Y/Z)", blk, "G")
-            for letter in named:
-                i = _AXIS_OF[letter]
-                xf.mirror[i] = True
-                xf.mirror_c[i] = self._dim(blk, letter)
-        self._xf_changed()
-
-    def _scaling(self, blk: Block, code: int) -> None:
-        xf = self._xf
-        if code == 500:
-            xf.scale = None
-            self._xf_changed()
-            return
-        c = list(self._pos)
-        for letter in "XYZ":
-            if letter in blk.words:
-                c[_AXIS_OF[letter]] = self._dim(blk, letter)
-        words = blk.words
-        if "P" in words:
-            f = self._plain(blk, "P")
-            factors = [f, f, f]
-        else:
-            factors = [1.0, 1.0, 1.0]
-            for i, letter in enumerate("IJK"):
-                if letter in words:
-                    factors[i] = self._plain(blk, letter)
-        if any(f == 0.0 for f in factors):
-            raise self._err("scaling factor 0", blk, "P" if "P" in words else "I")
-        xf.scale = factors
-        xf.scale_c = c
-        self._xf_changed()
-
-    def _rotation(self, blk: Block, code: int) -> None:
-        xf = self._xf
-        if code == 690:
-            xf.rot = False
-            xf.cos, xf.sin = 1.0, 0.0
-            self._xf_changed()
-            return
-        u, v = self._pu, self._pv
-        names = _AXIS_NAME
-        cu = self._dim(blk, names[u]) if names[u] in blk.words else self._pos[u]
-        cv = self._dim(blk, names[v]) if names[v] in blk.words else self._pos[v]
-        ang = self._plain(blk, "R") if "R" in blk.words else 0.0
-        was = xf.rot
-        xf.rot = False
-        c = xf.apply(_put(u, v, cu, cv))
-        xf.rot = was
-        xf.set_rotation((u, v), (c[u], c[v]), ang)
-        self._xf_changed()
-
     def _xf_changed(self) -> None:
         self._xf_on = self._xf.active
-        if self._comp is not None and self._comp.active:
+        if self._comp_engaged():
             raise NcError(
                 "mirror/scaling/rotation change while cutter compensation is active",
                 self._line,
@@ -1361,34 +1165,6 @@ class Interpreter(CannedCycles):
         else:
             raise self._err(f"G10 L{lv} is not supported", blk, "L")
 
-    def _reference_return(self, blk: Block, code: int, exact: bool) -> None:
-        if self._comp is not None and self._comp.active:
-            raise self._err("G28/G30 with cutter compensation active (cancel with G40)", blk, "G")
-        if code == 300 and "P" in blk.words and int(blk.words["P"]) not in (1, 2):
-            raise self._err("G30 P3/P4 (third/fourth reference) is not configured", blk, "P")
-        words = blk.words
-        named = [i for i, letter in enumerate("XYZ") if letter in words]
-        if self._lathe:
-            if "U" in words:
-                named.append(0)
-            if "W" in words:
-                named.append(2)
-        ref = self._home if code == 280 else self._second_ref
-        if named:
-            mid = self._target(blk, words)
-            self._line_to(mid, None, blk, exact)
-        else:
-            named = [0, 1, 2]
-        m = list(self._mach)
-        for i in set(named):
-            m[i] = ref[i]
-        mt = (m[0], 0.0 if self._lathe else m[1], m[2])
-        self._check(mt, blk, blk.line)
-        self._out.append(StraightTraverse(blk.line, mt, exact))
-        self._mach = mt
-        self._pos = self._prog_from_machine()
-        self._moved = True
-
     def _coordinate_set(self, blk: Block) -> None:
         words = blk.words
         if "S" in words:
@@ -1406,31 +1182,6 @@ class Interpreter(CannedCycles):
             val = self._dim(blk, letter) * (0.5 if letter == "X" and self._diam else 1.0)
             self._g92[i] = self._mach[i] - w[i] - c[i] - t[i] - val
         self._refresh_offsets(resync=True)
-
-    def _g53(self, blk: Block, motion: int | None, exact: bool) -> None:
-        if not self._abs:
-            raise self._err("G53 needs absolute mode (G90)", blk, "G")
-        if self._comp is not None and self._comp.active:
-            raise self._err("G53 with cutter compensation active", blk, "G")
-        mo = motion if motion is not None else self._motion
-        if mo not in (0, 10):
-            raise self._err("G53 moves only with G0 or G1", blk, "G")
-        m = list(self._mach)
-        for letter in "XYZ":
-            if letter in blk.words:
-                val = self._dim(blk, letter) * (0.5 if letter == "X" and self._diam else 1.0)
-                m[_AXIS_OF[letter]] = val
-        mt = (m[0], 0.0 if self._lathe else m[1], m[2])
-        self._check(mt, blk, blk.line)
-        if mo == 0:
-            self._out.append(StraightTraverse(blk.line, mt, exact))
-        else:
-            self._out.append(StraightFeed(blk.line, mt, self._feed(blk), exact))
-        if motion is not None:
-            self._motion = motion
-        self._mach = mt
-        self._pos = self._prog_from_machine()
-        self._moved = True
 
     # --- subprograms ------------------------------------------------------------------
 
@@ -1483,18 +1234,6 @@ class Interpreter(CannedCycles):
             self._frames.append(nf)
 
 
-def _put(u: int, v: int, cu: float, cv: float) -> tuple[float, float, float]:
-    p = [0.0, 0.0, 0.0]
-    p[u], p[v] = cu, cv
-    return (p[0], p[1], p[2])
-
-
-_STOPS = {
-    0: StopKind.PROGRAM_STOP,
-    1: StopKind.OPTIONAL_STOP,
-    2: StopKind.PROGRAM_END,
-    30: StopKind.PROGRAM_END_REWIND,
-}
 CHECK_MAX_ERRORS = 1000
 
 

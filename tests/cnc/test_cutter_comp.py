@@ -750,3 +750,27 @@ def test_corner_arc_checked_against_a_curling_arc_after_it():
     with pytest.raises(NcError) as e:
         run("right", 1.0, segs, cancel=L(p2, (-20, -20), 4))
     assert e.value.line == 3 and "line 3" in e.value.message
+
+
+def test_finish_ends_a_pending_g40_without_a_cancel_move() -> None:
+    # G40 then G28/G53/a plane change before any in-plane move: the held element ends at its
+    # perpendicular offset and compensation is off; the next segment passes uncompensated.
+    cc = CutterCompensation()
+    cc.start("left", 1.0)
+    out = cc.push(UP) + cc.push(L((0, 0), (10, 0), 2))
+    cc.cancel()
+    assert cc.active and cc.cancelling
+    out += cc.finish()
+    assert not cc.active and not cc.cancelling
+    assert [(s.role, s.end) for s in out][-1] == ("contour", (10.0, 1.0))
+    nxt = L((10, 0), (20, 0), 3)
+    assert cc.push(nxt) == [nxt]
+
+
+def test_finish_with_compensation_on_is_a_flush() -> None:
+    cc = CutterCompensation()
+    cc.start("left", 1.0)
+    cc.push(UP)
+    cc.push(L((0, 0), (10, 0), 2))
+    assert cc.finish()[-1].end == (10.0, 1.0)
+    assert cc.active and not cc.cancelling

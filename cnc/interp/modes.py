@@ -1,0 +1,100 @@
+"""Modal settings: units, feed mode, F, spindle mode, S, plane, distance, path control.
+
+Code handlers of cnc.interp.codes: `handler(ip, run)` with the interpreter context `ip`
+(cnc.interp.context.Context) and the block in execution `run`.
+"""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING
+
+from cnc.canon import PathMode, SetPathMode
+from cnc.interp.gnum import G20, G61, G90, G90_1, G95, G96, G99
+
+if TYPE_CHECKING:
+    from cnc.interp.context import BlockRun, Context
+
+INCH = 25.4
+
+
+def units(ip: Context, run: BlockRun) -> None:
+    code = run.g["units"]
+    inch = code == G20
+    if inch != ip._inch:
+        if ip._moved:
+            raise ip._err(
+                "G20/G21 unit change after motion (use one unit per program)",
+                run.blk,
+                "G",
+                run.gcol["units"],
+            )
+        ip._inch = inch
+        ip._scale = INCH if inch else 1.0
+
+
+def feed_mode(ip: Context, run: BlockRun) -> None:
+    ip._per_rev = run.g["feed_mode"] in (G95, G99)  # lathe G99: per revolution
+
+
+def feed_word(ip: Context, run: BlockRun) -> None:
+    ip._set_feed(run.blk, run.words["F"])
+
+
+def spindle_mode(ip: Context, run: BlockRun) -> None:
+    css = run.g["spindle_mode"] == G96
+    if css != ip._css:
+        ip._css = css
+        run.spindle_changed = True
+        if not css and "S" not in run.words:
+            ip._s = ip._rpm_now_from(ip._s, True)  # G97 keeps the speed turning now
+
+
+def speed_word(ip: Context, run: BlockRun) -> None:
+    nonmodal = run.rows.get("nonmodal")
+    if nonmodal is not None and "S" in nonmodal.words:
+        return  # G92 S / lathe G50 S: the maximum spindle speed, set by that code
+    s = run.words["S"]
+    if s < 0:
+        raise ip._err("S must not be negative", run.blk, "S")
+    ip._s = s * (0.3048 if ip._inch and ip._css else 1.0)  # G96 in inch: ft/min -> m/min
+    run.spindle_changed = True
+
+
+def plane(ip: Context, run: BlockRun) -> None:
+    code = run.g["plane"]
+    if code == ip._plane:
+        return
+    if ip._comp_engaged():
+        raise ip._err("plane change while cutter compensation is active", run.blk, "G")
+    if ip._xf.rot:
+        raise ip._err("plane change while G68 rotation is active", run.blk, "G")
+    ip._set_plane(code)
+
+
+def distance(ip: Context, run: BlockRun) -> None:
+    g = run.g
+    d = g.get("distance")
+    if d is not None:
+        ip._abs = d == G90
+
+
+def arc_distance(ip: Context, run: BlockRun) -> None:
+    ip._arc_abs = run.g["arc_distance"] == G90_1
+
+
+def return_level(ip: Context, run: BlockRun) -> None:
+    ip._retract = run.g["return_level"]
+
+
+def path_mode(ip: Context, run: BlockRun) -> None:
+    code = run.g["path_mode"]
+    ip._path = code
+    if code == G61:
+        ip._emit(SetPathMode(run.line, PathMode.EXACT_STOP))
+        return
+    tol = ip.params.default_path_tolerance
+    if "P" in run.words:
+        tol = ip._dim(run.blk, "P")
+        if tol < 0:
+            raise ip._err("G64 P tolerance must not be negative", run.blk, "P")
+    ip._emit(SetPathMode(run.line, PathMode.CONTINUOUS, tol))
