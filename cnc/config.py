@@ -318,6 +318,7 @@ class MachineConfig(_Section):
             lookahead=self.lookahead,
             ipo_cycle_s=self.ipo_cycle_ms / 1000.0,
             second_reference_mm=second,
+            max_spindle_rpm=self.spindle.max_rpm,
         )
 
 
