@@ -339,9 +339,10 @@ class MachineConfig(_Section):
     plc: PlcConfig = Field(default_factory=PlcConfig, description="The PLC section.")
     can: CanConfig = Field(default_factory=CanConfig, description="The CAN bus section.")
     ports: PortsConfig = Field(default_factory=PortsConfig, description="The faces' ports section.")
-    machine_data: MachineDataConfig = Field(
+    machine_data: MachineDataConfig | None = Field(
         default_factory=MachineDataConfig,
-        description="The machine data section: tools, work offsets, power-on unit.",
+        description="The machine data section: tools, work offsets, power-on unit; null ="
+        " every offset 0 and no tools (programs in machine coordinates).",
     )
 
     @property
@@ -841,6 +842,8 @@ def _check_machine_data(name: tuple[Any, ...], m: MachineConfig) -> list[tuple[t
 
     out: list[tuple[tuple, str]] = []
     md = m.machine_data
+    if md is None:
+        return out
     base = (*name, "machine_data")
     for key, vec in md.work_offsets.items():
         try:

@@ -354,6 +354,12 @@ class Interpreter(CannedCycles):
 
     # --- running ----------------------------------------------------------------------
 
+    def check_all(self, lines: Iterable[str] | str) -> list[NcError]:
+        """Interpret a whole program carrying on after errors; ALL its errors (see `check`)."""
+        for _ in self._run(lines, recover=True):
+            pass
+        return self.errors
+
     def run(self, lines: Iterable[str] | str) -> Iterator[CanonCommand]:
         """Interpret `lines` lazily, yielding canonical commands as blocks are read.
 
@@ -1495,12 +1501,17 @@ class Interpreter(CannedCycles):
         w = self._wofs[self._wcs]
         c = self._wofs[0]
         t = self._tlo
+        g92 = list(self._g92)
         for letter in named:
             i = _AXIS_OF[letter]
             val = self._dim(blk, letter) * (0.5 if letter == "X" and self._diam else 1.0)
-            self._g92[i] = self._mach[i] - w[i] - c[i] - t[i] - val
+            g92[i] = self._mach[i] - w[i] - c[i] - t[i] - val
         if self._md is not None:
-            self._md.set_g92(self._g92)  # the shift outlives the program, as on a control
+            try:
+                self._md.set_g92(g92)  # the shift outlives the program, as on a control
+            except ValueError as e:
+                raise self._err(f"G92 shift {e}", blk, "G") from None
+        self._g92 = g92
         self._refresh_offsets(resync=True)
 
     def _g53(self, blk: Block, motion: int | None, exact: bool) -> None:
@@ -1617,6 +1628,4 @@ def check(
         block_delete=block_delete,
         machine_data=machine_data,
     )
-    for _ in interp._run(lines, recover=True):
-        pass
-    return interp.errors
+    return interp.check_all(lines)

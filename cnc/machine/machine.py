@@ -47,6 +47,8 @@ class Machine:
         parameters) is loaded from `<state_dir>/<name>.machine-data.json` when the file
         exists (else the configuration's `machine_data` section) and saved there atomically
         whenever it changed and no program is in cycle, and at close.
+    machine_data: a cnc.machine_data.MachineData to start with instead of the
+        configuration's `machine_data` section (a saved file in state_dir still wins).
     """
 
     def __init__(
@@ -65,6 +67,7 @@ class Machine:
         epoch: float = 1_800_000_000.0,
         substep: float | None = None,
         state_dir: str | None = None,
+        machine_data=None,
     ) -> None:
         from plc.machine_io import machine_plc
         from plc.runtime import RuntimeConfig
@@ -92,7 +95,10 @@ class Machine:
         )
         self.memory = ProgramMemory(config.program_memory_bytes)
         factory = controller_factory or controller_class()
-        self.controller = factory(config, self.memory)
+        if machine_data is not None:  # a given setup instead of the configuration's
+            self.controller = factory(config, self.memory, machine_data=machine_data)
+        else:
+            self.controller = factory(config, self.memory)
         self.machine_data_file = None
         self._md_saved = -1
         md = getattr(self.controller, "machine_data", None)

@@ -63,10 +63,15 @@ def test_g43_h7_on_a_running_machine_uses_tool_7s_length() -> None:
 
 
 def test_machine_data_comes_from_the_config_section() -> None:
-    rig = Rig()
-    md = rig.ctl.machine_data
-    cfg = rig.config.machine_data
-    assert md == cfg.initial()
+    from cnc.config import builtin_machine
+    from cnc.controller import Controller
+    from cnc.program_memory import ProgramMemory
+
+    cfg = builtin_machine("mill3")
+    ctl = Controller(cfg, ProgramMemory(4096))
+    assert ctl.machine_data == cfg.machine_data.initial()
+    assert ctl.machine_data.work_offsets[1] == (-300.0, -200.0, -300.0)
+    assert Controller(Rig().config, ProgramMemory(4096)).machine_data == MachineData()
 
 
 def test_operator_input_refused_in_cycle_and_validated() -> None:

@@ -361,3 +361,10 @@ def test_offsets_file_and_apply(tmp_path) -> None:
     assert set(got.tools) == {7} and got.work_offsets[1] == (5.0, 5.0, 5.0)
     assert got.work_offsets[2] == (1.0, 2.0, 3.0) and got.g92 == (0.0, 0.0, 1.0)
     assert set(base.tools) == {1}  # the original is left alone
+
+
+def test_g92_shift_out_of_range_is_an_nc_error_and_changes_nothing() -> None:
+    md = MachineData()
+    with pytest.raises(NcError, match="G92 shift"):
+        run("G92 X280300\n", md)
+    assert md.g92 == (0.0, 0.0, 0.0)
