@@ -227,6 +227,9 @@ class Controller:
         self._load = 0.0
         self._rpm = 0.0
         self._cutting = False
+        # tool life: the tool M6 put in the spindle and its cutting time not yet booked
+        self._life_tool = 0
+        self._life_cut_s = 0.0
         self._fo_applied = -1.0
         self._ro_applied = -1.0
         self._status = MachineStatus()
@@ -674,6 +677,7 @@ class Controller:
         self._event(f"reset ({who}); {len(kept)} alarm(s) remain")
 
     def _abort_now(self, final: str) -> None:
+        self._book_cut_time()
         run = self._run
         self._run = None
         self._final = final
@@ -1150,7 +1154,14 @@ class Controller:
         ):
             self._finish(run)
 
+    def _book_cut_time(self) -> None:
+        """Book the cutting time since the last tool change on that tool (its life)."""
+        if self._life_cut_s > 0.0 and self._life_tool:
+            self.machine_data.count_use(self._life_tool, cut_time_s=self._life_cut_s)
+        self._life_cut_s = 0.0
+
     def _finish(self, run: _Run) -> None:
+        self._book_cut_time()
         self._run = None
         if run.end_kind is not None and not self.dry_run and run.kind != "MDI":
             self.part_count += 1
@@ -1189,7 +1200,9 @@ class Controller:
         elif isinstance(cmd, canon.ToolChange):
             steps.append(("M", 6))
             if not self.dry_run:
+                self._book_cut_time()
                 self.machine_data.count_use(cmd.tool)  # tool life: one more use
+                self._life_tool = cmd.tool
         elif isinstance(cmd, canon.AuxFunction):
             steps.append(("M", cmd.code))
         elif isinstance(cmd, canon.ProgramStop):
@@ -1280,6 +1293,8 @@ class Controller:
             self.run_time += dt
         if self._cutting:
             self.cutting_time += dt
+            if not self.dry_run:
+                self._life_cut_s += dt
         if self._rpm > 0.0:
             self.spindle_time += dt
 

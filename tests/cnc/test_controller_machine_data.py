@@ -91,12 +91,17 @@ def test_operator_input_refused_in_cycle_and_validated() -> None:
     assert rig.ctl.machine_data.work_offsets[9] == (1.0, 2.0, 3.0)
 
 
-def test_tool_change_counts_a_use() -> None:
-    prog = "%\nO1004\nT3 M6\nM30\n%\n"
-    rig = Rig(programs={1004: prog}, machine_data=MachineData({3: ToolData(life_uses=5)}))
+def test_tool_change_counts_a_use_and_feed_moves_its_cutting_time() -> None:
+    prog = "%\nO1004\nT3 M6\nG90 G0 X-10 Y-10 Z-10\nG1 X-110 F3000\nT4 M6\nM30\n%\n"
+    md = MachineData({3: ToolData(life_uses=5), 4: ToolData()})
+    rig = Rig(programs={1004: prog}, machine_data=md)
     rig.home()
     rig.run_program(1004)
-    assert rig.ctl.machine_data.tools[3].uses == 1
+    t3, t4 = md.tools[3], md.tools[4]
+    assert (t3.uses, t4.uses) == (1, 1)
+    # 100 mm at 3000 mm/min: 2 s, a little more with the ramps
+    assert 1.9 < t3.cut_time_s < 2.5 and t4.cut_time_s == 0.0
+    assert rig.ctl.cutting_time == pytest.approx(t3.cut_time_s)
 
 
 def test_machine_keeps_machine_data_across_restarts(tmp_path) -> None:
