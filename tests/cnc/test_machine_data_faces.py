@@ -96,3 +96,31 @@ def test_a_body_cut_short_or_not_json_is_refused(machine) -> None:
         assert reply.startswith(f"ERR {ALARM_BAD_DATA} body is not ASCII JSON")
         s.sendall(b"TOOLS PUT\n")
         assert "needs the body size" in s.recv(4096).decode()
+
+
+def test_the_hosts_tool_data_is_sent_with_fmscell_dnc(machine, tmp_path) -> None:
+    from typer.testing import CliRunner
+
+    from server.cli import app
+
+    runner = CliRunner()
+    args = ["--database-url", f"sqlite:///{tmp_path / 'host.db'}"]
+    dnc = f"127.0.0.1:{machine.faces.ports()['dnc']}"
+    added = runner.invoke(app, ["dnc", "machine", "mill1", "--kind", "mill", "--dnc", dnc, *args])
+    assert added.exit_code == 0, added.output
+    table = tmp_path / "tools.csv"
+    table.write_text("number,length,radius,comment\n12,-22.5,6,12 mm end mill\n")
+    res = runner.invoke(app, ["dnc", "tools", "-m", "mill1", "--send", str(table), *args])
+    assert res.exit_code == 0, res.output
+    assert json.loads(res.stdout) == {"12": pytest.approx(json.loads(res.stdout)["12"])}
+    assert machine.controller.machine_data.tools[12].comment == "12 mm end mill"
+    ofs = tmp_path / "ofs.csv"
+    ofs.write_text("offset,x,y,z\nG55,-1,-2,-3\n")
+    res = runner.invoke(app, ["dnc", "offsets", "-m", "mill1", "--send", str(ofs), *args])
+    assert res.exit_code == 0, res.output
+    assert machine.controller.machine_data.work_offsets[2] == (-1.0, -2.0, -3.0)
+    table.write_text("number,length\n12,x\n")
+    res = runner.invoke(app, ["dnc", "tools", "-m", "mill1", "--send", str(table), *args])
+    assert res.exit_code == 2 and f"{table}:2:4: length: 'x' is not a number" in res.stderr
+    res = runner.invoke(app, ["dnc", "tools", "-m", "mill1", *args])
+    assert res.exit_code == 0 and list(json.loads(res.stdout)) == ["12"]
