@@ -12,7 +12,6 @@ Work offsets are indexed as the interpreter keeps them (`_wofs`): 0 = common / E
 
 from __future__ import annotations
 
-import copy
 import dataclasses
 import math
 from collections.abc import Iterable, Mapping
@@ -230,8 +229,18 @@ class MachineData:
         return {n: t.offset() for n, t in self.tools.items()}
 
     def copy(self) -> MachineData:
-        """An independent copy (a check or a plan works on one; the controller keeps its own)."""
-        return copy.deepcopy(self)
+        """An independent copy (a check or a plan works on one; the controller keeps its own).
+
+        Taken from snapshots of the table and the list (one C-level copy each), so a face
+        thread may copy while the machine's thread books tool life."""
+        out = MachineData.__new__(MachineData)
+        out.tools = dict(self.tools)  # ToolData entries are frozen: shared safely
+        out.work_offsets = list(self.work_offsets)
+        out.g92 = self.g92
+        out.power_on_units = self.power_on_units
+        out.decimal_style = self.decimal_style
+        out.revision = self.revision
+        return out
 
     def __eq__(self, other: object) -> bool:
         return isinstance(other, MachineData) and self.to_dict() == other.to_dict()
@@ -311,11 +320,13 @@ class MachineData:
     # --- JSON form ----------------------------------------------------------------------
 
     def tools_dict(self) -> dict[str, dict[str, Any]]:
-        return {str(n): dataclasses.asdict(self.tools[n]) for n in sorted(self.tools)}
+        tools = dict(self.tools)  # a snapshot: another thread may book tool life meanwhile
+        return {str(n): dataclasses.asdict(tools[n]) for n in sorted(tools)}
 
     def offsets_dict(self) -> dict[str, Any]:
+        offsets = list(self.work_offsets)
         return {
-            "work_offsets": {work_offset_name(i): list(v) for i, v in enumerate(self.work_offsets)},
+            "work_offsets": {work_offset_name(i): list(v) for i, v in enumerate(offsets)},
             "g92": list(self.g92),
         }
 

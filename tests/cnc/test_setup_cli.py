@@ -101,8 +101,9 @@ def test_simulate_takes_offsets_and_warns_about_units(tmp_path) -> None:
 @pytest.mark.skipif(not GCODE_CORPUS.exists(), reason=MISSING)
 def test_an_ordinary_corpus_program_plans_without_options() -> None:
     # a Fusion 360 program, G54 at the part, Z10 clearance: inside mill3's travel as shipped
-    res = runner.invoke(nc_app, ["check", str(GCODE_CORPUS / "led-1024-block.nc")])
-    assert res.exit_code == 0, res.output
+    for name in ("led-1024-block.nc", "led-1089-wall.nc", "led-1040-sq.nc"):
+        res = runner.invoke(nc_app, ["check", str(GCODE_CORPUS / name)])
+        assert res.exit_code == 0, res.output
     res = runner.invoke(nc_app, ["plan", str(GCODE_CORPUS / "led-1024-block.nc"), "--json"])
     assert res.exit_code == 0, res.output
     assert json.loads(res.stdout)["moves"] > 10
