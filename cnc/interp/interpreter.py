@@ -1373,9 +1373,26 @@ class Interpreter(CannedCycles):
         """G10 data setting (Fanuc): L2 P0..P6 work offsets (P0 = EXT), L20 P1..P48 the
         G54.1 extended offsets; L1 / L10 / L11 / L12 / L13 P<n> R tool offsets (memory A,
         length geometry / wear, radius geometry / wear; lathe: X Z for the tip offset, R the
-        nose radius, Q the tip). Values are absolute in G90, added in G91. With machine
-        data the change is written there for good."""
+        nose radius, Q the tip; or the T-series form G10 P X Z R Q / U W). Values are
+        absolute in G90, added in G91. With machine data the change is written there for
+        good."""
         words = blk.words
+        if "L" not in words and self._lathe and "P" in words:
+            # Fanuc T series: G10 P<n> X Z R Q (U W add), P1..999 the wear,
+            # P10001..10999 the geometry of offset n
+            p = self._int_word(blk, "P")
+            n = p - 10000 if p > 10000 else p
+            if not 1 <= n <= MAX_TOOL_OFFSET:
+                raise self._err(
+                    f"G10 P{p}: P must be 1..{MAX_TOOL_OFFSET} (wear) or"
+                    f" 10001..{10000 + MAX_TOOL_OFFSET} (geometry)",
+                    blk,
+                    "P",
+                )
+            if not any(letter in words for letter in "XZUWRQ"):
+                raise self._err(f"G10 P{p} needs X, Z, U, W, R or Q", blk, "G")
+            self._set_tool_offset(blk, 10 if p > 10000 else 11, n)
+            return
         if "L" not in words:
             raise self._err("G10 needs L (L2/L20: work offset, L1/L10..L13: tool offset)", blk, "G")
         lv = self._int_word(blk, "L")
@@ -1412,7 +1429,7 @@ class Interpreter(CannedCycles):
                 raise self._err(
                     f"G10 L{lv} P{p}: offset number must be 1..{MAX_TOOL_OFFSET}", blk, "P"
                 )
-            lathe_words = self._lathe and ("X" in words or "Z" in words or "Q" in words)
+            lathe_words = self._lathe and any(letter in words for letter in "XZUWQ")
             if "R" not in words and not lathe_words:
                 need = "R, X or Z" if self._lathe else "R"
                 raise self._err(f"G10 L{lv} needs {need} (offset value)", blk, "G")
@@ -1426,21 +1443,26 @@ class Interpreter(CannedCycles):
         # which fields this L sets: (length or radius, geometry or wear); lathe X/Z go to
         # geometry with L1/L10/L12, wear with L11/L13
         fields: dict[str, float] = {}
+        added: set[str] = set()  # fields given incrementally (G91, lathe U/W)
         if "R" in words:
             key = "length" if lv in (1, 10, 11) and not self._lathe else "radius"
             fields[key + ("_wear" if wear else "")] = self._dim(blk, "R")
         if self._lathe:
-            for letter, key in (("X", "x"), ("Z", "z")):
+            for letter, key in (("X", "x"), ("Z", "z"), ("U", "x"), ("W", "z")):
                 if letter in words:
-                    val = self._dim(blk, letter) * (0.5 if letter == "X" and self._diam else 1.0)
+                    val = self._dim(blk, letter) * (0.5 if letter in "XU" and self._diam else 1.0)
                     fields[key + ("_wear" if wear else "")] = val
+                    if letter in "UW":
+                        added.add(key + ("_wear" if wear else ""))
+        if not self._abs:
+            added.update(fields)
         md = self._md
         if md is not None:
             cur = md.tools.get(p)
             new = {}
             for k, v in fields.items():
                 base = getattr(cur, k) if cur is not None else 0.0
-                new[k] = v if self._abs else base + v
+                new[k] = base + v if k in added else v
             if lv == 1:  # memory A: one value per number, no separate wear
                 new.update({k: 0.0 for k in ("length_wear", "radius_wear") if k not in new})
             if "Q" in words:
@@ -1456,7 +1478,7 @@ class Interpreter(CannedCycles):
         vals = {"length": cur_off.length, "radius": cur_off.radius, "x": cur_off.x, "z": cur_off.z}
         for k, v in fields.items():
             base_key = k.removesuffix("_wear")
-            vals[base_key] = v if self._abs else vals[base_key] + v
+            vals[base_key] = vals[base_key] + v if k in added else v
         self._tools[p] = ToolOffset(vals["length"], vals["radius"], vals["x"], vals["z"])
 
     def _reference_return(self, blk: Block, code: int, exact: bool) -> None:

@@ -368,3 +368,26 @@ def test_g92_shift_out_of_range_is_an_nc_error_and_changes_nothing() -> None:
     with pytest.raises(NcError, match="G92 shift"):
         run("G92 X280300\n", md)
     assert md.g92 == (0.0, 0.0, 0.0)
+
+
+@pytest.mark.parametrize(
+    "prog,want",
+    [
+        # Fanuc T series: P10000+n geometry, P n wear; X in diameter, U/W add
+        ("G10 P10003 X-40 Z12 R0.4 Q3\n", {"x": -20.0, "z": 12.0, "radius": 0.4, "tip": 3}),
+        ("G10 P3 X0.06 Z-0.02\n", {"x_wear": 0.03, "z_wear": -0.02}),
+        ("G10 P10003 X-40\nG10 P10003 U2 W-1\n", {"x": -19.0, "z": -1.0}),
+        ("G10 P3 U0.02\nG10 P3 U0.02\n", {"x_wear": 0.02}),
+    ],
+)
+def test_lathe_g10_p_form(prog, want) -> None:
+    md = MachineData()
+    run(prog, md, LATHE)
+    t = md.tools[3]
+    assert {k: getattr(t, k) for k in want} == pytest.approx(want)
+
+
+@pytest.mark.parametrize("prog", ["G10 P0 X1\n", "G10 P10000 X1\n", "G10 P1000 X1\n", "G10 P3\n"])
+def test_lathe_g10_p_form_refusals(prog) -> None:
+    with pytest.raises(NcError, match="G10 P"):
+        run(prog, MachineData(), LATHE)
