@@ -319,3 +319,16 @@ def tools_csv(data: MachineData) -> str:
                 for f in TOOL_FIELDS]  # fmt: skip
         lines.append(f"{n}," + ",".join(vals))
     return "\n".join(lines) + "\n"
+
+
+def offsets_csv(data: MachineData) -> str:
+    """The work offsets that are set (and G92 when set) as the CSV `parse_offsets` reads."""
+    from cnc.machine_data.core import work_offset_name
+
+    lines = ["offset,x,y,z"]
+    for i, (x, y, z) in enumerate(data.work_offsets):
+        if (x, y, z) != (0.0, 0.0, 0.0):
+            lines.append(f"{work_offset_name(i)},{x!r},{y!r},{z!r}")
+    if data.g92 != (0.0, 0.0, 0.0):
+        lines.append("G92," + ",".join(repr(v) for v in data.g92))
+    return "\n".join(lines) + "\n"

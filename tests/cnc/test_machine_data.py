@@ -18,6 +18,7 @@ from cnc.machine_data import (
     ToolData,
     apply_files,
     load,
+    offsets_csv,
     parse_offsets,
     parse_tools,
     save,
@@ -391,3 +392,11 @@ def test_lathe_g10_p_form(prog, want) -> None:
 def test_lathe_g10_p_form_refusals(prog) -> None:
     with pytest.raises(NcError, match="G10 P"):
         run(prog, MachineData(), LATHE)
+
+
+def test_offsets_csv_round_trip(tmp_path) -> None:
+    md = MachineData(work_offsets={1: (-300.0, -200.0, -300.0), 9: (1.5, 0.0, -2.0)})
+    md.set_g92((0.0, 0.0, 0.25))
+    path = tmp_path / "o.csv"
+    path.write_text(offsets_csv(md))
+    assert apply_files(MachineData(), offsets=path) == md
