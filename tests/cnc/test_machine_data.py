@@ -7,6 +7,8 @@ import os
 from dataclasses import replace
 
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from cnc.canon import Spindle, StraightTraverse
 from cnc.errors import NcError
@@ -400,3 +402,41 @@ def test_offsets_csv_round_trip(tmp_path) -> None:
     path = tmp_path / "o.csv"
     path.write_text(offsets_csv(md))
     assert apply_files(MachineData(), offsets=path) == md
+
+
+# --- property: a refused change never changes anything; every accepted one round-trips ---
+
+
+_VALUES = st.one_of(
+    st.floats(-2000.0, 2000.0, allow_nan=False),
+    st.just(float("nan")),
+    st.just(float("inf")),
+    st.text(max_size=3),
+)
+_OPS = st.lists(
+    st.one_of(
+        st.tuples(st.just("tool"), st.integers(-2, 1002), st.sampled_from(
+            ["length", "radius_wear", "x", "tip", "uses", "bogus"]), _VALUES),
+        st.tuples(st.just("offset"), st.integers(-2, 56), st.integers(0, 2), _VALUES),
+    ),
+    max_size=25,
+)  # fmt: skip
+
+
+@settings(max_examples=150, deadline=None)
+@given(_OPS)
+def test_refused_changes_change_nothing_and_accepted_ones_round_trip(ops) -> None:
+    md = MachineData()
+    for kind, number, key, value in ops:
+        before = md.to_dict()
+        try:
+            if kind == "tool":
+                md.update_tool(number, **{key: value})
+            else:
+                xyz = [0.0, 0.0, 0.0]
+                xyz[key] = value
+                md.set_work_offset(number, xyz)
+        except MachineDataError as e:
+            assert e.pointer.startswith("/")
+            assert md.to_dict() == before
+    assert MachineData.from_dict(json.loads(json.dumps(md.to_dict()))) == md
