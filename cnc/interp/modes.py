@@ -19,6 +19,7 @@ INCH = 25.4
 
 def units(ip: Context, run: BlockRun) -> None:
     code = run.g["units"]
+    ip.units_programmed = True  # `nc check` warns about programs that never say G20/G21
     inch = code == G20
     if inch != ip._inch:
         if ip._moved:
