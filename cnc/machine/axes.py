@@ -214,6 +214,12 @@ class CanopenAxes:
                     self._fresh += ((axis, 0, f"drive sequence {cmd}: {exc}"),)
             self._note_faults(self.group.take_faults())
         targets = {n: v for n, v in outputs.targets.items() if n in self.drives}
+        if cmd == "home":
+            # the controller computed this cycle's targets before the homing ran: for the
+            # axes just homed they are positions in the old (unreferenced) frame, a jump of
+            # up to the whole travel; those axes hold where homing left them
+            for n in outputs.home_axes or self.names:
+                targets.pop(n, None)
         for n, v in targets.items():
             if not math.isfinite(v):
                 raise ValueError(f"axis {n}: target {v!r} is not finite")
