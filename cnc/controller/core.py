@@ -866,7 +866,11 @@ class Controller:
                 or self._t - self._enable_sent_at >= self.settings.enable_retry_s - 1e-9
             )
             free = self._axis_cmd == "none"  # a fault reset or homing goes first
-            if due and free and not self._alarms.has(al.FOLLOWING_ERROR):
+            # with a drive, bus or following-error alarm active the drives stay off until
+            # the operator's reset (it sends the fault reset first): enabling a drive in FAULT
+            # only fails again, every retry period, with an alarm of its own
+            held = (al.FOLLOWING_ERROR, al.DRIVE_FAULT, al.BUS_FAULT)
+            if due and free and not any(self._alarms.has(n) for n in held):
                 self._axis("enable")
                 self._enable_sent_at = self._t
         elif not want and self._want_enable and fb.enabled and not self._estop:

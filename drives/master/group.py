@@ -105,6 +105,7 @@ class _Axis:
         self.hb_last: float | None = None
         self.hb_lost = False
         self.active: list[AxisFault] = []
+        self.restarting = False  # the master itself asked for the boot-up (not a fault)
 
 
 class _Line:
@@ -149,6 +150,18 @@ class _Line:
         elif isinstance(self.bus, SimBus):
             with contextlib.suppress(ValueError):  # already removed
                 self.bus.remove_listener(self._receive)
+
+
+#: What the operator does when a fault reset is refused because the cause is still there.
+REMEDIES = {
+    0x2310: "the power stage is shorted: the drive needs service",
+    0x2350: "I2t above 80 %: let the motor rest (a few seconds unloaded), then reset",
+    0x3130: "no mains at the drive: restore the supply, then reset",
+    0x3210: "DC link above the chopper level: check the mains and the brake chopper",
+    0x3220: "DC link below 250 V: restore the mains, then reset",
+    0x4310: "winding above 130 degC: let the motor cool, then reset",
+    0x7305: "encoder signal lost: check the encoder cable, then reset and home",
+}
 
 
 class AxisGroup:
@@ -362,7 +375,7 @@ class AxisGroup:
             if state == 0:
                 axis.booted = True
                 axis.known = False
-                if self._running:
+                if self._running and not axis.restarting:
                     self._report(
                         axis, 0, 0, "drive rebooted (boot-up seen): power cycle or reset", "bootup"
                     )
@@ -802,6 +815,7 @@ class AxisGroup:
     def fault_reset(self, axes: Iterable[str] | None = None, timeout_s: float = 0.1) -> None:
         """Fault reset edge (0x00 then 0x80) for faulted axes; AxisError if one stays in FAULT."""
         selected = self._select(axes)
+        self.restart([a.name for a in selected if self._needs_restart(a)])
         with self._cond:  # faults of drives that are not in FAULT (e.g. a heartbeat) just clear
             for axis in selected:
                 if not axis.sw & power.SW_FAULT:
@@ -809,6 +823,7 @@ class AxisGroup:
         chosen = [a for a in selected if a.sw & power.SW_FAULT]
         if not chosen:
             return
+        t_reset = self._now()  # the faults this reset acknowledges were reported by now
         for axis in chosen:
             axis.cw = power.CW_DISABLE_VOLTAGE
         self.cycle()
@@ -825,8 +840,10 @@ class AxisGroup:
             raise AxisError(
                 "; ".join(
                     f"axis {a.name} (node {a.node_id}) still in FAULT after fault reset "
-                    f"(0x603F={self._error_code(a)}): the cause is still present"
+                    f"(0x603F={code}): the cause is still present"
+                    + (f": {REMEDIES[int(code, 16)]}" if int(code, 16) in REMEDIES else "")
                     for a in stuck
+                    for code in [self._error_code(a).replace("unreadable", "0x0000")]
                 ),
                 tuple(a.name for a in stuck),
             ) from None
@@ -835,8 +852,70 @@ class AxisGroup:
                 axis.cw = power.CW_DISABLE_VOLTAGE
         with self._cond:
             for axis in chosen:
-                axis.active.clear()
+                # a fault the drive raised after the reset (its EMCY came in while we waited)
+                # is a new one: it stays, and the drive's statusword says FAULT again
+                axis.active = [f for f in axis.active if f.time > t_reset]
                 axis.hb_lost = False
+
+    @staticmethod
+    def _needs_restart(axis: _Axis) -> bool:
+        """The drive rebooted (power cycle, its own reset) or sends no TPDO: its PDO mapping
+        and heartbeat settings are gone (CiA 301 defaults after a reset)."""
+        return not axis.known or any(f.source == "bootup" for f in axis.active)
+
+    def restart(self, axes: Iterable[str] | None = None, timeout_s: float | None = None) -> None:
+        """Bring drives back onto the cyclic traffic after a reboot or a bus-off: NMT reset
+        communication, wait for the boot-up, write the configuration again by SDO, NMT start,
+        wait for the first TPDO. AxisError names a drive that does not come back."""
+        chosen = self._select(axes)
+        if not chosen:
+            return
+        limit = timeout_s if timeout_s is not None else self.boot_timeout_s
+        with self._cond:
+            for axis in chosen:
+                axis.booted = False
+                axis.known = False
+                axis.restarting = True
+        try:
+            self._restart(chosen, limit)
+        finally:
+            with self._cond:
+                for axis in chosen:
+                    axis.restarting = False
+        logger.info("restarted %s", ", ".join(a.name for a in chosen))
+
+    def _restart(self, chosen: list[_Axis], limit: float) -> None:
+        for axis in chosen:
+            line = self._lines[axis.cfg.line]
+            line.network.send_message(0x000, bytes([0x82, axis.node_id]))
+
+        def names(which: list[_Axis]) -> str:
+            return ", ".join(f"axis {a.name} (node {a.node_id})" for a in which)
+
+        self._wait(
+            lambda: all(a.booted for a in chosen),
+            limit,
+            lambda: f"no boot-up within {limit} s after NMT reset communication from "
+            + names([a for a in chosen if not a.booted]),
+        )
+        for axis in chosen:
+            for index, sub, value in self._configuration(axis):
+                self._sdo_write(axis, index, sub, value)
+            self._lines[axis.cfg.line].network.send_message(0x000, bytes([0x01, axis.node_id]))
+        now = self._now()
+        with self._cond:
+            for axis in chosen:
+                axis.cw = power.CW_DISABLE_VOLTAGE
+                axis.hb_last = now
+                axis.hb_lost = False
+        self._run_cycles(
+            lambda fb: all(a.known for a in chosen),
+            limit,
+            "first TPDO after NMT start from " + names(chosen),
+        )
+        with self._cond:  # the boot-up and heartbeat reports are answered by the restart
+            for axis in chosen:
+                axis.active = [f for f in axis.active if f.source not in ("bootup", "heartbeat")]
 
     def disable(self, axes: Iterable[str] | None = None, timeout_s: float = 2.0) -> None:
         """Controlled stop: Disable operation (0x07, ramp per 0x605C), then Shutdown (0x06)."""
