@@ -116,6 +116,12 @@ class AlarmList:
         self._entries = keep
         return [e.alarm for e in keep]
 
+    def clear(self, number: int, axis: str | None = None) -> None:
+        """Drop the alarm `number` of `axis` (a SELF alarm whose condition ended)."""
+        self._entries = [
+            e for e in self._entries if not (e.alarm.number == number and e.alarm.axis == axis)
+        ]
+
     def nc_count(self) -> int:
         """Active alarms raised by the NC side (not mirrors of the PLC's)."""
         return sum(1 for e in self._entries if e.alarm.source != "PLC")

@@ -218,6 +218,8 @@ class Controller:
         self._ro_applied = -1.0
         self._status = MachineStatus()
         self._status_key = None
+        self._start_refused = ""  # why the last cycle start was refused (until a start/select)
+        self._unreferenced: tuple[str, ...] = ()
 
     # ================================================================ public API ===========
     @property
@@ -306,6 +308,7 @@ class Controller:
             self._plc_requests()
         self._manage_enable(fb)
         self._homing_step(fb)
+        self._watch_reference()
         if not fb.enabled or fb.homing or self._homing:
             # drives off or homing: the command follows the actual position (no jump later)
             self._cmd = dict(self._actual)
@@ -372,10 +375,15 @@ class Controller:
             raise CommandRefused(why[1])
         self.selected = number
         self._final = "READY"
+        self._start_refused = ""
         self._event(f"program O{number:04d} selected")
 
     def _cmd_cycle_start(self) -> None:
-        self._cycle_start()
+        try:
+            self._cycle_start()
+        except CommandRefused as exc:
+            self._start_refused = exc.reason
+            raise
 
     def _cmd_feed_hold(self) -> None:
         ex = self._execution()
@@ -420,6 +428,7 @@ class Controller:
         self._event(f"ACC {'on' if on else 'off'} limit {self.acc.limit_pct:g} %")
 
     def _cmd_alarm_reset(self) -> None:
+        self._start_refused = ""
         kept = self._alarms.reset(self._active_causes())
         self._event(f"alarm reset: {len(kept)} alarm(s) remain")
 
@@ -591,6 +600,7 @@ class Controller:
         self._start(_Run("AUTO", name, self._motion(), self._interpreter(name), lines))
 
     def _start(self, run: _Run) -> None:
+        self._start_refused = ""
         run.motion.set_single_block(self.single_block)
         self._run = run
         self._hold = False
@@ -630,6 +640,7 @@ class Controller:
             e.number in (al.DRIVE_FAULT, al.BUS_FAULT, al.FOLLOWING_ERROR, al.AXES_DISABLED)
             for e in self._alarms.active
         )
+        self._start_refused = ""
         kept = self._alarms.reset(self._active_causes())
         if drive_faults and not self._estop:
             self._axis("fault_reset")
@@ -687,6 +698,7 @@ class Controller:
             try:
                 self._cycle_start()
             except CommandRefused as exc:
+                self._start_refused = exc.reason
                 self._event(f"PLC: {exc.reason}")
         # the PLC alarm the NC sees: the lowest active number, mirrored as a SELF alarm
         number = int(plc.get("PlcAlarmNumber", 0)) if plc.get("PlcAlarm", False) else 0
@@ -704,6 +716,7 @@ class Controller:
             if why is None:
                 self.selected = number
                 self._final = "READY"
+                self._start_refused = ""
                 self._event(f"program O{number:04d} selected (PLC)")
                 self._select_answer = (True, 0)
             else:
@@ -904,6 +917,20 @@ class Controller:
                 return
             self._homing = ""
             self._event(f"homed {' '.join(self._homing_done)}")
+
+    def _watch_reference(self) -> None:
+        """Which axes are not referenced (power-on, E-stop, a drive that lost its position):
+        the status says so at once (`MachineStatus.unreferenced`, the SHDR `referenced` item,
+        the operator message in the event log), not first at a refused cycle start. It is a
+        state, not an alarm: homing, not RESET, ends it."""
+        ref = self._ref
+        missing = tuple(a for a in self.axes if not (ref[a] and self._fb_homed(a)))
+        if missing == self._unreferenced:
+            return
+        lost = [a for a in missing if a not in self._unreferenced]
+        if lost and not self._homing:
+            self._event(f"axis {', '.join(lost)} not referenced: home the machine (REF, home)")
+        self._unreferenced = missing
 
     def _homing_failed(self, why: str) -> None:
         self._homing = ""
@@ -1298,6 +1325,8 @@ class Controller:
             self.part_count,
             self._estop,
             self.acc.state(self._cutting),
+            self._unreferenced,
+            self._start_refused,
         )
         if key == self._status_key:
             return self._status  # nothing changed: the same snapshot (cheap when idle)
@@ -1325,6 +1354,8 @@ class Controller:
             part_count=self.part_count,
             emergency_stop="TRIGGERED" if self._estop else "ARMED",
             adaptive_control=self.acc.state(self._cutting),
+            unreferenced=self._unreferenced,
+            cycle_start_refused=self._start_refused,
         )
 
     def _event(self, text: str) -> None:

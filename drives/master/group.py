@@ -895,8 +895,10 @@ class AxisGroup:
         self._wait(
             lambda: all(a.booted for a in chosen),
             limit,
-            lambda: f"no boot-up within {limit} s after NMT reset communication from "
-            + names([a for a in chosen if not a.booted]),
+            lambda: (
+                f"no boot-up within {limit} s after NMT reset communication from "
+                + names([a for a in chosen if not a.booted])
+            ),
         )
         for axis in chosen:
             for index, sub, value in self._configuration(axis):

@@ -99,9 +99,9 @@ def _power_on() -> tuple[Machine, int]:
 def _run_program(m: Machine, number: int) -> None:
     m.command("select_program", number=number)
     m.command("cycle_start")
-    assert m.run_until(
-        lambda m: m.status.execution == "PROGRAM_COMPLETED" or m.alarms, 30.0
-    ), m.status.execution
+    assert m.run_until(lambda m: m.status.execution == "PROGRAM_COMPLETED" or m.alarms, 30.0), (
+        m.status.execution
+    )
     assert m.status.execution == "PROGRAM_COMPLETED", m.alarms
 
 
