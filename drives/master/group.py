@@ -106,6 +106,8 @@ class _Axis:
         self.hb_lost = False
         self.active: list[AxisFault] = []
         self.restarting = False  # the master itself asked for the boot-up (not a fault)
+        self.missed = 0  # consecutive SYNC cycles without this axis's TPDO1
+        self.feedback_lost = False
 
 
 class _Line:
@@ -191,6 +193,14 @@ class AxisGroup:
     following_error_every:
         Map 0x60F4 following error into TPDO2 sent every n-th SYNC (0 = not mapped,
         feedback then carries None). TPDO1 (6 bytes) cannot also hold it.
+    rpdo_deadline_ms:
+        Write 0x1400:5 (RPDO deadline, CiA 301) so a drive whose RPDO1 stops arriving faults
+        (EMCY 0x8250 -> 0x6007 reaction) after this long (0 = off).
+    feedback_timeout_cycles:
+        The master's own check of the cyclic feedback: an axis whose TPDO1 has not arrived
+        for this many consecutive SYNC cycles (lost, destroyed or late) is reported as a
+        fault 0x8100 "cyclic feedback lost" (0 = off; the heartbeat still catches a node
+        that falls silent, after 3 heartbeat periods).
     sync_watchdog:
         Write 0x1006 = IPO cycle so a drive faults (0x8100) when SYNC stops for 1.5 cycles.
     bitrate:
@@ -211,6 +221,8 @@ class AxisGroup:
         heartbeat_timeout_factor: float = 3.0,
         master_node_id: int | None = None,
         following_error_every: int = 1,
+        rpdo_deadline_ms: int = 0,
+        feedback_timeout_cycles: int = 0,
         sync_watchdog: bool = False,
         bitrate: int = 1_000_000,
         eds_path: str = EDS_PATH,
@@ -246,6 +258,14 @@ class AxisGroup:
         self.master_node_id = master_node_id
         self.following_error_every = following_error_every
         self.sync_watchdog = sync_watchdog
+        if not 0 <= rpdo_deadline_ms <= 0xFFFF:
+            raise ValueError(
+                f"axis group: rpdo_deadline_ms must be 0..65535, got {rpdo_deadline_ms}"
+            )
+        if feedback_timeout_cycles < 0:
+            raise ValueError("axis group: feedback_timeout_cycles must be >= 0")
+        self.rpdo_deadline_ms = rpdo_deadline_ms
+        self.feedback_timeout_cycles = feedback_timeout_cycles
         self.bitrate = bitrate
         self.boot_timeout_s = boot_timeout_s
         self.stats = CycleStats()
@@ -491,6 +511,7 @@ class AxisGroup:
             (0x1600, 1, 0x60400010),
             (0x1600, 2, 0x607A0020),
             (0x1600, 0, 2),
+            *([(0x1400, 5, self.rpdo_deadline_ms)] if self.rpdo_deadline_ms else []),
             (0x1400, 1, 0x200 + n),
             (0x1401, 1, off | (0x300 + n)),
             (0x1402, 1, off | (0x400 + n)),
@@ -704,6 +725,7 @@ class AxisGroup:
                         f"heartbeat lost (none for {limit * 1e3:.0f} ms)",
                         "heartbeat",
                     )
+                self._watch_feedback(axis)
                 if axis.sw & power.SW_FAULT and not axis.active:
                     self._report(
                         axis,
@@ -713,6 +735,30 @@ class AxisGroup:
                         " without an EMCY",
                         "statusword",
                     )
+
+    def _watch_feedback(self, axis: _Axis) -> None:
+        """The cyclic feedback check (under the lock): TPDO1 of this cycle seen or not."""
+        limit = self.feedback_timeout_cycles
+        if not limit or not axis.known or axis.restarting:
+            axis.missed = 0
+            return
+        if axis.rx_cycle == self.cycle_count:
+            axis.missed = 0
+            if axis.feedback_lost:
+                axis.feedback_lost = False
+                axis.active = [f for f in axis.active if f.source != "feedback"]
+            return
+        axis.missed += 1
+        if axis.missed >= limit and not axis.feedback_lost:
+            axis.feedback_lost = True
+            self._report(
+                axis,
+                0x8100,
+                0,
+                f"cyclic feedback lost: no TPDO1 for {axis.missed} SYNC cycles "
+                f"({axis.missed * self.ipo_cycle_s * 1e3:.0f} ms; lost, destroyed or late frames)",
+                "feedback",
+            )
 
     # ------------------------------------------------------------------ waiting
     def _wait(self, done, timeout_s: float, message) -> None:
