@@ -199,3 +199,37 @@ def test_a_reset_while_the_winding_is_hot_is_refused_saying_to_let_it_cool() -> 
         assert m.run_until(lambda m: m.axes.feedback().enabled, 2.0)
     finally:
         m.close()
+
+
+@pytest.mark.parametrize(
+    ("axis", "start_m", "direction"),
+    [("X", 0.004, -1), ("Z", 0.446, +1)],  # 9 mm from the negative / positive limit switch
+)
+def test_an_axis_driven_onto_its_limit_switch_is_reset_and_homed_off_it(axis, start_m, direction):
+    """Jogged unreferenced (no soft limits) onto a limit switch: the drive faults 0x8612;
+    one RESET, and homing moves the table off the switch (the drive lets it move away from
+    an active limit switch) to the reference point."""
+    cfg = builtin_machine("mill3")
+    cfg.drives.axes[axis].plant["switches"] = {"initial_position": start_m}
+    m = Machine(cfg, "mill3")
+    try:
+        m.step(50)  # the PLC enables the drives
+        m.command("mode", mode="JOG")
+        m.command("jog", axis=axis, direction=direction, feed=3000.0)
+        assert m.run_until(lambda m: m.alarms, 2.0)
+        assert any("0x8612" in a.text and a.axis == axis for a in m.alarms), m.alarms
+        assert m.axes.drives[axis].drive.plant.switch_inputs() & 3  # on the switch
+        assert m.run_until(_standstill(), 2.0)
+        m.press("PanelReset")
+        m.step(3 * m.plc_every)
+        assert not [a for a in m.alarms if a.severity == "FAULT"], m.alarms
+        m.command("mode", mode="REF")
+        m.command("home")
+        ctl = m.controller
+        assert m.run_until(lambda m: not ctl.homing, 60.0)
+        m.step(m.plc_every)
+        assert all(ctl.referenced.values()), (ctl.referenced, m.alarms)
+        assert not m.axes.drives[axis].drive.plant.switch_inputs() & 3  # off the switch
+        assert not m.alarms
+    finally:
+        m.close()
