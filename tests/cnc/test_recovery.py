@@ -233,3 +233,48 @@ def test_an_axis_driven_onto_its_limit_switch_is_reset_and_homed_off_it(axis, st
         assert not m.alarms
     finally:
         m.close()
+
+
+TOOL_CHANGE = """%
+O0200 (TOOL CHANGER CHECK: CHANGES TOOLS TWICE, SO EVERY RUN REACHES THE CHANGER)
+N10 G90 G21 G17
+N20 T2 M6
+N30 G0 X-50 Y-50 Z-20
+N40 T1 M6
+N50 G0 X-20 Y-20 Z-10
+N60 M30
+%
+"""
+
+
+@pytest.mark.parametrize(
+    ("fault", "number", "bound_s"),
+    [
+        ("carousel_jam", 1017, 5.1),  # T function: carousel not at the pocket within 5 s
+        ("changer_jam", 1017, 5.1),
+        ("arm_jam", 1012, 2.7),  # orient, then the arm: not at grip within 2 s
+        ("orient_fail", 1010, 5.3),  # tool change: spindle not oriented within 5 s
+    ],
+)
+def test_tool_changer_faults_are_reached_by_a_program_that_changes_tools(fault, number, bound_s):
+    """The four tool-changer faults need a tool change to show: a program whose tool is
+    already in the spindle never reaches the changer. This one changes to another tool and
+    back, so every run does; after clear and RESET it runs to its end."""
+    m, _ = _power_on()
+    try:
+        n = m.load_program(TOOL_CHANGE)
+        m.inject(f"plc:{fault}")
+        m.command("select_program", number=n)
+        m.command("cycle_start")
+        t0 = m.t
+        assert m.run_until(lambda m: m.alarms, bound_s + 0.5), m.status.execution
+        assert m.t - t0 <= bound_s
+        assert [(a.number, a.source) for a in m.alarms] == [(number, "PLC")]
+        m.clear_fault(f"plc:{fault}")
+        m.press("PanelReset")
+        m.step(3 * m.plc_every)
+        assert not m.alarms, m.alarms
+        assert all(m.controller.referenced.values())  # no motion lost: no homing needed
+        _run_program(m, n)
+    finally:
+        m.close()
