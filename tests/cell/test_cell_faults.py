@@ -171,3 +171,36 @@ def test_fault_auth_matrix(make_cell):
         20,
         "fault cleared after its duration",
     )
+
+
+def test_clear_reset_home_over_http_brings_a_machine_back_and_it_says_when_it_is_not_homed(
+    make_cell,
+):
+    """docs/recovery.md over the REST API: a drive fault that loses the reference, cleared,
+    one reset (no FAULT left, but `referenced` false: the tile says NOT REFERENCED, the cell
+    does not dispatch to it), home, referenced again."""
+    _, api = make_cell(faults=True)
+    poll(lambda: status(api, "mill1")["referenced"] is True, 30, "mill1 referenced")
+    r = api("admin").post(
+        "/api/machines/mill1/faults", json={"type": "encoder_break", "target": "drive:X"}
+    )
+    assert r.status_code == 201, r.text
+    fault = r.json()
+    poll(
+        lambda: any(a["level"] == "FAULT" for a in status(api, "mill1")["alarms"]),
+        30,
+        "mill1 drive alarm",
+    )
+    r = api("admin").delete(f"/api/machines/mill1/faults/{fault['id']}")
+    assert r.status_code == 200, r.text
+    r = api("operator").post("/api/machines/mill1/commands", json={"command": "reset"})
+    assert r.status_code == 202, r.text
+    after = poll(
+        lambda: (s := status(api, "mill1"))["alarms"] == [] and s, 30, "mill1 alarms cleared"
+    )
+    assert after["referenced"] is False and "X" in after["unreferenced_axes"], after
+    r = api("operator").post("/api/machines/mill1/commands", json={"command": "home"})
+    assert r.status_code == 202, r.text
+    back = poll(lambda: (s := status(api, "mill1"))["referenced"] and s, 60, "mill1 homed")
+    assert back["unreferenced_axes"] == [] and back["mode"] == "AUTOMATIC"
+    assert back["alarms"] == []
