@@ -117,7 +117,10 @@ class MonitoringModel:
         if s["mode"] != "AUTOMATIC":
             return OFFLINE  # in the operator's hands (REF, JOG, MDI): not for the cell
         if s["referenced"] is False:
-            return OFFLINE  # not homed: a cycle start would be refused, the operator homes it
+            # READY in AUTO but not homed (a reset after a fault that lost the reference):
+            # it cannot cut, a part on it is lost, and nothing is dispatched to it until
+            # the operator homes it (warning 3031 says so per axis)
+            return ALARM
         return IDLE
 
     def views(self) -> list[MachineView]:

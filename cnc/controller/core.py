@@ -220,6 +220,7 @@ class Controller:
         self._status_key = None
         self._start_refused = ""  # why the last cycle start was refused (until a start/select)
         self._unreferenced: tuple[str, ...] = ()
+        self._was_referenced: set[str] = set()  # axes referenced at least once
 
     # ================================================================ public API ===========
     @property
@@ -919,17 +920,32 @@ class Controller:
             self._event(f"homed {' '.join(self._homing_done)}")
 
     def _watch_reference(self) -> None:
-        """Which axes are not referenced (power-on, E-stop, a drive that lost its position):
-        the status says so at once (`MachineStatus.unreferenced`, the SHDR `referenced` item,
-        the operator message in the event log), not first at a refused cycle start. It is a
-        state, not an alarm: homing, not RESET, ends it."""
+        """Which axes are not referenced (`MachineStatus.unreferenced`: before the first
+        homing, after an E-stop, a quick stop, an encoder fault, a drive that rebooted): the
+        status says so at once, not first at a refused cycle start. An axis that *loses* its
+        reference also raises the warning 3031 "axis X not referenced: home the machine"
+        (rule self: homing ends it, RESET does not); at power-on the status alone says it,
+        as a control shows "reference return" before the first homing without an alarm."""
         ref = self._ref
         missing = tuple(a for a in self.axes if not (ref[a] and self._fb_homed(a)))
         if missing == self._unreferenced:
             return
-        lost = [a for a in missing if a not in self._unreferenced]
-        if lost and not self._homing:
-            self._event(f"axis {', '.join(lost)} not referenced: home the machine (REF, home)")
+        for a in self._unreferenced:
+            if a not in missing:
+                self._alarms.clear(al.NOT_REFERENCED, a)
+                self._was_referenced.add(a)
+        for a in missing:
+            if a not in self._unreferenced and a in self._was_referenced:
+                self._alarms.raise_(
+                    al.NOT_REFERENCED,
+                    f"axis {a} not referenced: home the machine (REF mode, home)",
+                    self._t,
+                    axis=a,
+                    rule=al.SELF,
+                    cause="reference",
+                    severity="WARNING",
+                )
+                self._event(f"axis {a} lost its reference: home the machine")
         self._unreferenced = missing
 
     def _homing_failed(self, why: str) -> None:

@@ -10,7 +10,7 @@ import pytest
 from cnc.config import builtin_machine
 from cnc.faces.shdr import ShdrFormatter
 from cnc.machine import Machine
-from dnc.scheduler import IDLE, OFFLINE
+from dnc.scheduler import ALARM, IDLE
 from server.host import MonitoringModel, StartRefused, make_starter
 from server.mtconnect.agent import Agent
 from server.mtconnect.model import build_device
@@ -57,7 +57,8 @@ def test_unreferenced_machine_is_not_idle_and_says_which_axes(cell):
     s = cell.monitor.status("m1")
     assert s["referenced"] is False and s["unreferenced_axes"] == ["X", "Y", "Z"]
     assert s["mode"] == "AUTOMATIC" and s["execution"] == "READY" and not s["alarms"]
-    assert cell.monitor.state("m1") == OFFLINE  # READY, AUTO, no alarm: still not for the cell
+    # READY, AUTO, no alarm before the first homing: still not for the cell
+    assert cell.monitor.state("m1") == ALARM
     m.power_on()
     cell.publish()
     s = cell.monitor.status("m1")
@@ -77,8 +78,10 @@ def test_a_drive_that_loses_its_position_drops_the_reference_until_homed(cell):
     s = cell.monitor.status("m1")
     assert not [a for a in s["alarms"] if a["level"] == "FAULT"], s["alarms"]
     assert s["referenced"] is False and "Y" in s["unreferenced_axes"]
-    assert cell.monitor.state("m1") == OFFLINE
-    assert any("not referenced: home the machine" in text for _, text in m.controller.events)
+    assert cell.monitor.state("m1") == ALARM
+    # the axes quick-stopped by the fault lost their reference: a warning each
+    warnings = {(a["code"], a["text"]) for a in s["alarms"] if a["level"] == "WARNING"}
+    assert ("3031", "axis Y not referenced: home the machine (REF mode, home)") in warnings
 
 
 def test_a_refused_cycle_start_reports_the_ncs_reason_at_once(cell, monkeypatch):
