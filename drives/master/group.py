@@ -831,11 +831,20 @@ class AxisGroup:
         except AxisError as exc:
             if exc.axes:
                 raise
-            stuck = [a for a in chosen if power.state_name(a.sw) != "OPERATION ENABLED"]
+            stuck = [
+                a for a in chosen if not a.known or power.state_name(a.sw) != "OPERATION ENABLED"
+            ]
             raise AxisError(
                 "; ".join(
                     f"axis {a.name} (node {a.node_id}) did not reach OPERATION ENABLED within "
-                    f"{timeout_s} s: {power.state_name(a.sw) if a.known else 'no TPDO'} "
+                    f"{timeout_s} s: "
+                    + (
+                        power.state_name(a.sw)
+                        if a.known
+                        else "no TPDO since NMT start (rebooted or silent: fault_reset() "
+                        "restarts it)"
+                    )
+                    + " "
                     f"(statusword 0x{a.sw:04X})"
                     for a in stuck
                 ),
