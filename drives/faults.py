@@ -143,26 +143,28 @@ DETECTION: dict[str, str] = {
     "supply_loss": "EMCY 0x3130 after 20 ms (< 30 ms at the NC)",
     "mains_voltage": "swell above 420 V link: EMCY 0x3210 within 1 sub-step; sag: EMCY 0x3220 "
     "once the link has sagged below 200 V (seconds, with the load: < 3 s at 150 V)",
-    "chopper_failure": "NOT DETECTED on the default machine: only braking energy that lifts "
-    "the link above 420 V trips 0x3210, and the mill's axes return too little (a real drive "
-    "monitors its chopper transistor and would report it at once; not modelled)",
-    "ambient_temperature": "NOT DETECTED at 90 degC within minutes: it shifts the winding model "
-    "(600 s time constant), so 0x4310 comes only after the winding passes 150 degC; a real "
-    "drive has its own heat-sink sensor warning at ~80 degC (not modelled)",
+    "chopper_failure": "EMCY 0x7111 from the drive's brake check (every 100 ms): < 102 ms, "
+    "before braking energy could lift the link to the 420 V trip (0x3210)",
+    "ambient_temperature": "heat-sink sensor (5 s lag behind the cabinet air): warning bit 7 "
+    "above 75 degC, EMCY 0x4210 above 85 degC: 11.5 s at 90 degC; the winding model's 0x4310 "
+    "comes much later",
     "winding_temperature": "above 150 degC: EMCY 0x4310 within 1 sub-step; above 130 degC: "
     "statusword warning bit 7 only",
     "backlash": "UNDETECTABLE BY DESIGN in a semi-closed loop: the motor encoder does not see "
     "the dead band between nut and table; only a second (linear) encoder or a ballbar test "
     "shows it (larger contour error at reversals)",
-    "drop": "heartbeat lost 0x8130 at the master within 3 x 100 ms (< 310 ms at the NC)",
-    "drop_rpdo": "NOT DETECTED: the drive holds its last target and reports no error (the "
-    "RPDO timeout 0x1006 SYNC window is off by default); the axis stops following the NC",
-    "corrupt": "NOT DETECTED by the master: a destroyed TPDO1 leaves the last feedback in place "
-    "(the simulated bus keeps no error counters / EMCY 0x8110 for it)",
-    "delay": "NOT DETECTED: a late TPDO1 gives older feedback; the master does not check the "
-    "TPDO's age against the SYNC",
-    "bus_off": "heartbeat lost 0x8130 at the master within 3 x 100 ms (< 310 ms at the NC)",
-    "babble": "heartbeats of the line lost 0x8130 within 3 x 100 ms (< 310 ms at the NC)",
+    "drop": "the machine's master: no TPDO1 for 5 SYNC cycles -> 0x8100 cyclic feedback lost "
+    "(12 ms at 2 ms); heartbeat lost 0x8130 after 3 x 100 ms; one lost frame is tolerated",
+    "drop_rpdo": "the drive's RPDO deadline 0x1400:5 (the machine's master writes 50 ms): EMCY "
+    "0x8250 RPDO timeout -> fault (0x6007 = 1) within 52 ms; one lost frame is tolerated",
+    "corrupt": "the machine's master: the destroyed TPDO1s are missing -> 0x8100 cyclic "
+    "feedback lost after 5 SYNC cycles (12 ms); one destroyed frame is tolerated",
+    "delay": "the machine's master: no TPDO1 in its SYNC cycle for 5 cycles -> 0x8100 "
+    "(12 ms) when the delay exceeds 5 cycles; a single late frame is tolerated",
+    "bus_off": "the machine's master: no TPDO1 for 5 SYNC cycles -> 0x8100 (12 ms); heartbeat "
+    "lost 0x8130 after 3 x 100 ms",
+    "babble": "the machine's master: the starved axes' TPDO1s missing -> 0x8100 (12 ms); "
+    "heartbeats lost 0x8130 after 3 x 100 ms",
     "power_cycle": "boot-up frame at the master: drive fault within one cycle (< 10 ms)",
 }
 
