@@ -150,3 +150,22 @@ def test_monitoring_is_off_by_default_and_checked():
     finally:
         rig.group.close()
         rig.hub.close()
+
+
+def test_drives_that_lost_the_master_heartbeat_come_back_with_one_reset(make):
+    """The master falls silent (a stalled host): every drive's heartbeat consumer trips
+    (0x8130 through 0x6007 = 1, FAULT); once the master runs again one fault reset and an
+    enable bring every axis back."""
+    rig = make()
+    g = rig.group
+    for _ in range(5):
+        g.cycle()  # the first master heartbeat starts the drives' consumers
+    rig.hub.run_for(0.5, 0.002)  # no SYNC, no RPDO, no heartbeat from the master
+    fb = g.cycle()
+    assert {(f.axis, f.emcy_code) for f in fb.faults} == {(a, 0x8130) for a in "XYZ"}
+    for _ in range(60):  # the master's heartbeat is back (every 100 ms)
+        g.cycle()
+    g.fault_reset()
+    g.enable()
+    assert all(g.state(a) == "OPERATION ENABLED" for a in "XYZ")
+    assert g.faults == []
