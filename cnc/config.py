@@ -332,6 +332,12 @@ class HostConfig(_Section):
     auth: dict[str, Any] = Field(
         default_factory=dict, description="Authentication settings (free-form for now)."
     )
+    lost_contact_s: float = Field(
+        30.0,
+        gt=0,
+        description="A machine out of contact this long is taken as lost: its allocation is"
+        " interrupted and the part rerouted (seconds).",
+    )
     faults: bool = Field(
         False,
         description="Fault injection: the `/api/...faults` endpoints and each machine's"
