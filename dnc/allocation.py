@@ -68,7 +68,9 @@ class Look:
 class Alloc:
     state: str
     machine: str
-    parts_at_start: int  # the machine's part counter when the allocation was made
+    # the machine's part counter when the allocation was made, and from its confirmed start
+    # on, the counter the machine showed just before cycle start was pressed
+    parts_at_start: int
     dispatch: str = NOT_STARTED  # one of DISPATCH_PHASES
     program: str | None = None  # the program this allocation runs (O1234)
     job_open: bool = True  # False once the job is cancelled
@@ -110,13 +112,7 @@ def step(a: Alloc, look: Look, *, lost_contact_s: float = DEFAULT_LOST_CONTACT_S
             f"part counter of {m} went back from {a.parts_at_start} to {look.part_count}: "
             "the machine's control was restarted"
         )
-    if look.part_count > a.parts_at_start:
-        if not_started:
-            # parts made before this allocation's program was even started are not its own
-            return interrupt(
-                f"{m} counted a part before this allocation's program was started: "
-                "the machine was used by an operator"
-            )
+    if look.part_count > a.parts_at_start and a.dispatch in (STARTED, START_FAILED):
         extra = look.part_count - a.parts_at_start - 1
         return Step(
             COMPLETED,
@@ -124,6 +120,9 @@ def step(a: Alloc, look: Look, *, lost_contact_s: float = DEFAULT_LOST_CONTACT_S
             reason=f"part counter of {m} advanced to {look.part_count}",
             note=f"{extra} more part(s) counted by {m} belong to no allocation" if extra else "",
         )
+    # Parts counted before the start are not this allocation's (an operator's own part):
+    # the worker writes the counter it saw just before pressing cycle start as the new
+    # `parts_at_start` when the start is confirmed, so they are never mistaken for it.
     if not a.job_open and not_started:
         return interrupt("job cancelled before its program was started")
     ours = look.program is None or a.program is None or look.program == a.program

@@ -41,8 +41,11 @@ log = logging.getLogger(__name__)
 STARTING = "starting"
 
 ClientFactory = Callable[[str, int, dict], DncClient]
-Starter = Callable[[str, int], None]
-"""(machine name, program number) -> None: cycle start through the machine's remote panel."""
+Starter = Callable[[str, int], "int | None"]
+"""(machine name, program number) -> the machine's part counter just before cycle start was
+pressed (None if unknown): cycle start through the machine's remote panel. The counter is
+written as the allocation's baseline with the confirmed start, so a part an operator made
+between the allocation and the start is never counted as the allocation's."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -199,10 +202,13 @@ class TransferWorker:
                 if not self._step(snap, STARTING, bytes_sent=sent, verified=verified, start=True):
                     return self._called_off(dispatch_id)
                 try:
-                    self._starter(job["machine"], job["number"])
+                    baseline = self._starter(job["machine"], job["number"])
                 except Exception as exc:
                     raise TransferError("start", f"cycle start failed: {exc}") from exc
-            if not self._step(snap, DONE, bytes_sent=sent, verified=verified, error=None):
+            else:
+                baseline = None
+            done = dict(bytes_sent=sent, verified=verified, error=None)
+            if not self._step(snap, DONE, baseline=baseline, **done):
                 return self._called_off(dispatch_id)
             return DONE
         except TransferError as exc:
@@ -250,7 +256,15 @@ class TransferWorker:
                 self._set(s, row, FAILED, now, error=error)
             return row.state
 
-    def _step(self, snap: dict, state: str, *, start: bool = False, **values) -> bool:
+    def _step(
+        self,
+        snap: dict,
+        state: str,
+        *,
+        start: bool = False,
+        baseline: int | None = None,
+        **values,
+    ) -> bool:
         """Move a claimed dispatch on: one UPDATE and its event, from the claim's snapshot
         (only this worker writes a dispatch it has claimed, so the snapshot is the row).
 
@@ -271,6 +285,8 @@ class TransferWorker:
             ).first()
             if moved is None:
                 return False
+            if isinstance(baseline, int):
+                s.execute(_BASELINE, dict(b_dispatch=snap["id"], b_parts=baseline))
             snap.update(values, state=state)
             _event(s, snap, now)
             return True
@@ -344,6 +360,14 @@ _START = (
     )
     .values(**_STEP_VALUES)
     .returning(_D.c.id)
+)
+_BASELINE = (
+    update(_A)
+    .where(
+        _A.c.dispatch_id == bindparam("b_dispatch"),
+        _A.c.status.in_(("dispatched", "running")),
+    )
+    .values(parts_at_start=bindparam("b_parts"))
 )
 TEXT_CACHE_CHARS = 64 * 1024 * 1024
 _EVENT_FIELDS = (

@@ -201,11 +201,12 @@ def make_starter(
     monitor: MonitoringModel,
     timeout_s: float = 30.0,
     repress_s: float = 5.0,
-) -> Callable[[str, int], None]:
+) -> Callable[[str, int], int | None]:
     """The transfer worker's cycle start: select the program and press cycle start on the
-    machine's Modbus remote panel, and wait until the machine reports it running."""
+    machine's Modbus remote panel, and wait until the machine reports it running. Returns
+    the machine's part counter from just before the press (the allocation's baseline)."""
 
-    def start(machine: str, number: int) -> None:
+    def start(machine: str, number: int) -> int | None:
         link = links[machine]
         name = f"O{number:04d}"
         before = monitor.status(machine)["counters"]["part_count"]
@@ -244,6 +245,7 @@ def make_starter(
 
         try:
             wait_for(running, timeout_s, f"{machine}: {name} running")
+            return before
         except MachineUnavailable as exc:
             panel = link.panel_status()
             if panel.get("CycleStartRefused"):
