@@ -1,0 +1,110 @@
+"""Issue 14 items 1 and 2 in a whole cell over HTTP: an operator reset of a cutting machine
+frees it and the job still completes; a FAULT while the machine cuts on (lube level low) is
+recorded, does not interrupt, and no part is made twice."""
+
+from __future__ import annotations
+
+import pytest
+
+from tests.cell.conftest import poll, upload_released
+from tests.cell.test_cell_faults import STOPPING_PROGRAM, status
+
+pytestmark = pytest.mark.timeout(180)
+
+
+def command(api, machine, name):
+    r = api("operator").post(f"/api/machines/{machine}/commands", json={"command": name})
+    assert r.status_code == 202, r.text
+
+
+def job_of(api, job):
+    return api("viewer").get(f"/api/jobs/{job}").json()
+
+
+def continue_stopped_parts(api):
+    """The operators at the mills press cycle start after each M0."""
+    for name in ("mill1", "mill2"):
+        if status(api, name)["execution"] == "PROGRAM_STOPPED":
+            command(api, name, "cycle_start")
+
+
+def parts_made(api):
+    return sum(status(api, n)["counters"]["part_count"] or 0 for n in ("mill1", "mill2"))
+
+
+def test_an_operator_reset_of_a_cutting_machine_frees_it_and_the_job_completes(make_cell):
+    _, api = make_cell()
+    rev = upload_released(api, STOPPING_PROGRAM, number=1002)
+    job = api("operator").post("/api/jobs", json={"revision_id": rev, "quantity": 2}).json()["id"]
+    for name in ("mill1", "mill2"):
+        poll(lambda n=name: status(api, n)["execution"] == "PROGRAM_STOPPED", 60, f"{name} at M0")
+    command(api, "mill1", "reset")  # the part on mill1 is abandoned: READY, no part
+
+    def interrupted():
+        allocs = job_of(api, job)["allocations"]
+        return [a for a in allocs if a["machine"] == "mill1" and a["status"] != "running"]
+
+    (ended,) = poll(interrupted, 30, "mill1's allocation ended after the reset")[:1]
+    assert ended["status"] in ("interrupted", "rerouted"), ended
+
+    def completed():
+        continue_stopped_parts(api)
+        j = job_of(api, job)
+        return j["status"] == "completed" and j
+
+    done = poll(completed, 120, "job completed after the reset", interval_s=0.2)
+    assert done["done"] == 2
+    states = sorted(a["status"] for a in done["allocations"])
+    assert states == ["completed", "completed", "rerouted"], done["allocations"]
+    assert any(
+        d["action"] == "interrupt" and "cycle on mill1 ended without a part" in d["reason"]
+        for d in done["decisions"]
+    ), done["decisions"]
+    assert parts_made(api) == 2  # nothing made twice
+
+
+# One slow move (84 s of machine time) and M30: the lube fault lands while it cuts.
+SLOW_PROGRAM = """%
+O1003 (E2E ONE SLOW MOVE)
+N10 G21 G90 G17
+N20 G1 X-300 Y-300 F300
+N30 M30
+%
+"""
+
+
+def test_a_fault_while_the_machine_cuts_on_does_not_interrupt_its_part(make_cell):
+    _, api = make_cell(faults=True)
+    rev = upload_released(api, SLOW_PROGRAM, number=1003)
+    job = api("operator").post("/api/jobs", json={"revision_id": rev, "quantity": 1}).json()["id"]
+    name = poll(
+        lambda: next(
+            (n for n in ("mill1", "mill2") if status(api, n)["execution"] == "ACTIVE"), None
+        ),
+        60,
+        "a mill cutting",
+        interval_s=0.01,
+    )
+    r = api("admin").post(
+        f"/api/machines/{name}/faults", json={"type": "lube_level_low", "target": "plc"}
+    )
+    assert r.status_code == 201, r.text
+    # the PLC's lube alarm is a FAULT that refuses the next cycle start, not this one
+    alarm = poll(
+        lambda: [a for a in status(api, name)["alarms"] if a["level"] == "FAULT"],
+        30,
+        f"{name} lube alarm",
+        interval_s=0.01,
+    )
+    assert status(api, name)["execution"] == "ACTIVE", alarm
+
+    def completed():
+        j = job_of(api, job)
+        return j["status"] == "completed" and j
+
+    done = poll(completed, 120, "job completed", interval_s=0.2)
+    assert done["done"] == 1
+    assert [(a["machine"], a["status"]) for a in done["allocations"]] == [(name, "completed")]
+    assert "alarm while cutting on" in done["allocations"][0]["note"]
+    assert [d["action"] for d in done["decisions"]] == ["allocate", "note", "complete"]
+    assert parts_made(api) == 1
