@@ -108,3 +108,69 @@ def test_a_fault_while_the_machine_cuts_on_does_not_interrupt_its_part(make_cell
     assert "alarm while cutting on" in done["allocations"][0]["note"]
     assert [d["action"] for d in done["decisions"]] == ["allocate", "note", "complete"]
     assert parts_made(api) == 1
+
+
+def test_a_machine_process_killed_mid_part_loses_its_part_to_another_machine(tmp_path):
+    """Issue 14 item 6: machines in their own processes; mill1's process is killed while it
+    cuts. Past the cell's contact time-out its allocation is interrupted and the part
+    rerouted; the job completes on mill2 with each part made once."""
+    import json
+    import os
+    import signal
+
+    from cnc.config import load_cell_config
+    from server.cell import Cell
+    from tests.cell.conftest import Api, serve
+    from tests.cell.test_cell_restart import RESTART_PROGRAM
+
+    ports = {"host": "127.0.0.1", "dnc": 0, "modbus": 0, "shdr": 0}
+    config = load_cell_config(
+        {
+            "machines": {n: {"base": "mill3", "ports": ports} for n in ("mill1", "mill2")},
+            "host": {"lost_contact_s": 2.0},
+        }
+    )
+    cell = Cell(
+        config,
+        clock="fast",
+        database_url=f"sqlite:///{tmp_path}/cell.db",
+        processes=True,
+        ideal_axes=True,
+        state_dir=tmp_path,
+    ).start()
+    server, thread, sock = serve(cell)
+    api = Api(f"http://127.0.0.1:{sock.getsockname()[1]}")
+    try:
+        rev = upload_released(api, RESTART_PROGRAM)
+        job = api("operator").post("/api/jobs", json={"revision_id": rev, "quantity": 3})
+        job = job.json()["id"]
+        poll(lambda: status(api, "mill1")["execution"] == "ACTIVE", 90, "mill1 cutting", 0.01)
+        pid = json.loads((tmp_path / "mill1.machine.json").read_text())["pid"]
+        os.kill(pid, signal.SIGKILL)
+
+        def lost():
+            allocs = job_of(api, job)["allocations"]
+            return [a for a in allocs if a["machine"] == "mill1" and a["status"] != "running"]
+
+        poll(lost, 60, "mill1's allocation ended after its process was killed")
+
+        def completed():
+            j = job_of(api, job)
+            return j["status"] == "completed" and j
+
+        done = poll(completed, 120, "job completed on mill2", interval_s=0.2)
+        assert done["done"] == 3
+        lost_parts = [a for a in done["allocations"] if a["machine"] == "mill1"]
+        assert lost_parts[-1]["status"] == "rerouted", done["allocations"]
+        assert any(
+            d["action"] == "interrupt" and "contact with mill1 lost" in d["reason"]
+            for d in done["decisions"]
+        )
+        mill1_parts = sum(a["status"] == "completed" for a in lost_parts)
+        assert status(api, "mill2")["counters"]["part_count"] == 3 - mill1_parts
+    finally:
+        api.close()
+        server.should_exit = True
+        thread.join(20)
+        sock.close()
+        cell.stop()
