@@ -233,3 +233,33 @@ def test_a_host_killed_in_cycle_start_makes_no_part_twice(rig):
     r.round()
     job = r.jobs.get(r.job)
     assert (job.status, job.done, r.started) == ("completed", 1, ["mill1"])
+
+
+def test_a_start_claimed_between_the_ticks_read_and_write_wins_and_the_tick_decides_again(
+    rig, sessions
+):
+    """The other order of the race: the worker claims the start (commits `starting`) after
+    the tick read the dispatch as `verifying` and before it calls the dispatch off. The
+    tick's conditional call-off finds it moved on, the tick is rolled back and decided again:
+    the allocation waits for the start's outcome instead of being interrupted."""
+    r = rig(1)
+    r.machines["mill2"].estop = True
+    r.scheduler.tick()
+    with sessions() as s, s.begin():
+        s.execute(text("UPDATE dispatches SET state = 'verifying'"))
+    r.machines["mill1"].alarm = "servo FAULT 2101"  # would interrupt a part not yet started
+    looks = []
+
+    def machines_while_the_worker_claims():
+        if not looks:  # first look: the worker's claim lands now, in its own transaction
+            with sessions() as s, s.begin():
+                s.execute(text("UPDATE dispatches SET state = 'starting'"))
+        looks.append(1)
+        return [m.view(n) for n, m in r.machines.items()]
+
+    tick = Scheduler(sessions, machines_while_the_worker_claims, now=lambda: T0)
+    tick.tick()
+    assert len(looks) == 2  # decided twice
+    assert r.allocs() == [("mill1", "dispatched")]
+    assert Dispatches(sessions).list()[0].state == "starting"
+    assert r.reasons("interrupt") == []
