@@ -5,6 +5,8 @@ from __future__ import annotations
 import itertools
 
 import pytest
+from hypothesis import given
+from hypothesis import strategies as st
 
 from dnc.allocation import (
     ACTIVE,
@@ -179,3 +181,49 @@ def test_every_event_leads_to_an_end(state, phase, open_):
 )
 def test_dispatch_phase(state, phase):
     assert dispatch_phase(state) == phase
+
+
+# -- random event sequences against the pure core ---------------------------------------------
+
+LOOKS = st.builds(
+    Look,
+    connected=st.booleans(),
+    offline_s=st.sampled_from([0.0, 10.0, 29.9, 30.0, 1e6]),
+    in_cycle=st.booleans(),
+    program=st.sampled_from([P, "O2002", "", None]),
+    part_count=st.integers(AT - 2, AT + 3),
+    alarm=st.sampled_from([None, "", "servo FAULT 2101"]),
+    estop=st.booleans(),
+    warnings=st.sampled_from([(), ("w",)]),
+)
+
+
+@given(
+    looks=st.lists(st.tuples(LOOKS, st.sampled_from(DISPATCH_PHASES)), max_size=30),
+    job_open=st.booleans(),
+)
+def test_random_event_sequences_end_once_and_count_at_most_one_part(looks, job_open):
+    """Any sequence of looks (and dispatch phases as the worker moves on): an allocation
+    leaves the active states at most once, counts at most one part, never counts one without
+    a start, and from wherever it stands a settled machine (start confirmed, READY and idle)
+    ends it."""
+    a = Alloc(DISPATCHED, "mill1", AT, NOT_STARTED, P, job_open)
+    parts = 0
+    for seen, phase in looks:
+        a = Alloc(a.state, a.machine, a.parts_at_start, phase, a.program, a.job_open)
+        got = step(a, seen)
+        assert got.parts in (0, 1)
+        if got.parts:
+            assert phase in (STARTED, START_FAILED) and got.state == COMPLETED
+        if got.cancel_dispatch:
+            assert phase == NOT_STARTED and got.state == INTERRUPTED
+        parts += got.parts
+        if a.state in ACTIVE:
+            a = Alloc(got.state, a.machine, a.parts_at_start, phase, a.program, a.job_open)
+        else:
+            assert got.state == a.state  # a final or interrupted allocation stays put
+    assert parts <= 1
+    if a.state in ACTIVE:
+        settled = Alloc(a.state, a.machine, a.parts_at_start, STARTED, a.program, a.job_open)
+        assert step(settled, look()).state == INTERRUPTED
+        assert step(settled, look(part_count=AT + 1)).state == COMPLETED
