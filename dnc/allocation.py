@@ -148,10 +148,11 @@ def step(a: Alloc, look: Look, *, lost_contact_s: float = DEFAULT_LOST_CONTACT_S
         return Step(a.state, note="; ".join(look.warnings))
     elif a.dispatch == START_FAILED and a.state == DISPATCHED:
         why = f"dispatch to {m} failed"
-    elif not ours:
-        why = f"operator changed the program on {m} to {look.program or 'none'}"
+    elif not ours and look.program:
+        why = f"operator changed the program on {m} to {look.program}"
     else:
-        why = f"cycle on {m} ended without a part (reset or abort at the machine)"
+        # READY with the program gone from selection is what a restarted control shows
+        why = f"cycle on {m} ended without a part (reset, abort or restart at the machine)"
     return interrupt(why)
 
 

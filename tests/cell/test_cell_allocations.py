@@ -174,3 +174,101 @@ def test_a_machine_process_killed_mid_part_loses_its_part_to_another_machine(tmp
         thread.join(20)
         sock.close()
         cell.stop()
+
+
+def test_a_machine_process_killed_and_restarted_frees_its_allocation(tmp_path):
+    """Issue 14 item 1: mill1's process is killed while it cuts and started again on the
+    same ports (the operator's restart), well within the contact time-out. The new control
+    is READY with no program and its part counter at 0: the allocation ends, the part is
+    made again, and the job completes with each part made once."""
+    import json
+    import os
+    import signal
+    import socket
+    import subprocess
+
+    from cnc.config import load_cell_config
+    from server.cell import Cell
+    from server.supervisor import machine_command
+    from tests.cell.conftest import Api, serve
+    from tests.cell.test_cell_restart import RESTART_PROGRAM
+
+    def free_port() -> int:
+        with socket.socket() as s:
+            s.bind(("127.0.0.1", 0))
+            return s.getsockname()[1]
+
+    machines = {
+        n: {
+            "base": "mill3",
+            "ports": {
+                "host": "127.0.0.1",
+                "dnc": free_port(),
+                "modbus": free_port(),
+                "shdr": free_port(),
+            },
+        }
+        for n in ("mill1", "mill2")
+    }
+    config = load_cell_config({"machines": machines, "host": {"lost_contact_s": 120.0}})
+    cell = Cell(
+        config,
+        clock="fast",
+        database_url=f"sqlite:///{tmp_path}/cell.db",
+        processes=True,
+        ideal_axes=True,
+        state_dir=tmp_path,
+    ).start()
+    server, thread, sock = serve(cell)
+    api = Api(f"http://127.0.0.1:{sock.getsockname()[1]}")
+    restarted = None
+    try:
+        rev = upload_released(api, RESTART_PROGRAM)
+        job = api("operator").post("/api/jobs", json={"revision_id": rev, "quantity": 3})
+        job = job.json()["id"]
+        poll(lambda: status(api, "mill1")["execution"] == "ACTIVE", 90, "mill1 cutting", 0.01)
+        state_file = tmp_path / "mill1.machine.json"
+        before_kill = status(api, "mill1")["counters"]["part_count"] or 0  # dies with it
+        os.kill(json.loads(state_file.read_text())["pid"], signal.SIGKILL)
+        poll(lambda: not status(api, "mill1")["connected"], 30, "mill1 seen lost")
+        state_file.unlink()
+        log = open(tmp_path / "mill1.restarted.log", "ab")  # noqa: SIM115
+        restarted = subprocess.Popen(
+            machine_command(
+                tmp_path / "fmscell-cell.yaml",
+                "mill1",
+                ready_file=state_file,
+                fast=True,
+                simulation=False,
+                ideal=True,
+            ),
+            stdin=subprocess.DEVNULL,
+            stdout=log,
+            stderr=log,
+        )
+        log.close()
+
+        def completed():
+            j = job_of(api, job)
+            return j["status"] == "completed" and j
+
+        done = poll(completed, 150, "job completed after mill1's restart", interval_s=0.2)
+        assert done["done"] == 3
+        interrupts = [d for d in done["decisions"] if d["action"] == "interrupt"]
+        assert [d["machine"] for d in interrupts] == ["mill1"], interrupts
+        assert "contact" not in interrupts[0]["reason"]  # the restart, not the time-out
+        assert sorted(a["status"] for a in done["allocations"]).count("rerouted") == 1
+        assert parts_made(api) + before_kill == 3  # nothing made twice
+    finally:
+        if restarted is not None:
+            restarted.terminate()
+            try:
+                restarted.wait(20)
+            except subprocess.TimeoutExpired:
+                restarted.kill()
+                restarted.wait(5)
+        api.close()
+        server.should_exit = True
+        thread.join(20)
+        sock.close()
+        cell.stop()
