@@ -79,10 +79,16 @@ class TransferWorker:
         starter: Starter | None = None,
         retry: RetryPolicy | None = None,
         now: Callable[[], datetime] | None = None,
+        part_counter: Callable[[str], int | None] | None = None,
     ) -> None:
         self._sessions = sessions
         self._client = client_factory
         self._starter = starter
+        # The machine's part counter as the host sees it (None: unknown). Read before the
+        # start is claimed and written as the allocation's baseline with the claim, so a
+        # host killed between pressing cycle start and confirming it leaves a baseline that
+        # does not count an operator's earlier part as the job's.
+        self._part_counter = part_counter
         self.retry = retry or RetryPolicy()
         self._now = now or (lambda: datetime.now(UTC))
         self._recovered = False
@@ -200,7 +206,10 @@ class TransferWorker:
                 # Claimed under the database's write lock, conditional on the dispatch not
                 # having been called off and its allocation still active: a part whose
                 # allocation the scheduler interrupted is never started.
-                if not self._step(snap, STARTING, bytes_sent=sent, verified=verified, start=True):
+                before = self._part_counter(job["machine"]) if self._part_counter else None
+                if not self._step(
+                    snap, STARTING, bytes_sent=sent, verified=verified, start=True, baseline=before
+                ):
                     return self._called_off(dispatch_id)
                 try:
                     baseline = self._starter(job["machine"], job["number"])

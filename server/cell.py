@@ -170,6 +170,7 @@ class Cell:
                 client_factory=self._dnc_client,
                 starter=self._audited(make_starter(self.links, self.monitor)),
                 retry=RetryPolicy(max_attempts=3, base_s=0.5, cap_s=5.0),
+                part_counter=lambda name: self.monitor.status(name)["counters"]["part_count"],
             )
             self.worker.recover()
             self.alarm_watch = AlarmWatch(self.sessions, self.monitor)

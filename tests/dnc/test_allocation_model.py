@@ -76,6 +76,11 @@ class SimMachine:
     estop: bool = False
     memory: set[int] = field(default_factory=set)
     unseen: bool = False  # a part counted that no tick has looked at yet
+    # A run stopped (reset, alarm, E-stop) that no tick has looked at yet. The host sees the
+    # machine as its status at each tick (0.5 s): a reset and an operator's own program run
+    # to its end between two ticks would look like our part; an operator needs longer than
+    # a tick to start another program, so the model lets one start only after a look.
+    stop_unseen: bool = False
     die_on_start: bool = False  # the host is killed right after pressing cycle start
     alarm_in_transfer: bool = False  # a stopping alarm arrives while a program is loading
 
@@ -174,7 +179,12 @@ class CellModel(RuleBasedStateMachine):
             starter=self.start,
             retry=RetryPolicy(max_attempts=3, base_s=0.0, cap_s=0.0),
             now=lambda: T0,
+            part_counter=self.part_count,
         )
+
+    def part_count(self, name: str) -> int | None:
+        m = self.machines[name]
+        return m.count if m.alive and m.connected else None
 
     def views(self) -> list[MachineView]:
         return [m.view(n) for n, m in self.machines.items()]
@@ -212,7 +222,7 @@ class CellModel(RuleBasedStateMachine):
         self.scheduler.tick()
         for m in self.machines.values():
             if m.connected:
-                m.unseen = False
+                m.unseen = m.stop_unseen = False
 
     @rule()
     def work(self):
@@ -272,12 +282,14 @@ class CellModel(RuleBasedStateMachine):
     def reset(self, name):
         m = self.machines[name]
         if m.alive:
+            m.stop_unseen = m.stop_unseen or m.in_cycle
             m.in_cycle, m.alarm = False, None
 
     @rule(name=st.sampled_from(NAMES))
     def stopping_alarm(self, name):
         m = self.machines[name]
         if m.alive:
+            m.stop_unseen = m.stop_unseen or m.in_cycle
             m.alarm, m.in_cycle = "servo FAULT 2101 following error", False
 
     @rule(name=st.sampled_from(NAMES), low=st.booleans())
@@ -290,12 +302,13 @@ class CellModel(RuleBasedStateMachine):
         if m.alive:
             m.estop = pressed
             if pressed:
+                m.stop_unseen = m.stop_unseen or m.in_cycle
                 m.in_cycle = False
 
     @rule(name=st.sampled_from(NAMES))
     def operator_runs_own_program(self, name):
         m = self.machines[name]
-        if m.healthy_idle():
+        if m.healthy_idle() and not m.stop_unseen:
             m.program, m.in_cycle = OPERATOR_PROGRAM, True
 
     @rule(name=st.sampled_from(NAMES))
