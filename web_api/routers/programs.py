@@ -106,7 +106,9 @@ async def read_upload(
         if "number" in model.model_fields:
             _fill_from_header(values, data, upload.filename)
         try:
-            fields = model.model_validate({**values, "text": ""})
+            # form fields are text by nature: "1001" is the number 1001 here (lax), while
+            # a JSON body is strict
+            fields = model.model_validate({**values, "text": ""}, strict=False)
         except ValidationError as exc:
             raise _invalid(exc.errors()) from None
         return fields, data, upload.filename
