@@ -113,9 +113,9 @@ def test_connecting_to_a_silent_database_gives_up_at_the_connect_timeout(silent)
 def test_postgresql_statement_timeout_ends_a_statement_that_runs_too_long():
     engine = make_engine(PG_ADMIN, statement_timeout_s=0.2)
     t0 = time.monotonic()
-    with pytest.raises(DatabaseUnavailable, match="statement timeout"):
-        with transaction(session_factory(engine)) as s:
-            s.execute(text("select pg_sleep(10)"))
+    sessions = session_factory(engine)
+    with pytest.raises(DatabaseUnavailable, match="statement timeout"), transaction(sessions) as s:
+        s.execute(text("select pg_sleep(10)"))
     assert time.monotonic() - t0 < 5.0  # 0.2 s server side, generous margin for the box
     engine.dispose()
 
@@ -128,9 +128,9 @@ def test_sqlite_busy_timeout_bounds_the_wait_for_another_process_write_lock(tmp_
     other.execute("BEGIN IMMEDIATE")
     try:
         t0 = time.monotonic()
-        with pytest.raises(DatabaseUnavailable, match="locked"):
-            with transaction(session_factory(engine)) as s:
-                s.execute(text("INSERT INTO contents (sha256, size, text) VALUES ('x', 1, 'x')"))
+        sessions = session_factory(engine)
+        with pytest.raises(DatabaseUnavailable, match="locked"), transaction(sessions) as s:
+            s.execute(text("INSERT INTO contents (sha256, size, text) VALUES ('x', 1, 'x')"))
         elapsed = time.monotonic() - t0
         assert 0.25 <= elapsed < 0.3 + 5.0, elapsed
     finally:
