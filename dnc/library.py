@@ -128,6 +128,7 @@ class Library:
             raise InvalidUpload("program name must not be empty")
         text = self._decode(text, name)
         check = self._check(text, machine_kind)
+        digest = text.sha256 if isinstance(text, ProgramUpload) else None
         text = _stored(text)
         with transaction(self._sessions) as s:
             taken = s.scalar(
@@ -155,7 +156,7 @@ class Library:
                 raise Conflict(f"program O{number:04d} already exists") from exc
             for tag in sorted({t.strip() for t in tags if t.strip()}):
                 s.add(m.ProgramTag(program_id=prog.id, tag=tag))
-            rev = self._add_revision(s, prog, text, check, author, comment, source)
+            rev = self._add_revision(s, prog, text, check, author, comment, source, digest)
             self._record(s, author, "program.create", "program", prog.id, number=number, name=name)
             return self._program_info(s, prog), _revision_info(rev)
 
@@ -173,10 +174,11 @@ class Library:
             kind, name = prog.machine_kind, prog.name
         text = self._decode(text, name)
         check = self._check(text, kind)
+        digest = text.sha256 if isinstance(text, ProgramUpload) else None
         text = _stored(text)
         with transaction(self._sessions) as s:
             prog = self._get_program(s, program_id)
-            rev = self._add_revision(s, prog, text, check, author, comment, source)
+            rev = self._add_revision(s, prog, text, check, author, comment, source, digest)
             return _revision_info(rev)
 
     def receive_from_machine(self, machine: str, text: str | bytes) -> RevisionInfo:
@@ -594,8 +596,10 @@ class Library:
         author: str,
         comment: str,
         source: str,
+        digest: str | None = None,
     ) -> m.Revision:
-        digest = sha256_of(text)
+        # an upload hashed its stored form as it streamed in: no second pass (and copy)
+        digest = digest or sha256_of(text)
         # stored text is ASCII (dnc.tape.normalise_text): characters are bytes, no encoding
         size = len(text) if text.isascii() else len(text.encode("utf-8"))
         if s.get(m.Content, digest) is None:
