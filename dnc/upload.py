@@ -29,6 +29,16 @@ _TAPE_CONTROL = b"\x11\x12\x13\x14"  # DC1-DC4: tape reader control, stripped
 _HEAD = 4096  # kept for the tape header (number, title) and the parity hint
 
 
+def _whole_utf8(data: bytes) -> bool:
+    """Whether `data` starts with one complete UTF-8 character (or a byte that starts none,
+    which no further byte can mend)."""
+    lead = data[0]
+    need = (
+        2 if lead >> 5 == 0b110 else 3 if lead >> 4 == 0b1110 else 4 if lead >> 3 == 0b11110 else 1
+    )
+    return len(data) >= need
+
+
 class ProgramUpload:
     """Feed bytes with `feed()` (any chunking), then `finish()`; use as a context manager
     (the temporary file goes with it)."""
@@ -48,6 +58,8 @@ class ProgramUpload:
         self._cr = False  # a CR held back: CR LF may be split between two chunks
         self._content = False  # something other than blanks and % seen
         self._last = b""
+        self._held: tuple[int, bytes] | None = None  # (offset, bytes) of a split refusal
+        self._held_where: tuple[int, int, bytes] | None = None
         self.finished = False
 
     # ------------------------------------------------------------------ receiving
@@ -59,9 +71,18 @@ class ProgramUpload:
         check_size(self.size, limit=self.limit, name=self.name)
         if len(self.head) < _HEAD:
             self.head += chunk[: _HEAD - len(self.head)]
+        if self._held is not None:  # a refused character split between two chunks
+            held_at, held = self._held
+            raise self._refusal(held + chunk[:3], 0, held_at, final=True)
         bad = _OUTSIDE.search(chunk)
         if bad is not None:
-            raise self._refusal(chunk, bad.start(), at)
+            i = bad.start()
+            if chunk[i] >= 0x80 and len(chunk) - i < 4 and not _whole_utf8(chunk[i:]):
+                # its UTF-8 sequence may go on in the next chunk: name it then (or at finish)
+                self._held = (at + i, chunk[i:])
+                self._held_where = (self._line, self._line_start, chunk[:i])
+                return
+            raise self._refusal(chunk, i, at)
         lf = chunk.count(b"\n")
         if lf:
             self._line += lf
@@ -89,6 +110,9 @@ class ProgramUpload:
 
     def finish(self) -> ProgramUpload:
         """End of the upload: InvalidUpload if it holds no program."""
+        if self._held is not None:
+            held_at, held = self._held
+            raise self._refusal(held, 0, held_at, final=True)
         if self._cr:
             self._cr = False
             self._store(b"\n")
@@ -98,12 +122,19 @@ class ProgramUpload:
         self.finished = True
         return self
 
-    def _refusal(self, chunk: bytes, i: int, at: int) -> InvalidUpload:
+    def _refusal(self, chunk: bytes, i: int, at: int, final: bool = False) -> InvalidUpload:
         offset = at + i
+        if final and self._held_where is not None:
+            # the line counters stopped before the chunk that held the character
+            line0, start0, before = self._held_where
+            at, i = offset - len(before), len(before)
+            chunk = before + chunk
+        else:
+            line0, start0 = self._line, self._line_start
         before = chunk[:i]
         lf = before.count(b"\n")
-        line = self._line + lf
-        start = at + before.rfind(b"\n") + 1 if lf else self._line_start
+        line = line0 + lf
+        start = at + before.rfind(b"\n") + 1 if lf else start0
         column = offset - start + 1
         code = chunk[i]
         where = dict(offset=offset, line=line, column=column)

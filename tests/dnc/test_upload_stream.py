@@ -123,3 +123,18 @@ def test_memory_of_a_streamed_upload_stays_near_one_copy_of_the_program(sessions
         tracemalloc.stop()
     assert rev.size == len(data) and rev.sha256 == sha256_of(data.decode())
     assert peak < 2.5 * len(data), f"peak {peak / 1e6:.1f} MB for {len(data) / 1e6:.1f} MB"
+
+
+@pytest.mark.parametrize("cut", [1, 2, 3])
+def test_a_character_split_between_chunks_is_named_whole(cut):
+    data = "O1\nG0 X1 (\u20ac)\n".encode()  # the euro sign: 3 bytes
+    i = data.index("\u20ac".encode())
+    up = ProgramUpload(limit=LIMIT)
+    with pytest.raises(InvalidUpload) as info:
+        up.feed(data[: i + cut] if cut < 3 else data[:i] + data[i : i + 1])
+        up.feed(data[i + cut :] if cut < 3 else data[i + 1 :])
+        up.finish()
+    up.close()
+    assert "U+20AC" in str(info.value)
+    assert (info.value.detail["offset"], info.value.detail["line"]) == (i, 2)
+    assert info.value.detail["column"] == 8
