@@ -184,6 +184,10 @@ class TransferWorker:
         except Exception as exc:
             failure = TransferError("read", f"revision text {found.sha256[:12]}: {exc}")
             return self._fail(dispatch_id, job["attempts"], failure)
+        if (unsendable := _outside_tape_code(text)) is not None:
+            # stored before uploads were held to the ISO character set: the 7-bit tape
+            # cannot carry it, on this attempt or any other
+            return self._fail(dispatch_id, job["attempts"], unsendable)
         try:
             host, port = _address(job["address"], dispatch_id)
             client = self._client(host, port, job["profile"])
@@ -223,6 +227,10 @@ class TransferWorker:
             return DONE
         except TransferError as exc:
             return self._fail(dispatch_id, job["attempts"], exc)
+        except Exception as exc:  # a bug costs one attempt, recorded, never a dispatch stuck
+            log.exception("dispatch %d: attempt failed", dispatch_id)
+            failure = TransferError("internal", f"{type(exc).__name__}: {exc}")
+            return self._fail(dispatch_id, job["attempts"], failure)
 
     # ------------------------------------------------------------------------------ helpers
 
@@ -457,3 +465,17 @@ def _address(address: str, dispatch_id: int) -> tuple[str, int]:
             "connect", f"machine has no DNC address (got {address!r}) for dispatch {dispatch_id}"
         )
     return host, int(port)
+
+
+def _outside_tape_code(text: str) -> TransferError | None:
+    """A failure naming the first character the ISO 7-bit tape cannot carry, or None."""
+    if text.isascii():
+        return None
+    at = next(i for i, ch in enumerate(text) if ord(ch) > 0x7F)
+    before = text[:at]
+    line, column = before.count("\n") + 1, at - (before.rfind("\n") + 1) + 1
+    return TransferError(
+        "encode",
+        f"character {text[at]!r} (U+{ord(text[at]):04X}) at line {line}, column {column} is "
+        "outside the ISO 7-bit tape code; the revision cannot be sent (upload a corrected one)",
+    )

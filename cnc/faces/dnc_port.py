@@ -73,6 +73,7 @@ ALARM_OVERRUN = 2010
 ALARM_AUTH = 2011  # no or a wrong AUTH line on a port with a shared secret
 ALARM_BAD_DATA = 2012  # machine data refused: the reply names the JSON pointer and why
 MACHINE_DATA_MAX = 1 << 20  # bytes of one TOOLS/OFFSETS PUT body
+ALARM_EIGHT_BIT = 2013  # a byte with bit 7 set on a port without parity: not tape code
 FATAL_TO_CONNECTION = {
     ALARM_PARITY,
     ALARM_CUT_OFF,
@@ -82,6 +83,7 @@ FATAL_TO_CONNECTION = {
     ALARM_BLOCK_TOO_LONG,
     ALARM_UNKNOWN_COMMAND,
     ALARM_AUTH,
+    ALARM_EIGHT_BIT,
 }
 RAISES_ALARM = {ALARM_PARITY, ALARM_CUT_OFF, ALARM_MEMORY_FULL, ALARM_OVERRUN, ALARM_TIMEOUT}
 
@@ -359,6 +361,12 @@ class DncPort(TcpFace):
                     raise DncError(
                         ALARM_PARITY, f"parity error at byte {ev.offset}; program rejected"
                     )
+                elif ev.kind == "eight_bit":
+                    raise DncError(
+                        ALARM_EIGHT_BIT,
+                        f"8-bit byte 0x{ev.code:02X} at byte {ev.offset} (line {ev.line}) on a "
+                        "7-bit port without parity; program rejected",
+                    )
                 elif ev.kind == "overlong":
                     raise DncError(
                         ALARM_BLOCK_TOO_LONG,
@@ -468,6 +476,13 @@ class DncPort(TcpFace):
             text = self.memory.get(number)
         except KeyError:
             raise DncError(ALARM_NOT_IN_MEMORY, f"program O{number:04d} not in memory") from None
+        if not text.isascii():  # loaded by another way than the tape: say so, do not drop
+            at = next(i for i, ch in enumerate(text) if ord(ch) > 0x7F)
+            raise DncError(
+                ALARM_EIGHT_BIT,
+                f"program O{number:04d} holds {text[at]!r} (U+{ord(text[at]):04X}) on line "
+                f"{text.count(chr(10), 0, at) + 1}, outside the 7-bit tape code; cannot punch",
+            )
         await conn.send_tape(text)
         self.stats.programs_punched += 1
 
