@@ -21,7 +21,7 @@ from cnc.canon import ArcFeed, SetPathMode, StraightFeed, StraightTraverse
 from cnc.errors import NcError
 from cnc.interpolator.sample import Sample
 from cnc.params import MachineParams
-from cnc.planner.geometry import Vec, Vec3
+from cnc.planner.geometry import Line, Vec, Vec3
 from cnc.planner.limits import AxisLimits
 from cnc.planner.path import Path
 from cnc.planner.profile import INF, PlanMemo, Row, Span, partition, partition_again, solve
@@ -64,6 +64,7 @@ class Motion:
     _urgent: bool
     _sb_wait: bool
     replans: int
+    fallbacks: int
     _memo: PlanMemo
     _lookahead: int  # params.lookahead (params is frozen)
 
@@ -112,6 +113,7 @@ class Motion:
         self._urgent = False
         self._sb_wait = False
         self.replans = 0
+        self.fallbacks = 0  # re-plans refused because the running plan had to stay
         # spans of the last plan by their inputs: a re-plan for new blocks rebuilds only
         # the spans whose inputs changed (see profile.solve)
         self._memo = PlanMemo()
@@ -251,8 +253,11 @@ class Motion:
         return self._s < self.path.end_s
 
     def _protect_s(self) -> float:
+        """Path the running plan covers: a new block's blend never reshapes it, so the
+        plan stays valid whatever the new block asks for (see `_replan`). It ends at the
+        stoppable tail (`_tail_start`), so blends still use all of the last line."""
         if self._si < len(self._spans):
-            return self._spans[self._si].s1
+            return self._spans[-1].s1
         return self._s
 
     def _in_coast(self) -> bool:
@@ -311,15 +316,47 @@ class Motion:
                 spans = self._plan_single_block(k, s0, v0, fo, ro)
             else:
                 path = self.path
-                parts = partition_again(segs, k, s0, fo, ro, self.ipo, self._memo, path.changed_s)
+                tail = self._tail_start(s0)
+                parts = partition_again(
+                    segs, k, s0, fo, ro, self.ipo, self._memo, path.changed_s, tail
+                )
                 path.changed_s = INF
-                spans, _ok = solve(parts, v0, self.ipo, self._memo)
+                spans, ok = solve(parts, v0, self.ipo, self._memo)
+                if not ok and not urgent and self._si < len(self._spans):
+                    # The new blocks ask for less than the committed state can give (a
+                    # plan from it would break a limit). The running plan stays: it ends
+                    # at rest before any path the new blocks could change, so it is still
+                    # valid; the re-plan is tried again next cycle from a later state.
+                    self._dirty = True
+                    self.fallbacks += 1
+                    return
         if lead is not None:
             spans.insert(0, lead)
         self._spans = spans
         self._si = 0
         self._t = 0.0
         self._hint = 0
+
+    def _tail_start(self, s0: float) -> float:
+        """Where the plan must come to rest: the start of the last piece while the next
+        block may still reshape it (INF when the path end is final or already reached).
+
+        The next block's G64 blend may use up all of the last line not yet committed, and
+        its junctions then ask for speeds no plan made before could know: so the window
+        keeps a stoppable tail, the plan covers only path that can no longer change, and
+        a re-plan never has to demand more than the limits from a committed state.
+        """
+        if self._eop:
+            return INF
+        segs = self.path.segs
+        if not segs:
+            return INF
+        last = segs[-1]
+        if last.exact or last.sync_after or not isinstance(last.geom, Line):
+            return INF  # only a line is blended, and not before an exact stop or sync point
+        if last.s0 <= s0:
+            return INF  # already on it (look-ahead 1, or resting there): runs to its end
+        return last.s0
 
     def _lead(self, urgent: bool) -> Span | None:
         """The part of the current motion that must run on as planned (a != 0 now)."""
