@@ -169,6 +169,7 @@ def plan_run(
     def per_axis(vals) -> dict[str, float]:
         return {nm: vals[i] for nm, i in zip(names, idx, strict=True)}
 
+    ratios = limit_ratios(params, vmax, amax, jmax, names, idx)
     return {
         "blocks": blocks,
         "moves": moves,
@@ -181,8 +182,28 @@ def plan_run(
         "max_abs_accel": per_axis(amax),
         "max_abs_jerk": per_axis(jmax),
         "max_path_deviation_mm": dev.worst,
+        "limit_ratio": ratios,
+        "worst_limit_ratio": max((r for ax in ratios.values() for r in ax.values()), default=0.0),
+        "replans": motion.replans,
         "units": {"velocity": "mm/s", "accel": "mm/s^2", "jerk": "mm/s^3"},
     }
+
+
+def limit_ratios(params, vmax, amax, jmax, names, idx) -> dict[str, dict[str, float]]:
+    """Per axis, each maximum over the axis's limit: {"X": {"v": .., "a": .., "j": ..}}.
+
+    The planner's claim (docs/motion.md, Limits) is that every ratio is <= 1 up to float
+    rounding; a run that shows more has found a planner bug.
+    """
+    out: dict[str, dict[str, float]] = {}
+    for nm, i in zip(names, idx, strict=True):
+        ax = params.axis(nm)
+        out[nm] = {
+            "v": vmax[i] / (ax.max_velocity / 60.0) if ax.max_velocity > 0 else math.inf,
+            "a": amax[i] / ax.max_accel if ax.max_accel > 0 else math.inf,
+            "j": jmax[i] / ax.max_jerk if ax.max_jerk > 0 else math.inf,
+        }
+    return out
 
 
 @nc_app.command("plan")

@@ -59,6 +59,14 @@ def test_plan_prints_one_json_object_with_the_figures(prog):
         assert rep["max_abs_velocity"][ax.name] <= ax.max_velocity / 60 * (1 + 1e-9)
         assert rep["max_abs_accel"][ax.name] <= ax.max_accel * (1 + 1e-9)
         assert rep["max_abs_jerk"][ax.name] <= ax.max_jerk * (1 + 1e-9)
+        # the limit ratios are the maxima over the limits, per axis
+        r = rep["limit_ratio"][ax.name]
+        assert r["v"] == pytest.approx(rep["max_abs_velocity"][ax.name] / (ax.max_velocity / 60))
+        assert r["a"] == pytest.approx(rep["max_abs_accel"][ax.name] / ax.max_accel)
+        assert r["j"] == pytest.approx(rep["max_abs_jerk"][ax.name] / ax.max_jerk)
+    worst = max(v for ax in rep["limit_ratio"].values() for v in ax.values())
+    assert rep["worst_limit_ratio"] == worst
+    assert 0.5 < worst <= 1.0 + 1e-9
     # the dwell is part of the cycle time
     assert rep["cycle_time_s"] > 0.25
 
