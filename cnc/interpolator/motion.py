@@ -29,7 +29,57 @@ from cnc.planner.scurve import change_distance
 
 DROP_EVERY: Final = 256
 
-__all__ = ["Motion", "Sample"]
+__all__ = ["Motion", "Peaks", "Sample"]
+
+
+class Peaks:
+    """Per-axis maxima of |v|, |a|, |j| over IPO samples, by the discrete definition of
+    docs/motion.md (backward differences, at rest before the first sample).
+
+    Kept here so that it runs compiled with the interpolator: `Motion.run` feeds it every
+    pose without a Python-level loop (`nc plan` without a trace).
+    """
+
+    t: float
+    p: Vec3
+    v: Vec3
+    a: Vec3
+    vmax: Vec3
+    amax: Vec3
+    jmax: Vec3
+
+    def __init__(self, start: Vec3, ipo: float) -> None:
+        self.t = ipo
+        self.p = (float(start[0]), float(start[1]), float(start[2]))
+        self.v = self.a = (0.0, 0.0, 0.0)
+        self.vmax = self.amax = self.jmax = (0.0, 0.0, 0.0)
+
+    def add(self, pose: Vec3) -> None:
+        t = self.t
+        p0, p1, p2 = self.p
+        v0, v1, v2 = self.v
+        a0, a1, a2 = self.a
+        x0, x1, x2 = pose
+        w0, w1, w2 = (x0 - p0) / t, (x1 - p1) / t, (x2 - p2) / t
+        b0, b1, b2 = (w0 - v0) / t, (w1 - v1) / t, (w2 - v2) / t
+        j0, j1, j2 = (b0 - a0) / t, (b1 - a1) / t, (b2 - a2) / t
+        self.p = (x0, x1, x2)
+        self.v = (w0, w1, w2)
+        self.a = (b0, b1, b2)
+        self.vmax = _absmax(self.vmax, w0, w1, w2)
+        self.amax = _absmax(self.amax, b0, b1, b2)
+        self.jmax = _absmax(self.jmax, j0, j1, j2)
+
+
+def _absmax(m: Vec3, x: float, y: float, z: float) -> Vec3:
+    m0, m1, m2 = m
+    if x < 0.0:
+        x = -x
+    if y < 0.0:
+        y = -y
+    if z < 0.0:
+        z = -z
+    return (x if x > m0 else m0, y if y > m1 else m1, z if z > m2 else m2)
 
 
 class Motion:
@@ -65,6 +115,7 @@ class Motion:
     _sb_wait: bool
     replans: int
     fallbacks: int
+    run_cycles: int
     _memo: PlanMemo
     _lookahead: int  # params.lookahead (params is frozen)
 
@@ -114,6 +165,7 @@ class Motion:
         self._sb_wait = False
         self.replans = 0
         self.fallbacks = 0  # re-plans refused because the running plan had to stay
+        self.run_cycles = 0  # cycles the last `run` stepped
         # spans of the last plan by their inputs: a re-plan for new blocks rebuilds only
         # the spans whose inputs changed (see profile.solve)
         self._memo = PlanMemo()
@@ -247,6 +299,26 @@ class Motion:
         self._maybe_replan()
         self._advance(self.ipo)
         return Sample(tnow, self._pose, self._v, self._line)
+
+    def run(self, limit: int, peaks: Peaks, feeding: bool) -> Sample:
+        """`step()` up to `limit` times (at least once), each pose into `peaks`; returns
+        the last sample. Stops early after a cycle that reports a sync command, when the
+        machine is idle, or, while the caller has blocks to push (`feeding`), as soon
+        as the look-ahead has room for one: the samples are those of calling `step()`
+        in a loop that pushes whenever there is room, without a Python-level loop."""
+        s = self.step()
+        peaks.add(s.pose)
+        n = 1
+        while n < limit and s.sync is None:
+            if feeding and self._lookahead > self.path.blocks - self._blocks_done:
+                break
+            if self.idle:
+                break
+            s = self.step()
+            peaks.add(s.pose)
+            n += 1
+        self.run_cycles = n
+        return s
 
     # -- internals ----------------------------------------------------------------------
     def _ahead(self) -> bool:
