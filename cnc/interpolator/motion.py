@@ -307,7 +307,7 @@ class Motion:
         as the look-ahead has room for one: the samples are those of calling `step()`
         in a loop that pushes whenever there is room, without a Python-level loop."""
         s = self.step()
-        peaks.add(s.pose)
+        peaks.add(self._pose)  # s.pose, typed as the pose it is
         n = 1
         while n < limit and s.sync is None:
             if feeding and self._lookahead > self.path.blocks - self._blocks_done:
@@ -315,7 +315,7 @@ class Motion:
             if self.idle:
                 break
             s = self.step()
-            peaks.add(s.pose)
+            peaks.add(self._pose)
             n += 1
         self.run_cycles = n
         return s
