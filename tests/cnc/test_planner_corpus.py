@@ -132,3 +132,28 @@ def test_no_corpus_program_makes_the_planner_break_a_limit(lookahead):
             worst = (peaks.worst, path.name, peaks.where)
     assert len(planned) >= MIN_PLANNED, planned
     assert worst[0] <= 1.0 + REL, f"worst limit ratio {worst} (look-ahead {lookahead})"
+
+
+@pytest.mark.skipif(not GCODE_CORPUS.is_dir(), reason=MISSING)
+@pytest.mark.parametrize(
+    "name", ["cline-exclamation.nc", "enier-mill-hp2.nc", "kiely-mill-text.nc"]
+)
+def test_the_summary_without_a_trace_equals_the_sampled_one_on_real_programs(name):
+    """`nc plan` without a trace (Motion.run, closed-form deviation) and with one (every
+    sample through Python) report the same cycle time and maxima, to the bit; the
+    sampled deviation is at most the closed-form one (see tests/cnc/test_plan_cli.py)."""
+    from cnc.interp import Interpreter
+
+    path = GCODE_CORPUS / name
+    params = _wide("mill3", 200)
+    reps = []
+    for on_sample in (None, lambda s: None):
+        interp = Interpreter(params, file=str(path))
+        start = tuple(interp.state.machine_position)
+        with open(path, encoding="latin-1") as fh:
+            reps.append(plan_run(params, interp.run(fh), start, None, on_sample))
+    fast, slow = reps
+    for key in ("cycle_time_s", "max_abs_velocity", "max_abs_accel", "max_abs_jerk"):
+        assert fast[key] == slow[key], key
+    assert fast["worst_limit_ratio"] == slow["worst_limit_ratio"] <= 1.0 + REL
+    assert slow["sampled_path_deviation_mm"] <= fast["max_path_deviation_mm"] + 1e-12
