@@ -14,8 +14,8 @@ Prints one JSON object:
   (must be <= 1: the planner's claim, up to 1e-9 float rounding) and where it occurs,
   and the programs cut short at `cycle_cap` IPO cycles (a lathe program read on a mill
   may run for hours of machining time) in `capped`.
-* `compiled`: whether the interpolator ran as a mypyc extension (plain Python is about
-  as fast for the summary-free parts and several times slower per IPO cycle).
+* `compiled`: whether the planner and interpolator ran as mypyc extensions (the target is
+  for the compiled build; as plain Python the same run takes about 3x the CPU time).
 
 `--quick` plans only led-1089-wall.nc and caps the corpus at 25k cycles per program.
 """
