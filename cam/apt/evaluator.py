@@ -15,8 +15,8 @@ from dataclasses import dataclass
 
 from cam.apt import geometry as g
 from cam.apt.geometry import Circle, Conic, GeometryError, Line, Plane, Point, Vector
-from cam.apt.parser import BinOp, Call, Definition, Minor, Neg, Num, Ref, Statement, parse
 from cam.apt.lexer import Token
+from cam.apt.parser import GEOMETRY, BinOp, Call, Definition, Minor, Neg, Num, Ref, Statement, parse
 from cam.cl import ClRecord
 from cam.errors import CamError, CamWarning, WarningSink, ignore_warning
 
@@ -680,6 +680,8 @@ class Processor:
             yield self._rec(st, m)
         elif m in ("MACHIN", "LOADTL", "TURRET", "SPINDL", "FEDRAT", "COOLNT", "CUTCOM", "DELAY"):
             yield self.post_word(st, m, args, sig)
+        elif m in GEOMETRY:
+            raise self.err(f"{m} is a geometry definition: give it a name ({m[0]}1 = {m}/...)", st.tok)
         elif m in ("MACRO", "TERMAC", "CALL", "LOOPST", "LOOPND", "JUMPTO", "IF"):
             raise self.err(f"{m} is not supported by this processor (no macros or loops)", st.tok)
         else:

@@ -26,7 +26,7 @@ MINORS = frozenset(
      "PERPTO", "DELTA", "CLW", "CCLW", "ON", "OFF", "TO", "PAST", "THRU", "XYPLAN", "YZPLAN",
      "ZXPLAN", "XAXIS", "YAXIS", "RTHETA", "MM", "INCHES", "IPM", "IPR", "MMPM", "MMPR",
      "FLOOD", "MIST", "RPM", "SFM", "SMM", "MAXRPM", "NOMORE", "TIMES", "SAME", "AUTO",
-     "MILL", "LATHE", "TAP", "THRU", "ALL", "NORMAL", "UNIT", "PLUS", "MINUS", "ADJUST",
+     "MILL", "LATHE", "TAP", "ALL", "NORMAL", "UNIT", "PLUS", "MINUS", "ADJUST",
      "LENGTH", "OMIT", "AT", "INCR", "LINEAR", "ARC", "SCALE", "TRANSL", "ROTATE"}
 )  # fmt: skip
 FUNCTIONS = frozenset(

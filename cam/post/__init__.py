@@ -50,10 +50,9 @@ class Machine:
 def load_machine(spec: str | Path) -> Machine:
     """`mill3`, `lathe2` (the NC kernel's shipped machines), `mill5` (cam/machines/mill5.yaml)
     or a machine YAML file (its `kind` picks the loader and the post)."""
+    from cam.machine5 import MILL5_FILE, load_mill5
     from cnc.config import BUILTIN_MACHINES, builtin_machine, load_machine_config
     from cnc.errors import NcError
-
-    from cam.machine5 import MILL5_FILE, load_mill5
 
     text = str(spec)
     if text in BUILTIN_MACHINES:
