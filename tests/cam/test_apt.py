@@ -533,7 +533,7 @@ def test_post_statements_pass_through() -> None:
         ("FOO/1", 1, 1, "unknown statement word 'FOO'"),
         ("P1 = POINT/1,,2", 1, 14, "empty argument"),
         ("P1 = POINT/1,2 #", 1, 16, "invalid character"),
-        ("P1 = POINT/1,2 $\n", 1, 16, "past the end of the file"),
+        ("P1 = POINT/1,2 $\n", 1, 14, "past the end of the file"),
         ("X = 1/0", 1, 6, "division by zero"),
         ("P1 = POINT/1,2\nX = P1 + 1", 2, 5, "expected a number"),
         ("L1 = LINE/1,1,1,1", 1, 6, "coincide"),
