@@ -171,7 +171,7 @@ def _nc_check(path: Path, mach, offsets, source: Path, repost) -> dict:
     from cnc.interp import check
 
     params = mach.config.params
-    travel = offsets is not None or mach.kind == "lathe"
+    travel = offsets is not None
     if not travel:
         big = 1e9
         params = replace(

@@ -6,7 +6,7 @@ import math
 
 import pytest
 
-from cam.apt import Processor, process
+from cam.apt import Processor
 from cam.apt.geometry import Circle, Line, Plane, Point
 from cam.errors import CamError
 
