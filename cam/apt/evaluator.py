@@ -681,7 +681,9 @@ class Processor:
         elif m in ("MACHIN", "LOADTL", "TURRET", "SPINDL", "FEDRAT", "COOLNT", "CUTCOM", "DELAY"):
             yield self.post_word(st, m, args, sig)
         elif m in GEOMETRY:
-            raise self.err(f"{m} is a geometry definition: give it a name ({m[0]}1 = {m}/...)", st.tok)
+            raise self.err(
+                f"{m} is a geometry definition: give it a name ({m[0]}1 = {m}/...)", st.tok
+            )
         elif m in ("MACRO", "TERMAC", "CALL", "LOOPST", "LOOPND", "JUMPTO", "IF"):
             raise self.err(f"{m} is not supported by this processor (no macros or loops)", st.tok)
         else:

@@ -45,7 +45,8 @@ class PostOptions:
     tolerance_mm: float | None = None  # T, mm (None: the machine's, else 0.01)
     program_number: int | None = None
     merge: bool = False  # merge collinear blocks within T
-    max_depth: int = 20  # linearisation: bisections of one CL segment at most
+    max_depth: int | None = None  # linearisation: bisections of one segment (None: the machine's)
+    trace: list | None = None  # 5-axis: (CL pose, joints) of every point sent (tests, tools)
 
 
 @dataclass(slots=True)

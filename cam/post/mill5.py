@@ -24,6 +24,7 @@ from cam.cl import ClRecord
 from cam.post.base import INCH, SINGULAR_LIST_MAX, FanucPost, NcBlock
 
 SINGULAR_K = 1e-12  # as cnc.kinematics: k this close to 1 is the singular orientation
+SINGULAR_STEP = 1e-4  # how far along a segment C's limit at its singular end is taken
 C_JUMP_WARN = 90.0  # degrees of C in one block: flagged (002 req 13)
 _H = math.sqrt(0.5)
 
@@ -46,6 +47,9 @@ class Mill5Post(FanucPost):
         self.joints: tuple[float, float, float, float, float] | None = None  # of self.anchor
         self.prev_c: float | None = None
         self.last_singular = -1  # CL line of the last singular record
+        self.singular_ik = False  # the last inverse kinematics met the singular orientation
+        self.allow_unwind = False  # a rapid may turn C the long way round within the limits
+        self.joints_singular = False  # self.joints are at the singular orientation
 
     def merge_tol(self) -> float:
         return self.tol_mm / INCH if self.units == "INCHES" else self.tol_mm
@@ -81,7 +85,7 @@ class Mill5Post(FanucPost):
     # --- kinematics ----------------------------------------------------------------------------
 
     def ik(
-        self, pose: tuple[float, ...], prev_c: float | None, rec: ClRecord
+        self, pose: tuple[float, ...], prev_c: float | None, rec: ClRecord, report: bool = True
     ) -> tuple[float, float, float, float, float]:
         """Joints (X, Y, Z, B, C) of a CL pose; the closed forms of cnc.kinematics.bc45_inverse
         with the branch sign, C unwrapped next to prev_c and the limits applied."""
@@ -99,11 +103,14 @@ class Mill5Post(FanucPost):
                 rec,
             )
         k = min(max(k, 0.0), 1.0)
-        if 1.0 - k <= SINGULAR_K:
+        self.singular_ik = 1.0 - k <= SINGULAR_K
+        if self.singular_ik:
             b, s, m, kk = 0.0, 0.0, 1.0, 1.0
             c = prev_c if prev_c is not None else 0.0
             sm = self.summary
-            if rec.line != self.last_singular:
+            if not report:
+                first_of_run = False
+            elif rec.line != self.last_singular:
                 first_of_run = self.last_singular != self.prev_line
                 self.last_singular = rec.line
                 sm.singular_count += 1
@@ -139,19 +146,25 @@ class Mill5Post(FanucPost):
         return (x, y, z, b, c)
 
     def _unwrap(self, c: float, prev: float | None, rec: ClRecord) -> float:
+        """The turn of C nearest the previous C (the shortest path). With C limits a cutting
+        move must still take the shortest path (the table cannot unwind while the tool cuts:
+        the tool axis would sweep round); a rapid may take the other way round."""
         ref = prev if prev is not None else 0.0
         c = c + 360.0 * round((ref - c) / 360.0)
         if self.c_lim is None:
             return c
         lo, hi = self.c_lim
-        cands = [
-            c + 360.0 * t for t in (-2, -1, 0, 1, 2) if lo - 1e-9 <= c + 360.0 * t <= hi + 1e-9
-        ]
-        if not cands:
-            raise self.err(
-                f"C {c:.4f} cannot be reached within the C limits ({lo:g} ... {hi:g})", rec
-            )
-        return min(cands, key=lambda v: abs(v - ref))
+        if lo - 1e-9 <= c <= hi + 1e-9:
+            return c
+        if self.allow_unwind or prev is None:
+            cands = [c + 360.0 * t for t in range(-3, 4) if lo - 1e-9 <= c + 360.0 * t <= hi + 1e-9]
+            if cands:
+                return min(cands, key=lambda v: abs(v - ref))
+        raise self.err(
+            f"C {c:.4f} beyond the C limits ({lo:g} ... {hi:g}): the table would have to"
+            " unwind during a cutting move (reposition with a RAPID first)",
+            rec,
+        )
 
     def fk_tip(
         self, x: float, y: float, z: float, b: float, c: float
@@ -176,12 +189,29 @@ class Mill5Post(FanucPost):
     def emit_linear(self, pose: tuple[float, ...], rec: ClRecord, rapid: bool) -> Iterator[NcBlock]:
         self._setup()
         prev_c = self.joints[4] if self.joints is not None else self.prev_c
+        self.allow_unwind = rapid
         joints = self.ik(pose, prev_c, rec)
+        self.allow_unwind = False
+        singular = self.singular_ik
         if rapid or self.joints is None or self.anchor is None:
-            yield from self.emit_joints(joints, rec, rapid)
+            yield from self.emit_joints(joints, rec, rapid, pose)
         else:
+            if self.joints_singular and not singular and abs(joints[4] - self.joints[4]) > 1e-9:
+                # Leaving the singular orientation: C was free there (kept from before) and
+                # now has a value. Turn C at the singular point first, the tool tip held on
+                # the CL point within T (the same bisection, with both ends at one pose).
+                # C's limit approaching the singular point along this segment: the
+                # kinematics is smooth there except for C, which the table can turn first
+                a, v = self.anchor, pose
+                near = [a[3 + q] + SINGULAR_STEP * (v[3 + q] - a[3 + q]) for q in range(3)]
+                nn = math.sqrt(sum(x * x for x in near))
+                c_near = self.ik((*a[:3], *(x / nn for x in near)), joints[4], rec, report=False)[4]
+                turned = self.ik(self.anchor, c_near, rec, report=False)
+                yield from self.linearise(self.anchor, self.joints, self.anchor, turned, rec, 0)
+                self.joints = turned
             yield from self.linearise(self.anchor, self.joints, pose, joints, rec, 0)
         self.joints = joints
+        self.joints_singular = singular
 
     def linearise(self, pa, ja, pb, jb, rec: ClRecord, depth: int) -> Iterator[NcBlock]:
         tip = self.fk_tip(
@@ -195,7 +225,7 @@ class Mill5Post(FanucPost):
         if dev <= self.T:
             if dev > self.summary.peak_deviation:
                 self.summary.peak_deviation = dev
-            yield from self.emit_joints(jb, rec, False)
+            yield from self.emit_joints(jb, rec, False, pb)
             return
         if depth >= self.max_depth:
             raise self.err(
@@ -216,13 +246,15 @@ class Mill5Post(FanucPost):
             j / n,
             k / n,
         )
-        jm = self.ik(pm, (ja[4] + jb[4]) * 0.5, rec)
+        jm = self.ik(pm, (ja[4] + jb[4]) * 0.5, rec, report=False)
         self.summary.points_inserted += 1
         yield from self.linearise(pa, ja, pm, jm, rec, depth + 1)
         yield from self.linearise(pm, jm, pb, jb, rec, depth + 1)
 
-    def emit_joints(self, j, rec: ClRecord, rapid: bool) -> Iterator[NcBlock]:
+    def emit_joints(self, j, rec: ClRecord, rapid: bool, pose) -> Iterator[NcBlock]:
         x, y, z, b, c = j
+        if self.opt.trace is not None:
+            self.opt.trace.append((tuple(pose), j))
         for name, v in (("X", x), ("Y", y), ("Z", z)):
             lo, hi = self.lim[name]
             if not lo - 1e-9 <= v <= hi + 1e-9:

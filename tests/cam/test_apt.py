@@ -68,7 +68,9 @@ def test_a1_long_name_used_as_a_value() -> None:
 
 
 def test_a2_statement_forms() -> None:
-    e = env("P1 = POINT/4,5,6\nX = 10.0\nC1 = CIRCLE/CENTER,P1,RADIUS,5\nY = 10/4\nZ = 2*(1+2)**2-1")
+    e = env(
+        "P1 = POINT/4,5,6\nX = 10.0\nC1 = CIRCLE/CENTER,P1,RADIUS,5\nY = 10/4\nZ = 2*(1+2)**2-1"
+    )
     assert pt(e["P1"]) == (4, 5, 6)
     assert e["X"] == 10.0
     assert e["C1"] == Circle(4, 5, 5, 6)
@@ -353,7 +355,14 @@ def test_a9_ellipse_coefficients() -> None:
 def test_a9_hyperbola_matches_the_seed_general_form() -> None:
     a, b, m, n = 1.5, 2.0, 5.0, 4.0
     co = env(f"P1 = POINT/{m},{n}\nH1 = HYPERB/CENTER,P1,{a},{b}")["H1"].coefficients
-    want = (b * b, 0, -a * a, -2 * b * b * m, 2 * a * a * n, b * b * m * m - a * a * n * n - a * a * b * b)
+    want = (
+        b * b,
+        0,
+        -a * a,
+        -2 * b * b * m,
+        2 * a * a * n,
+        b * b * m * m - a * a * n * n - a * a * b * b,
+    )
     assert close(co, want, 1e-12)
 
 
@@ -412,8 +421,12 @@ def test_b11_four_sided_contour_offset_by_the_cutter_radius() -> None:
 
 
 def test_b11_inside_pocket_and_to_modifiers() -> None:
-    src = SQUARE.replace("FROM/-3,-3,1", "FROM/3,3,1").replace("TLRGT,GORGT/S1,PAST,S2", "TLLFT,GOLFT/S1,TO,S2")
-    src = src.replace("GOLFT/S2,PAST,S3", "GOLFT/S2,TO,S3").replace("GOLFT/S3,PAST,S4", "GOLFT/S3,TO,S4")
+    src = SQUARE.replace("FROM/-3,-3,1", "FROM/3,3,1").replace(
+        "TLRGT,GORGT/S1,PAST,S2", "TLLFT,GOLFT/S1,TO,S2"
+    )
+    src = src.replace("GOLFT/S2,PAST,S3", "GOLFT/S2,TO,S3").replace(
+        "GOLFT/S3,PAST,S4", "GOLFT/S3,TO,S4"
+    )
     src = src.replace("GOLFT/S4,PAST,S1", "GOLFT/S4,TO,S1")
     _, recs = run(src)
     pts = [r.args[:2] for r in recs if r.word == "GOTO"]
@@ -436,7 +449,9 @@ GOFWD/C1,TANTO,L2
 GOFWD/L2,ON,L0
 """
     _, recs = run(src)
-    words = [(r.word, tuple(round(a, 9) for a in r.args)) for r in recs if r.word in ("GOTO", "CIRCLE")]
+    words = [
+        (r.word, tuple(round(a, 9) for a in r.args)) for r in recs if r.word in ("GOTO", "CIRCLE")
+    ]
     assert words == [
         ("GOTO", (0.0, -2.0, 0.0)),
         ("GOTO", (20.0, -2.0, 0.0)),

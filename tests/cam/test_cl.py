@@ -117,7 +117,24 @@ def records(draw) -> ClRecord:
         return ClRecord(draw(st.sampled_from(["PARTNO", "PPRINT", "INSERT"])), (), draw(_text))
     if kind == "bare":
         return ClRecord(draw(st.sampled_from(["RAPID", "FINI", "END", "STOP"])))
-    word = draw(_word.filter(lambda w: w not in ("GOTO", "FROM", "TLAXIS", "CIRCLE", "INDIRV", "PARTNO", "PPRINT", "INSERT", "REMARK")))
+    word = draw(
+        _word.filter(
+            lambda w: (
+                w
+                not in (
+                    "GOTO",
+                    "FROM",
+                    "TLAXIS",
+                    "CIRCLE",
+                    "INDIRV",
+                    "PARTNO",
+                    "PPRINT",
+                    "INSERT",
+                    "REMARK",
+                )
+            )
+        )
+    )
     args = draw(st.lists(st.one_of(_num, _word), min_size=1, max_size=12))
     return ClRecord(word, tuple(args))
 

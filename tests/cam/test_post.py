@@ -73,7 +73,9 @@ def test_c15_passes_nc_check_for_mill3() -> None:
 
 
 def test_c13_rapid_is_for_the_next_motion_only() -> None:
-    nc, _ = post_text("FEDRAT/5\nFROM/0,0,0\nRAPID\nGOTO/1,0,0\nGOTO/2,0,0\nRAPID\nGOTO/3,0,0\nGOTO/4,0,0\nFINI")
+    nc, _ = post_text(
+        "FEDRAT/5\nFROM/0,0,0\nRAPID\nGOTO/1,0,0\nGOTO/2,0,0\nRAPID\nGOTO/3,0,0\nGOTO/4,0,0\nFINI"
+    )
     assert body(nc).splitlines()[1:] == [
         "G00 X1. Y0. Z0.", "G01 X2. F5.", "G00 X3.", "G01 X4.", "M30",
     ]  # fmt: skip
