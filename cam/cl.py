@@ -25,8 +25,8 @@ from __future__ import annotations
 import math
 import re
 from collections.abc import Iterable, Iterator
-from dataclasses import dataclass, field
-from typing import TextIO
+from dataclasses import dataclass
+from typing import Any, TextIO
 
 from cam.errors import CamError, CamWarning, WarningSink, ignore_warning
 
@@ -42,23 +42,33 @@ __all__ = [
 
 TEXT_WORDS = frozenset({"PARTNO", "PPRINT", "INSERT", "REMARK"})
 VECTOR_TOLERANCE = 1e-3  # | |v| - 1 | accepted (and normalised) for a tool-axis vector
-VECTOR_EXACT = 1e-9  # closer than this to unit length: kept as written, no warning
+VECTOR_EXACT = 1e-9  # closer than this to unit length: kept as written
+VECTOR_PRINTED = 1e-6  # closer than this: the rounding of 6-7 printed decimals, normalised silently
 LINE_WIDTH = 72  # the card width CL writers keep to; longer statements continue with `$`
 
 _WORD = re.compile(r"[A-Z][A-Z0-9]*\Z")
 _NUMBER_START = frozenset("+-.0123456789")
 
 
-@dataclass(frozen=True, slots=True)
+@dataclass(slots=True, eq=False)
 class ClRecord:
     """One CL statement: the major word, its arguments (numbers as float, minor words as
     upper-case str), free text for PARTNO/PPRINT/INSERT, and the source line (not part of
-    equality)."""
+    equality). Treat it as immutable (not frozen only because a frozen dataclass is slow to
+    build, and a post builds one per CL line)."""
 
     word: str
     args: tuple[float | str, ...] = ()
     text: str | None = None
-    line: int = field(default=0, compare=False)
+    line: int = 0
+
+    def __eq__(self, other: object) -> bool:
+        if not isinstance(other, ClRecord):
+            return NotImplemented
+        return (self.word, self.args, self.text) == (other.word, other.args, other.text)
+
+    def __hash__(self) -> int:
+        return hash((self.word, self.args, self.text))
 
     @property
     def numbers(self) -> tuple[float, ...]:
@@ -109,13 +119,25 @@ def write_cl(records: Iterable[ClRecord], out: TextIO) -> int:
 # --- reader ---------------------------------------------------------------------------------
 
 
-def _statements(lines: Iterable[str], file: str) -> Iterator[tuple[int, str]]:
+def _statements(lines: Iterable[str], file: str) -> Iterator[tuple[int, Any]]:
     """(first line number, statement text) with continuations joined, comments and blank
     lines dropped."""
     pending: list[str] = []
     start = 0
     n = 0
     for n, raw in enumerate(lines, 1):  # noqa: B007 - n is used after the loop
+        if not pending and raw.startswith("GOTO/"):
+            # the fast path for the commonest record by far; anything unusual in it
+            # (continuation, comment, a bad number) takes the general path below
+            body = raw[5:].rstrip()
+            if body.isascii() and "$" not in body and "_" not in body:
+                try:
+                    vals = [float(x) for x in body.split(",")]
+                except ValueError:
+                    vals = None
+                if vals is not None and len(vals) in (3, 6) and math.isfinite(sum(vals)):
+                    yield n, vals
+                    continue
         s = raw.rstrip("\r\n")
         head = s.lstrip()[:6].upper()
         if not pending and any(head.startswith(w) for w in TEXT_WORDS):
@@ -149,6 +171,9 @@ def _vector(vals: list[float], at: int, line: int, file: str, warn: WarningSink,
     i, j, k = vals[at], vals[at + 1], vals[at + 2]
     n = math.sqrt(i * i + j * j + k * k)
     if abs(n - 1.0) <= VECTOR_EXACT:
+        return
+    if abs(n - 1.0) <= VECTOR_PRINTED:
+        vals[at], vals[at + 1], vals[at + 2] = i / n, j / n, k / n
         return
     if not abs(n - 1.0) <= VECTOR_TOLERANCE:
         raise CamError(
@@ -222,6 +247,18 @@ def read_cl(
     """The records of CL text, one at a time (a file object is read line by line)."""
     lines = source.splitlines() if isinstance(source, str) else source
     for line, s in _statements(lines, file):
+        if s.__class__ is list:  # a GOTO read by the fast path
+            if len(s) == 6:
+                i, j, k = s[3], s[4], s[5]
+                n2 = i * i + j * j + k * k
+                if not -2 * VECTOR_EXACT <= n2 - 1.0 <= 2 * VECTOR_EXACT:
+                    if -2 * VECTOR_PRINTED <= n2 - 1.0 <= 2 * VECTOR_PRINTED:
+                        n = math.sqrt(n2)
+                        s[3], s[4], s[5] = i / n, j / n, k / n
+                    else:
+                        _vector(s, 3, line, file, warn, "GOTO")
+            yield ClRecord("GOTO", tuple(s), None, line)
+            continue
         head = s[:6].upper()
         for w in TEXT_WORDS:
             if head.startswith(w) and (len(s) == len(w) or s[len(w)] in " /"):

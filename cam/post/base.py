@@ -203,6 +203,7 @@ class FanucPost:
     # --- the record loop ---------------------------------------------------------------------
 
     def run(self, records: Iterable[ClRecord]) -> Iterator[NcBlock]:
+        handlers: dict = {}
         for rec in records:
             self.summary.blocks_in += 1
             self.prev_line, self.cur_line = self.cur_line, rec.line
@@ -211,7 +212,9 @@ class FanucPost:
                     f"CIRCLE (line {self.arc.line}) must be followed by the GOTO that ends the arc",
                     rec,
                 )
-            handler = getattr(self, "do_" + rec.word, None)
+            handler = handlers.get(rec.word)
+            if handler is None:
+                handler = handlers[rec.word] = getattr(self, "do_" + rec.word, None)
             if handler is None:
                 raise self.err(f"the {self.name} post cannot execute CL word {rec.word}", rec)
             yield from handler(rec)
@@ -398,10 +401,13 @@ class FanucPost:
     # --- motion --------------------------------------------------------------------------------
 
     def cl_pose(self, rec: ClRecord) -> tuple[float, ...]:
-        v = rec.numbers
-        if len(v) >= 6:
-            return v[:6]
-        return (*v[:3], *self.tool_axis)
+        v = rec.args  # GOTO and FROM hold numbers only (the reader and processor see to it)
+        n = len(v)
+        if n == 6:
+            return v  # type: ignore[return-value]
+        if n > 6:
+            return v[:6]  # type: ignore[return-value]
+        return (*v[:3], *self.tool_axis)  # type: ignore[misc]
 
     def do_FROM(self, rec: ClRecord) -> Iterator[NcBlock]:
         yield from self.flush(rec)
@@ -446,19 +452,27 @@ class FanucPost:
         self.check_axis(pose[3:], rec)
         return {"X": pose[0], "Y": pose[1], "Z": pose[2]}
 
-    def motion_block(self, words: str, rec: ClRecord, rapid: bool) -> Iterator[NcBlock]:
-        if not words:
-            return  # already there: nothing to move (a pending RAPID is used up all the same)
-        yield from self.header(rec)  # before the feed words: the header sets the feed mode
+    def motion_text(self, words: str, rec: ClRecord, rapid: bool) -> str:
+        """The text of a motion block (after the header): pending G words, G00/G01 when it
+        changes, the axis words, the feed when it changes."""
         g = "G00" if rapid else "G01"
-        parts = list(self.pending_g)
-        self.pending_g = []
+        parts = self.pending_g
+        if parts:
+            self.pending_g = []
+        else:
+            parts = []
         if self.motion_out != g:
             parts.append(g)
             self.motion_out = g
         parts.append(words)
         feed = "" if rapid else self.feed_words(rec)
-        yield from self.block(" ".join(parts) + feed, rec)
+        return " ".join(parts) + feed
+
+    def motion_block(self, words: str, rec: ClRecord, rapid: bool) -> Iterator[NcBlock]:
+        if not words:
+            return  # already there: nothing to move (a pending RAPID is used up all the same)
+        yield from self.header(rec)  # before the feed words: the header sets the feed mode
+        yield from self.block(self.motion_text(words, rec, rapid), rec)
 
     def do_GOTO(self, rec: ClRecord) -> Iterator[NcBlock]:
         pose = self.cl_pose(rec)
@@ -470,7 +484,8 @@ class FanucPost:
             yield from self.arc_move(arc, pose, rec)
             self.anchor = pose
         elif rapid or not self.opt.merge or self.anchor is None:
-            yield from self.flush(rec)
+            if self.held is not None:
+                yield from self.flush(rec)
             yield from self.emit_linear(pose, rec, rapid)
             self.anchor = pose
         else:

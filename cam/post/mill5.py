@@ -23,6 +23,8 @@ from collections.abc import Iterator
 from cam.cl import ClRecord
 from cam.post.base import INCH, SINGULAR_LIST_MAX, FanucPost, NcBlock
 
+_sqrt, _acos, _atan2, _cos, _sin = math.sqrt, math.acos, math.atan2, math.cos, math.sin
+_DEG, _RAD = 180.0 / math.pi, math.pi / 180.0
 SINGULAR_K = 1e-12  # as cnc.kinematics: k this close to 1 is the singular orientation
 SINGULAR_STEP = 1e-4  # how far along a segment C's limit at its singular end is taken
 C_JUMP_WARN = 90.0  # degrees of C in one block: flagged (002 req 13)
@@ -80,6 +82,13 @@ class Mill5Post(FanucPost):
         lin = self.cfg.post.linear_decimals + (1 if self.units == "INCHES" else 0)
         rot = self.cfg.post.rotary_decimals
         self.dec = {"X": lin, "Y": lin, "Z": lin, "B": rot, "C": rot}
+        self.fmt_linear, self.fmt_rotary = f"%.{lin}f", f"%.{rot}f"
+        self.last5: list[str | None] = [None] * 5  # the axis words the NC has
+        e = 1e-9
+        self.bounds = (
+            self.lim["X"][0] - e, self.lim["X"][1] + e, self.lim["Y"][0] - e, self.lim["Y"][1] + e,
+            self.lim["Z"][0] - e, self.lim["Z"][1] + e, self.b_lim[0] - e, self.b_lim[1] + e,
+        )  # fmt: skip
         self.max_depth = self.opt.max_depth if self.opt.max_depth else self.cfg.post.max_depth
 
     # --- kinematics ----------------------------------------------------------------------------
@@ -90,12 +99,15 @@ class Mill5Post(FanucPost):
         """Joints (X, Y, Z, B, C) of a CL pose; the closed forms of cnc.kinematics.bc45_inverse
         with the branch sign, C unwrapped next to prev_c and the limits applied."""
         x0, y0, z0, i, j, k = pose
-        n = math.sqrt(i * i + j * j + k * k)
-        if not abs(n - 1.0) <= 1e-3:
-            raise self.err(
-                f"tool axis ({i:.6g}, {j:.6g}, {k:.6g}) is not a unit vector (|v| = {n:.6g})", rec
-            )
-        i, j, k = i / n, j / n, k / n
+        n2 = i * i + j * j + k * k
+        if not -1e-15 <= n2 - 1.0 <= 1e-15:
+            n = _sqrt(n2)
+            if not abs(n - 1.0) <= 1e-3:
+                raise self.err(
+                    f"tool axis ({i:.6g}, {j:.6g}, {k:.6g}) is not a unit vector (|v| = {n:.6g})",
+                    rec,
+                )
+            i, j, k = i / n, j / n, k / n
         if k < -1e-12:
             raise self.err(
                 f"orientation unreachable: tool axis ({i:.6g}, {j:.6g}, {k:.6g}) has k < 0;"
@@ -125,14 +137,17 @@ class Mill5Post(FanucPost):
                     rec,
                 )
         else:
-            m = min(max(2.0 * k - 1.0, -1.0), 1.0)
-            b = self.sigma * math.degrees(math.acos(m))
-            kk = (1.0 + m) / 2.0
-            s = self.sigma * math.sqrt(max(2.0 * (kk - kk * kk), 0.0))
-            c = math.degrees(math.atan2((kk - 1.0) * i + s * j, (kk - 1.0) * j - s * i))
-            c = self._unwrap(c, prev_c, rec)
-        cr = math.radians(c)
-        cc, sc = math.cos(cr), math.sin(cr)
+            m = 2.0 * k - 1.0
+            sigma = self.sigma
+            b = sigma * _acos(m) * _DEG
+            kk = (1.0 + m) * 0.5
+            q = 2.0 * (kk - kk * kk)
+            s = sigma * _sqrt(q) if q > 0.0 else 0.0
+            c = _atan2((kk - 1.0) * i + s * j, (kk - 1.0) * j - s * i) * _DEG
+            if prev_c is None or not -180.0 < c - prev_c <= 180.0 or self.c_lim is not None:
+                c = self._unwrap(c, prev_c, rec)
+        cr = c * _RAD
+        cc, sc = _cos(cr), _sin(cr)
         d = self.d
         x = (m * x0 + s * y0) * cc + (s * x0 - m * y0) * sc + s * (d + z0)
         y = (kk * y0 - s * x0) * cc + (kk * x0 + s * y0) * sc + (kk - 1.0) * (d + z0)
@@ -175,45 +190,49 @@ class Mill5Post(FanucPost):
         pz = z + self.zo - self.tl + d
         y1 = _H * (y + pz)
         z1 = _H * (pz - y)
-        br, cr = math.radians(b), math.radians(c)
-        cb, sb = math.cos(br), math.sin(br)
+        br, cr = b * _RAD, c * _RAD
+        cb, sb = _cos(br), _sin(br)
         x2 = cb * x - sb * y1
         y2 = sb * x + cb * y1
         y3 = _H * (y2 - z1)
         z3 = _H * (y2 + z1)
-        cc, sc = math.cos(cr), math.sin(cr)
+        cc, sc = _cos(cr), _sin(cr)
         return (cc * x2 + sc * y3, -sc * x2 + cc * y3, z3 - d)
 
     # --- motion --------------------------------------------------------------------------------
 
     def emit_linear(self, pose: tuple[float, ...], rec: ClRecord, rapid: bool) -> Iterator[NcBlock]:
         self._setup()
+        out: list[NcBlock] = []
         prev_c = self.joints[4] if self.joints is not None else self.prev_c
         self.allow_unwind = rapid
         joints = self.ik(pose, prev_c, rec)
         self.allow_unwind = False
         singular = self.singular_ik
         if rapid or self.joints is None or self.anchor is None:
-            yield from self.emit_joints(joints, rec, rapid, pose)
+            self.emit_joints(joints, rec, rapid, pose, out)
         else:
             if self.joints_singular and not singular and abs(joints[4] - self.joints[4]) > 1e-9:
                 # Leaving the singular orientation: C was free there (kept from before) and
-                # now has a value. Turn C at the singular point first, the tool tip held on
-                # the CL point within T (the same bisection, with both ends at one pose).
-                # C's limit approaching the singular point along this segment: the
-                # kinematics is smooth there except for C, which the table can turn first
+                # now has a value. Turn C at the singular point first, to C's limit
+                # approaching B = 0 along this segment (the kinematics is smooth there but
+                # for C), the tool tip held on the CL point within T by the same bisection
+                # with both ends at one pose.
                 a, v = self.anchor, pose
                 near = [a[3 + q] + SINGULAR_STEP * (v[3 + q] - a[3 + q]) for q in range(3)]
                 nn = math.sqrt(sum(x * x for x in near))
                 c_near = self.ik((*a[:3], *(x / nn for x in near)), joints[4], rec, report=False)[4]
                 turned = self.ik(self.anchor, c_near, rec, report=False)
-                yield from self.linearise(self.anchor, self.joints, self.anchor, turned, rec, 0)
+                self.linearise(self.anchor, self.joints, self.anchor, turned, rec, 0, out)
                 self.joints = turned
-            yield from self.linearise(self.anchor, self.joints, pose, joints, rec, 0)
+            self.linearise(self.anchor, self.joints, pose, joints, rec, 0, out)
         self.joints = joints
         self.joints_singular = singular
+        return iter(out)
 
-    def linearise(self, pa, ja, pb, jb, rec: ClRecord, depth: int) -> Iterator[NcBlock]:
+    def linearise(self, pa, ja, pb, jb, rec: ClRecord, depth: int, out: list[NcBlock]) -> None:
+        """Depth-first bisection of the CL segment pa-pb (joints ja-jb) until the tool tip at
+        every sub-segment's joint midpoint is within T of the CL midpoint; blocks to `out`."""
         tip = self.fk_tip(
             (ja[0] + jb[0]) * 0.5, (ja[1] + jb[1]) * 0.5, (ja[2] + jb[2]) * 0.5,
             (ja[3] + jb[3]) * 0.5, (ja[4] + jb[4]) * 0.5,
@@ -225,7 +244,7 @@ class Mill5Post(FanucPost):
         if dev <= self.T:
             if dev > self.summary.peak_deviation:
                 self.summary.peak_deviation = dev
-            yield from self.emit_joints(jb, rec, False, pb)
+            self.emit_joints(jb, rec, False, pb, out)
             return
         if depth >= self.max_depth:
             raise self.err(
@@ -239,41 +258,67 @@ class Mill5Post(FanucPost):
         if n < 1e-9:
             raise self.err("the tool axis turns by 180 degrees in one CL segment", rec)
         pm = (
-            (pa[0] + pb[0]) * 0.5,
-            (pa[1] + pb[1]) * 0.5,
-            (pa[2] + pb[2]) * 0.5,
-            i / n,
-            j / n,
-            k / n,
-        )
+            (pa[0] + pb[0]) * 0.5, (pa[1] + pb[1]) * 0.5, (pa[2] + pb[2]) * 0.5,
+            i / n, j / n, k / n,
+        )  # fmt: skip
         jm = self.ik(pm, (ja[4] + jb[4]) * 0.5, rec, report=False)
         self.summary.points_inserted += 1
-        yield from self.linearise(pa, ja, pm, jm, rec, depth + 1)
-        yield from self.linearise(pm, jm, pb, jb, rec, depth + 1)
+        self.linearise(pa, ja, pm, jm, rec, depth + 1, out)
+        self.linearise(pm, jm, pb, jb, rec, depth + 1, out)
 
-    def emit_joints(self, j, rec: ClRecord, rapid: bool, pose) -> Iterator[NcBlock]:
+    def emit_joints(self, j, rec: ClRecord, rapid: bool, pose, out: list[NcBlock]) -> None:
         x, y, z, b, c = j
         if self.opt.trace is not None:
             self.opt.trace.append((tuple(pose), j))
-        for name, v in (("X", x), ("Y", y), ("Z", z)):
+        lx, hx, ly, hy, lz, hz, lb, hb = self.bounds
+        if not (lx <= x <= hx and ly <= y <= hy and lz <= z <= hz and lb <= b <= hb):
+            self._limit_error(j, rec)
+        pc = self.prev_c
+        if pc is not None and not -C_JUMP_WARN <= c - pc <= C_JUMP_WARN:
+            self.warn(
+                f"C turns by {c - pc:.1f} degrees in one block (near the singular orientation)",
+                rec,
+            )
+        self.prev_c = c
+        # the axis words, modal (Fanuc number style as fmt(), inlined: this runs per block)
+        last = self.last5
+        fl, fr = self.fmt_linear, self.fmt_rotary
+        words = []
+        for q, name, v, f in (
+            (0, "X", x, fl),
+            (1, "Y", y, fl),
+            (2, "Z", z, fl),
+            (3, "B", b, fr),
+            (4, "C", c, fr),
+        ):
+            w = (f % v).rstrip("0")
+            if w == "-0.":
+                w = "0."
+            if last[q] != w:
+                words.append(name + w)
+                last[q] = w
+        if not words:
+            return
+        if not self.header_done:
+            out.extend(self.header(rec))
+        text = self.motion_text(" ".join(words), rec, rapid)
+        if self.ended:
+            raise self.err("output after the end of the program (FINI or END)", rec)
+        self.summary.blocks_out += 1
+        self.last_text = text
+        out.append(NcBlock(text, rec.line))
+
+    def _limit_error(self, j, rec: ClRecord) -> None:
+        for name, v in zip("XYZ", j, strict=False):
             lo, hi = self.lim[name]
             if not lo - 1e-9 <= v <= hi + 1e-9:
                 raise self.err(
                     f"{name} {v:.4f} beyond the {name} travel ({lo:g} ... {hi:g}) after posting",
                     rec,
                 )
-        if not self.b_lim[0] - 1e-9 <= b <= self.b_lim[1] + 1e-9:
-            raise self.err(
-                f"B {b:.4f} beyond the B limits ({self.b_lim[0]:g} ... {self.b_lim[1]:g})", rec
-            )
-        if self.prev_c is not None and abs(c - self.prev_c) > C_JUMP_WARN:
-            self.warn(
-                f"C turns by {c - self.prev_c:.1f} degrees in one block (near the singular orientation)",
-                rec,
-            )
-        self.prev_c = c
-        words = self.axis_words({"X": x, "Y": y, "Z": z, "B": b, "C": c}, self.dec)
-        yield from self.motion_block(words, rec, rapid)
+        raise self.err(
+            f"B {j[3]:.4f} beyond the B limits ({self.b_lim[0]:g} ... {self.b_lim[1]:g})", rec
+        )
 
     def arc_move(self, arc: ClRecord, pose: tuple[float, ...], rec: ClRecord) -> Iterator[NcBlock]:
         """A CL arc as chords whose sagitta is within T (each chord then linearised)."""
