@@ -88,7 +88,8 @@ def main() -> None:
             if wall < best:
                 best, summary = wall, p.summary
         assert summary is not None
-        out_lines = sum(1 for _ in open(out, encoding="utf-8"))
+        with open(out, encoding="utf-8") as fh:
+            out_lines = sum(1 for _ in fh)
         mem_small = peak_kib(small, out, machine)
         mem_big = peak_kib(big, out, machine)
     print(
