@@ -55,6 +55,7 @@ class PostSummary:
     blocks_out: int = 0  # NC blocks written (without the `%` lines)
     points_inserted: int = 0  # by linearisation
     blocks_merged: int = 0  # CL points dropped by merging collinear blocks
+    arc_points: int = 0  # 5-axis: CL arcs cut into chords within T (points added)
     peak_deviation: float = 0.0  # largest tool-tip midpoint deviation left, program units
     singular: list[int] = field(default_factory=list)  # CL lines of singular orientations
     singular_count: int = 0  # all of them (the list keeps the first SINGULAR_LIST_MAX)
@@ -68,6 +69,7 @@ class PostSummary:
             "blocks_out": self.blocks_out,
             "points_inserted": self.points_inserted,
             "blocks_merged": self.blocks_merged,
+            "arc_points": self.arc_points,
             "peak_midpoint_deviation_mm": round(self.peak_deviation * mm, 9),
             "singular_records": list(self.singular),
             "singular_count": self.singular_count,
@@ -150,7 +152,6 @@ class FanucPost:
         self.last_text = ""
         self.tool: int | None = None
         self.ended = False
-        self.prev_line = self.cur_line = 0  # CL lines of the previous and current record
         self.anchor: tuple[float, ...] | None = None  # the CL pose of the last block sent
         self.held: tuple[tuple[float, ...], ClRecord] | None = None
         self.merge_run: list[tuple[float, ...]] = []
@@ -206,7 +207,6 @@ class FanucPost:
         handlers: dict = {}
         for rec in records:
             self.summary.blocks_in += 1
-            self.prev_line, self.cur_line = self.cur_line, rec.line
             if self.arc is not None and rec.word != "GOTO":
                 raise self.err(
                     f"CIRCLE (line {self.arc.line}) must be followed by the GOTO that ends the arc",

@@ -120,22 +120,17 @@ class Mill5Post(FanucPost):
             b, s, m, kk = 0.0, 0.0, 1.0, 1.0
             c = prev_c if prev_c is not None else 0.0
             sm = self.summary
-            if not report:
-                first_of_run = False
-            elif rec.line != self.last_singular:
-                first_of_run = self.last_singular != self.prev_line
+            if report and rec.line != self.last_singular:
                 self.last_singular = rec.line
                 sm.singular_count += 1
                 if len(sm.singular) < SINGULAR_LIST_MAX:
                     sm.singular.append(rec.line)
-            else:
-                first_of_run = False
-            if first_of_run:
-                self.warn(
-                    "singular orientation: the tool axis is parallel to C (B = 0), C kept at"
-                    f" {c:.4f}",
-                    rec,
-                )
+                if sm.singular_count == 1:
+                    self.warn(
+                        "singular orientation: the tool axis is parallel to C (B = 0), C kept at"
+                        f" {c:.4f} (every singular record is listed in the summary)",
+                        rec,
+                    )
         else:
             m = 2.0 * k - 1.0
             sigma = self.sigma
@@ -348,6 +343,7 @@ class Mill5Post(FanucPost):
             sweep += 2 * math.pi
         step = 2 * math.acos(max(-1.0, 1 - self.T / r)) if r > self.T else math.pi / 2
         n = max(1, math.ceil(sweep / step))
+        self.summary.arc_points += n - 1
         start = self.pos
         for q in range(1, n + 1):
             t = q / n

@@ -286,3 +286,32 @@ def test_cli_post_bad_machine(cli, tmp_path: Path) -> None:
     src.write_text(SEED15)
     r = cli("cam", "post", str(src), "--machine", str(tmp_path / "nope.yaml"))
     assert r.exit_code == 2 and "cannot read the machine file" in r.stderr
+
+
+def test_readme_example_posts_for_two_machines(cli, tmp_path: Path) -> None:
+    """The README's "post an APT program for two machines" stays true."""
+    example = Path(__file__).resolve().parents[2] / "cam" / "examples" / "plate.apt"
+    out3, out5 = tmp_path / "plate_mill3.nc", tmp_path / "plate_mill5.nc"
+    r = cli(
+        "cam",
+        "post",
+        str(example),
+        "--machine",
+        "mill3",
+        "--g54",
+        "-300,-300,-300",
+        "-o",
+        str(out3),
+        "--json",
+    )
+    assert r.exit_code == 0, r.output
+    doc = json.loads(r.stdout)
+    assert (doc["nc_check"], doc["travel_checked"], doc["blocks_out"]) == ("passed", True, 24)
+    assert out3.read_text().splitlines()[1] == "O2001 (PLATE 2001)"
+    assert "G17 G03 Y45. I0. J25." in out3.read_text()
+    r = cli("cam", "post", str(example), "--machine", "mill5", "-o", str(out5), "--json")
+    assert r.exit_code == 0, r.output
+    doc = json.loads(r.stdout)
+    assert doc["kind"] == "mill5" and doc["singular_count"] == 16 and len(doc["warnings"]) == 1
+    text = out5.read_text()
+    assert "G00 X-20. Y-20. Z2. B0. C0." in text and " B" not in text.split("B0. C0.", 1)[1]
