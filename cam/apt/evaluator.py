@@ -969,8 +969,6 @@ class Processor:
         x0, y0, z0 = self.pos
         if len(groups) != 2:
             raise self.err(f"{m}/ds,[TO|ON|PAST|TANTO,]cs: a drive and a check surface", st.tok)
-        if groups[0][0] != "TO" or groups[0][1].tok is None:
-            pass
         ds_arg = groups[0][1]
         cs_mod, cs_arg = groups[1]
         if self.direction is None:

@@ -78,6 +78,14 @@ def _line_tokens(s: str, ln: int, file: str, first: bool) -> tuple[list[Token], 
                 j += 1
                 while j < n and s[j].isdigit():
                     j += 1
+            if j < n and s[j] in "eE":  # an exponent: 1.5E-3
+                k = j + 1
+                if k < n and s[k] in "+-":
+                    k += 1
+                if k < n and s[k].isdigit():
+                    while k < n and s[k].isdigit():
+                        k += 1
+                    j = k
             if j < n and s[j].isalpha():
                 k = j
                 while k < n and s[k].isalnum():

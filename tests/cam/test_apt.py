@@ -93,9 +93,10 @@ def test_a2_thesis_style_semicolons_and_continuation() -> None:
     assert pt(e["P1"]) == (1, 2, 3) and pt(e["P2"]) == (4, 5, 0)
 
 
-def test_a2_functions() -> None:
-    e = env("A = SQRTF(16) + COSF(60) + ATAN2F(1,1)")
+def test_a2_functions_and_exponents() -> None:
+    e = env("A = SQRTF(16) + COSF(60) + ATAN2F(1,1)\nB = 1.5E-3 * 2e2")
     assert e["A"] == pytest.approx(4 + 0.5 + 45)
+    assert e["B"] == pytest.approx(0.3)
 
 
 # --- A3 POINT defaults ----------------------------------------------------------------------------
