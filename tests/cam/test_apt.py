@@ -559,3 +559,42 @@ def test_error_classes_say_where_and_why(src: str, line: int, col: int, why: str
     e = error(src)
     assert (e.file, e.line, e.col) == ("t.apt", line, col)
     assert why in e.message
+
+
+def test_boss_round_a_circle_and_vertical_moves() -> None:
+    """A round boss: down onto the part surface, start-up to the circle, once round it
+    (the check surface is a line through the centre), up again."""
+    src = """UNITS/MM
+CUTTER/10
+C1 = CIRCLE/0,0,20
+L1 = LINE/0,0,1,0
+TOP = PLANE/0,0,1,0
+BOT = PLANE/0,0,1,-5
+FROM/-40,0,10
+GODOWN/C1,TO,BOT
+GO/TO,C1
+INDIRV/0,-1,0
+TLRGT,GOFWD/C1,ON,L1
+GOUP/C1,ON,TOP
+"""
+    _, recs = run(src)
+    got = [
+        (r.word, tuple(round(a, 9) for a in r.args)) for r in recs if r.word in ("GOTO", "CIRCLE")
+    ]
+    assert got == [
+        ("GOTO", (-40.0, 0.0, -5.0)),
+        ("GOTO", (-25.0, 0.0, -5.0)),
+        ("CIRCLE", (0.0, 0.0, -5.0, 0.0, 0.0, 1.0, 25.0)),  # outside, counter-clockwise
+        ("GOTO", (25.0, 0.0, -5.0)),
+        ("GOTO", (25.0, 0.0, 0.0)),
+    ]
+
+
+def test_vertical_move_to_a_plane_that_is_not_there() -> None:
+    e = error("CUTTER/1\nC1 = CIRCLE/0,0,2\nPL = PLANE/0,0,1,5\nFROM/0,-5,0\nGODOWN/C1,TO,PL")
+    assert e.line == 5 and "not below the tool" in e.message
+
+
+def test_cutter_too_big_for_an_inside_circle() -> None:
+    e = error("CUTTER/10\nC1 = CIRCLE/0,0,4\nFROM/0,0,0\nINDIRV/1,0,0\nGO/TO,C1")
+    assert e.line == 5 and "does not fit inside" in e.message

@@ -435,3 +435,31 @@ def test_cli_unreachable_refused_nothing_written(tmp_path: Path) -> None:
     r = CliRunner().invoke(app, ["cam", "post", str(src), "--machine", "mill5", "-o", str(out)])
     assert r.exit_code == 1 and not out.exists()
     assert f"{src}:5:1: orientation unreachable" in r.stderr
+
+
+def test_inch_cl_data_is_posted_with_the_machine_constants_in_inch() -> None:
+    """The same Table 1 in inches (UNITS/INCHES, the APT default): T and d are mm in the
+    machine file, so the counts are the millimetre ones and the axes come out in inch."""
+    inch = [(x / 25.4, y / 25.4, z / 25.4, i, j, k) for x, y, z, i, j, k in TABLE1]
+    text = cl_of(inch).replace("UNITS/MM\n", "").replace("FEDRAT/1000", "FEDRAT/40")
+    for tol, points in ((0.25, 6), (0.05, 13), (0.01, 25)):
+        nc, p, trace = run(text, mill5(100.0), tolerance_mm=tol)
+        assert len(trace) == points
+    assert nc[2] == "G20 G90 G94"
+    mm = ik_post(100.0).ik(tuple(float(v) for v in TABLE1[0]), None, REC)
+    assert trace[0][1][:3] == pytest.approx(tuple(v / 25.4 for v in mm[:3]), abs=1e-9)
+    assert trace[0][1][3:] == pytest.approx(mm[3:], abs=1e-9)
+    assert nc[3].startswith("G01 X") and nc[3].split()[1].count(".") == 1
+    assert len(nc[3].split()[1].split(".")[1]) <= 4  # 4 decimals in inch
+
+
+def test_cli_missing_file_and_bad_tolerance(tmp_path: Path) -> None:
+    from server.cli import app
+
+    runner = CliRunner()
+    r = runner.invoke(app, ["cam", "post", str(tmp_path / "none.cl"), "--machine", "mill5"])
+    assert r.exit_code == 2 and "cannot read" in r.stderr
+    src = tmp_path / "t.cl"
+    src.write_text(cl_of(TABLE1))
+    r = runner.invoke(app, ["cam", "post", str(src), "--machine", "mill5", "--tolerance", "0"])
+    assert r.exit_code == 2 and "--tolerance must be > 0" in r.stderr
