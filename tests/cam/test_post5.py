@@ -345,6 +345,26 @@ def test_property_posted_tool_tip_within_t_at_every_midpoint(start, steps, d: fl
         assert math.dist(mid, cl_mid) <= tol + 1e-12
         assert _dist_to_segment(mid, segments[seg][0][:3], segments[seg][1][:3]) <= tol + 1e-12
     assert p.summary.peak_deviation <= tol
+    # the NC text carries those joints, rounded to 0.001 mm and 0.0001 degree (a point
+    # that rounds to the block before it sends no block)
+    sent: list[tuple[float, ...]] = []
+    for _, j in trace:
+        r = tuple(float(f"{v:.3f}") for v in j[:3]) + tuple(float(f"{v:.4f}") for v in j[3:])
+        if not sent or sent[-1] != r:
+            sent.append(r)
+    assert _joints_of(nc) == sent
+
+
+def _joints_of(nc: list[str]) -> list[tuple[float, ...]]:
+    """The X Y Z B C of every motion block (modal words carried on)."""
+    cur: dict[str, float] = {}
+    out = []
+    for line in nc:
+        words = {w[0]: float(w[1:]) for w in line.split() if w[0] in "XYZBC"}
+        if words:
+            cur.update(words)
+            out.append(tuple(cur[a] for a in "XYZBC"))
+    return out
 
 
 @given(
