@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import re
-from collections.abc import Iterable, Iterator
+from collections.abc import Iterator
 from pathlib import Path
 
 from cam.apt import process
@@ -53,8 +53,3 @@ def records_from_file(
 def _stream(path: Path, warn: WarningSink) -> Iterator[ClRecord]:
     with open(path, encoding="utf-8") as fh:
         yield from read_cl(fh, str(path), warn)
-
-
-def lines_of(blocks: Iterable) -> Iterator[str]:
-    for b in blocks:
-        yield b.text

@@ -621,7 +621,10 @@ class Processor:
         if m in TOOL_SIDES and not st.has_slash:
             self.tool_side = m
             return
-        args = self.args(st.args)
+        nodes = st.args
+        if m == "MACHIN" and nodes and isinstance(nodes[0], Ref):
+            nodes = [Minor(nodes[0].name, nodes[0].tok), *nodes[1:]]  # the post's name: a word
+        args = self.args(nodes)
         sig = tuple(x.sig for x in args)
         if m in ("FROM", "GOTO", "GODLTA"):
             yield from self.ptp(st, m, args, sig)
@@ -743,11 +746,8 @@ class Processor:
         elif m == "DELAY":
             if sig not in (("n",), ("n", "REV")) or not nums[0].value >= 0:  # type: ignore[operator]
                 raise self.err("DELAY/seconds (>= 0)", st.tok)
-        elif m == "MACHIN":
-            if any(isinstance(x.value, (Point, Line, Circle, Plane, Vector, Conic)) for x in args):
-                raise self.err("MACHIN/name[,n]", st.tok)
-            # the post-processor's name is a word; an unknown word parses as a name
-            vals = tuple(x.value if not isinstance(x.value, float) else x.value for x in args)
+        elif m == "MACHIN" and any(not isinstance(x.value, (float, str)) for x in args):
+            raise self.err("MACHIN/name[,n]", st.tok)
         if any(not isinstance(x, (float, str)) for x in vals):
             raise self.err(f"{m} takes numbers and modifier words only", st.tok)
         return self._rec(st, m, vals)

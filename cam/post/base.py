@@ -341,8 +341,6 @@ class FanucPost:
             self.pending_g = [g + self.comp_register(rec)]
         else:
             raise self.err("CUTCOM/LEFT, RIGHT or OFF", rec)
-        return
-        yield
 
     def comp_register(self, rec: ClRecord) -> str:
         n = rec.numbers

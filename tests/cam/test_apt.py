@@ -521,6 +521,11 @@ def test_b12_cutter_defaults_and_auto_corner() -> None:
 # --- post-processor statements pass through --------------------------------------------------------
 
 
+def test_machin_names_the_post_with_any_word() -> None:
+    _, recs = run("MACHIN/UNCX01,1\nMACHIN/FANUC")
+    assert [r.args for r in recs] == [("UNCX01", 1.0), ("FANUC",)]
+
+
 def test_post_statements_pass_through() -> None:
     src = (
         "PARTNO TEST1\nMACHIN/MILL,1\nUNITS/MM\nLOADTL/1\nSPINDL/1000,CLW\nFEDRAT/10,MMPM\nRAPID\n"

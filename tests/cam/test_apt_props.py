@@ -132,3 +132,30 @@ def test_contour_of_a_rotated_rectangle_is_offset_by_the_radius(
     ]
     for (x, y), (wx, wy) in zip(pts, want, strict=True):
         assert math.hypot(x - wx, y - wy) < 1e-7 * (1 + abs(cx) + abs(cy) + w + h)
+
+
+_TOKENS = [
+    "P1", "P2", "L1", "C1", "PL1", "X", "=", "/", ",", "(", ")", "+", "-", "*", "**", "1", "2.5",
+    "0", "-3", "POINT", "LINE", "CIRCLE", "PLANE", "VECTOR", "CENTER", "RADIUS", "TANTO",
+    "INTOF", "ATANGL", "XLARGE", "YSMALL", "LEFT", "RIGHT", "PARLEL", "DELTA", "CLW", "ON",
+    "TO", "PAST", "GO", "GOLFT", "GOFWD", "TLRGT", "FROM", "GOTO", "GODLTA", "CUTTER", "FEDRAT",
+    "SQRTF", "$", "$$", ";", "\n", "IN", "OUT", "THRU", "ZSURF", "UNITS", "MM", "INDIRV",
+]  # fmt: skip
+
+_PRELUDE = (
+    "P1 = POINT/1,2\nP2 = POINT/5,-1\nL1 = LINE/P1,P2\nC1 = CIRCLE/0,0,3\n"
+    "PL1 = PLANE/0,0,1,0\nX = 2\nCUTTER/0.5\nFROM/-9,-9,1\n"
+)
+
+
+@given(st.lists(st.sampled_from(_TOKENS), max_size=25))
+def test_fuzz_the_processor_fails_only_with_located_errors(tokens) -> None:
+    """Any statement soup: CL records or a CamError with file, line and column, never
+    another exception."""
+    from cam.errors import CamError
+
+    src = _PRELUDE + " ".join(tokens)
+    try:
+        list(Processor(src, "fuzz.apt").run())
+    except CamError as e:
+        assert e.file == "fuzz.apt" and e.line >= 1 and e.col >= 1, str(e)
