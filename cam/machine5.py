@@ -69,6 +69,14 @@ class PostSection(_Section):
     max_depth: int = Field(20, ge=1, le=40)
     linear_decimals: int = Field(3, ge=1, le=6)
     rotary_decimals: int = Field(4, ge=1, le=6)
+    feed: Literal["per_minute", "inverse_time"] = Field(
+        "per_minute",
+        description="per_minute: G94 F as programmed; inverse_time: G93 F = 1/minutes of each"
+        " block, from the tool tip's path in the workpiece frame",
+    )
+    rotary_feed_deg_min: float = Field(
+        3600.0, gt=0, description="inverse time: the rate of a block that only turns B/C"
+    )
 
 
 class Mill5Config(_Section):

@@ -21,7 +21,7 @@ import math
 from collections.abc import Iterator
 
 from cam.cl import ClRecord
-from cam.post.base import INCH, SINGULAR_LIST_MAX, FanucPost, NcBlock
+from cam.post.base import INCH, SINGULAR_LIST_MAX, FanucPost, NcBlock, fmt
 
 _sqrt, _acos, _atan2, _cos, _sin = math.sqrt, math.acos, math.atan2, math.cos, math.sin
 _DEG, _RAD = 180.0 / math.pi, math.pi / 180.0
@@ -49,6 +49,8 @@ class Mill5Post(FanucPost):
         self.joints: tuple[float, float, float, float, float] | None = None  # of self.anchor
         self.prev_c: float | None = None
         self.last_singular = -1  # CL line of the last singular record
+        self.sent: tuple = ()  # the CL pose and joints of the last block sent (inverse time)
+        self.block_minutes: float | None = None
         self.singular_ik = False  # the last inverse kinematics met the singular orientation
         self.allow_unwind = False  # a rapid may turn C the long way round within the limits
         self.joints_singular = False  # self.joints are at the singular orientation
@@ -83,6 +85,7 @@ class Mill5Post(FanucPost):
         rot = self.cfg.post.rotary_decimals
         self.dec = {"X": lin, "Y": lin, "Z": lin, "B": rot, "C": rot}
         self.fmt_linear, self.fmt_rotary = f"%.{lin}f", f"%.{rot}f"
+        self.inverse_time = self.cfg.post.feed == "inverse_time"
         self.last5: list[str | None] = [None] * 5  # the axis words the NC has
         e = 1e-9
         self.bounds = (
@@ -294,6 +297,9 @@ class Mill5Post(FanucPost):
                 last[q] = w
         if not words:
             return
+        if self.inverse_time and not rapid:
+            self.block_minutes = self._minutes(pose, j, rec)
+        self.sent = (pose, j)
         if not self.header_done:
             out.extend(self.header(rec))
         text = self.motion_text(" ".join(words), rec, rapid)
@@ -302,6 +308,32 @@ class Mill5Post(FanucPost):
         self.summary.blocks_out += 1
         self.last_text = text
         out.append(NcBlock(text, rec.line))
+
+    def _minutes(self, pose, j, rec: ClRecord) -> float | None:
+        """Inverse time: how long the block takes, from the tool tip's path length in the
+        workpiece frame at the programmed feed; a block that only turns the table takes
+        the configured rotary rate."""
+        if self.feed is None:
+            raise self.err("a cutting move without a feed rate (FEDRAT before it)", rec)
+        if self.feed_per_rev:
+            raise self.err("inverse-time feed (G93) cannot take a feed per revolution", rec)
+        if not self.sent:
+            return None  # from where the machine happens to be: a feed per minute
+        pa, ja = self.sent
+        length = math.dist(pa[:3], pose[:3])
+        turn = max(abs(j[3] - ja[3]), abs(j[4] - ja[4]))
+        return max(length / self.feed, turn / self.cfg.post.rotary_feed_deg_min)
+
+    def feed_words(self, rec: ClRecord) -> str:
+        if not self.inverse_time or self.block_minutes is None:
+            return super().feed_words(rec)
+        words = ""
+        if self.feed_mode_out != "G93":
+            words = " G93"
+            self.feed_mode_out = "G93"  # type: ignore[assignment]
+        self.feed_out = None  # a later G94 block must give its F again
+        minutes = max(self.block_minutes, 1e-9)
+        return words + " F" + fmt(1.0 / minutes, 3)  # in every G93 block: it is not modal
 
     def _limit_error(self, j, rec: ClRecord) -> None:
         for name, v in zip("XYZ", j, strict=False):

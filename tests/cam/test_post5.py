@@ -483,3 +483,19 @@ def test_cli_missing_file_and_bad_tolerance(tmp_path: Path) -> None:
     src.write_text(cl_of(TABLE1))
     r = runner.invoke(app, ["cam", "post", str(src), "--machine", "mill5", "--tolerance", "0"])
     assert r.exit_code == 2 and "--tolerance must be > 0" in r.stderr
+
+
+def test_inverse_time_feed() -> None:
+    data = yaml.safe_load(MILL5_FILE.read_text())
+    data["post"]["feed"] = "inverse_time"
+    data["axes"]["Y"] = {"min": -1000.0, "max": 1000.0}
+    machine = Machine("m5", "mill5", load_mill5(data))
+    nc, _, trace = run(cl_of(TABLE1), machine, tolerance_mm=0.25)
+    motion = [ln for ln in nc if ln.startswith(("G01", "X", "Y", "Z"))]
+    assert motion[0].endswith(" F1000.")  # the first move, from wherever the machine is: G94
+    for ln, ((pa, _), (pb, _)) in zip(motion[1:], zip(trace, trace[1:], strict=False), strict=True):
+        words = ln.split()
+        assert words[-1].startswith("F")  # G93: F in every block
+        minutes = math.dist(pa[:3], pb[:3]) / 1000.0
+        assert float(words[-1][1:]) == pytest.approx(1 / minutes, abs=1e-3)
+    assert " G93 " in motion[1] and all("G93" not in m for m in motion[2:])
