@@ -22,6 +22,7 @@ from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
 from cnc.interp import auxiliary, compensation, flow, modes, motion, offsets
+from cnc.interp import lathe_cycles as lc
 from cnc.interp import transform_codes as xf
 from cnc.interp.context import Step
 
@@ -219,7 +220,8 @@ CODES: tuple[Code, ...] = (
     _g("G73", "cycle", Step.MOTION, motion.motion, MILL, words=_CYCLE_WORDS, doc="high-speed peck drilling"),
     _g("G74", "cycle", Step.MOTION, motion.motion, MILL, words=_CYCLE_WORDS, doc="left-hand tapping"),
     _g("G76", "cycle", Step.MOTION, motion.motion, MILL, words=_CYCLE_WORDS, doc="fine boring"),
-    _g("G80", "cycle", Step.MOTION, motion.motion, MILL, default=True, doc="canned cycle cancel"),
+    _g("G80", "cycle", Step.MOTION, motion.motion, default=True,
+       doc="canned cycle cancel (lathe: also G32/G90/G92/G94; a no-op in a safe-start line)"),
     _g("G81", "cycle", Step.MOTION, motion.motion, MILL, words=_CYCLE_WORDS, doc="drilling"),
     _g("G82", "cycle", Step.MOTION, motion.motion, MILL, words=_CYCLE_WORDS, doc="spot drilling, dwell"),
     _g("G83", "cycle", Step.MOTION, motion.motion, MILL, words=_CYCLE_WORDS, doc="peck drilling"),
@@ -269,11 +271,31 @@ CODES: tuple[Code, ...] = (
     _refused("G65", BOTH, _MACRO.format("G65", "")),
     _refused("G66", BOTH, _MACRO.format("G66 modal", "")),
     _refused("G67", BOTH, _MACRO.format("G67", " cancel")),
-    *(_refused(f"G{n}", LATHE, "unsupported: lathe canned cycle") for n in range(70, 77)),
-    _refused("G90", LATHE, "unsupported: lathe turning cycle (G90, system A)"),
-    _refused("G92", LATHE, "unsupported: lathe threading cycle (G92, system A)"),
-    _refused("G94", LATHE, "unsupported: lathe facing cycle (G94, system A)"),
-    _refused("G32", LATHE, "unsupported: lathe threading (G32)"),
+    # --- lathe cycles (Fanuc T, G-code system A; cnc.interp.lathe_cycles) ---
+    _g("G70", "nonmodal", Step.NON_MODAL, lc.finishing, LATHE, words="PQUW", owns_axes=True,
+       doc="finishing: the contour N P..N Q as programmed, then back to the start"),
+    _g("G71", "nonmodal", Step.NON_MODAL, lc.stock_removal, LATHE, words="PQUWR",
+       owns_axes=True,
+       doc="stock removal in turning: U depth R retract; P Q U W F (D depth, R1 type II)"),
+    _g("G72", "nonmodal", Step.NON_MODAL, lc.stock_removal, LATHE, words="PQUWR",
+       owns_axes=True, doc="stock removal in facing: W depth R retract; P Q U W F (D depth)"),
+    _g("G73", "nonmodal", Step.NON_MODAL, lc.pattern_repeating, LATHE, words="PQUWRIK",
+       owns_axes=True, doc="pattern repeating: U W R divisions; P Q U W F (Haas I K D)"),
+    _g("G74", "nonmodal", Step.NON_MODAL, lc.grooving, LATHE, words="@PQRIK", owns_axes=True,
+       doc="face grooving / peck drilling: R retract; X Z P Q R F (Haas I K)"),
+    _g("G75", "nonmodal", Step.NON_MODAL, lc.grooving, LATHE, words="@PQRIK", owns_axes=True,
+       doc="OD grooving: R retract; X Z P Q R F (Haas I K)"),
+    _g("G76", "nonmodal", Step.NON_MODAL, lc.multi_threading, LATHE, words="@PQRIK",
+       owns_axes=True,
+       doc="multi-pass threading: P mmrraa Q R; X Z R P Q F (Haas X Z K D I F)"),
+    _g("G32", "cycle", Step.MOTION, motion.motion, LATHE, words="@",
+       doc="thread cutting, F lead; spindle-synchronised feed (modal)"),
+    _g("G90", "cycle", Step.MOTION, motion.motion, LATHE, words="@R",
+       doc="turning cycle (modal): X Z R taper F"),
+    _g("G92", "cycle", Step.MOTION, motion.motion, LATHE, words="@R",
+       doc="threading cycle (modal): X Z R taper F lead"),
+    _g("G94", "cycle", Step.MOTION, motion.motion, LATHE, words="@R",
+       doc="facing cycle (modal): X Z R taper F"),
     # --- M codes ---
     _g("M0", "stop", Step.STOP, flow.stop, doc="program stop"),
     _g("M1", "stop", Step.STOP, flow.stop, doc="optional stop (per the machine's switch)"),

@@ -48,6 +48,11 @@ def cancel(ip: Context) -> None:
 
 def cycle_block(ip: Context, blk: Block, code: int | None, exact: bool) -> None:
     """A block in the cycle group or under a modal cycle: set the cycle data, drill."""
+    if ip._lathe:
+        from cnc.interp import lathe_cycles
+
+        lathe_cycles.cancel_or_cycle(ip, blk, code, exact)
+        return
     words = blk.words
     cd: CycleData = ip.cyc
     if code == G80:

@@ -31,7 +31,7 @@ from cnc.canon import (
 )
 from cnc.errors import NcError
 from cnc.gcode.lexer import Block, MarkedBlock, parse_line
-from cnc.gcode.source import Lines, ProgramLibrary, main_lines, skip_leader
+from cnc.gcode.source import Lines, ProgramLibrary, Pushback, main_lines, skip_leader
 from cnc.interp import codes
 from cnc.interp.codes import fmt_g
 from cnc.interp.context import BlockRun, Classified
@@ -91,7 +91,7 @@ class _Frame:
     __slots__ = ("it", "file", "number", "repeats", "call_line", "header_seen", "body_started")
 
     def __init__(self, it: Lines, file: str, number: int | None, repeats: int, call_line: int):
-        self.it = it
+        self.it = Pushback(it)  # a lathe cycle may look ahead for its contour
         self.file = file
         self.number = number
         self.repeats = repeats
