@@ -129,7 +129,13 @@ def _word_text(blk: Block, letter: str) -> str:
 
 def _seq(ip: Context, blk: Block, letter: str, code: str) -> int:
     if letter not in blk.words:
-        raise _alarm(ip, blk, f"{code} needs P and Q (the contour's first and last sequence numbers)", "PS0061", "G")
+        raise _alarm(
+            ip,
+            blk,
+            f"{code} needs P and Q (the contour's first and last sequence numbers)",
+            "PS0061",
+            "G",
+        )
     v = blk.words[letter]
     if v != int(v) or v < 0:
         raise _alarm(ip, blk, f"{code} {letter} must be a sequence number", "PS0061", letter)
@@ -204,10 +210,12 @@ def contour_lines(
     src = _reopen(ip)
     if src is None:
         raise _alarm(
-            ip, blk,
+            ip,
+            blk,
             f"{code}: the block N{p} does not follow the cycle and the program is streamed "
             "(it cannot be read again)",
-            "PS0063", "P",
+            "PS0063",
+            "P",
         )
     for item in src:
         try:
@@ -235,8 +243,11 @@ def _collect(ip, blk, first, it, q: int, code: str, file: str) -> list[tuple[int
         if n == q:
             return lines
     raise _alarm(
-        ip, blk, f"{code}: no block with sequence number N{q} (Q) after the block N{n0}",
-        "PS0063", "Q",
+        ip,
+        blk,
+        f"{code}: no block with sequence number N{q} (Q) after the block N{n0}",
+        "PS0063",
+        "Q",
     )
 
 
@@ -263,7 +274,9 @@ def read_contour(
             if b is None:
                 continue
             if type(b) is MarkedBlock and (b.tape or b.program is not None):
-                raise _at_line(ip, lineno, text, f"{code}: program mark inside the contour", "PS0066")
+                raise _at_line(
+                    ip, lineno, text, f"{code}: program mark inside the contour", "PS0066"
+                )
             for i, g in enumerate(b.g):
                 if g in _CONTOUR_G:
                     if g <= G3:
@@ -271,7 +284,10 @@ def read_contour(
                     continue
                 raise ip._err(
                     f"PS0066 {code}: G{g / 10:g} is not allowed between the contour's first and "
-                    "last block", b, "G", i + 1,
+                    "last block",
+                    b,
+                    "G",
+                    i + 1,
                 )
             for i, m in enumerate(b.m):
                 if m in _FLOW_M:
@@ -291,7 +307,11 @@ def read_contour(
             tx, _, tz = ip._target(b, b.words)
             if motion in (G0, G1):
                 if abs(tx - x) > lg.EPS or abs(tz - z) > lg.EPS:
-                    segs.append(lg.Seg(lg.RAPID if motion == G0 else lg.FEED, (x, z), (tx, tz), None, lineno))
+                    segs.append(
+                        lg.Seg(
+                            lg.RAPID if motion == G0 else lg.FEED, (x, z), (tx, tz), None, lineno
+                        )
+                    )
             else:
                 c = _arc_centre(ip, b, (x, z), (tx, tz), motion == G2)
                 segs.append(lg.Seg(lg.CW if motion == G2 else lg.CCW, (x, z), (tx, tz), c, lineno))
@@ -345,8 +365,9 @@ def _profile(segs: tuple[lg.Seg, ...]) -> tuple[lg.Seg, ...]:
 # --- emitting ---------------------------------------------------------------------------
 
 
-def emit(ip: Context, blk: Block, moves: list[lg.Move], lead: float | None = None,
-         exact: bool = True) -> None:
+def emit(
+    ip: Context, blk: Block, moves: list[lg.Move], lead: float | None = None, exact: bool = True
+) -> None:
     if len(moves) > MAX_CYCLE_MOVES:
         raise ip._err(f"cycle expands to more than {MAX_CYCLE_MOVES} moves", blk, "G")
     y = ip._pos[1]
@@ -388,13 +409,15 @@ def thread_to(ip: Context, blk: Block, p, lead: float) -> None:
     axis = "Z" if dz >= dx else "X"
     f_axis = lead * rpm
     vmax = ip.params.max_feed
+    what = f"machine maximum feed {vmax:g} mm/min"
     for ax in ip.params.axes:
-        if ax.name == axis:
-            vmax = min(vmax, ax.max_velocity)
+        if ax.name == axis and ax.max_velocity < vmax:
+            vmax = ax.max_velocity
+            what = f"{axis} axis maximum {vmax:g} mm/min"
     if f_axis > vmax + 1e-9:
         raise ip._err(
             f"thread lead {lead:g} mm at {rpm:g} rpm needs {f_axis:g} mm/min on {axis}, above the "
-            f"{vmax:g} mm/min the axis can feed (lower S or the lead)",
+            f"{what} (lower S or the lead)",
             blk,
             "F" if "F" in blk.words else "G",
         )
@@ -468,7 +491,9 @@ def finishing(ip: Context, run: BlockRun) -> None:
             ip._refresh_offsets(resync=False)
     ip._line = blk.line  # type: ignore[attr-defined]
     if ip._comp_engaged():
-        raise ip._err("G70: the contour leaves tool nose compensation on (end it with G40)", blk, "G")
+        raise ip._err(
+            "G70: the contour leaves tool nose compensation on (end it with G40)", blk, "G"
+        )
     ip._line_to(start, None, blk, True)
     ip._motion = motion
 
@@ -480,7 +505,13 @@ def _contour_cycle(ip: Context, blk: Block, code: str, consume: bool = True):
     segs, ns, ns_z = read_contour(ip, lines, code)
     prof = _profile(segs)
     if not prof:
-        raise _alarm(ip, blk, f"{code}: the contour N{p}..N{q} has no element after its first block", "PS0062", "P")
+        raise _alarm(
+            ip,
+            blk,
+            f"{code}: the contour N{p}..N{q} has no element after its first block",
+            "PS0062",
+            "P",
+        )
     return segs, prof, ns, ns_z, lines
 
 
@@ -496,9 +527,15 @@ def _fault_error(ip, lines, fault, prof, code, type2: bool, facing: bool):
     text = next((t for n, t in lines if n == line), "")
     first = "Z" if facing else "X"
     alarm = "PS0064" if axis == first else "PS0329"
-    kind = "type II needs Z" if type2 and not facing else ("type II needs X" if type2 else "type I needs X and Z")
+    kind = (
+        "type II needs Z"
+        if type2 and not facing
+        else ("type II needs X" if type2 else "type I needs X and Z")
+    )
     return _at_line(
-        ip, line, text,
+        ip,
+        line,
+        text,
         f"{code}: the finishing shape is not monotonic in {axis} ({kind} to move one way only)",
         alarm,
     )
@@ -515,11 +552,15 @@ def stock_removal(ip: Context, run: BlockRun) -> None:
         # first block: G71 U(depth) R(retract) / G72 W(depth) R(retract)
         dl = "W" if facing else "U"
         if dl not in words and "R" not in words:
-            raise _alarm(ip, blk, f"{code} needs P and Q (or {dl} and R in a first block)", "PS0061", "G")
+            raise _alarm(
+                ip, blk, f"{code} needs P and Q (or {dl} and R in a first block)", "PS0061", "G"
+            )
         if dl in words:
             d = ip._dim(blk, dl)
             if d <= 0:
-                raise _alarm(ip, blk, f"{code} depth of cut {dl} must be greater than 0", "PS0062", dl)
+                raise _alarm(
+                    ip, blk, f"{code} depth of cut {dl} must be greater than 0", "PS0062", dl
+                )
             if facing:
                 st.depth72 = d
             else:
@@ -541,9 +582,11 @@ def stock_removal(ip: Context, run: BlockRun) -> None:
         depth = st.depth72 if facing else st.depth71
         if depth is None:
             raise _alarm(
-                ip, blk,
+                ip,
+                blk,
                 f"{code} needs the depth of cut (D, or {'W' if facing else 'U'} in a first {code} block)",
-                "PS0062", "G",
+                "PS0062",
+                "G",
             )
     retract = st.retract72 if facing else st.retract71
     explicit2 = "R" in words and words["R"] == 1
@@ -575,7 +618,9 @@ def pattern_repeating(ip: Context, run: BlockRun) -> None:
     st = state(ip)
     if "P" not in words and "Q" not in words:
         if not any(k in words for k in "UWR"):
-            raise _alarm(ip, blk, "G73 needs P and Q (or U, W and R in a first block)", "PS0061", "G")
+            raise _alarm(
+                ip, blk, "G73 needs P and Q (or U, W and R in a first block)", "PS0061", "G"
+            )
         old = st.g73 or (0.0, 0.0, 1)
         di = ip._dim(blk, "U") if "U" in words else old[0]
         dk = ip._dim(blk, "W") if "W" in words else old[1]
@@ -583,7 +628,9 @@ def pattern_repeating(ip: Context, run: BlockRun) -> None:
         if "R" in words:
             r = words["R"]
             if r != int(r) or r < 1:
-                raise _alarm(ip, blk, "G73 R (divisions) must be a whole number 1 or more", "PS0062", "R")
+                raise _alarm(
+                    ip, blk, "G73 R (divisions) must be a whole number 1 or more", "PS0062", "R"
+                )
             n = int(r)
         st.g73 = (di, dk, n)
         return
@@ -592,14 +639,20 @@ def pattern_repeating(ip: Context, run: BlockRun) -> None:
         dk = ip._dim(blk, "K") if "K" in words else 0.0
         d = words.get("D", 1)
         if d != int(d) or d < 1:
-            raise _alarm(ip, blk, "G73 D (number of passes) must be a whole number 1 or more", "PS0062", "D")
+            raise _alarm(
+                ip, blk, "G73 D (number of passes) must be a whole number 1 or more", "PS0062", "D"
+            )
         n = int(d)
     elif st.g73 is not None:
         di, dk, n = st.g73
     else:
-        raise _alarm(ip, blk, "G73 needs the relief and divisions (a first G73 U W R block)", "PS0062", "G")
+        raise _alarm(
+            ip, blk, "G73 needs the relief and divisions (a first G73 U W R block)", "PS0062", "G"
+        )
     segs, prof, ns, ns_z, lines = _contour_cycle(ip, blk, "G73")
-    moves = _geometry(ip, blk, lg.pattern_repeat, _start(ip), prof, (di, dk), n, _allowance(ip, blk))
+    moves = _geometry(
+        ip, blk, lg.pattern_repeat, _start(ip), prof, (di, dk), n, _allowance(ip, blk)
+    )
     emit(ip, blk, moves)
 
 
@@ -627,7 +680,10 @@ def grooving(ip: Context, run: BlockRun) -> None:
         return
     start = _start(ip)
     tx, _, tz = ip._target(blk, words)
-    end = (tx if any(k in words for k in "XU") else start[0], tz if any(k in words for k in "ZW") else start[1])
+    end = (
+        tx if any(k in words for k in "XU") else start[0],
+        tz if any(k in words for k in "ZW") else start[1],
+    )
     retract = st.retract74 if face else st.retract75
     relief = 0.0
     # the X step: Fanuc P (increments), Haas I (radius); the Z step: Fanuc Q, Haas K
@@ -673,14 +729,22 @@ def multi_threading(ip: Context, run: BlockRun) -> None:
             if m < 1:
                 raise _alarm(ip, blk, "G76 P: 1..99 finishing passes (mm)", "PS0062", "P")
             if angle not in (0.0, 29.0, 30.0, 55.0, 60.0, 80.0):
-                raise _alarm(ip, blk, f"G76 P: tool angle {angle:g} is not 80, 60, 55, 30, 29 or 0", "PS0062", "P")
+                raise _alarm(
+                    ip,
+                    blk,
+                    f"G76 P: tool angle {angle:g} is not 80, 60, 55, 30, 29 or 0",
+                    "PS0062",
+                    "P",
+                )
             chamfer = rr / 10.0
         if "Q" in words:
             dmin = _increments(ip, blk, "Q")
         if "R" in words:
             allow = ip._dim(blk, "R")
             if allow < 0:
-                raise _alarm(ip, blk, "G76 R finishing allowance must not be negative", "PS0062", "R")
+                raise _alarm(
+                    ip, blk, "G76 R finishing allowance must not be negative", "PS0062", "R"
+                )
         st.g76 = (m, chamfer, angle, dmin, allow)
         return
     if not (("X" in words or "U" in words) and ("Z" in words or "W" in words)):
@@ -691,15 +755,21 @@ def multi_threading(ip: Context, run: BlockRun) -> None:
     m, chamfer, angle, dmin, allow = st.g76
     if "K" in words or "D" in words:  # Haas one-block
         if "K" not in words or "D" not in words:
-            raise _alarm(ip, blk, "G76 (one-block) needs K (thread height) and D (first cut)", "PS0062", "G")
+            raise _alarm(
+                ip, blk, "G76 (one-block) needs K (thread height) and D (first cut)", "PS0062", "G"
+            )
         height = ip._dim(blk, "K")
         first = ip._dim(blk, "D")
         taper = ip._dim(blk, "I") if "I" in words else 0.0
-        depths = _geometry(ip, blk, lg.thread_depths, height, first, 0.0, 0.0, 1)
-        moves = _geometry(ip, blk, lg.thread_passes, start, (tx, tz), depths, height, taper, 0.0, 0.0)
+        depths = _geometry(ip, blk, lg.thread_depths, height, first, 0.0, 0.0, 0)
+        moves = _geometry(
+            ip, blk, lg.thread_passes, start, (tx, tz), depths, height, taper, 0.0, 0.0
+        )
     else:
         if "P" not in words or "Q" not in words:
-            raise _alarm(ip, blk, "G76 needs P (thread height) and Q (first cut depth)", "PS0062", "G")
+            raise _alarm(
+                ip, blk, "G76 needs P (thread height) and Q (first cut depth)", "PS0062", "G"
+            )
         height = _increments(ip, blk, "P")
         first = _increments(ip, blk, "Q")
         taper = ip._dim(blk, "R") if "R" in words else 0.0

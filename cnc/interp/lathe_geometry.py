@@ -230,10 +230,16 @@ def _material_spans(segs: tuple[Seg, ...], level: float, s: float) -> list[tuple
                 pts = [(t, p)]
         for t, p in pts:
             # the state just after the crossing decides entering or leaving
-            after = seg.b if t >= 1.0 - 1e-12 else (
-                _arc_point(seg, min(1.0, t + 1e-6)) if seg.arc else (
-                    seg.a[0] + min(1.0, t + 1e-6) * (seg.b[0] - seg.a[0]),
-                    seg.a[1] + min(1.0, t + 1e-6) * (seg.b[1] - seg.a[1]),
+            after = (
+                seg.b
+                if t >= 1.0 - 1e-12
+                else (
+                    _arc_point(seg, min(1.0, t + 1e-6))
+                    if seg.arc
+                    else (
+                        seg.a[0] + min(1.0, t + 1e-6) * (seg.b[0] - seg.a[0]),
+                        seg.a[1] + min(1.0, t + 1e-6) * (seg.b[1] - seg.a[1]),
+                    )
                 )
             )
             now_inside = h(after) < -TOL
@@ -452,9 +458,7 @@ def face_grooving(
     start: Pt, end: Pt, peck: float, shift_step: float, retract: float, relief: float = 0.0
 ) -> list[Move]:
     """G74: G75 with X and Z exchanged (pecks along Z, grooves stepped along X)."""
-    moves = grooving(
-        (start[1], start[0]), (end[1], end[0]), peck, shift_step, retract, relief
-    )
+    moves = grooving((start[1], start[0]), (end[1], end[0]), peck, shift_step, retract, relief)
     return swap_moves(moves)
 
 
