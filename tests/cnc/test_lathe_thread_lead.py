@@ -1,0 +1,88 @@
+"""G32 / G76 thread lead measured against the spindle's encoder.
+
+What is coupled (docs/gcode.md, "Thread cutting"): the interpreter turns a thread move into
+a feed of lead x rpm along the thread's long axis, at the spindle speed programmed for the
+pass; the planner runs it exact-stop. These tests run the canonical moves through the
+planner/interpolator (cnc.interpolator.Motion, one setpoint per IPO cycle) next to a
+spindle turning at the programmed speed with a 4096-count encoder, and measure the lead as
+Z travel per encoder revolution over the pass's constant-velocity part: the error must be
+below 0.1 % of the lead. The acceleration and deceleration at the ends of a pass are not
+synchronised (a real control needs run-in and run-out distances there too), which is why
+the thread's approach and overrun must lie outside the part.
+"""
+
+from __future__ import annotations
+
+import math
+
+import pytest
+
+from cnc.canon import StraightFeed, StraightTraverse
+from cnc.interp import Interpreter
+from cnc.interpolator.motion import Motion
+from cnc.params import AxisParams, MachineParams
+
+LATHE = MachineParams(
+    kind="lathe",
+    axes=(
+        AxisParams("X", -1000, 1000, 20000, 4000, 60000),
+        AxisParams("Z", -1000, 1000, 24000, 3000, 50000),
+    ),
+)
+COUNTS_PER_REV = 4096
+
+
+def encoder_leads(prog: str, rpm: float, line: int) -> list[float]:
+    """The lead (mm per spindle revolution, from encoder counts) of each thread pass of
+    `line`, over its constant-velocity part."""
+    cmds = [
+        c for c in Interpreter(LATHE).run(prog) if isinstance(c, StraightFeed | StraightTraverse)
+    ]
+    threads = {i for i, c in enumerate(cmds) if isinstance(c, StraightFeed) and c.line == line}
+    m = Motion(LATHE, start=(0.0, 0.0, 0.0))
+    samples = []
+    pending = list(cmds)
+    while pending or not m.idle:
+        while pending and m.space() > 0:
+            m.push(pending.pop(0))
+        if not pending:
+            m.end_of_program()
+        s = m.step()
+        samples.append(s)
+        if len(samples) > 5_000_000:
+            raise AssertionError("motion never finished")
+    assert threads
+    leads = []
+    run: list = []
+    for s in samples + [None]:
+        feeding = s is not None and s.line == line and s.velocity > 0
+        if feeding:
+            run.append(s)
+            continue
+        if run:
+            vmax = max(r.velocity for r in run)
+            flat = [r for r in run if abs(r.velocity - vmax) <= 1e-9 * vmax]
+            if len(flat) > 100:
+                a, b = flat[0], flat[-1]
+                counts = math.floor(b.t * rpm / 60.0 * COUNTS_PER_REV) - math.floor(
+                    a.t * rpm / 60.0 * COUNTS_PER_REV
+                )
+                leads.append(abs(b.pose[2] - a.pose[2]) / (counts / COUNTS_PER_REV))
+            run = []
+    return leads
+
+
+@pytest.mark.parametrize(("rpm", "lead"), [(500.0, 1.5), (300.0, 2.0), (800.0, 1.0)])
+def test_g32_lead_on_the_encoder(rpm: float, lead: float) -> None:
+    prog = f"G97 S{rpm:g} M3\nG0 X20 Z5\nG32 Z-60 F{lead:g}\nG0 X30\n"
+    leads = encoder_leads(prog, rpm, 3)
+    assert len(leads) == 1
+    assert abs(leads[0] - lead) < 0.001 * lead
+
+
+def test_g76_every_pass_has_the_lead() -> None:
+    prog = "G97 S600 M3\nG0 X25 Z5\nG76 P010060 Q100 R0.05\nG76 X18.2 Z-60 P900 Q400 F1.5\n"
+    leads = encoder_leads(prog, 600.0, 4)
+    assert len(leads) == 6  # one per infeed (see test_lathe_cycles)
+    for got in leads:
+        assert abs(got - 1.5) < 0.001 * 1.5
