@@ -72,7 +72,9 @@ def main() -> None:
                 "cycle_moves": moves,
                 # roughing passes and the contour pass: each starts with a rapid then a feed
                 "passes": sum(
-                    1 for a, b in zip(mv, mv[1:]) if a[0] == lg.RAPID and b[0] != lg.RAPID
+                    1
+                    for a, b in zip(mv, mv[1:], strict=False)
+                    if a[0] == lg.RAPID and b[0] != lg.RAPID
                 ),
                 "expansion_ms": round(statistics.median(times) * 1000, 2),
                 "pass_generator_ms": round(statistics.median(gen) * 1000, 2),
