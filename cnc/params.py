@@ -47,6 +47,7 @@ class MachineParams:
     lookahead: int = 200  # blocks
     ipo_cycle_s: float = 0.002
     second_reference_mm: tuple[float, ...] | None = None  # G30 point; None = home
+    lathe_gcode_system: str = "A"  # Fanuc T G-code system A, B or C (cnc.interp.codes)
 
     def axis(self, name: str) -> AxisParams:
         for a in self.axes:

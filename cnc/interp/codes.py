@@ -341,13 +341,74 @@ def table(letter: str, kind: str) -> dict[int, Code]:
     return out
 
 
+# Fanuc T G-code systems B and C: number -> the row (by its system A name, or a mill row's
+# name for the codes system A's lathe does not have) it stands for. A number not listed
+# keeps its system A row; `None` removes it.
+_LATHE_B = {
+    "G50": None,  # coordinate setting is G92
+    "G90": "mill:G90",  # absolute
+    "G91": "mill:G91",  # incremental
+    "G92": "lathe:G50",  # coordinate system setting, S maximum spindle speed
+    "G94": "mill:G94",  # feed per minute
+    "G95": "mill:G95",  # feed per revolution
+    "G98": "mill:G98",  # return to the initial level
+    "G99": "mill:G99",  # return to the R level
+    "G77": "lathe:G90",  # turning cycle
+    "G78": "lathe:G92",  # threading cycle
+    "G79": "lathe:G94",  # facing cycle
+}
+_LATHE_C = {
+    **_LATHE_B,
+    "G77": None,
+    "G78": None,
+    "G79": None,
+    "G20": "lathe:G90",  # turning cycle
+    "G21": "lathe:G92",  # threading cycle
+    "G24": "lathe:G94",  # facing cycle
+    "G70": "lathe:G20",  # inch
+    "G71": "lathe:G21",  # mm
+    "G72": "lathe:G70",  # finishing
+    "G73": "lathe:G71",  # stock removal in turning
+    "G74": "lathe:G72",  # stock removal in facing
+    "G75": "lathe:G73",  # pattern repeating
+    "G76": "lathe:G74",  # face grooving / peck drilling
+    "G77": "lathe:G75",  # OD grooving
+    "G78": "lathe:G76",  # multi-pass threading
+}
+GCODE_SYSTEMS = {"A": {}, "B": _LATHE_B, "C": _LATHE_C}
+
+
+def _number(name: str) -> int:
+    whole, _, frac = name[1:].partition(".")
+    return int(whole) * 10 + (int(frac) if frac else 0)
+
+
+def _renamed(kind: str, system: str) -> dict[int, Code]:
+    """The lathe's G table under G-code system B or C (rows keep their system A names)."""
+    base = table("G", kind)
+    if kind != "lathe" or system == "A":
+        return base
+    tables = {"lathe": base, "mill": table("G", "mill")}
+    out = dict(base)
+    renames = GCODE_SYSTEMS[system]
+    for name, target in renames.items():
+        out.pop(_number(name), None)
+    for name, target in renames.items():
+        if target is not None:
+            src, _, row = target.partition(":")
+            out[_number(name)] = tables[src][_number(row)]
+    return out
+
+
 class KindTable:
     """The table as one machine kind reads it, resolved once (`for_kind`)."""
 
     __slots__ = ("g", "m", "g_words", "m_words", "g_needs", "m_needs")
 
-    def __init__(self, kind: str) -> None:
-        self.g = table("G", kind)
+    def __init__(self, kind: str, system: str = "A") -> None:
+        if system not in GCODE_SYSTEMS:
+            raise ValueError(f"G-code system {system!r} is not A, B or C")
+        self.g = _renamed(kind, system)
         self.m = table("M", kind)
         self.g_words = {n: row.words_for(kind) for n, row in self.g.items()}
         self.m_words = {n: row.words_for(kind) for n, row in self.m.items()}
@@ -356,8 +417,9 @@ class KindTable:
 
 
 @functools.cache
-def for_kind(kind: str) -> KindTable:
-    return KindTable(kind)
+def for_kind(kind: str, system: str = "A") -> KindTable:
+    """The table of a machine kind; a lathe reads it in G-code system `system` (A, B, C)."""
+    return KindTable(kind, system)
 
 
 def fmt_g(code: int) -> str:

@@ -139,7 +139,7 @@ class Interpreter:
         # fast-path words of a G0/G1 and of a G2/G3 block (others take the checked path)
         self._fast_line = frozenset("XZUWFN" if self._lathe else "XYZFN")
         self._fast_arc = frozenset("XZUWIKRFN" if self._lathe else "XYZIJKRFN")
-        self._codes = kt = codes.for_kind(params.kind)
+        self._codes = kt = codes.for_kind(params.kind, params.lathe_gcode_system)
         self._gtab = kt.g
         self._mtab = kt.m
         self._classified: dict[tuple[int, ...], Classified] = {}

@@ -481,3 +481,39 @@ def test_rough_turning_never_cuts_below_the_translated_contour() -> None:
     for k, x, z, _, _ in mv:
         if k == lg.FEED and z > -29.9:
             assert x >= x_at(z) - 1e-6, (x, z)
+
+
+# --- G-code systems B and C ------------------------------------------------------------------
+
+
+def _system(letter: str) -> MachineParams:
+    return MachineParams(kind="lathe", axes=LATHE.axes, lathe_gcode_system=letter)
+
+
+def test_system_b_renames_the_cycles_and_frees_g90_g91_g92_g94() -> None:
+    # B: G77 is A's G90; G90/G91 absolute/incremental; G92 S the speed clamp; G95 per rev
+    b = _system("B")
+    prog = "G95 G97 S1000 M3\nG0 X50 Z2\nG77 X40 Z-20 F0.2\nG0 X60\nG91 G0 X-4 Z-1\n"
+    cmds = run(prog, params=b)
+    assert moves(cmds, 3) == ["G0 X40 Z2", "G1 X40 Z-20", "G1 X50 Z-20", "G0 X50 Z2"]
+    assert moves(cmds, 5) == ["G0 X56 Z1"]  # incremental under G91
+    cmds = run("G0 X10 Z2\nG92 S1000\nG96 S100 M3\n", params=b)
+    assert [c for c in cmds if isinstance(c, Spindle)][-1].rpm == pytest.approx(1000.0)
+    with pytest.raises(NcError, match="unsupported G code G50"):
+        run("G50 S1000\n", params=b)
+    assert moves(run(G71_TYPE1.replace("G99", "G95"), params=b), 5) == moves(run(G71_TYPE1), 5)
+
+
+def test_system_c_moves_the_multiple_cycles_to_g72_g78_and_units_to_g70_g71() -> None:
+    c = _system("C")
+    prog = (
+        G71_TYPE1.replace("G21", "G71")
+        .replace("G99", "G95")
+        .replace("G71 U2", "G73 U2")
+        .replace("G71 P10", "G73 P10")
+    )
+    assert moves(run(prog, params=c), 5) == moves(run(G71_TYPE1), 5)
+    cmds = run("G70\nG0 X1 Z1\n", params=c)  # G70: inch
+    assert moves(cmds, 2) == ["G0 X25.4 Z25.4"]
+    cmds = run("G95 G97 S1000 M3\nG0 X50 Z2\nG20 X40 Z-20 F0.2\n", params=c)  # G20: turning
+    assert moves(cmds, 3) == ["G0 X40 Z2", "G1 X40 Z-20", "G1 X50 Z-20", "G0 X50 Z2"]
