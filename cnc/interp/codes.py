@@ -359,8 +359,6 @@ _LATHE_B = {
 }
 _LATHE_C = {
     **_LATHE_B,
-    "G77": None,
-    "G78": None,
     "G79": None,
     "G20": "lathe:G90",  # turning cycle
     "G21": "lathe:G92",  # threading cycle
@@ -391,7 +389,7 @@ def _renamed(kind: str, system: str) -> dict[int, Code]:
     tables = {"lathe": base, "mill": table("G", "mill")}
     out = dict(base)
     renames = GCODE_SYSTEMS[system]
-    for name, target in renames.items():
+    for name in renames:
         out.pop(_number(name), None)
     for name, target in renames.items():
         if target is not None:
