@@ -10,6 +10,7 @@ a fixed speed (G97) so a feed per revolution is a known mm/min.
 from __future__ import annotations
 
 import math
+from pathlib import Path
 
 import pytest
 
@@ -517,3 +518,37 @@ def test_system_c_moves_the_multiple_cycles_to_g72_g78_and_units_to_g70_g71() ->
     assert moves(cmds, 2) == ["G0 X25.4 Z25.4"]
     cmds = run("G95 G97 S1000 M3\nG0 X50 Z2\nG20 X40 Z-20 F0.2\n", params=c)  # G20: turning
     assert moves(cmds, 3) == ["G0 X40 Z2", "G1 X40 Z-20", "G1 X50 Z-20", "G0 X50 Z2"]
+
+
+# --- the generated path in `nc plan` traces ------------------------------------------------------
+
+
+def test_nc_plan_trace_carries_the_cycle_path(tmp_path) -> None:
+    import csv
+
+    import yaml
+    from typer.testing import CliRunner
+
+    import cnc.cli_plan  # noqa: F401  (registers the command)
+    from cnc.cli import nc_app
+    from cnc.machines import __file__ as machines_init
+
+    # the shipped lathe with room for this part in + X and Z (machine zero = part zero)
+    shipped = Path(machines_init).with_name("lathe2.yaml")
+    cfg = yaml.safe_load(shipped.read_text(encoding="utf-8"))
+    cfg["axes"]["X"].update(min_mm=-300.0, max_mm=300.0)
+    cfg["axes"]["Z"].update(min_mm=-600.0, max_mm=300.0)
+    mcfg = tmp_path / "lathe.yaml"
+    mcfg.write_text(yaml.safe_dump(cfg))
+    prog = tmp_path / "g71.nc"
+    prog.write_text(G71_TYPE1)
+    trace = tmp_path / "t.csv"
+    res = CliRunner().invoke(
+        nc_app, ["plan", str(prog), "--config", str(mcfg), "--trace", str(trace), "--json"]
+    )
+    assert res.exit_code == 0, res.output
+    rows = [r for r in csv.DictReader(trace.open()) if r["line"] == "5"]
+    # the cycle block's samples run every roughing level (radius 23 .. 11) and the contour
+    levels = {round(float(r["X"]), 3) for r in rows}
+    assert {23.0, 21.0, 19.0, 17.0, 15.0, 13.0, 11.0, 10.25} <= levels
+    assert min(float(r["Z"]) for r in rows) == pytest.approx(-39.9)
