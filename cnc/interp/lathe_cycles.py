@@ -627,9 +627,13 @@ def pattern_repeating(ip: Context, run: BlockRun) -> None:
         n = old[2]
         if "R" in words:
             r = words["R"]
-            if r != int(r) or r < 1:
+            if r != int(r) or not 1 <= r <= lg.MAX_DIVISIONS:
                 raise _alarm(
-                    ip, blk, "G73 R (divisions) must be a whole number 1 or more", "PS0062", "R"
+                    ip,
+                    blk,
+                    f"G73 R (divisions) must be a whole number 1..{lg.MAX_DIVISIONS}",
+                    "PS0062",
+                    "R",
                 )
             n = int(r)
         st.g73 = (di, dk, n)

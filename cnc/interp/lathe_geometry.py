@@ -18,6 +18,8 @@ import math
 from dataclasses import dataclass
 
 RAPID, FEED, CW, CCW, THREAD = 0, 1, 2, 3, 32
+MAX_MOVES = 1_000_000  # one cycle block's moves: a tiny depth or step cannot flood the planner
+MAX_DIVISIONS = 9999  # G73 passes
 EPS = 1e-9
 TOL = 1e-6  # mm: a point this close to a level counts as on it
 
@@ -326,6 +328,11 @@ def rough_turning(
             moves.append(mv(RAPID, (x0, moves[-1][2])))
             moves.append(mv(RAPID, (x0, z0)))
         prev = level
+        if len(moves) > MAX_MOVES:
+            raise CycleGeometryError(
+                f"cycle expands to more than {MAX_MOVES} moves (depth of cut too small)",
+                alarm="PS0062",
+            )
     moves.extend(contour_pass(start, prof))
     return moves
 
@@ -376,8 +383,10 @@ def pattern_repeat(
     and back to A. The first pass is the whole relief (Δi, Δk) off, the last one the
     finishing allowance only.
     """
-    if divisions < 1:
-        raise CycleGeometryError("G73 needs 1 or more divisions (R)", alarm="PS0062")
+    if not 1 <= divisions <= MAX_DIVISIONS:
+        raise CycleGeometryError(f"G73 divisions must be 1..{MAX_DIVISIONS}", alarm="PS0062")
+    if divisions * (len(contour) + 3) > MAX_MOVES:
+        raise CycleGeometryError(f"G73 expands to more than {MAX_MOVES} moves", alarm="PS0062")
     x0, z0 = start
     moves: list[Move] = []
     for k in range(1, divisions + 1):
@@ -422,16 +431,14 @@ def grooving(
         )
     s = 1.0 if xe > x0 else -1.0
     zdir = 1.0 if span_z > 0 else -1.0
-    grooves = [z0]
-    if abs(span_z) > TOL:
-        n = int(math.ceil(abs(span_z) / shift_step - 1e-9))
-        grooves = [z0 + zdir * min(i * shift_step, abs(span_z)) for i in range(n + 1)]
+    n = int(math.ceil(abs(span_z) / shift_step - 1e-9)) if abs(span_z) > TOL else 0
     depth = abs(xe - x0)
     pecks = int(math.ceil(depth / peck - 1e-9)) if peck > 0 else 1
-    if pecks * len(grooves) > max_pecks:
+    if pecks * (n + 1) > max_pecks:
         raise CycleGeometryError(
             f"grooving cycle expands to more than {max_pecks} pecks", alarm="PS0062"
         )
+    grooves = [z0 + zdir * min(i * shift_step, abs(span_z)) for i in range(n + 1)]
     moves: list[Move] = []
     for i, zg in enumerate(grooves):
         if i:

@@ -552,3 +552,18 @@ def test_nc_plan_trace_carries_the_cycle_path(tmp_path) -> None:
     levels = {round(float(r["X"]), 3) for r in rows}
     assert {23.0, 21.0, 19.0, 17.0, 15.0, 13.0, 11.0, 10.25} <= levels
     assert min(float(r["Z"]) for r in rows) == pytest.approx(-39.9)
+
+
+@pytest.mark.parametrize(
+    "cycle",
+    [
+        "G71 P10 Q20 D0.000001 F0.2\nN10 G0 X20\nG1 Z-10\nN20 X50\n",
+        "G73 U1 W1 R99999999\nG73 P10 Q20 F0.2\nN10 G0 X20\nG1 Z-10\nN20 X50\n",
+        "G75 X20 Z-900 I0.0001 K0.0000001 F0.1\n",
+        "G74 Z-900 K0.00001 F0.1\n",
+        "G76 X40 Z-20 K5 D0.0000001 F1\n",
+    ],
+)
+def test_a_cycle_that_would_explode_is_refused_quickly(cycle: str) -> None:
+    e = err(HEAD + "G0 X50 Z2\n" + cycle)
+    assert "PS0062" in e.message and e.line == 4
