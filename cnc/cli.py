@@ -14,79 +14,63 @@ nc_app = typer.Typer(
 @nc_app.command("check")
 def check_cmd(
     file: Path = typer.Argument(..., help="part program file (ISO 6983 / Fanuc)"),
-    kind: str = typer.Option("mill", help="machine kind: mill or lathe"),
+    kind: str = typer.Option("mill", help="machine kind: mill (mill3) or lathe (lathe2)"),
     config: Path | None = typer.Option(
-        None, "--config", help="machine YAML (cnc.config); overrides --kind and --decimal"
+        None, "--config", help="machine YAML (cnc.config); overrides --kind"
     ),
-    decimal: str = typer.Option(
-        "calculator", help="numbers without a decimal point: calculator or least_increment"
+    decimal: str | None = typer.Option(
+        None,
+        help="numbers without a decimal point: calculator or least_increment"
+        " (default: the machine's)",
     ),
     block_delete: bool = typer.Option(False, "--block-delete", help="skip '/' blocks"),
     g54: str = typer.Option(
-        "", "--g54", help="G54 work offset 'X,Y,Z' in mm, machine coordinates (default 0,0,0)"
+        "",
+        "--g54",
+        help="G54 work offset 'X,Y,Z' in mm, machine coordinates (default: the machine's setup)",
+    ),
+    tools: Path | None = typer.Option(None, "--tools", help="tool table file (CSV or .tbl)"),
+    offsets: Path | None = typer.Option(None, "--offsets", help="work offsets file (CSV)"),
+    units: str | None = typer.Option(
+        None, "--units", help="power-on unit, inch or mm (default: the machine's)"
     ),
     soft_limits: bool = typer.Option(
         True, "--soft-limits/--no-soft-limits", help="check moves against the axis travel"
     ),
 ) -> None:
     """Check a part program: exit 0 when valid, else one `FILE:LINE:COL: message` per error."""
-    from cnc.interp import check
-    from cnc.params import DecimalStyle, MachineParams
+    from cnc.cli_setup import SETUP_ERRORS, fail, machine_setup, units_warning
+    from cnc.interp import Interpreter
 
-    if kind not in ("mill", "lathe"):
-        typer.echo(f"--kind must be mill or lathe, not {kind!r}", err=True)
-        raise typer.Exit(2)
     try:
-        style = DecimalStyle(decimal)
-    except ValueError:
-        typer.echo(f"--decimal must be calculator or least_increment, not {decimal!r}", err=True)
-        raise typer.Exit(2) from None
-    params = MachineParams(kind=kind, decimal_style=style)
-    if config is not None:
-        from cnc.config import load_machine_params
-        from cnc.errors import NcError
-
-        try:
-            params = load_machine_params(config)
-        except NcError as err:
-            typer.echo(str(err), err=True)
-            raise typer.Exit(2) from None
-    elif kind == "lathe":
-        from cnc.params import AxisParams
-
-        x, _, z = params.axes
-        params = MachineParams(
-            kind="lathe",
-            axes=(AxisParams("X", -5.0, 300.0, x.max_velocity, x.max_accel, x.max_jerk),
-                  AxisParams("Z", -600.0, 300.0, z.max_velocity, z.max_accel, z.max_jerk)),
-            decimal_style=style,
+        setup = machine_setup(
+            kind=kind, config=config, tools=tools, offsets=offsets, units=units, g54=g54,
+            decimal=decimal, soft_limits=soft_limits,
         )  # fmt: skip
-    offsets = None
-    if g54:
-        try:
-            xyz = tuple(float(v) for v in g54.split(","))
-            assert len(xyz) == 3
-        except (ValueError, AssertionError):
-            typer.echo(f"--g54 must be 'X,Y,Z' in mm, not {g54!r}", err=True)
-            raise typer.Exit(2) from None
-        offsets = {1: xyz}
-    if not soft_limits:
-        from dataclasses import replace
-
-        big = 1e9
-        params = replace(
-            params, axes=tuple(replace(a, min_mm=-big, max_mm=big) for a in params.axes)
-        )
+    except SETUP_ERRORS as err:
+        raise fail(err) from None
     try:
         fh = open(file, encoding="latin-1", newline=None)  # noqa: SIM115 - closed below
     except OSError as err:
         typer.echo(f"{file}:0:0: cannot read: {err.strerror}", err=True)
         raise typer.Exit(1) from None
+    interp = Interpreter(
+        setup.params,
+        file=str(file),
+        block_delete=block_delete,
+        machine_data=setup.machine_data,
+        max_blocks=CHECK_MAX_BLOCKS,
+    )
     with fh:
-        errors = check(fh, params, file=str(file), block_delete=block_delete, work_offsets=offsets)
+        errors = interp.check_all(fh)
     for e in errors:
         typer.echo(str(e))
+    if not interp.units_programmed:
+        typer.echo(units_warning(str(file), setup.machine_data.power_on_units), err=True)
     raise typer.Exit(1 if errors else 0)
+
+
+CHECK_MAX_BLOCKS = 5_000_000
 
 
 # `nc plan` lives in cnc.cli_plan and registers itself on nc_app when imported.

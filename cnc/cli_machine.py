@@ -45,6 +45,12 @@ def machine(
     ready_file: Path | None = typer.Option(
         None, "--ready-file", help="write {machine, pid, ports} here (atomically) once ready"
     ),
+    state_dir: Path | None = typer.Option(
+        None,
+        "--state-dir",
+        help="keep the machine data (tools, offsets) here across restarts"
+        " (default: the --ready-file's directory, else none)",
+    ),
     seconds: float | None = typer.Option(None, "--seconds", help="stop after this wall time"),
     event_log: Path | None = typer.Option(None, "--event-log", help="JSONL event log file"),
     candump: Path | None = typer.Option(None, "--candump", help="CAN frames, candump log"),
@@ -84,9 +90,20 @@ def machine(
         typer.echo(f"--clock {clock!r}: realtime or fast", err=True)
         raise typer.Exit(2)
     dump = open(candump, "w", encoding="ascii") if candump else None  # noqa: SIM115
-    m = Machine(
-        cfg, name, ideal=ideal, candump=dump, event_log_path=str(event_log) if event_log else None
-    )
+    if state_dir is None and ready_file is not None:
+        state_dir = ready_file.parent
+    try:
+        m = Machine(
+            cfg,
+            name,
+            ideal=ideal,
+            candump=dump,
+            event_log_path=str(event_log) if event_log else None,
+            state_dir=str(state_dir) if state_dir else None,
+        )
+    except NcError as err:  # a damaged machine data file: say which and where
+        typer.echo(f"{name}: {err}", err=True)
+        raise typer.Exit(2) from None
     try:
         try:
             faces = m.start_faces(simulation=simulation, dnc_parity=dnc_parity)

@@ -188,22 +188,32 @@ def plan_run(
 @nc_app.command("plan")
 def plan_cmd(
     file: Path = typer.Argument(..., help="part program"),
-    config: Path | None = typer.Option(None, "--config", help="machine YAML (default: built-in)"),
+    config: Path | None = typer.Option(None, "--config", help="machine YAML (overrides --kind)"),
+    kind: str = typer.Option("mill", "--kind", help="shipped machine: mill (mill3) or lathe"),
+    tools: Path | None = typer.Option(None, "--tools", help="tool table file (CSV or .tbl)"),
+    offsets: Path | None = typer.Option(None, "--offsets", help="work offsets file (CSV)"),
+    g54: str = typer.Option("", "--g54", help="G54 'X,Y,Z' in mm (default: the machine's)"),
+    units: str | None = typer.Option(None, "--units", help="power-on unit, inch or mm"),
+    soft_limits: bool = typer.Option(
+        True, "--soft-limits/--no-soft-limits", help="check moves against the axis travel"
+    ),
     ipo_ms: float = typer.Option(None, "--ipo-ms", help="IPO cycle in ms (default: machine's)"),
     trace: Path | None = typer.Option(None, "--trace", help="write one CSV row per IPO sample"),
     as_json: bool = typer.Option(False, "--json", help="compact one-line JSON"),
 ) -> None:
     """Plan and interpolate FILE on ideal axes; print one JSON object with the figures."""
+    from cnc.cli_setup import SETUP_ERRORS, fail, machine_setup, units_warning
     from cnc.errors import NcError
-    from cnc.params import MachineParams
 
     try:
-        if config is not None:
-            from cnc.config import load_machine_params
-
-            params = load_machine_params(config)
-        else:
-            params = MachineParams()
+        setup = machine_setup(
+            kind=kind, config=config, tools=tools, offsets=offsets, units=units, g54=g54,
+            soft_limits=soft_limits,
+        )  # fmt: skip
+    except SETUP_ERRORS as err:
+        raise fail(err) from None
+    params = setup.params
+    try:
         from cnc.interp import Interpreter
 
         try:
@@ -211,7 +221,7 @@ def plan_cmd(
             fh = open(file, encoding="latin-1", newline=None)  # noqa: SIM115 - closed below
         except OSError as e:
             raise NcError(f"cannot read program: {e.strerror}", file=str(file)) from e
-        interp = Interpreter(params, file=str(file))
+        interp = Interpreter(params, file=str(file), machine_data=setup.machine_data)
         start = tuple(interp.state.machine_position)
         names = [a.name for a in params.axes if a.name in AXIS_INDEX]
         out = trace.open("w", encoding="ascii", newline="") if trace else None
@@ -242,6 +252,8 @@ def plan_cmd(
             e.file = str(file)
         print(str(e), file=sys.stderr)
         raise typer.Exit(1) from None
+    if not interp.units_programmed:
+        print(units_warning(str(file), setup.machine_data.power_on_units), file=sys.stderr)
     if as_json:
         print(json.dumps(report, separators=(",", ":")))
     else:

@@ -23,6 +23,7 @@ def simulate(
     candump=None,
     controller_factory=None,
     max_s: float = 3600.0,
+    machine_data=None,
 ) -> dict:
     """Home, cycle start, run to the end or to an alarm; the result as plain data.
 
@@ -38,6 +39,7 @@ def simulate(
         trace=trace,
         candump=candump,
         controller_factory=controller_factory,
+        machine_data=machine_data,
     )
     try:
         number = m.load_program(text)
@@ -140,9 +142,13 @@ def simulate_cmd(
     candump: Path | None = typer.Option(None, "--candump", help="CAN frames, candump log format"),
     fault: list[str] = typer.Option([], "--fault", help="fault spec target:kind@time (repeat)"),
     ideal: bool = typer.Option(False, "--ideal", help="ideal axes instead of CANopen drives"),
+    tools: Path | None = typer.Option(None, "--tools", help="tool table file (CSV or .tbl)"),
+    offsets: Path | None = typer.Option(None, "--offsets", help="work offsets file (CSV)"),
+    units: str | None = typer.Option(None, "--units", help="power-on unit, inch or mm"),
 ) -> None:
     """Run FILE on a complete simulated machine in lockstep: home, cycle start, to the end or
     to an alarm. Prints one JSON object (result, alarms, cycle_time_s, final_position, ...)."""
+    from cnc.cli_setup import SETUP_ERRORS, fail, names_units, units_warning
     from cnc.controller import CommandRefused
     from cnc.errors import NcError
     from cnc.machine.faults import FaultSpecError, parse_fault_spec
@@ -154,6 +160,12 @@ def simulate_cmd(
     except (NcError, ValueError, KeyError, OSError) as err:
         typer.echo(f"{config or machine}: {err}", err=True)
         raise typer.Exit(2) from None
+    md = None
+    if tools is not None or offsets is not None or units is not None:
+        try:
+            md = _setup_of(cfg, tools, offsets, units)
+        except SETUP_ERRORS as err:
+            raise fail(err) from None
     try:
         specs = [parse_fault_spec(f, tuple(cfg.axes)) for f in fault]
     except FaultSpecError as err:
@@ -164,9 +176,15 @@ def simulate_cmd(
     except (OSError, UnicodeDecodeError) as err:
         typer.echo(f"{file}: cannot read: {err}", err=True)
         raise typer.Exit(2) from None
+    if not names_units(text.splitlines()):
+        unit = md.power_on_units if md is not None else _power_on_units(cfg)
+        typer.echo(units_warning(str(file), unit), err=True)
     try:
         with _open(trace) as tr, _open(candump) as cd:
-            out = simulate(text, cfg, machine, ideal=ideal, faults=specs, trace=tr, candump=cd)
+            out = simulate(
+                text, cfg, machine, ideal=ideal, faults=specs, trace=tr, candump=cd,
+                machine_data=md,
+            )  # fmt: skip
     except MemoryFull as err:
         typer.echo(f"{file}: {err}", err=True)
         raise typer.Exit(2) from None
@@ -188,6 +206,23 @@ def simulate_cmd(
         for k, v in out.items():
             typer.echo(f"{k}: {v}")
     raise typer.Exit(0 if out["result"] == "completed" else 1)
+
+
+def _setup_of(cfg, tools, offsets, units):
+    """The machine data of a shipped machine with the command line's files taken in."""
+    from cnc.machine_data import MachineData, apply_files
+
+    md = cfg.machine_data.initial() if cfg.machine_data is not None else MachineData()
+    md = apply_files(md, tools, offsets)
+    if units is not None:
+        if units not in ("mm", "inch"):
+            raise typer.BadParameter(f"must be inch or mm, not {units!r}", param_hint="--units")
+        md.set_parameters(power_on_units=units)
+    return md
+
+
+def _power_on_units(cfg) -> str:
+    return cfg.machine_data.power_on_units if cfg.machine_data is not None else "mm"
 
 
 class _open:

@@ -45,11 +45,13 @@ __all__ = [
     "DrivesConfig",
     "HostConfig",
     "MachineConfig",
+    "MachineDataConfig",
     "PlcConfig",
     "PortsConfig",
     "SpindleConfig",
     "TlsConfig",
     "ToolChangerConfig",
+    "ToolConfig",
     "builtin_machine",
     "config_reference_markdown",
     "default_cell_config",
@@ -247,6 +249,56 @@ class PortsConfig(_Section):
     )
 
 
+class ToolConfig(_Section):
+    """One tool offset (`machine_data.tools.<N>`, N = 1..999), mm; see docs/machine_data.md."""
+
+    length: float = Field(0.0, description="Length geometry (G43/G44 H), mm.")
+    length_wear: float = Field(0.0, description="Length wear, mm.")
+    radius: float = Field(0.0, description="Radius geometry (G41/G42 D; lathe: nose), mm.")
+    radius_wear: float = Field(0.0, description="Radius wear, mm.")
+    x: float = Field(0.0, description="Lathe: X tip offset (radius value), mm.")
+    x_wear: float = Field(0.0, description="Lathe: X wear (radius value), mm.")
+    z: float = Field(0.0, description="Lathe: Z tip offset, mm.")
+    z_wear: float = Field(0.0, description="Lathe: Z wear, mm.")
+    tip: int = Field(0, ge=0, le=9, description="Lathe: imaginary tip number 0..9.")
+    life_uses: int = Field(0, ge=0, description="Tool life: tool changes allowed (0 = none).")
+    life_time_s: float = Field(
+        0.0, ge=0, description="Tool life: cutting time allowed, s (0 = none)."
+    )
+    comment: str = Field("", max_length=80, description="Free text (tool description).")
+
+
+class MachineDataConfig(_Section):
+    """The machine data a new machine starts with (`machine_data`); once the machine has
+    a state directory its saved data wins (docs/machine_data.md)."""
+
+    power_on_units: Literal["mm", "inch"] = Field(
+        "mm", description="Unit in force at power-on and reset until G20/G21: `mm` or `inch`."
+    )
+    work_offsets: dict[str, list[float]] = Field(
+        default_factory=dict,
+        description="Work offsets by name (EXT, G54..G59, G54.1P1..G54.1P48): [X, Y, Z],"
+        " machine coordinates, mm; names left out are 0.",
+    )
+    g92: list[float] | None = Field(None, description="G92 shift [X, Y, Z], mm; null = 0.")
+    tools: dict[int, ToolConfig] = Field(
+        default_factory=dict, description="Tool offsets by number 1..999; see the keys below."
+    )
+
+    def initial(self):
+        """The cnc.machine_data.MachineData this section describes."""
+        from cnc.machine_data import MachineData
+
+        doc: dict[str, Any] = {
+            "tools": {str(n): t.model_dump() for n, t in self.tools.items()},
+            "work_offsets": {k: list(v) for k, v in self.work_offsets.items()},
+            "parameters": {"power_on_units": self.power_on_units},
+        }
+        if self.g92 is not None:
+            doc["g92"] = list(self.g92)
+        return MachineData.from_dict(doc)
+
+
 class MachineConfig(_Section):
     """One machine (`machines.<NAME>`, or a whole machine file)."""
 
@@ -306,6 +358,11 @@ class MachineConfig(_Section):
     plc: PlcConfig = Field(default_factory=PlcConfig, description="The PLC section.")
     can: CanConfig = Field(default_factory=CanConfig, description="The CAN bus section.")
     ports: PortsConfig = Field(default_factory=PortsConfig, description="The faces' ports section.")
+    machine_data: MachineDataConfig | None = Field(
+        default_factory=MachineDataConfig,
+        description="The machine data section: tools, work offsets, power-on unit; null ="
+        " every offset 0 and no tools (programs in machine coordinates).",
+    )
 
     @property
     def params(self) -> MachineParams:
@@ -338,6 +395,7 @@ class MachineConfig(_Section):
             lookahead=self.lookahead,
             ipo_cycle_s=self.ipo_cycle_ms / 1000.0,
             second_reference_mm=second,
+            max_spindle_rpm=self.spindle.max_rpm,
         )
 
 
@@ -835,6 +893,31 @@ def _check_machine(name: tuple[Any, ...], m: MachineConfig) -> list[tuple[tuple,
         except AllowListError as exc:
             out.append(((*name, "plc", "modbus_write_allow"), str(exc)))
     out.extend(_check_drives(name, m))
+    out.extend(_check_machine_data(name, m))
+    return out
+
+
+def _check_machine_data(name: tuple[Any, ...], m: MachineConfig) -> list[tuple[tuple, str]]:
+    from cnc.machine_data import MachineData, MachineDataError
+
+    out: list[tuple[tuple, str]] = []
+    md = m.machine_data
+    if md is None:
+        return out
+    base = (*name, "machine_data")
+    for key, vec in md.work_offsets.items():
+        try:
+            MachineData.from_dict({"work_offsets": {key: vec}})
+        except MachineDataError as e:
+            out.append(((*base, "work_offsets", key), e.message))
+    if md.g92 is not None and len(md.g92) != 3:
+        out.append(((*base, "g92"), f"must be [X, Y, Z], got {len(md.g92)} values"))
+    for n, tool in md.tools.items():
+        try:
+            MachineData.from_dict({"tools": {str(n): tool.model_dump()}})
+        except MachineDataError as e:
+            sub = e.pointer.split("/")[3:]
+            out.append(((*base, "tools", n, *sub), e.message))
     return out
 
 
@@ -1010,6 +1093,8 @@ def config_reference_markdown() -> str:
         ("machines.<NAME>.plc", PlcConfig),
         ("machines.<NAME>.can", CanConfig),
         ("machines.<NAME>.ports", PortsConfig),
+        ("machines.<NAME>.machine_data", MachineDataConfig),
+        ("machines.<NAME>.machine_data.tools.<N>", ToolConfig),
         ("host", HostConfig),
         ("host.auth", AuthConfig),
         ("host.auth.api_keys[]", ApiKeyConfig),

@@ -175,3 +175,79 @@ def receive(
         typer.echo(f"refused: {exc.message}", err=True)
         raise typer.Exit(1) from None
     typer.echo(f"program {rev.program_id} revision {rev.seq} ({rev.status}) from {machine}")
+
+
+@dnc_app.command("tools")
+def tools(
+    machine: str = typer.Option(..., "--machine", "-m", help="Registered machine name."),
+    send_file: Path | None = typer.Option(
+        None, "--send", help="tool table to send: CSV, LinuxCNC .tbl or JSON (the table)"
+    ),
+    database_url: str | None = DB_OPTION,
+    secret: str | None = SECRET_OPTION,
+) -> None:
+    """Print a machine's tool offset table (JSON), or send one to it first (--send)."""
+    _machine_data(machine, "tools", send_file, database_url, secret)
+
+
+@dnc_app.command("offsets")
+def offsets(
+    machine: str = typer.Option(..., "--machine", "-m", help="Registered machine name."),
+    send_file: Path | None = typer.Option(
+        None, "--send", help="work offsets to send: CSV offset,x,y,z or JSON"
+    ),
+    database_url: str | None = DB_OPTION,
+    secret: str | None = SECRET_OPTION,
+) -> None:
+    """Print a machine's work offsets and G92 shift (JSON), or send offsets first (--send)."""
+    _machine_data(machine, "offsets", send_file, database_url, secret)
+
+
+def _machine_data(
+    machine: str, what: str, send_file: Path | None, database_url, secret: str | None
+) -> None:
+    """The host's tool data to and from a machine over its DNC port (TOOLS / OFFSETS)."""
+    import json
+
+    from cnc.errors import NcError
+    from dnc.errors import DncError
+    from dnc.machine_link import client_for
+    from dnc.transfer import TransferError
+
+    doc = None
+    if send_file is not None:
+        try:
+            doc = _data_file(what, send_file)
+        except (NcError, OSError, ValueError) as exc:
+            typer.echo(str(exc), err=True)
+            raise typer.Exit(2) from None
+    lib = _library(database_url)
+    try:
+        with client_for(lib, machine, secret=secret) as client:
+            data = client.machine_data(what, doc)
+    except (DncError, TransferError) as exc:
+        typer.echo(f"refused: {exc.message}", err=True)
+        raise typer.Exit(1) from None
+    if doc is not None:
+        lib.note_transfer(machine, f"machine.{what}_written", actor="cli", file=str(send_file))
+    typer.echo(json.dumps(data, indent=1))
+
+
+def _data_file(what: str, path: Path) -> object:
+    import json
+
+    from cnc.machine_data import MachineData, load_offsets, load_tools
+
+    if path.suffix.lower() == ".json":
+        try:
+            return json.loads(path.read_text(encoding="utf-8"))
+        except json.JSONDecodeError as exc:
+            raise ValueError(f"{path}:{exc.lineno}:{exc.colno}: not JSON: {exc.msg}") from None
+    if what == "tools":
+        return MachineData(load_tools(path)).tools_dict()
+    ofs = load_offsets(path)
+    g92 = ofs.pop("G92", None)
+    doc: dict = {"work_offsets": {k: list(v) for k, v in ofs.items()}}
+    if g92 is not None:
+        doc["g92"] = list(g92)
+    return doc

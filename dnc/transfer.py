@@ -386,6 +386,27 @@ class DncClient:
             number, size, sha = line.split()
             entries.append((int(number[1:]), int(size), sha))
 
+    def machine_data(self, what: str, doc: object | None = None) -> object:
+        """The machine's tool table (`what` = "tools") or work offsets ("offsets") as JSON
+        data; with `doc`, replace them first (TOOLS PUT / OFFSETS PUT). A refusal (in cycle,
+        a bad value: alarm 2012 with the JSON pointer) is a TransferError "refused"."""
+        import json
+
+        command = what.upper()
+        if command not in ("TOOLS", "OFFSETS"):
+            raise ValueError(f"machine data is tools or offsets, not {what!r}")
+        if doc is None:
+            self._raw_send(f"{command}\n".encode())
+        else:
+            body = json.dumps(doc, separators=(",", ":"), ensure_ascii=True).encode("ascii")
+            self._raw_send(f"{command} PUT {len(body)}\n".encode() + body)
+        line = self._reply()
+        if not line.startswith("DATA "):
+            raise TransferError("protocol", f"expected DATA, got {line[:60]!r}", sent=self.sent)
+        data = json.loads(line[5:])
+        self._reply()  # OK TOOLS <count>
+        return data
+
     def delete(self, number: int) -> None:
         self._raw_send(f"DELETE O{number:04d}\n".encode())
         self._reply()

@@ -417,6 +417,31 @@ class Cell:
             return f"mode {args['mode']} taken (Modbus remote panel)"
         raise MachineUnavailable(f"unknown command {command!r}")
 
+    # ------------------------------------------------------------------ machine data
+    def machine_data(self, name: str, what: str, doc: dict | None = None) -> dict:
+        """The machine's tool table (`what` = "tools") or work offsets ("offsets") read
+        through its DNC port; with `doc`, replaced first. Conflict: the machine refuses
+        (in cycle); cnc.machine_data.MachineDataError: a bad value (`.pointer` into doc);
+        MachineUnavailable: the DNC port cannot be reached."""
+        from cnc.faces.dnc_port import ALARM_BAD_DATA, ALARM_REFUSED
+        from cnc.machine_data import MachineDataError
+        from dnc.errors import Conflict
+        from dnc.machine_link import client_for
+        from dnc.transfer import TransferError
+
+        link = self.link(name)  # NotFound for an unknown machine
+        try:
+            with client_for(self.library, name, secret=link.secret) as client:
+                return client.machine_data(what, doc)
+        except TransferError as exc:
+            text = exc.message.split(": ", 1)[-1]
+            if exc.alarm == ALARM_BAD_DATA:
+                pointer, _, reason = text.partition(": ")
+                raise MachineDataError(reason or text, pointer if reason else "") from None
+            if exc.alarm == ALARM_REFUSED:
+                raise Conflict(f"{name}: {text}") from None
+            raise MachineUnavailable(f"{name}: {exc.message}") from None
+
     # ------------------------------------------------------------------ faults
     def fault_types(self) -> list[dict]:
         from cnc.machine.faults import DRIVE_ALIASES, PLC_ALIASES

@@ -118,10 +118,12 @@ def create_app(
     # machine commands and fault injection act on the running cell (server.cell.Cell)
     from web_api.routers import faults as faults_router
     from web_api.routers import machine_commands as machine_commands_router
+    from web_api.routers import machine_data as machine_data_router
 
     app.state.cell_control = cell_control
     if cell_control is not None:
         app.include_router(machine_commands_router.router)
+        app.include_router(machine_data_router.router)
         if faults_enabled:
             app.include_router(faults_router.router)
     if mtconnect_agent is not None:

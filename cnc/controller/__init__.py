@@ -2,8 +2,10 @@
 
 Public API (the machine shell builds against exactly this; docs/controller.md):
 
-    Controller(config, memory, *, tools=None, work_offsets=None, cutting_model=None,
-               settings=None)
+    Controller(config, memory, *, tools=None, work_offsets=None, machine_data=None,
+               cutting_model=None, settings=None)
+        .machine_data                            its cnc.machine_data.MachineData
+        .put_machine_data("tools"|"offsets", doc) operator input; refused in cycle
         .cycle(CycleInputs) -> CycleOutputs      exactly once per IPO cycle; pure
         .command(name, **args)                   raises CommandRefused(reason)
         .drip_input() -> DripBuffer | None       for the DNC port's DRIP

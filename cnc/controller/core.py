@@ -29,6 +29,7 @@ from cnc.errors import NcError
 from cnc.faces.drip import DripBuffer
 from cnc.interp import Interpreter
 from cnc.interpolator import Motion
+from cnc.machine_data import MachineData, MachineDataError, ToolData
 from cnc.program_memory import ProgramMemory, program_number_error
 from cnc.status import AxisStatus, MachineStatus
 from plc.signals import (
@@ -136,14 +137,26 @@ class Controller:
         *,
         tools=None,
         work_offsets=None,
+        machine_data: MachineData | None = None,
         cutting_model: CuttingModel | None = None,
         settings: ControllerSettings | None = None,
     ) -> None:
         self.config = config
         self.params = config.params
         self.memory = memory
-        self.tools = tools
-        self.work_offsets = work_offsets
+        # the controller's own machine data: G10 in one program is seen by the next; the
+        # machine shell saves it to its state directory (cnc.machine_data.store)
+        if machine_data is None:
+            section = getattr(config, "machine_data", None)
+            machine_data = section.initial() if section is not None else MachineData()
+        self.machine_data = machine_data
+        if tools is not None:  # an explicit table (tests, a DNC-side setup) replaces it
+            machine_data.tools = {
+                n: ToolData(length=o.length, radius=o.radius, x=o.x, z=o.z)
+                for n, o in tools.items()
+            }
+        for index, xyz in (work_offsets or {}).items():
+            machine_data.set_work_offset(index, xyz)
         self.cutting_model = cutting_model or CuttingModel()
         self.settings = settings or ControllerSettings()
         self.axes = tuple(config.axes)
@@ -216,6 +229,9 @@ class Controller:
         self._load = 0.0
         self._rpm = 0.0
         self._cutting = False
+        # tool life: the tool M6 put in the spindle and its cutting time not yet booked
+        self._life_tool = 0
+        self._life_cut_s = 0.0
         self._fo_applied = -1.0
         self._ro_applied = -1.0
         self._status = MachineStatus()
@@ -273,6 +289,30 @@ class Controller:
         self._drip = DripBuffer(self.settings.drip_buffer_bytes)
         self._event("drip-feed armed: cycle start runs the program as it arrives")
         return self._drip
+
+    def put_machine_data(self, what: str, doc) -> None:
+        """Replace the tool table (`what` = "tools": {number: {...}}) or the offsets
+        ("offsets": {work_offsets: {name: [x, y, z]}, g92: [...]}) as an operator does at
+        the control's offset screen: refused (CommandRefused) while a program is in cycle,
+        as a real control refuses offset input then; a bad document raises
+        MachineDataError with the JSON pointer and changes nothing."""
+        ex = self._execution()
+        if ex in IN_CYCLE:
+            raise CommandRefused(f"machine is {ex}: offsets can be changed only out of cycle")
+        if what == "tools":
+            new = self.machine_data.copy()
+            new.set_tools_from(doc, "")
+        elif what == "offsets":
+            new = self.machine_data.copy()
+            new.set_offsets_from(doc)
+        else:
+            raise MachineDataError(f"unknown machine data {what!r} (tools, offsets)")
+        self.machine_data.replace_with(new)
+        self._event(f"machine data: {what} changed by the operator")
+
+    @property
+    def in_cycle(self) -> bool:
+        return self._execution() in IN_CYCLE
 
     def policy(self, op: str, number: int | None) -> str | None:
         """The DNC port's question: may `op` (READ, DELETE, PUNCH, DRIP) touch `number`?"""
@@ -640,6 +680,7 @@ class Controller:
         self._event(f"reset ({who}); {len(kept)} alarm(s) remain")
 
     def _abort_now(self, final: str) -> None:
+        self._book_cut_time()
         run = self._run
         self._run = None
         self._final = final
@@ -980,8 +1021,7 @@ class Controller:
         return Interpreter(
             self.params,
             programs=_MemoryPrograms(self.memory),
-            tools=self.tools,
-            work_offsets=self.work_offsets,
+            machine_data=self.machine_data,
             block_delete=self.block_skip,
             file=name,
             start=start,
@@ -1120,7 +1160,14 @@ class Controller:
         ):
             self._finish(run)
 
+    def _book_cut_time(self) -> None:
+        """Book the cutting time since the last tool change on that tool (its life)."""
+        if self._life_cut_s > 0.0 and self._life_tool:
+            self.machine_data.count_use(self._life_tool, cut_time_s=self._life_cut_s)
+        self._life_cut_s = 0.0
+
     def _finish(self, run: _Run) -> None:
+        self._book_cut_time()
         self._run = None
         if run.end_kind is not None and not self.dry_run and run.kind != "MDI":
             self.part_count += 1
@@ -1158,6 +1205,10 @@ class Controller:
             steps.append(("T", cmd.tool))
         elif isinstance(cmd, canon.ToolChange):
             steps.append(("M", 6))
+            if not self.dry_run:
+                self._book_cut_time()
+                self.machine_data.count_use(cmd.tool)  # tool life: one more use
+                self._life_tool = cmd.tool
         elif isinstance(cmd, canon.AuxFunction):
             steps.append(("M", cmd.code))
         elif isinstance(cmd, canon.ProgramStop):
@@ -1248,6 +1299,8 @@ class Controller:
             self.run_time += dt
         if self._cutting:
             self.cutting_time += dt
+            if not self.dry_run:
+                self._life_cut_s += dt
         if self._rpm > 0.0:
             self.spindle_time += dt
 

@@ -91,8 +91,10 @@ class CutterCompensation:
 
     Read-ahead: one in-plane element resolves a corner; on top of that each compensated
     segment is held until `lookahead` further contour elements are known and is checked
-    against the programmed contour from `lookahead` elements before to `lookahead` after
-    its own (the interference check): closer than the tool radius is a gouge. Zero-length
+    against its own programmed element and the `lookahead` after it (the interference
+    check, forward as a control's read-ahead): closer than the tool radius is a gouge. A
+    backward check would refuse a second lap of a contour entered along the extension of
+    its first element, which real controls run. Zero-length
     segments are queued in order, never counted. `lookahead=0` keeps only the corner
     read-ahead and the local checks (reversed or vanished elements, inside arcs, no
     intersection). Every refusal is an `NcError` naming the offending segment's line and
@@ -330,7 +332,7 @@ class CutterCompensation:
                 # construction; a corner arc need not (an arc after it may curl back).
                 skip = own if seg.role == "contour" else -1
                 for idx, prog, pshape, pbox in self._window:
-                    if idx >= own - self._lookahead and idx != skip:
+                    if idx >= own and idx != skip:
                         self._interfere(staged, prog, pshape, pbox)
             self._queue.append(staged)
 

@@ -10,6 +10,8 @@ command line; a connection may run several operations in turn:
     DIR             list program memory                           -> lines, OK <count>
     DELETE Onnnn    remove a program                               -> OK
     LISTEN          stay connected for remote requests: DC2 %\\nO9999\\n(/REQ nnnn)\\n% DC4
+    TOOLS | OFFSETS read the tool table / work offsets  -> DATA <json>, OK TOOLS <count>
+    TOOLS PUT <n> | OFFSETS PUT <n>   then <n> bytes of JSON: replace them -> OK ...
     QUIT            close
 
 A connection that starts straight with tape (`%`, NUL leader, blank lines) is a READ, so a
@@ -25,6 +27,7 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import hashlib
+import json
 import logging
 import re
 import socket
@@ -65,6 +68,8 @@ ALARM_BLOCK_TOO_LONG = 2008
 ALARM_REFUSED = 2009
 ALARM_OVERRUN = 2010
 ALARM_AUTH = 2011  # no or a wrong AUTH line on a port with a shared secret
+ALARM_BAD_DATA = 2012  # machine data refused: the reply names the JSON pointer and why
+MACHINE_DATA_MAX = 1 << 20  # bytes of one TOOLS/OFFSETS PUT body
 FATAL_TO_CONNECTION = {
     ALARM_PARITY,
     ALARM_CUT_OFF,
@@ -97,6 +102,9 @@ PUNCH_CHUNK = LINE_BUFFER_BYTES
 
 Policy = Callable[[str, int | None], str | None]
 """(operation, program number) -> None to allow, or the reason the machine refuses it."""
+MachineDataAccess = Callable[[str, object | None], object]
+"""(what: "tools" | "offsets", None to read or a document to write) -> the data (read) or
+the stored data (write); raises DncError with the machine's refusal or ALARM_BAD_DATA."""
 
 
 def program_number(lines: list[str]) -> int | None:
@@ -147,6 +155,7 @@ class DncPort(TcpFace):
         drip: Callable[[], DripBuffer] | None = None,
         on_alarm: Callable[[int, str], None] | None = None,
         policy: Policy | None = None,
+        machine_data: MachineDataAccess | None = None,
         xoff_slack_bytes: int = 256,
         max_block: int = 4096,
         secret: str | None = None,
@@ -159,6 +168,7 @@ class DncPort(TcpFace):
         self._drip = drip
         self._on_alarm = on_alarm or (lambda n, t: None)
         self._policy = policy or (lambda op, n: None)
+        self._machine_data = machine_data
         self.xoff_slack = xoff_slack_bytes
         self.max_block = max_block
         self.stats = DncPortStats()
@@ -275,8 +285,38 @@ class DncPort(TcpFace):
             if self._secret is not None and not secret_matches(arg, self._secret):
                 raise DncError(ALARM_AUTH, "authentication failed: wrong secret")
             await conn.reply("OK AUTH" if self._secret is not None else "OK AUTH (no secret)")
+        elif command in ("TOOLS", "OFFSETS"):
+            await self._data(conn, command, arg)
         else:
             raise DncError(ALARM_UNKNOWN_COMMAND, f"unknown command {command!r}")
+
+    async def _data(self, conn: _Conn, command: str, arg: str) -> None:
+        """TOOLS / OFFSETS [PUT <bytes>]: the machine data as JSON (cnc.machine_data's
+        tools_dict / offsets_dict form), like a control's offset screen read or written
+        from outside (FOCAS-style); a write is all or nothing and refused in cycle."""
+        what = command.lower()
+        word, _, size_text = arg.partition(" ")
+        body = None
+        if word.upper() == "PUT":
+            if not size_text.strip().isdigit():
+                raise DncError(ALARM_UNKNOWN_COMMAND, f"{command} PUT needs the body size")
+            size = int(size_text)
+            if size > MACHINE_DATA_MAX:
+                raise DncError(ALARM_UNKNOWN_COMMAND, f"{command} PUT body over {MACHINE_DATA_MAX}")
+            raw = await conn.read_exact(size, self.idle_timeout_s)
+            try:
+                body = json.loads(raw.decode("ascii"))
+            except (UnicodeDecodeError, json.JSONDecodeError) as exc:
+                raise DncError(ALARM_BAD_DATA, f"body is not ASCII JSON: {exc}") from None
+        elif arg:
+            raise DncError(ALARM_UNKNOWN_COMMAND, f"{command} takes no argument but PUT <n>")
+        if self._machine_data is None:
+            raise DncError(ALARM_REFUSED, f"{command} refused: this port has no machine data")
+        data = self._machine_data(what, body)
+        text = json.dumps(data, separators=(",", ":"), ensure_ascii=True)
+        await conn.reply(f"DATA {text}")
+        count = len(data) if what == "tools" else len(data.get("work_offsets", {}))
+        await conn.reply(f"OK {command} {count}{' stored' if body is not None else ''}")
 
     def _allow(self, op: str, number: int | None) -> None:
         reason = self._policy(op, number)
@@ -470,6 +510,27 @@ class _Conn:
         # asyncio.timeout, not wait_for: wait_for makes a task of every read.
         async with asyncio.timeout(timeout):
             return await self.reader.read(4096)
+
+    async def read_exact(self, size: int, timeout: float | None) -> bytes:
+        """`size` bytes of a command's body (parity stripped)."""
+        buf = b""
+        while len(buf) < size:
+            try:
+                data = await self.read_raw(timeout)
+            except TimeoutError:
+                raise DncError(
+                    ALARM_TIMEOUT, f"no data for {timeout:g} s after {len(buf)} of {size} bytes"
+                ) from None
+            if not data:
+                raise DncError(ALARM_CUT_OFF, f"body cut off after {len(buf)} of {size} bytes")
+            buf += data
+        self.unread(buf[size:])
+        body = buf[:size]
+        if self.parity:
+            if parity_error_at(body) is not None:
+                raise DncError(ALARM_PARITY, "parity error in the body")
+            body = strip_parity(body)
+        return body
 
     async def read_command(self, timeout: float | None) -> tuple[str | None, str, bytes]:
         """The next command, or ("READ", "", tape bytes) when the peer starts with tape."""

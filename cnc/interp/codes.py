@@ -170,9 +170,10 @@ CODES: tuple[Code, ...] = (
     _g("G4", "nonmodal", Step.DWELL, flow.dwell, words="PXU", needs=("PXU",), owns_axes=True,
        doc="dwell: P milliseconds, X (lathe also U) seconds"),
     _g("G9", "exact_stop", Step.EXACT_STOP, motion.exact_stop, doc="exact stop for this block's moves"),
-    _g("G10", "nonmodal", Step.NON_MODAL, offsets.data_setting, words="LPRXYZ",
-       needs=("L", "P"), owns_axes=True,
-       doc="data setting: L2 P work offset, L1/L10/L11 tool length, L12/L13 radius"),
+    _g("G10", "nonmodal", Step.NON_MODAL, offsets.data_setting, words="LPRQXYZUW",
+       needs=("P",), owns_axes=True,
+       doc="data setting into the machine data: L2 P (G54-G59) / L20 P (G54.1 P1-P48) work"
+           " offsets, L1/L10-L13 tool length and radius geometry/wear; lathe G10 P X Z R Q"),
     _g("G28", "nonmodal", Step.NON_MODAL, offsets.reference_return, words="@", owns_axes=True,
        doc="return to the reference point via the intermediate point"),
     _g("G30", "nonmodal", Step.NON_MODAL, offsets.reference_return, words="@P", owns_axes=True,
@@ -253,7 +254,8 @@ CODES: tuple[Code, ...] = (
        doc="polar coordinates: first plane axis radius, second angle"),
     # --- spindle mode (13) ---
     _g("G96", "spindle_mode", Step.SPINDLE_MODE, modes.spindle_mode,
-       doc="constant surface speed, S in m/min"),
+       doc="constant surface speed, S in m/min; rpm clamped by G50 S / G92 S and the"
+           " spindle's max_rpm"),
     _g("G97", "spindle_mode", Step.SPINDLE_MODE, modes.spindle_mode, default=True, doc="S in rpm"),
     # --- work offsets (14) ---
     *(

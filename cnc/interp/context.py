@@ -156,6 +156,7 @@ class Context(Protocol):
     _arc_abs: bool
     _per_rev: bool
     _inch: bool
+    units_programmed: bool
     _scale: float
     _moved: bool
     _comp_code: int

@@ -16,6 +16,7 @@ from __future__ import annotations
 import math
 from collections.abc import Iterable, Iterator, Mapping
 from operator import itemgetter
+from typing import TYPE_CHECKING
 
 from cnc.canon import (
     ArcFeed,
@@ -60,9 +61,14 @@ from cnc.interp.transform import Transform
 from cnc.params import DecimalStyle, MachineParams
 from cnc.program_memory import MAX_PROGRAM_NUMBER
 
+if TYPE_CHECKING:  # cnc.machine_data imports cnc.interp.state: no import at run time
+    from cnc.machine_data import MachineData
+
 INCH = 25.4
 ARC_TOLERANCE_MM = 0.01  # |start radius - end radius| allowed (000_nc_book TV-INT-3)
 MAX_SUB_NESTING = 10  # M98 nesting depth (Fanuc 0i: 10 levels)
+MAX_TOOL_OFFSET = 999  # H/D/T offset numbers (= cnc.machine_data.MAX_TOOL_OFFSET)
+EXTENDED_OFFSETS = 48  # G54.1 P1..P48; work offset list index = 6 + P
 _EPS = 1e-9
 
 # Letters the interpreter understands, per machine kind (others: "unknown address").
@@ -107,7 +113,12 @@ class Interpreter:
     `tools` maps offset numbers to ToolOffset (H, D and lathe T offsets share the table);
     None means "no tool table known" (offsets read as 0, as a DNC-side check needs), while
     a mapping makes a missing entry an error;
-    `work_offsets` maps 1..6 (G54..G59) and 0 (common/EXT) to offsets in mm;
+    `work_offsets` maps 1..6 (G54..G59), 0 (common/EXT) and 7..54 (G54.1 P1..P48, index
+    6 + P) to offsets in mm;
+    `machine_data` (cnc.machine_data.MachineData) is the controller's own machine data:
+    tool offsets (every number 1..999 exists, 0 until set), work offsets, the G92 shift,
+    the power-on unit and decimal style come from it, and G10 / G92 write into it for good
+    (give a copy to keep it unchanged); it replaces `tools` and `work_offsets`;
     `block_delete` is the BLOCK DELETE switch (`/` blocks are skipped when True);
     `start` is the machine position in mm (default: every axis at its reference point);
     `max_blocks` bounds the number of executed blocks (None: unbounded) so a checker can
@@ -126,15 +137,21 @@ class Interpreter:
         work_offsets: Mapping[int, tuple[float, ...]] | None = None,
         arc_tolerance: float = ARC_TOLERANCE_MM,
         max_blocks: int | None = None,
+        machine_data: MachineData | None = None,
     ) -> None:
         self.params = params
+        self._md = machine_data
+        self.units_programmed = False  # a G20/G21 was read (else the power-on unit holds)
         self.file = file
         self.block_delete = block_delete
         self.arc_tolerance = arc_tolerance
         self.max_blocks = max_blocks
         self._lathe = params.kind == "lathe"
         self._diam = self._lathe and params.lathe_diameter_mode
-        self._li = params.decimal_style is DecimalStyle.LEAST_INCREMENT
+        style = params.decimal_style
+        if machine_data is not None and machine_data.decimal_style is not None:
+            style = DecimalStyle(machine_data.decimal_style)
+        self._li = style is DecimalStyle.LEAST_INCREMENT
         self._words_ok = _LATHE_WORDS if self._lathe else _MILL_WORDS
         # fast-path words of a G0/G1 and of a G2/G3 block (others take the checked path)
         self._fast_line = frozenset("XZUWFN" if self._lathe else "XYZFN")
@@ -144,6 +161,9 @@ class Interpreter:
         self._mtab = kt.m
         self._classified: dict[tuple[int, ...], Classified] = {}
         self._lib = ProgramLibrary(programs)
+        if machine_data is not None:
+            tools = machine_data.tool_offsets()
+            work_offsets = dict(enumerate(machine_data.work_offsets))
         self._tools: dict[int, ToolOffset] = dict(tools or {})
         self._tools_known = tools is not None
         self._limits: list[tuple[int, float, float, str]] = []
@@ -168,12 +188,18 @@ class Interpreter:
             (float(start[0]), float(start[1]), float(start[2])) if start else self._home
         )
         # work offsets: index 0 = common (EXT), 1..6 = G54..G59, 7..54 = G54.1 P1..P48
-        self._wofs: list[list[float]] = [[0.0, 0.0, 0.0] for _ in range(55)]
+        n_wofs = 7 + EXTENDED_OFFSETS
+        self._wofs: list[list[float]] = [[0.0, 0.0, 0.0] for _ in range(n_wofs)]
         for k, v in (work_offsets or {}).items():
-            if not 0 <= k <= 6:
-                raise NcError(f"work offset number {k} is not 0..6", 0, 0, file)
+            if not 0 <= k < n_wofs:
+                raise NcError(f"work offset number {k} is not 0..{n_wofs - 1}", 0, 0, file)
             self._wofs[k] = [float(v[0]), float(v[1]), float(v[2])]
         self._reset_modal()
+        if machine_data is not None:
+            self._g92 = list(machine_data.g92)
+            self._inch = machine_data.power_on_units == "inch"
+            self._scale = INCH if self._inch else 1.0
+            self._update_simple()
         self._off = self._compute_off()
         self._pos = self._prog_from_machine()
         self._out: list[CanonCommand] = []
@@ -214,7 +240,7 @@ class Interpreter:
         self._f: float | None = None  # mm/min or mm/rev
         self._s = 0.0  # rpm (G97) or surface speed m/min (G96)
         self._css = False
-        self._max_rpm = getattr(self.params, "max_spindle_rpm", None)
+        self._max_rpm = self.params.max_spindle_rpm  # G50 S / G92 S lowers it
         self._spindle = SpindleDirection.STOP
         self._mist = False
         self._flood = False
@@ -300,6 +326,12 @@ class Interpreter:
         )
 
     # --- running ----------------------------------------------------------------------
+
+    def check_all(self, lines: Iterable[str] | str) -> list[NcError]:
+        """Interpret a whole program carrying on after errors; ALL its errors (see `check`)."""
+        for _ in self._run(lines, recover=True):
+            pass
+        return self.errors
 
     def run(self, lines: Iterable[str] | str) -> Iterator[CanonCommand]:
         """Interpret `lines` lazily, yielding canonical commands as blocks are read.
@@ -717,8 +749,10 @@ class Interpreter:
                 self._tlo = (0.0, 0.0, 0.0)
             else:
                 off = self._tools.get(ofs)
-                if off is None and not self._tools_known:
-                    off = ToolOffset()
+                if off is None and (not self._tools_known or self._md is not None):
+                    if ofs > MAX_TOOL_OFFSET:
+                        raise self._err(f"T{t}: offset number {ofs} is out of range", blk, "T")
+                    off = ToolOffset()  # not set in the machine data: 0 as on a control
                 if off is None:
                     raise self._err(f"T{t}: no tool offset number {ofs}", blk, "T")
                 self._tlo = (off.x, 0.0, off.z)
@@ -731,10 +765,16 @@ class Interpreter:
     def _offset_entry(self, blk: Block, letter: str, number: int) -> ToolOffset:
         if number == 0:
             return ToolOffset()
+        if not 0 < number <= MAX_TOOL_OFFSET:
+            raise self._err(
+                f"{letter}{number}: offset number out of range 1..{MAX_TOOL_OFFSET}", blk, letter
+            )
         off = self._tools.get(number)
         if off is None:
-            if not self._tools_known:
-                return ToolOffset()  # no tool table given (e.g. a DNC check): offsets read 0
+            if not self._tools_known or self._md is not None:
+                # no tool table given (a DNC check), or an offset the control has but
+                # nobody set: it reads 0
+                return ToolOffset()
             raise self._err(f"{letter}{number}: no such tool offset", blk, letter)
         return off
 
@@ -1134,41 +1174,123 @@ class Interpreter:
         # the program point stays; the machine reaches it on the next move
 
     def _g10(self, blk: Block) -> None:
+        """G10 data setting (Fanuc): L2 P0..P6 work offsets (P0 = EXT), L20 P1..P48 the
+        G54.1 extended offsets; L1 / L10 / L11 / L12 / L13 P<n> R tool offsets (memory A,
+        length geometry / wear, radius geometry / wear; lathe: X Z for the tip offset, R the
+        nose radius, Q the tip; or the T-series form G10 P X Z R Q / U W). Values are
+        absolute in G90, added in G91. With machine data the change is written there for
+        good."""
         words = blk.words
+        if "L" not in words and self._lathe and "P" in words:
+            # Fanuc T series: G10 P<n> X Z R Q (U W add), P1..999 the wear,
+            # P10001..10999 the geometry of offset n
+            p = self._int_word(blk, "P")
+            n = p - 10000 if p > 10000 else p
+            if not 1 <= n <= MAX_TOOL_OFFSET:
+                raise self._err(
+                    f"G10 P{p}: P must be 1..{MAX_TOOL_OFFSET} (wear) or"
+                    f" 10001..{10000 + MAX_TOOL_OFFSET} (geometry)",
+                    blk,
+                    "P",
+                )
+            if not any(letter in words for letter in "XZUWRQ"):
+                raise self._err(f"G10 P{p} needs X, Z, U, W, R or Q", blk, "G")
+            self._set_tool_offset(blk, 10 if p > 10000 else 11, n)
+            return
         if "L" not in words:
-            raise self._err("G10 needs L (L2: work offset, L10/L12: tool offset)", blk, "G")
-        lv = int(words["L"])
+            raise self._err("G10 needs L (L2/L20: work offset, L1/L10..L13: tool offset)", blk, "G")
+        lv = self._int_word(blk, "L")
         if "P" not in words:
-            raise self._err("G10 needs P", blk, "G")
+            raise self._err(f"G10 L{lv} needs P (offset number)", blk, "G")
         p = self._int_word(blk, "P")
+        md = self._md
         if lv in (2, 20):
-            if lv == 20 or p > 6:
-                raise self._err(f"G10 L{lv} P{p}: only P0..P6 (common, G54..G59)", blk, "P")
-            ofs = self._wofs[p]
+            if lv == 2 and not 0 <= p <= 6:
+                raise self._err(f"G10 L2 P{p}: only P0..P6 (EXT, G54..G59)", blk, "P")
+            if lv == 20 and not 1 <= p <= EXTENDED_OFFSETS:
+                raise self._err(
+                    f"G10 L20 P{p}: P must be 1 .. {EXTENDED_OFFSETS} (G54.1 P1..P48)", blk, "P"
+                )
+            idx = p if lv == 2 else 6 + p
+            if not any(letter in words for letter in "XYZ"):
+                raise self._err(f"G10 L{lv} needs X, Y or Z", blk, "G")
+            ofs = list(self._wofs[idx])
             for letter in "XYZ":
                 if letter in words:
                     i = _AXIS_OF[letter]
                     val = self._dim(blk, letter) * (0.5 if letter == "X" and self._diam else 1.0)
                     ofs[i] = val if self._abs else ofs[i] + val
-            if p in (0, self._wcs):
+            if md is not None:
+                try:
+                    md.set_work_offset(idx, ofs)
+                except ValueError as e:
+                    raise self._err(f"G10 L{lv} P{p}: {e}", blk, "G") from None
+            self._wofs[idx] = ofs
+            if idx in (0, self._wcs):
                 self._refresh_offsets(resync=True)
         elif lv in (1, 10, 11, 12, 13):
-            if "R" not in words:
-                raise self._err(f"G10 L{lv} needs R (offset value)", blk, "G")
-            val = self._dim(blk, "R")
-            cur = self._tools.get(p, ToolOffset())
-            if lv in (1, 10, 11):
-                new = ToolOffset((val if self._abs else cur.length + val), cur.radius, cur.x, cur.z)
-            else:
-                new = ToolOffset(cur.length, val if self._abs else cur.radius + val, cur.x, cur.z)
-            self._tools[p] = new
+            if not 1 <= p <= MAX_TOOL_OFFSET:
+                raise self._err(
+                    f"G10 L{lv} P{p}: offset number must be 1..{MAX_TOOL_OFFSET}", blk, "P"
+                )
+            lathe_words = self._lathe and any(letter in words for letter in "XZUWQ")
+            if "R" not in words and not lathe_words:
+                need = "R, X or Z" if self._lathe else "R"
+                raise self._err(f"G10 L{lv} needs {need} (offset value)", blk, "G")
+            self._set_tool_offset(blk, lv, p)
         else:
-            raise self._err(f"G10 L{lv} is not supported", blk, "L")
+            raise self._err(f"G10 L{lv} is not supported (L1, L2, L10..L13, L20)", blk, "L")
+
+    def _set_tool_offset(self, blk: Block, lv: int, p: int) -> None:
+        words = blk.words
+        wear = lv in (11, 13)
+        # which fields this L sets: (length or radius, geometry or wear); lathe X/Z go to
+        # geometry with L1/L10/L12, wear with L11/L13
+        fields: dict[str, float] = {}
+        added: set[str] = set()  # fields given incrementally (G91, lathe U/W)
+        if "R" in words:
+            key = "length" if lv in (1, 10, 11) and not self._lathe else "radius"
+            fields[key + ("_wear" if wear else "")] = self._dim(blk, "R")
+        if self._lathe:
+            for letter, key in (("X", "x"), ("Z", "z"), ("U", "x"), ("W", "z")):
+                if letter in words:
+                    val = self._dim(blk, letter) * (0.5 if letter in "XU" and self._diam else 1.0)
+                    fields[key + ("_wear" if wear else "")] = val
+                    if letter in "UW":
+                        added.add(key + ("_wear" if wear else ""))
+        if not self._abs:
+            added.update(fields)
+        md = self._md
+        if md is not None:
+            cur = md.tools.get(p)
+            new = {}
+            for k, v in fields.items():
+                base = getattr(cur, k) if cur is not None else 0.0
+                new[k] = base + v if k in added else v
+            if lv == 1:  # memory A: one value per number, no separate wear
+                new.update({k: 0.0 for k in ("length_wear", "radius_wear") if k not in new})
+            if "Q" in words:
+                new["tip"] = self._int_word(blk, "Q")
+            try:
+                entry = md.update_tool(p, **new)
+            except ValueError as e:
+                raise self._err(f"G10 L{lv} P{p}: {e}", blk, "P") from None
+            self._tools[p] = entry.offset()
+            return
+        # no machine data (a bare check): geometry and wear share the effective value
+        cur_off = self._tools.get(p, ToolOffset())
+        vals = {"length": cur_off.length, "radius": cur_off.radius, "x": cur_off.x, "z": cur_off.z}
+        for k, v in fields.items():
+            base_key = k.removesuffix("_wear")
+            vals[base_key] = vals[base_key] + v if k in added else v
+        self._tools[p] = ToolOffset(vals["length"], vals["radius"], vals["x"], vals["z"])
 
     def _coordinate_set(self, blk: Block) -> None:
         words = blk.words
         if "S" in words:
-            self._max_rpm = words["S"]
+            # G50 S / G92 S: the CSS speed limit, never above the spindle's own
+            mx = self.params.max_spindle_rpm
+            self._max_rpm = words["S"] if mx is None else min(words["S"], mx)
         named = [letter for letter in "XYZ" if letter in words]
         if not named:
             return
@@ -1177,10 +1299,17 @@ class Interpreter:
         w = self._wofs[self._wcs]
         c = self._wofs[0]
         t = self._tlo
+        g92 = list(self._g92)
         for letter in named:
             i = _AXIS_OF[letter]
             val = self._dim(blk, letter) * (0.5 if letter == "X" and self._diam else 1.0)
-            self._g92[i] = self._mach[i] - w[i] - c[i] - t[i] - val
+            g92[i] = self._mach[i] - w[i] - c[i] - t[i] - val
+        if self._md is not None:
+            try:
+                self._md.set_g92(g92)  # the shift outlives the program, as on a control
+            except ValueError as e:
+                raise self._err(f"G92 shift {e}", blk, "G") from None
+        self._g92 = g92
         self._refresh_offsets(resync=True)
 
     # --- subprograms ------------------------------------------------------------------
@@ -1247,6 +1376,7 @@ def check(
     work_offsets: Mapping[int, tuple[float, ...]] | None = None,
     max_blocks: int = 5_000_000,
     block_delete: bool = False,
+    machine_data: MachineData | None = None,
 ) -> list[NcError]:
     """Interpret a whole program and return ALL its errors (at most CHECK_MAX_ERRORS).
 
@@ -1261,7 +1391,6 @@ def check(
         work_offsets=work_offsets,
         max_blocks=max_blocks,
         block_delete=block_delete,
+        machine_data=machine_data,
     )
-    for _ in interp._run(lines, recover=True):
-        pass
-    return interp.errors
+    return interp.check_all(lines)

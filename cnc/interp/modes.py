@@ -18,6 +18,7 @@ INCH = 25.4
 
 
 def units(ip: Context, run: BlockRun) -> None:
+    ip.units_programmed = True  # `nc check` warns about programs that never say G20/G21
     inch = run.rows["units"].name == "G20"  # lathe system C writes it G70
     if inch != ip._inch:
         if ip._moved:

@@ -46,6 +46,7 @@ class MachineFaces:
                 on_alarm=lambda n, text: m.raise_face_alarm(n, text, "DNC"),
                 policy=getattr(ctl, "policy", None),
                 secret=ports.secret,
+                machine_data=self._machine_data if hasattr(ctl, "machine_data") else None,
             )
             self.loop.run(self.dnc.start)
         if ports.modbus is not None:
@@ -81,6 +82,24 @@ class MachineFaces:
 
             raise DncError(ALARM_REFUSED, "DRIP refused: the NC is not ready for a drip-feed")
         return buffer
+
+    def _machine_data(self, what: str, doc):
+        """The DNC port's TOOLS / OFFSETS: read, or write through the controller (refused
+        in cycle, validated all or nothing; the machine saves it to its state directory)."""
+        from cnc.controller import CommandRefused
+        from cnc.faces.dnc_port import ALARM_BAD_DATA, ALARM_REFUSED, DncError
+        from cnc.machine_data import MachineDataError
+
+        ctl = self.machine.controller
+        if doc is not None:
+            try:
+                ctl.put_machine_data(what, doc)
+            except CommandRefused as exc:
+                raise DncError(ALARM_REFUSED, f"{what.upper()} refused: {exc}") from None
+            except MachineDataError as exc:
+                raise DncError(ALARM_BAD_DATA, f"{exc.pointer or '/'}: {exc.message}") from None
+        md = ctl.machine_data
+        return md.tools_dict() if what == "tools" else md.offsets_dict()
 
     def ports(self) -> dict[str, int | None]:
         """Bound TCP ports by face (None = off)."""

@@ -43,6 +43,12 @@ class Machine:
     event_log_path: JSONL file for the event log (the ring is always kept).
     shdr_every: publish the status to the SHDR face every n IPO cycles (default: each scan).
     epoch: SHDR timestamps are `epoch + machine time` (virtual: byte-identical streams).
+    state_dir: the machine's state directory: its machine data (tools, offsets, kept
+        parameters) is loaded from `<state_dir>/<name>.machine-data.json` when the file
+        exists (else the configuration's `machine_data` section) and saved there atomically
+        whenever it changed and no program is in cycle, and at close.
+    machine_data: a cnc.machine_data.MachineData to start with instead of the
+        configuration's `machine_data` section (a saved file in state_dir still wins).
     """
 
     def __init__(
@@ -60,6 +66,8 @@ class Machine:
         shdr_every: int | None = None,
         epoch: float = 1_800_000_000.0,
         substep: float | None = None,
+        state_dir: str | None = None,
+        machine_data=None,
     ) -> None:
         from plc.machine_io import machine_plc
         from plc.runtime import RuntimeConfig
@@ -87,7 +95,20 @@ class Machine:
         )
         self.memory = ProgramMemory(config.program_memory_bytes)
         factory = controller_factory or controller_class()
-        self.controller = factory(config, self.memory)
+        if machine_data is not None:  # a given setup instead of the configuration's
+            self.controller = factory(config, self.memory, machine_data=machine_data)
+        else:
+            self.controller = factory(config, self.memory)
+        self.machine_data_file = None
+        self._md_saved = -1
+        md = getattr(self.controller, "machine_data", None)
+        if state_dir is not None and md is not None:
+            from cnc.machine_data import load, state_file
+
+            self.machine_data_file = state_file(state_dir, name)
+            if self.machine_data_file.exists():
+                md.replace_with(load(self.machine_data_file))
+            self.save_machine_data()
         self.axes = (
             IdealAxes(config)
             if ideal
@@ -175,6 +196,20 @@ class Machine:
         self._watch_alarms(status)
         if self.cycle % self.shdr_every == 0 and self.shdr is not None:
             self.shdr.publish(self.full_status(), self.epoch + self.t)
+        if self.machine_data_file is not None and self.cycle % self.plc_every == 0:
+            md = self.controller.machine_data
+            if md.revision != self._md_saved and not self.controller.in_cycle:
+                self.save_machine_data()
+
+    def save_machine_data(self) -> None:
+        """Write the machine data to the state directory now (atomically), if it changed."""
+        md = getattr(self.controller, "machine_data", None)
+        if self.machine_data_file is None or md is None or md.revision == self._md_saved:
+            return
+        from cnc.machine_data import save
+
+        save(self.machine_data_file, md)
+        self._md_saved = md.revision
 
     def _scan_until(self, t: float) -> None:
         now_ms = t * 1000.0 + 1e-6
@@ -377,6 +412,10 @@ class Machine:
         return self.faces
 
     def close(self) -> None:
+        try:
+            self.save_machine_data()
+        except OSError as err:  # a full disk must not keep the machine from closing
+            self.events.add(self.t, "machine_data", f"cannot save machine data: {err}")
         if self.faces is not None:
             self.faces.stop()
             self.faces = None

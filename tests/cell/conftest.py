@@ -36,7 +36,9 @@ N50 G0 Z-20
 N60 M30
 %
 """
-MILL_FINAL = {"X": -100.0, "Y": -60.0, "Z": -20.0}
+# machine coordinates: the program's X-100 Y-60 Z-20 from the shipped mill3's G54
+# (X-300 Y-200 Z-300, its factory setup in cnc/machines/mill3.yaml)
+MILL_FINAL = {"X": -400.0, "Y": -260.0, "Z": -320.0}
 
 
 class Api:

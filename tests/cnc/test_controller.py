@@ -5,10 +5,10 @@ from __future__ import annotations
 
 import pytest
 
-from cnc.config import builtin_machine
 from cnc.controller import CommandRefused, Controller, CycleInputs, IdealAxes
 from cnc.program_memory import ProgramMemory
 from plc.signals import PLC_TO_NC, signals
+from tests.cnc.setups import machine_coordinates
 
 PLC_PERIOD_CYCLES = 5  # 10 ms PLC scan at a 2 ms IPO cycle
 
@@ -73,7 +73,8 @@ class Rig:
     """A controller in lockstep with IdealAxes and a PLC (fake or real)."""
 
     def __init__(self, machine="mill3", plc="fake", programs=None, lag_s=0.0, **kw):
-        self.config = builtin_machine(machine)
+        # the programs here are in machine coordinates: G54 = 0, not the factory setup
+        self.config = machine_coordinates(machine)
         self.memory = ProgramMemory(self.config.program_memory_bytes)
         for number, text in (programs or {}).items():
             self.memory.store(number, text)

@@ -415,9 +415,9 @@ def arc_length(s: Segment) -> float:
 def test_interference_window_agrees_with_a_sampled_oracle(moves, side, radius):
     # Distance to a fixed element is 1-Lipschitz along the tool path, so n samples of a
     # compensated segment of length l bound its true minimum distance within l/(2n). If every
-    # sample of every segment keeps r + l/(2n) + eps from the programmed elements within 3 of
-    # its own, the window check must accept; if some sample comes closer than r - eps, it
-    # must refuse.
+    # sample of every segment keeps r + l/(2n) + eps from its own programmed element and the
+    # 3 after it (the read-ahead), the window check must accept; if some sample comes closer
+    # than r - eps, it must refuse.
     p = (0.0, 0.0)
     specs = []
     for m in moves:
@@ -451,7 +451,7 @@ def test_interference_window_agrees_with_a_sampled_oracle(moves, side, radius):
         if s.role in ("startup", "cancel") or (s.kind == "line" and s.start == s.end):
             continue
         slack = arc_length(s) / (2 * n)
-        for k in range(max(1, s.payload - 3), min(len(specs), s.payload + 3) + 1):
+        for k in range(max(1, s.payload), min(len(specs), s.payload + 3) + 1):
             d = min(point_element(pt, specs[k - 1]) for pt in samples(s, n))
             clear = clear and d >= radius + slack + eps
             hit = hit or d < radius - eps

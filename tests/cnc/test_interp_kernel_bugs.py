@@ -131,3 +131,50 @@ def test_a_lone_g40_is_completed_by_codes_that_need_compensation_off(after: str)
 def test_g40_then_an_in_plane_move_is_still_the_cancel_move() -> None:
     cmds = run("G0 X0 Y0 Z5\nG41 D1 G1 X10 F100\nX20\nG40\nG0 Z50\nX30 Y0\nM30\n")
     assert [c.end for c in cmds if hasattr(c, "end")][-1] == (30.0, 0.0, 50.0)
+
+
+# --- the interference check looks forward, as a control's read-ahead ---------------------
+
+# Two laps of a 75 x 45 rectangle entered along the extension of its first side (X5 from
+# Y-25): on the second lap the compensated path at the (5, 5) corner comes back onto that
+# first side's line, whose part below Y5 is the lead-in through air.
+TWO_LAPS = """G17 G21 G90
+G0 X-25 Y-25
+G1 Z-5 F500
+G41 D1 X5
+Y50
+X80
+Y5
+X5
+Y50
+X70
+G2 X80 Y40 R10
+G1 Y5
+X20
+G40 X-25
+M30
+"""
+
+
+def test_a_second_lap_is_not_a_gouge_against_the_lead_in() -> None:
+    tools = {1: ToolOffset(radius=5.0)}
+    assert list(Interpreter(MILL, tools=tools).run(TWO_LAPS))
+
+
+@pytest.mark.parametrize("name", ["enier-mill-hp1.nc", "enier-nims-mill.nc"])
+def test_haas_training_programs_lap_twice_with_a_real_cutter(name: str) -> None:
+    # with the shipped 5 mm radius these were refused against their own lead-in
+    path = reference.GCODE_CORPUS / name
+    if not path.exists():
+        pytest.skip(reference.MISSING)
+    params = replace(MILL, axes=BIG)
+    with open(path, encoding="latin-1") as fh:
+        errors = check(fh, params, file=name, tools={1: ToolOffset(radius=5.0)})
+    assert [str(e) for e in errors if "gouge" in str(e)] == []
+
+
+def test_a_neck_ahead_is_still_a_gouge() -> None:
+    # inside a slot 6 wide with a 10 mm cutter (G42: the tool between the walls)
+    slot = "G17 G21 G90\nG0 X-20 Y-20\nG1 Z-5 F500\nG42 D1 X0\nY40\nX6\nY-20\nG40 X30\nM30\n"
+    with pytest.raises(NcError, match="gouge"):
+        list(Interpreter(MILL, tools={1: ToolOffset(radius=5.0)}).run(slot))

@@ -536,8 +536,8 @@ def test_nc_plan_trace_carries_the_cycle_path(tmp_path) -> None:
     # the shipped lathe with room for this part in + X and Z (machine zero = part zero)
     shipped = Path(machines_init).with_name("lathe2.yaml")
     cfg = yaml.safe_load(shipped.read_text(encoding="utf-8"))
-    cfg["axes"]["X"].update(min_mm=-300.0, max_mm=300.0)
-    cfg["axes"]["Z"].update(min_mm=-600.0, max_mm=300.0)
+    cfg["axes"]["X"].update(min_mm=-500.0, max_mm=500.0)
+    cfg["axes"]["Z"].update(min_mm=-900.0, max_mm=500.0)
     mcfg = tmp_path / "lathe.yaml"
     mcfg.write_text(yaml.safe_dump(cfg))
     prog = tmp_path / "g71.nc"
@@ -548,10 +548,14 @@ def test_nc_plan_trace_carries_the_cycle_path(tmp_path) -> None:
     )
     assert res.exit_code == 0, res.output
     rows = [r for r in csv.DictReader(trace.open()) if r["line"] == "5"]
-    # the cycle block's samples run every roughing level (radius 23 .. 11) and the contour
-    levels = {round(float(r["X"]), 3) for r in rows}
+    # the cycle block's samples run every roughing level (radius 23 .. 11) and the contour;
+    # machine coordinates differ from the program's by the machine's work/tool offsets, so
+    # compare relative to the cycle's outermost point B' (radius 25.25, Z-39.9)
+    ox = max(float(r["X"]) for r in rows) - 25.25
+    oz = min(float(r["Z"]) for r in rows) + 39.9
+    levels = {round(float(r["X"]) - ox, 3) for r in rows}
     assert {23.0, 21.0, 19.0, 17.0, 15.0, 13.0, 11.0, 10.25} <= levels
-    assert min(float(r["Z"]) for r in rows) == pytest.approx(-39.9)
+    assert max(float(r["Z"]) - oz for r in rows) == pytest.approx(2.1)  # A' translated by W
 
 
 @pytest.mark.parametrize(

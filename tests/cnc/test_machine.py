@@ -8,8 +8,8 @@ from pathlib import Path
 
 import pytest
 
-from cnc.config import builtin_machine
 from cnc.machine import Machine
+from tests.cnc.setups import machine_coordinates
 
 SQUARE = """%
 O0010 (SQUARE WITH A TOOL CHANGE)
@@ -36,7 +36,7 @@ N40 M30
 
 
 def build(**kw) -> Machine:
-    return Machine(builtin_machine("mill3"), "mill3", **kw)
+    return Machine(machine_coordinates("mill3"), "mill3", **kw)
 
 
 def homed(m: Machine) -> bool:
@@ -256,7 +256,7 @@ def test_seed_chapter_10_cam_program_with_spindle_and_coolant_on_canopen_drives(
 
 
 def test_lathe_composes_two_canopen_axes_and_homes_them():
-    m = Machine(builtin_machine("lathe2"), "lathe2")
+    m = Machine(machine_coordinates("lathe2"), "lathe2")
     try:
         assert m.axis_names == ("X", "Z")
         assert sorted(m.axes.drives) == ["X", "Z"]

@@ -10,9 +10,9 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-from cnc.config import builtin_machine
 from cnc.machine import Machine
 from cnc.machine.contour import seg_dist
+from tests.cnc.setups import machine_coordinates
 
 coord = st.floats(-1000, 1000, allow_nan=False)
 point = st.tuples(coord, coord, coord)
@@ -37,7 +37,7 @@ def test_the_first_point_is_a_point(a, b, p):
 
 
 def run(text: str) -> Machine:
-    m = Machine(builtin_machine("mill3"), "mill3", ideal=True)
+    m = Machine(machine_coordinates("mill3"), "mill3", ideal=True)
     m.run_until(lambda x: x.axes.feedback().enabled, 2.0)
     m.step(2)
     m.command("mode", mode="REF")

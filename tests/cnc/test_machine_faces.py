@@ -34,7 +34,8 @@ N50 M30
 
 def config(**over):
     ports = {"dnc": 0, "modbus": 0, "shdr": 0, "simulation": None}
-    return load_machine_config({"base": "mill3", "ports": ports, **over})
+    # programs in machine coordinates: no factory setup (G54 = 0)
+    return load_machine_config({"base": "mill3", "ports": ports, "machine_data": None, **over})
 
 
 def homed(m) -> bool:

@@ -39,8 +39,9 @@ def prog(tmp_path):
     return p
 
 
-def invoke(*args):
-    res = runner.invoke(nc_app, ["plan", *map(str, args)])
+def invoke(*args, setup=("--g54", "0,0,0")):
+    # the programs here are in machine coordinates: G54 = 0 instead of the factory setup
+    res = runner.invoke(nc_app, ["plan", *map(str, args), *setup])
     return res
 
 
@@ -84,9 +85,10 @@ def test_trace_is_byte_identical_twice(prog, tmp_path):
 
 
 def test_config_file_is_used(prog):
-    res = invoke(prog, "--config", MACHINES_DIR / "mill3.yaml", "--json")
+    res = invoke(prog, "--config", MACHINES_DIR / "mill3.yaml", "--json", setup=())
     assert res.exit_code == 0, res.output
-    assert json.loads(res.output)["final_position"]["X"] == -150.0
+    # the machine's own setup: G54 X-300 (cnc/machines/mill3.yaml)
+    assert json.loads(res.output)["final_position"]["X"] == -450.0
 
 
 def test_bad_program_gives_file_line_col(tmp_path):
