@@ -571,3 +571,78 @@ def test_nc_plan_trace_carries_the_cycle_path(tmp_path) -> None:
 def test_a_cycle_that_would_explode_is_refused_quickly(cycle: str) -> None:
     e = err(HEAD + "G0 X50 Z2\n" + cycle)
     assert "PS0062" in e.message and e.line == 4
+
+
+# --- fuzz and properties ------------------------------------------------------------------------
+
+from hypothesis import HealthCheck, given, settings  # noqa: E402
+from hypothesis import strategies as st  # noqa: E402
+
+_num = st.one_of(
+    st.integers(-60, 60).map(str),
+    st.floats(-60, 60, allow_nan=False).map(lambda v: f"{v:.3f}"),
+    st.sampled_from(["0", "0.0001", "1000000", "-0.5", "1"]),
+)
+_cycle_word = st.builds(lambda a, n: a + n, st.sampled_from("XZUWPQRIKDF"), _num)
+_cycle_block = st.builds(
+    lambda g, ws: " ".join([g, *ws]),
+    st.sampled_from(["G70", "G71", "G72", "G73", "G74", "G75", "G76", "G90", "G92", "G94", "G32"]),
+    st.lists(_cycle_word, max_size=6),
+)
+_contour_block = st.builds(
+    lambda n, g, x, z: f"{n}{g} X{x} Z{z}",
+    st.sampled_from(["", "", "N10 ", "N20 "]),
+    st.sampled_from(["G0", "G1", "G2 R20", "G3 R20", "G1"]),
+    st.integers(0, 80),
+    st.integers(-60, 5),
+)
+_lathe_program = st.lists(st.one_of(_cycle_block, _contour_block), min_size=1, max_size=12).map(
+    lambda bl: "G97 S800 M3\nG0 X60 Z5\n" + "\n".join(bl) + "\n"
+)
+
+
+@settings(max_examples=200, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(_lathe_program)
+def test_fuzz_lathe_cycles_give_moves_or_nc_errors(text: str) -> None:
+    from cnc.interp.interpreter import check
+
+    try:
+        for _ in Interpreter(LATHE, max_blocks=20_000).run(text):
+            pass
+    except NcError as e:
+        assert e.line >= 1 and e.col >= 1 and e.message
+    assert all(isinstance(e, NcError) for e in check(text, LATHE, max_blocks=20_000))
+
+
+@settings(max_examples=100, deadline=None)
+@given(
+    st.lists(
+        st.tuples(st.floats(0.0, 8.0), st.floats(0.5, 15.0)), min_size=1, max_size=12
+    ),  # (radius rise, length) per element: monotonic
+    st.floats(0.3, 4.0),
+    st.booleans(),
+)
+def test_type1_roughing_stays_outside_the_contour_and_returns_to_a(steps, depth, type2) -> None:
+    pts = [(5.0, 0.0)]
+    for rise, length in steps:
+        x, z = pts[-1]
+        pts.append((x + rise, z - length))
+    segs = tuple(lg.Seg(lg.FEED, a, b) for a, b in zip(pts, pts[1:], strict=False))
+    x0 = pts[-1][0] + 2.0
+    mv = lg.rough_turning((x0, 2.0), segs, depth, 0.5, (0.2, 0.1), type2)
+
+    def x_at(z: float) -> float:  # the translated contour's radius at z (monotonic)
+        z -= 0.1
+        for a, b in zip(pts, pts[1:], strict=False):
+            if b[1] - 1e-9 <= z <= a[1] + 1e-9:
+                t = 0.0 if a[1] == b[1] else (a[1] - z) / (a[1] - b[1])
+                return a[0] + t * (b[0] - a[0]) + 0.2
+        return pts[0][0] + 0.2 if z > 0 else pts[-1][0] + 0.2
+
+    for k, x, z, _, _ in mv:
+        if k == lg.FEED and pts[-1][1] + 0.1 < z < 0.1:
+            assert x >= x_at(z) - 1e-6, (x, z)
+    assert mv[-1][1:3] == (x0, 2.0)
+    # the depth of every roughing level step is at most the depth of cut
+    levels = sorted({round(x, 9) for k, x, z, _, _ in mv if k == lg.RAPID and z == 2.0})
+    assert all(b - a <= depth + 1e-9 for a, b in zip(levels, levels[1:], strict=False))
