@@ -809,13 +809,17 @@ def modal_cycle(ip: Context, blk: Block, code: int | None) -> None:
         thread_to(ip, blk, (tx, ip._pos[1], tz), lead)
         return
     # the end point: words given now, else the cycle's last end point
-    last = st.single.get("end") or start
+    last = st.single.get("end")
+    if last is None:
+        if not (any(k in words for k in "XU") and any(k in words for k in "ZW")):
+            raise _alarm(ip, blk, f"{name} needs X (U) and Z (W) in its first block", "", "G")
+        last = start
     tx, _, tz = ip._target(blk, words)
     ex = tx if any(k in words for k in "XU") else last[0]  # type: ignore[index]
     ez = tz if any(k in words for k in "ZW") else last[1]  # type: ignore[index]
     st.single["end"] = (ex, ez)
     if "R" in words:
-        st.single["taper"] = ip._dim(blk, "R") if name == "G94" else ip._dim(blk, "R")
+        st.single["taper"] = ip._dim(blk, "R")  # radius (G90/G92) or Z (G94) difference
     taper = float(st.single.get("taper") or 0.0)  # type: ignore[arg-type]
     if name == "G90":
         moves = lg.single_turning(start, (ex, ez), taper)

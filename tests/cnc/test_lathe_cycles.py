@@ -13,6 +13,8 @@ import math
 from pathlib import Path
 
 import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
 
 from cnc.canon import ArcFeed, Spindle, StraightFeed, StraightTraverse
 from cnc.errors import NcError
@@ -418,6 +420,7 @@ def test_contour_turning_back_in_z_is_ps0329_even_for_type2() -> None:
         ("G0 X30 Z2\nG76 X20 P900 Q300 F1.5\n", 2, 1, "G76 needs X (U) and Z (W)"),
         ("G0 X30 Z2\nG75 X20 Z-10 I1 F0.1\n", 2, 1, "needs the shift per groove"),
         ("G0 X30 Z2\nG90 X20 Z-10\n", 2, 1, "feed move without F"),
+        ("G0 X30 Z2\nG90 X20 F0.2\n", 2, 1, "G90 needs X (U) and Z (W) in its first block"),
     ],
 )
 def test_bad_cycle_words(prog, line, col, fragment) -> None:
@@ -574,9 +577,6 @@ def test_a_cycle_that_would_explode_is_refused_quickly(cycle: str) -> None:
 
 
 # --- fuzz and properties ------------------------------------------------------------------------
-
-from hypothesis import HealthCheck, given, settings  # noqa: E402
-from hypothesis import strategies as st  # noqa: E402
 
 _num = st.one_of(
     st.integers(-60, 60).map(str),
