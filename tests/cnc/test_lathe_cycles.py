@@ -646,3 +646,20 @@ def test_type1_roughing_stays_outside_the_contour_and_returns_to_a(steps, depth,
     # the depth of every roughing level step is at most the depth of cut
     levels = sorted({round(x, 9) for k, x, z, _, _ in mv if k == lg.RAPID and z == 2.0})
     assert all(b - a <= depth + 1e-9 for a, b in zip(levels, levels[1:], strict=False))
+
+
+def test_contour_behind_the_cycle_in_a_subprogram_and_in_a_file(tmp_path) -> None:
+    # the contour N10..N20 runs first (as ordinary blocks), the G71 after it reads it again:
+    # from the called program O100, and from the file on disk
+    body = "G0 X30 Z2\nN10 G0 X20\nG1 Z-10 F0.2\nN20 X30\nG0 Z2\nG71 P10 Q20 D3\n"
+    want = [
+        "G0 X24 Z2", "G1 X24 Z-10", "G1 X25 Z-9.5", "G0 X25 Z2",
+        "G0 X20 Z2", "G1 X20 Z-10", "G1 X30 Z-10", "G0 X30 Z2",
+    ]  # fmt: skip
+    cmds = run(HEAD + "M98 P100\n", programs={100: "O100\n" + body + "M99\n"})
+    assert moves([c for c in cmds if c.line == 7]) == want  # line 7 of O100
+    path = tmp_path / "part.nc"
+    path.write_text(HEAD + body + "M30\n")
+    with path.open() as fh:
+        cmds = list(Interpreter(LATHE, file=str(path)).run(fh))
+    assert moves(cmds, 8) == want
