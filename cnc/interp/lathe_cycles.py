@@ -273,6 +273,8 @@ def read_contour(
             b = parse_line(text, lineno, fr.file, ip._li)  # type: ignore[attr-defined]
             if b is None:
                 continue
+            if type(b) is MarkedBlock and b.delete and ip.block_delete:  # type: ignore[attr-defined]
+                continue  # a `/` block with BLOCK DELETE on is not part of the contour
             if type(b) is MarkedBlock and (b.tape or b.program is not None):
                 raise _at_line(
                     ip, lineno, text, f"{code}: program mark inside the contour", "PS0066"
@@ -350,7 +352,18 @@ def _arc_centre(ip: Context, b: Block, s: tuple[float, float], e: tuple[float, f
         raise ip._err("arc needs R or a centre (I/K)", b, "G")
     oi = ip._dim(b, "I") if "I" in words else 0.0
     ok = ip._dim(b, "K") if "K" in words else 0.0
-    return (s[0] + oi, s[1] + ok)
+    c = (s[0] + oi, s[1] + ok)
+    r1 = math.hypot(s[0] - c[0], s[1] - c[1])
+    r2 = math.hypot(e[0] - c[0], e[1] - c[1])
+    tol = ip.arc_tolerance  # type: ignore[attr-defined]
+    if r1 < lg.EPS or abs(r1 - r2) > tol:
+        raise ip._err(
+            f"arc start radius {r1:.4f} mm and end radius {r2:.4f} mm differ by "
+            f"{abs(r1 - r2):.4f} mm (tolerance {tol:g} mm)",
+            b,
+            "I" if "I" in words else "K",
+        )
+    return c
 
 
 def _profile(segs: tuple[lg.Seg, ...]) -> tuple[lg.Seg, ...]:

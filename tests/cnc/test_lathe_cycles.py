@@ -663,3 +663,18 @@ def test_contour_behind_the_cycle_in_a_subprogram_and_in_a_file(tmp_path) -> Non
     with path.open() as fh:
         cmds = list(Interpreter(LATHE, file=str(path)).run(fh))
     assert moves(cmds, 8) == want
+
+
+def test_contour_arc_with_mismatched_radii_is_refused_in_roughing() -> None:
+    prog = (
+        HEAD + "G0 X40 Z2\nG71 P10 Q20 D2 F0.2\nN10 G0 X10\nG1 Z0\nG3 X20 Z-5 I0 K-4\nN20 G1 X40\n"
+    )
+    e = err(prog)
+    assert e.line == 7 and "end radius" in e.message
+
+
+def test_block_delete_lines_leave_the_contour_when_the_switch_is_on() -> None:
+    prog = HEAD + "G0 X30 Z2\nG71 P10 Q20 D3 F0.2\nN10 G0 X20\nG1 Z-10\n/X25 Z-15\nN20 X30\n"
+    on = moves(run(prog, block_delete=True), 4)
+    off = moves(run(prog, block_delete=False), 4)
+    assert "G1 X25 Z-15" in off and "G1 X25 Z-15" not in on
