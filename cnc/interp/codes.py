@@ -287,9 +287,9 @@ CODES: tuple[Code, ...] = (
        doc="face grooving / peck drilling: R retract; X Z P Q R F (Haas I K)"),
     _g("G75", "nonmodal", Step.NON_MODAL, lc.grooving, LATHE, words="@PQRIK", owns_axes=True,
        doc="OD grooving: R retract; X Z P Q R F (Haas I K)"),
-    _g("G76", "nonmodal", Step.NON_MODAL, lc.multi_threading, LATHE, words="@PQRIK",
+    _g("G76", "nonmodal", Step.NON_MODAL, lc.multi_threading, LATHE, words="@PQRIKA",
        owns_axes=True,
-       doc="multi-pass threading: P mmrraa Q R; X Z R P Q F (Haas X Z K D I F)"),
+       doc="multi-pass threading: P mmrraa Q R; X Z R P Q F (Haas X Z K D I A P F)"),
     _g("G32", "cycle", Step.MOTION, motion.motion, LATHE, words="@",
        doc="thread cutting, F lead; spindle-synchronised feed (modal)"),
     _g("G90", "cycle", Step.MOTION, motion.motion, LATHE, words="@R",
@@ -444,11 +444,11 @@ def _words_text(row: Code) -> str:
     if row.refused:
         return ""
     kinds = sorted(row.kinds)
-    texts = {" ".join(sorted(row.words_for(k), key="XYZUVWIJKRPQLDHS".find)) for k in kinds}
+    texts = {" ".join(sorted(row.words_for(k), key="XYZUVWIJKRPQLDHSA".find)) for k in kinds}
     if len(texts) == 1:
         return texts.pop()
     return "; ".join(
-        f"{k}: {' '.join(sorted(row.words_for(k), key='XYZUVWIJKRPQLDHS'.find))}" for k in kinds
+        f"{k}: {' '.join(sorted(row.words_for(k), key='XYZUVWIJKRPQLDHSA'.find))}" for k in kinds
     )
 
 

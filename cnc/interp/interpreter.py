@@ -73,7 +73,7 @@ _EPS = 1e-9
 
 # Letters the interpreter understands, per machine kind (others: "unknown address").
 _MILL_WORDS = frozenset("XYZIJKRFSTNPQLHD")
-_LATHE_WORDS = frozenset("XZUWIKRFSTNPQLHD")
+_LATHE_WORDS = frozenset("XZUWIKRFSTNPQLHDA")  # A: the Haas G76 tool angle only
 _DIM_LETTERS = frozenset("XYZUVWIJKRQ")
 _AXIS_OF = {"X": 0, "Y": 1, "Z": 2}
 _AXIS_NAME = "XYZ"

@@ -728,7 +728,7 @@ def grooving(ip: Context, run: BlockRun) -> None:
 
 def multi_threading(ip: Context, run: BlockRun) -> None:
     """G76 multi-pass threading: Fanuc two-block (P(m)(r)(a) Q R; X Z R P Q F) or Haas
-    one-block (X Z K D F, I taper)."""
+    one-block (X Z K D F; I taper, A tool angle, P1..P4 cutting method)."""
     blk = run.blk
     words = blk.words
     st = state(ip)
@@ -778,9 +778,28 @@ def multi_threading(ip: Context, run: BlockRun) -> None:
         height = ip._dim(blk, "K")
         first = ip._dim(blk, "D")
         taper = ip._dim(blk, "I") if "I" in words else 0.0
-        depths = _geometry(ip, blk, lg.thread_depths, height, first, 0.0, 0.0, 0)
+        angle = ip._plain(blk, "A") if "A" in words else 0.0
+        if not 0.0 <= angle <= 120.0:
+            raise _alarm(ip, blk, "G76 A (tool angle) must be 0..120 degrees", "PS0062", "A")
+        method = words.get("P", 1)
+        if method not in (1, 2, 3, 4):
+            raise _alarm(ip, blk, "G76 P (cutting method) must be 1, 2, 3 or 4", "PS0062", "P")
+        if method in (1, 2):  # constant chip area: D sqrt(n)
+            depths = _geometry(ip, blk, lg.thread_depths, height, first, 0.0, 0.0, 0)
+        else:  # constant depth per pass
+            depths = _geometry(ip, blk, lg.constant_depths, height, first)
         moves = _geometry(
-            ip, blk, lg.thread_passes, start, (tx, tz), depths, height, taper, 0.0, 0.0
+            ip,
+            blk,
+            lg.thread_passes,
+            start,
+            (tx, tz),
+            depths,
+            height,
+            taper,
+            angle,
+            0.0,
+            method in (2, 4),
         )
     else:
         if "P" not in words or "Q" not in words:

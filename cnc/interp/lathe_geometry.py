@@ -512,6 +512,18 @@ def thread_depths(
     return out
 
 
+def constant_depths(height: float, step: float) -> list[float]:
+    """Infeed depths of a constant depth per pass (Haas G76 P3/P4): step, 2 step, ... height."""
+    if height <= 0.0 or step <= 0.0:
+        raise CycleGeometryError(
+            "G76 needs a thread height and a cut depth greater than 0", alarm="PS0062"
+        )
+    n = int(math.ceil(height / step - 1e-9))
+    if n > 10_000:
+        raise CycleGeometryError("G76 expands to more than 10000 passes", alarm="PS0062")
+    return [min(k * step, height) for k in range(1, n + 1)]
+
+
 def thread_passes(
     start: Pt,
     end: Pt,
@@ -520,6 +532,7 @@ def thread_passes(
     taper: float = 0.0,
     angle_deg: float = 0.0,
     chamfer: float = 0.0,
+    alternate: bool = False,
 ) -> list[Move]:
     """G76 passes: for each infeed depth, from A rapid in Z (flank infeed shift), rapid in
     X to the pass's start diameter, the thread (THREAD moves) to the end point, rapid out
@@ -528,8 +541,8 @@ def thread_passes(
     `end` is the thread's end at the root (X the root radius); `height` the thread depth
     (radius); `taper` the radius difference start - end (Fanuc R i); `angle_deg` the tool
     angle: each pass starts (height - depth) x tan(angle/2) back towards A, so the tool
-    feeds along one flank and is on the programmed thread at full depth; `chamfer` the
-    pull-out length at the end (45 degrees).
+    feeds along one flank and is on the programmed thread at full depth (`alternate`: the
+    flanks take turns, Haas P2/P4); `chamfer` the pull-out length at the end (45 degrees).
     """
     x0, z0 = start
     xe, ze = end
@@ -537,9 +550,11 @@ def thread_passes(
     zdir = -1.0 if ze < z0 else 1.0
     tan_half = math.tan(math.radians(angle_deg) / 2.0)
     moves: list[Move] = []
-    for d in depths:
+    for i, d in enumerate(depths):
         x = xe + s * (height - d)
         back = (height - d) * tan_half
+        if alternate and i % 2:
+            back = -back
         zs = z0 - zdir * back
         if abs(zs - z0) > TOL:
             moves.append(mv(RAPID, (x0, zs)))

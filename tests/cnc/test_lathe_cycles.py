@@ -678,3 +678,24 @@ def test_block_delete_lines_leave_the_contour_when_the_switch_is_on() -> None:
     on = moves(run(prog, block_delete=True), 4)
     off = moves(run(prog, block_delete=False), 4)
     assert "G1 X25 Z-15" in off and "G1 X25 Z-15" not in on
+
+
+def test_g76_haas_angle_and_cutting_methods() -> None:
+    # A60, P3: constant depth 0.3 per pass up to K0.9: 0.3, 0.6, 0.9; each pass starts
+    # (0.9 - d) tan 30 back from Z5; P4 alternates the flank (the second pass shifts forward)
+    t = math.tan(math.radians(30))
+    base = "G97 S500 M3\nG0 X25 Z5\nG76 X18.2 Z-20 K0.9 D0.3 A60 {} F1.5\n"
+    got = moves(run(base.format("P3")), 3)
+    want = []
+    for d in (0.3, 0.6, 0.9):
+        dia, zs = round(20 - 2 * d, 3), round(5 + (0.9 - d) * t, 3)
+        if d < 0.9:
+            want.append(f"G0 X25 Z{zs:g}")
+        want += [f"G0 X{dia:g} Z{zs:g}", f"G1 X{dia:g} Z-20", "G0 X25 Z-20", "G0 X25 Z5"]
+    assert got == want
+    alt = moves(run(base.format("P4")), 3)
+    assert alt[0] == want[0] and alt[5] == f"G0 X25 Z{round(5 - 0.3 * t, 3):g}"
+    e = err(base.format("P5"))
+    assert "PS0062" in e.message and "cutting method" in e.message
+    e = err("G0 X20 A5\n")  # A is the G76 angle only
+    assert "A word with no code" in e.message
