@@ -445,7 +445,7 @@ class Cell:
     # ------------------------------------------------------------------ faults
     def fault_types(self) -> list[dict]:
         from cnc.machine.faults import DRIVE_ALIASES, PLC_ALIASES
-        from drives.faults import FAULT_KINDS
+        from drives.faults import DETECTION, FAULT_KINDS, RECOVERY
         from plc.machine_io import FAULTS
 
         out = []
@@ -458,6 +458,8 @@ class Cell:
                         {"name": p.name, "unit": p.unit, "default": p.default} for p in kind.params
                     ],
                     "description": getattr(kind, "description", "") or "",
+                    "detection": DETECTION.get(name, ""),
+                    "recovery": RECOVERY.get(name, ""),
                 }
             )
         for alias, (kind, _) in DRIVE_ALIASES.items():

@@ -22,6 +22,11 @@ IN_CYCLE = frozenset({"ACTIVE", "INTERRUPTED", "FEED_HOLD", "OPTIONAL_STOP", "PR
 CONDITIONS = ("nc_cond", "plc_cond", "bus_cond", "dnc_cond", "servo")
 
 
+def _text(value) -> str:
+    """An EVENT's text; UNAVAILABLE (nothing reported) reads as empty."""
+    return "" if value in (None, "UNAVAILABLE") else str(value)
+
+
 def _num(text: str) -> float | None:
     try:
         return float(text)
@@ -54,6 +59,7 @@ class MonitoringModel:
                         }
                     )
         connected = a.state[name].connected
+        ref = v("referenced") or ""
         feed = _num(v("path_feedrate"))
         part_count = _num(v("part_count"))
         return {
@@ -80,6 +86,13 @@ class MonitoringModel:
                 "mode": v(f"{spindle}mode"),
             },
             "alarms": alarms,
+            # homed since power-on / the last loss of reference (None: not reported)
+            "referenced": (
+                True if ref == "REFERENCED" else False if ref.startswith("NOT_REFERENCED") else None
+            ),
+            "unreferenced_axes": ref.split()[1:] if ref.startswith("NOT_REFERENCED") else [],
+            # the NC's reason for the last refused cycle start ("" after a start or select)
+            "cycle_start_refused": _text(v("start_refused")),
             "counters": {"part_count": None if part_count is None else int(part_count)},
             "bus_load": {
                 "mean_percent": _num(v("bus_load")),
@@ -103,6 +116,11 @@ class MonitoringModel:
             return BUSY
         if s["mode"] != "AUTOMATIC":
             return OFFLINE  # in the operator's hands (REF, JOG, MDI): not for the cell
+        if s["referenced"] is False:
+            # READY in AUTO but not homed (a reset after a fault that lost the reference):
+            # it cannot cut, a part on it is lost, and nothing is dispatched to it until
+            # the operator homes it (warning 3031 says so per axis)
+            return ALARM
         return IDLE
 
     def views(self) -> list[MachineView]:
@@ -155,6 +173,10 @@ class AlarmWatch:
         return len(changes)
 
 
+class StartRefused(MachineUnavailable):
+    """The NC refused the cycle start; the text carries its reason."""
+
+
 def make_starter(
     links: Mapping[str, MachineLink],
     monitor: MonitoringModel,
@@ -181,6 +203,13 @@ def make_starter(
             s = monitor.status(machine)
             if s["execution"] in IN_CYCLE and s["program"] == name:
                 return True
+            if s["cycle_start_refused"] and s["program"] == name:
+                # the NC said no (not homed, an alarm, the door...): say why now, not after
+                # the timeout
+                raise StartRefused(
+                    f"{machine}: cycle start of {name} refused by the NC: "
+                    f"{s['cycle_start_refused']}"
+                )
             # a very short program may have run and ended between two looks
             if (s["counters"]["part_count"] or 0) > (before or 0):
                 return True
@@ -203,6 +232,8 @@ def make_starter(
 
         try:
             wait_for(running, timeout_s, f"{machine}: {name} running")
+        except StartRefused:
+            raise
         except MachineUnavailable as exc:
             panel = link.panel_status()
             if panel.get("CycleStartRefused"):

@@ -236,6 +236,9 @@ class Controller:
         self._ro_applied = -1.0
         self._status = MachineStatus()
         self._status_key = None
+        self._start_refused = ""  # why the last cycle start was refused (until a start/select)
+        self._unreferenced: tuple[str, ...] = ()
+        self._was_referenced: set[str] = set()  # axes referenced at least once
 
     # ================================================================ public API ===========
     @property
@@ -348,6 +351,7 @@ class Controller:
             self._plc_requests()
         self._manage_enable(fb)
         self._homing_step(fb)
+        self._watch_reference()
         if not fb.enabled or fb.homing or self._homing:
             # drives off or homing: the command follows the actual position (no jump later)
             self._cmd = dict(self._actual)
@@ -415,10 +419,15 @@ class Controller:
             raise CommandRefused(why[1])
         self.selected = number
         self._final = "READY"
+        self._start_refused = ""
         self._event(f"program O{number:04d} selected")
 
     def _cmd_cycle_start(self) -> None:
-        self._cycle_start()
+        try:
+            self._cycle_start()
+        except CommandRefused as exc:
+            self._start_refused = exc.reason
+            raise
 
     def _cmd_feed_hold(self) -> None:
         ex = self._execution()
@@ -463,6 +472,7 @@ class Controller:
         self._event(f"ACC {'on' if on else 'off'} limit {self.acc.limit_pct:g} %")
 
     def _cmd_alarm_reset(self) -> None:
+        self._start_refused = ""
         kept = self._alarms.reset(self._active_causes())
         self._event(f"alarm reset: {len(kept)} alarm(s) remain")
 
@@ -634,6 +644,7 @@ class Controller:
         self._start(_Run("AUTO", name, self._motion(), self._interpreter(name), lines))
 
     def _start(self, run: _Run) -> None:
+        self._start_refused = ""
         run.motion.set_single_block(self.single_block)
         self._run = run
         self._hold = False
@@ -673,6 +684,7 @@ class Controller:
             e.number in (al.DRIVE_FAULT, al.BUS_FAULT, al.FOLLOWING_ERROR, al.AXES_DISABLED)
             for e in self._alarms.active
         )
+        self._start_refused = ""
         kept = self._alarms.reset(self._active_causes())
         if drive_faults and not self._estop:
             self._axis("fault_reset")
@@ -731,6 +743,7 @@ class Controller:
             try:
                 self._cycle_start()
             except CommandRefused as exc:
+                self._start_refused = exc.reason
                 self._event(f"PLC: {exc.reason}")
         # the PLC alarm the NC sees: the lowest active number, mirrored as a SELF alarm
         number = int(plc.get("PlcAlarmNumber", 0)) if plc.get("PlcAlarm", False) else 0
@@ -749,6 +762,7 @@ class Controller:
             if why is None:
                 self.selected = number
                 self._final = "READY"
+                self._start_refused = ""
                 self._event(f"program O{number:04d} selected (PLC)")
                 self._select_answer = (True, 0)
             else:
@@ -913,7 +927,11 @@ class Controller:
                 or self._t - self._enable_sent_at >= self.settings.enable_retry_s - 1e-9
             )
             free = self._axis_cmd == "none"  # a fault reset or homing goes first
-            if due and free and not self._alarms.has(al.FOLLOWING_ERROR):
+            # with a drive, bus or following-error alarm active the drives stay off until
+            # the operator's reset (it sends the fault reset first): enabling a drive in FAULT
+            # only fails again, every retry period, with an alarm of its own
+            held = (al.FOLLOWING_ERROR, al.DRIVE_FAULT, al.BUS_FAULT)
+            if due and free and not any(self._alarms.has(n) for n in held):
                 self._axis("enable")
                 self._enable_sent_at = self._t
         elif not want and self._want_enable and fb.enabled and not self._estop:
@@ -947,6 +965,35 @@ class Controller:
                 return
             self._homing = ""
             self._event(f"homed {' '.join(self._homing_done)}")
+
+    def _watch_reference(self) -> None:
+        """Which axes are not referenced (`MachineStatus.unreferenced`: before the first
+        homing, after an E-stop, a quick stop, an encoder fault, a drive that rebooted): the
+        status says so at once, not first at a refused cycle start. An axis that *loses* its
+        reference also raises the warning 3031 "axis X not referenced: home the machine"
+        (rule self: homing ends it, RESET does not); at power-on the status alone says it,
+        as a control shows "reference return" before the first homing without an alarm."""
+        ref = self._ref
+        missing = tuple(a for a in self.axes if not (ref[a] and self._fb_homed(a)))
+        if missing == self._unreferenced:
+            return
+        for a in self._unreferenced:
+            if a not in missing:
+                self._alarms.clear(al.NOT_REFERENCED, a)
+                self._was_referenced.add(a)
+        for a in missing:
+            if a not in self._unreferenced and a in self._was_referenced:
+                self._alarms.raise_(
+                    al.NOT_REFERENCED,
+                    f"axis {a} not referenced: home the machine (REF mode, home)",
+                    self._t,
+                    axis=a,
+                    rule=al.SELF,
+                    cause="reference",
+                    severity="WARNING",
+                )
+                self._event(f"axis {a} lost its reference: home the machine")
+        self._unreferenced = missing
 
     def _homing_failed(self, why: str) -> None:
         self._homing = ""
@@ -1353,6 +1400,8 @@ class Controller:
             self.part_count,
             self._estop,
             self.acc.state(self._cutting),
+            self._unreferenced,
+            self._start_refused,
         )
         if key == self._status_key:
             return self._status  # nothing changed: the same snapshot (cheap when idle)
@@ -1380,6 +1429,8 @@ class Controller:
             part_count=self.part_count,
             emergency_stop="TRIGGERED" if self._estop else "ARMED",
             adaptive_control=self.acc.state(self._cutting),
+            unreferenced=self._unreferenced,
+            cycle_start_refused=self._start_refused,
         )
 
     def _event(self, text: str) -> None:
