@@ -86,3 +86,32 @@ def test_g76_every_pass_has_the_lead() -> None:
     assert len(leads) == 6  # one per infeed (see test_lathe_cycles)
     for got in leads:
         assert abs(got - 1.5) < 0.001 * 1.5
+
+
+def test_g32_lead_on_the_controllers_spindle_in_lockstep() -> None:
+    """The same measurement on the controller in lockstep (ideal axes, a PLC that reports
+    the spindle at speed): Z's commanded position per IPO cycle against the spindle speed
+    the controller reports (status.spindle_speed, the speed it commanded through the PLC),
+    integrated into encoder counts."""
+    from tests.cnc.test_controller import Rig
+
+    prog = (
+        "%\nO7100\nG18 G21 G97 G99 S500 M3\nG0 X-100 Z-20\nG32 Z-120 F1.5\nG0 X-120\nM5\nM30\n%\n"
+    )
+    rig = Rig("lathe2", programs={7100: prog})
+    rig.home()
+    rig.run_program(7100, limit_s=120)
+    assert rig.ex == "PROGRAM_COMPLETED"
+    dt = rig.dt
+    run = [s for s in rig.trace if s.line == 5]
+    z = [s.axes["Z"].commanded for s in run]
+    v = [abs(b - a) / dt for a, b in zip(z, z[1:], strict=False)]
+    vmax = max(v)
+    flat = [i for i, vi in enumerate(v) if abs(vi - vmax) <= 1e-6 * vmax]
+    i0, i1 = flat[0], flat[-1] + 1
+    counts = 0.0
+    for s in run[i0 + 1 : i1 + 1]:
+        counts += s.spindle_speed / 60.0 * dt * COUNTS_PER_REV
+    lead = abs(z[i1] - z[i0]) / (math.floor(counts) / COUNTS_PER_REV)
+    assert run[i0].spindle_speed == pytest.approx(500.0)
+    assert abs(lead - 1.5) < 0.001 * 1.5
