@@ -53,6 +53,19 @@ class StraightFeed:
 
 
 @dataclass(frozen=True, slots=True)
+class ThreadFeed(StraightFeed):
+    """G32 (and the G76/G92 cycles' passes): a thread move, `feed` = `lead` x `rpm`.
+
+    The controller holds the lead while the spindle runs at another speed than `rpm` (an
+    override): the move's feed follows the spindle speed, and the feed override and the
+    adaptive feed are out of effect during it (Fanuc: fixed at 100 %).
+    """
+
+    lead: float = 0.0  # mm per spindle revolution, along the thread's long axis
+    rpm: float = 0.0  # the spindle speed `feed` is computed for
+
+
+@dataclass(frozen=True, slots=True)
 class ArcFeed:
     """G2/G3 circular or helical interpolation.
 

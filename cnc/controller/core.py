@@ -124,6 +124,7 @@ class _Run:
         self.end_kind = None  # canon.StopKind when M2/M30 was reached
         self.line = 0
         self.lines_feed: dict[int, float | None] = {}  # line -> max feed mm/min (None rapid)
+        self.thread_rpm: dict[int, float] = {}  # line -> the rpm its thread moves are fed for
         self.text_lines = source if isinstance(source, list) else None
 
 
@@ -1159,6 +1160,10 @@ class Controller:
                     run.lines_feed[cmd.line] = max(run.lines_feed[cmd.line] or 0.0, feed)
                 if len(run.lines_feed) > 4096:
                     del run.lines_feed[next(iter(run.lines_feed))]
+                if isinstance(cmd, canon.ThreadFeed) and cmd.rpm > 0.0:
+                    run.thread_rpm[cmd.line] = cmd.rpm
+                    if len(run.thread_rpm) > 4096:
+                        del run.thread_rpm[next(iter(run.thread_rpm))]
             elif not isinstance(cmd, canon.SetPathMode):
                 run.syncs_out += 1
 
@@ -1166,6 +1171,11 @@ class Controller:
         fo = self.feed_override / 100.0 * self.acc.factor
         if self._spindle_on and not self.dry_run and not self._plc.get("SpindleAtSpeed", True):
             fo = 0.0  # feed only with the spindle at speed (docs/machine_plc.md)
+        thread_rpm = run.thread_rpm.get(run.line) if run.thread_rpm else None
+        if thread_rpm and not self.dry_run:
+            # thread cutting: the feed follows the spindle speed the NC runs (S x the
+            # spindle overrides), so the lead holds; feed override and ACC are out of effect
+            fo = self._spindle_rpm_now() / thread_rpm
         ro = self.rapid_override / 100.0
         if fo != self._fo_applied:
             run.motion.set_feed_override(fo)

@@ -29,7 +29,7 @@ from __future__ import annotations
 import math
 from typing import TYPE_CHECKING
 
-from cnc.canon import ArcFeed, Plane
+from cnc.canon import ArcFeed, Plane, StraightFeed, ThreadFeed
 from cnc.errors import NcError
 from cnc.gcode.lexer import Block, MarkedBlock, parse_line
 from cnc.interp import lathe_geometry as lg
@@ -436,6 +436,9 @@ def thread_to(ip: Context, blk: Block, p, lead: float) -> None:
         )
     feed = f_axis * math.hypot(dx, dz) / long
     ip._line_to(p, feed, blk, True)
+    last = ip._out[-1]
+    if type(last) is StraightFeed:  # the controller keeps the lead (cnc.canon.ThreadFeed)
+        ip._out[-1] = ThreadFeed(last.line, last.end, last.feed, last.exact_stop, lead, rpm)
 
 
 def _lead(ip: Context, blk: Block, code: str) -> float:

@@ -115,3 +115,37 @@ def test_g32_lead_on_the_controllers_spindle_in_lockstep() -> None:
     lead = abs(z[i1] - z[i0]) / (math.floor(counts) / COUNTS_PER_REV)
     assert run[i0].spindle_speed == pytest.approx(500.0)
     assert abs(lead - 1.5) < 0.001 * 1.5
+
+
+def _controller_lead(spindle_pct: int, feed_pct: int) -> tuple[float, float]:
+    """(lead measured on the controller's spindle speed, that spindle speed) for a G32 pass
+    with the PLC's spindle and feed override switches at the given percentages."""
+    from tests.cnc.test_controller import Rig
+
+    prog = (
+        "%\nO7100\nG18 G21 G97 G99 S500 M3\nG0 X-100 Z-20\nG32 Z-120 F1.5\nG0 X-120\nM5\nM30\n%\n"
+    )
+    rig = Rig("lathe2", programs={7100: prog})
+    rig.plc.out.update(SpindleOverride=spindle_pct, FeedOverride=feed_pct)
+    rig.plc_in = rig.plc.outputs()
+    rig.home()
+    rig.run_program(7100, limit_s=120)
+    assert rig.ex == "PROGRAM_COMPLETED"
+    dt = rig.dt
+    run = [s for s in rig.trace if s.line == 5]
+    z = [s.axes["Z"].commanded for s in run]
+    v = [abs(b - a) / dt for a, b in zip(z, z[1:], strict=False)]
+    vmax = max(v)
+    flat = [i for i, vi in enumerate(v) if abs(vi - vmax) <= 1e-6 * vmax]
+    i0, i1 = flat[0], flat[-1] + 1
+    counts = sum(s.spindle_speed / 60.0 * dt * COUNTS_PER_REV for s in run[i0 + 1 : i1 + 1])
+    return abs(z[i1] - z[i0]) / (math.floor(counts) / COUNTS_PER_REV), run[i0].spindle_speed
+
+
+@pytest.mark.parametrize(("spindle_pct", "feed_pct"), [(80, 100), (120, 100), (100, 50)])
+def test_the_lead_holds_under_spindle_and_feed_overrides(spindle_pct, feed_pct) -> None:
+    # spindle override 80 %: the spindle runs 400 rpm and the thread feeds 1.5 x 400; a
+    # feed override is out of effect while threading
+    lead, rpm = _controller_lead(spindle_pct, feed_pct)
+    assert rpm == pytest.approx(500.0 * spindle_pct / 100.0)
+    assert abs(lead - 1.5) < 0.001 * 1.5
