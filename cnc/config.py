@@ -450,6 +450,12 @@ class HostConfig(_Section):
     tls: TlsConfig | None = Field(
         None, description="HTTPS certificate and key (see `host.tls`); null = plain HTTP."
     )
+    lost_contact_s: float = Field(
+        30.0,
+        gt=0,
+        description="A machine out of contact this long is taken as lost: its allocation is"
+        " interrupted and the part rerouted (seconds).",
+    )
     faults: bool = Field(
         False,
         description="Fault injection: the `/api/...faults` endpoints and each machine's"

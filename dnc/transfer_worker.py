@@ -21,7 +21,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from datetime import UTC, datetime, timedelta
 
-from sqlalchemy import bindparam, or_, select, update
+from sqlalchemy import bindparam, exists, or_, select, update
 from sqlalchemy.orm import Session, sessionmaker
 
 from dnc import models as m
@@ -41,8 +41,11 @@ log = logging.getLogger(__name__)
 STARTING = "starting"
 
 ClientFactory = Callable[[str, int, dict], DncClient]
-Starter = Callable[[str, int], None]
-"""(machine name, program number) -> None: cycle start through the machine's remote panel."""
+Starter = Callable[[str, int], "int | None"]
+"""(machine name, program number) -> the machine's part counter just before cycle start was
+pressed (None if unknown): cycle start through the machine's remote panel. The counter is
+written as the allocation's baseline with the confirmed start, so a part an operator made
+between the allocation and the start is never counted as the allocation's."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -185,7 +188,8 @@ class TransferWorker:
                 else:
                     result = client.send_program(text, number=job["number"])
                     sent = result.bytes_sent
-                    self._step(snap, VERIFYING, bytes_sent=sent)
+                    if not self._step(snap, VERIFYING, bytes_sent=sent):
+                        return self._called_off(dispatch_id)
                     verified = self._verify(client, job, text, result.sha256)
             if job["start"]:
                 if self._starter is None:
@@ -193,12 +197,20 @@ class TransferWorker:
                         "start",
                         "start requested but this host has no cycle-start path to the machine",
                     )
-                self._step(snap, STARTING, bytes_sent=sent, verified=verified)
+                # Claimed under the database's write lock, conditional on the dispatch not
+                # having been called off and its allocation still active: a part whose
+                # allocation the scheduler interrupted is never started.
+                if not self._step(snap, STARTING, bytes_sent=sent, verified=verified, start=True):
+                    return self._called_off(dispatch_id)
                 try:
-                    self._starter(job["machine"], job["number"])
+                    baseline = self._starter(job["machine"], job["number"])
                 except Exception as exc:
                     raise TransferError("start", f"cycle start failed: {exc}") from exc
-            self._step(snap, DONE, bytes_sent=sent, verified=verified, error=None)
+            else:
+                baseline = None
+            done = dict(bytes_sent=sent, verified=verified, error=None)
+            if not self._step(snap, DONE, baseline=baseline, **done):
+                return self._called_off(dispatch_id)
             return DONE
         except TransferError as exc:
             return self._fail(dispatch_id, job["attempts"], exc)
@@ -232,7 +244,9 @@ class TransferWorker:
         now = self._now()
         retry = exc.retryable and attempts < self.retry.max_attempts
         with transaction(self._sessions) as s:
-            row = s.get(m.Dispatch, dispatch_id)
+            row = s.get(m.Dispatch, dispatch_id, with_for_update=True)
+            if row.state not in _WORKER_STATES:
+                return row.state  # called off by the scheduler meanwhile: it stays so
             row.bytes_sent = max(row.bytes_sent, exc.sent)
             error = f"{exc.kind}: {exc.message}"
             if retry:
@@ -243,24 +257,46 @@ class TransferWorker:
                 self._set(s, row, FAILED, now, error=error)
             return row.state
 
-    def _step(self, snap: dict, state: str, **values) -> None:
+    def _step(
+        self,
+        snap: dict,
+        state: str,
+        *,
+        start: bool = False,
+        baseline: int | None = None,
+        **values,
+    ) -> bool:
         """Move a claimed dispatch on: one UPDATE and its event, from the claim's snapshot
-        (only this worker writes a dispatch it has claimed, so the snapshot is the row)."""
+        (only this worker writes a dispatch it has claimed, so the snapshot is the row).
+
+        False if the scheduler has called the dispatch off meanwhile (or, for the start,
+        its allocation is no longer active): nothing is written then."""
         now = self._now()
-        snap.update(values, state=state)
         with transaction(self._sessions) as s:
-            s.execute(
-                _STEP,
+            moved = s.execute(
+                _START if start else _STEP,
                 dict(
                     dispatch_id=snap["id"],
                     state=state,
                     updated_at=now,
-                    bytes_sent=snap["bytes_sent"],
-                    verified=snap["verified"],
-                    error=snap["error"],
+                    bytes_sent=values.get("bytes_sent", snap["bytes_sent"]),
+                    verified=values.get("verified", snap["verified"]),
+                    error=values.get("error", snap["error"]),
                 ),
-            )
+            ).first()
+            if moved is None:
+                return False
+            if isinstance(baseline, int):
+                s.execute(_BASELINE, dict(b_dispatch=snap["id"], b_parts=baseline))
+            snap.update(values, state=state)
             _event(s, snap, now)
+            return True
+
+    def _called_off(self, dispatch_id: int) -> str:
+        with transaction(self._sessions) as s:
+            state = s.scalar(select(_D.c.state).where(_D.c.id == dispatch_id))
+        log.info("dispatch %s called off by the scheduler: not started", dispatch_id)
+        return state
 
     def _set(self, s: Session, row: m.Dispatch, state: str, now: datetime, **values) -> None:
         row.state, row.updated_at = state, now
@@ -299,16 +335,40 @@ _CLAIM = (
 _CONTENT = select(m.Content.__table__.c.text).where(
     m.Content.__table__.c.sha256 == bindparam("sha")
 )
+# The states only the worker moves a claimed dispatch through; the scheduler may call a
+# dispatch off (failed) before its start, so every step is conditional on still being in one.
+_WORKER_STATES = (TRANSFERRING, VERIFYING, STARTING)
+_STEP_VALUES = dict(
+    state=bindparam("state"),
+    updated_at=bindparam("updated_at"),
+    bytes_sent=bindparam("bytes_sent"),
+    verified=bindparam("verified"),
+    error=bindparam("error"),
+)
 _STEP = (
     update(_D)
-    .where(_D.c.id == bindparam("dispatch_id"))
-    .values(
-        state=bindparam("state"),
-        updated_at=bindparam("updated_at"),
-        bytes_sent=bindparam("bytes_sent"),
-        verified=bindparam("verified"),
-        error=bindparam("error"),
+    .where(_D.c.id == bindparam("dispatch_id"), _D.c.state.in_(_WORKER_STATES))
+    .values(**_STEP_VALUES)
+    .returning(_D.c.id)
+)
+_A = m.Allocation.__table__
+_START = (
+    update(_D)
+    .where(
+        _D.c.id == bindparam("dispatch_id"),
+        _D.c.state.in_((TRANSFERRING, VERIFYING)),
+        ~exists().where(_A.c.dispatch_id == _D.c.id, _A.c.status.not_in(("dispatched", "running"))),
     )
+    .values(**_STEP_VALUES)
+    .returning(_D.c.id)
+)
+_BASELINE = (
+    update(_A)
+    .where(
+        _A.c.dispatch_id == bindparam("b_dispatch"),
+        _A.c.status.in_(("dispatched", "running")),
+    )
+    .values(parts_at_start=bindparam("b_parts"))
 )
 TEXT_CACHE_CHARS = 64 * 1024 * 1024
 _EVENT_FIELDS = (

@@ -158,7 +158,12 @@ class Cell:
             ).start()
             self.monitor = MonitoringModel(self.agent, self.links)
             self._wait_connected(ready_timeout_s)
-            self.scheduler = Scheduler(self.sessions, self.monitor.views, rule=self.rule)
+            self.scheduler = Scheduler(
+                self.sessions,
+                self.monitor.views,
+                rule=self.rule,
+                lost_contact_s=self.config.host.lost_contact_s,
+            )
             self.host_requests = HostRequests()
             self.worker = TransferWorker(
                 self.sessions,

@@ -170,9 +170,12 @@ class Job(BaseModel):
 class Allocation(BaseModel):
     id: int
     machine: str
+    # dnc/allocation.py: dispatched, running, completed, interrupted, rerouted, failed
     status: str
     dispatch_id: int | None
     reason: str | None
+    note: str = ""  # an alarm or warning noted while the machine cut on
+    rerouted_to: int | None = None  # the allocation that makes this one's part again
 
 
 class Decision(BaseModel):

@@ -385,15 +385,19 @@ class Machine:
         """Run `fn` on the machine's thread at the start of the next cycle (faces use it)."""
         self._inbox.put(fn)
 
-    def raise_face_alarm(self, number: int, text: str, source: str = "DNC") -> None:
-        """Thread-safe: an alarm raised by a face (DNC parity error, transfer cut off...)."""
-        alarm = Alarm(number, text, source=source, time=self.t)
+    def raise_face_alarm(
+        self, number: int, text: str, source: str = "DNC", severity: str = "FAULT"
+    ) -> None:
+        """Thread-safe: an alarm raised by a face (DNC parity error, overrun...), or with
+        severity WARNING a message that leaves the machine fit to run (a program load cut
+        off); both stay in the alarm list until a reset."""
+        alarm = Alarm(number, text, source=source, severity=severity, time=self.t)
 
         def add() -> None:
             self.face_alarms.append(alarm)
             self.events.add(
                 self.t,
-                "alarm",
+                "alarm" if severity == "FAULT" else "message",
                 f"{source} {number}: {text}",
                 {"number": number, "source": source, "axis": None, "line": 0},
             )
