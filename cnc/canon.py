@@ -66,6 +66,15 @@ class ThreadFeed(StraightFeed):
 
 
 @dataclass(frozen=True, slots=True)
+class SpindleSync:
+    """Before a thread pass: wait for the spindle's one-revolution signal, so every pass of
+    a thread starts at the same spindle angle and cuts the same helix (a sync point: the
+    motion stops at the end of the move before it)."""
+
+    line: int
+
+
+@dataclass(frozen=True, slots=True)
 class ArcFeed:
     """G2/G3 circular or helical interpolation.
 

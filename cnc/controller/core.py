@@ -229,6 +229,8 @@ class Controller:
         self._path_v = 0.0
         self._load = 0.0
         self._rpm = 0.0
+        self._spindle_phase = 0.0  # revolutions, mod 1 (an ideal encoder on the spindle)
+        self._spindle_index = False  # the one-revolution signal came in the last cycle
         self._cutting = False
         # tool life: the tool M6 put in the spindle and its cutting time not yet booked
         self._life_tool = 0
@@ -1258,6 +1260,8 @@ class Controller:
             if cmd.flood and not flood0:
                 steps.append(("M", 8))
             self._coolant = (cmd.mist, cmd.flood)
+        elif isinstance(cmd, canon.SpindleSync):
+            steps.append(("INDEX", 0))
         elif isinstance(cmd, canon.ToolSelect):
             steps.append(("T", cmd.tool))
         elif isinstance(cmd, canon.ToolChange):
@@ -1287,6 +1291,9 @@ class Controller:
             if kind == "DWELL":
                 if self._t + 1e-9 < value:
                     return
+            elif kind == "INDEX":  # a thread pass starts on the spindle's index
+                if not self._spindle_index and not self.dry_run:
+                    return  # (a spindle not turning keeps the pass waiting, as on a control)
             elif kind == "STOP":
                 if run.stop != "done":
                     run.stop = value
@@ -1347,6 +1354,11 @@ class Controller:
         m = self.cutting_model
         pos = self._actual.get(m.depth_axis)
         rpm = self._rpm = self._spindle_rpm_now()
+        # the spindle's angle (revolutions, mod 1) from the speed it runs: its one-revolution
+        # signal starts a thread pass (canon.SpindleSync)
+        prev = self._spindle_phase
+        self._spindle_phase = (prev + rpm / 60.0 * dt) % 1.0
+        self._spindle_index = rpm > 0.0 and self._spindle_phase < prev
         feed = self._path_v * 60.0 if self._cutting else 0.0
         self._load = m.load(feed, rpm, pos) if self._cutting else (m.idle_load_pct if rpm else 0)
         self.acc.update(self._load, self._cutting, dt)

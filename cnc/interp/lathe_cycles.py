@@ -29,7 +29,7 @@ from __future__ import annotations
 import math
 from typing import TYPE_CHECKING
 
-from cnc.canon import ArcFeed, Plane, StraightFeed, ThreadFeed
+from cnc.canon import ArcFeed, Plane, SpindleDirection, SpindleSync, StraightFeed, ThreadFeed
 from cnc.errors import NcError
 from cnc.gcode.lexer import Block, MarkedBlock, parse_line
 from cnc.interp import lathe_geometry as lg
@@ -61,6 +61,7 @@ class LatheCycleData:
         "g76",
         "single",
         "contours",
+        "thread_end",
     )
 
     def __init__(self) -> None:
@@ -76,6 +77,7 @@ class LatheCycleData:
         # modal single cycle: start point, end point (x radius, z), taper, lead
         self.single: dict[str, object] = {}
         self.contours: dict[tuple, list[tuple[int, str]]] = {}
+        self.thread_end: tuple[float, ...] | None = None  # machine point of the last thread move
 
 
 def state(ip: Context) -> LatheCycleData:
@@ -419,6 +421,8 @@ def thread_to(ip: Context, blk: Block, p, lead: float) -> None:
     rpm = ip._rpm_now_from(ip._s, ip._css)
     if rpm <= 0.0:
         raise ip._err("thread cutting with no spindle speed (S)", blk, "G")
+    if ip._spindle not in (SpindleDirection.CW, SpindleDirection.CCW):
+        raise ip._err("thread cutting with the spindle stopped (M3 or M4 first)", blk, "G")
     axis = "Z" if dz >= dx else "X"
     f_axis = lead * rpm
     vmax = ip.params.max_feed
@@ -435,10 +439,15 @@ def thread_to(ip: Context, blk: Block, p, lead: float) -> None:
             "F" if "F" in blk.words else "G",
         )
     feed = f_axis * math.hypot(dx, dz) / long
+    st = state(ip)
+    if st.thread_end != ip._mach:
+        # a new pass (not the continuation of the last thread move): start on the index
+        ip._emit(SpindleSync(blk.line))
     ip._line_to(p, feed, blk, True)
     last = ip._out[-1]
     if type(last) is StraightFeed:  # the controller keeps the lead (cnc.canon.ThreadFeed)
         ip._out[-1] = ThreadFeed(last.line, last.end, last.feed, last.exact_stop, lead, rpm)
+    st.thread_end = ip._mach
 
 
 def _lead(ip: Context, blk: Block, code: str) -> float:

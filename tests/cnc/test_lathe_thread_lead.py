@@ -149,3 +149,42 @@ def test_the_lead_holds_under_spindle_and_feed_overrides(spindle_pct, feed_pct) 
     lead, rpm = _controller_lead(spindle_pct, feed_pct)
     assert rpm == pytest.approx(500.0 * spindle_pct / 100.0)
     assert abs(lead - 1.5) < 0.001 * 1.5
+
+
+def test_every_g76_pass_starts_at_the_same_spindle_angle() -> None:
+    """The passes are phase-locked: the spindle angle (integrated from the controller's
+    spindle speed) at which the tool crosses Z-40 is the same on every pass, within the
+    rotation of one IPO cycle (500 rpm x 2 ms = 1/60 rev); without the index wait the
+    passes land anywhere."""
+    from tests.cnc.test_controller import Rig
+
+    prog = (
+        "%\nO7200\nG18 G21 G97 G99 S500 M3\nG0 X-100 Z-10\n"
+        "G76 X-97.4 Z-60 K1.3 D0.5 F2\nG0 X-120\nM5\nM30\n%\n"
+    )
+    rig = Rig("lathe2", programs={7200: prog})
+    rig.home()
+    rig.run_program(7200, limit_s=300)
+    assert rig.ex == "PROGRAM_COMPLETED"
+    dt = rig.dt
+    revs = 0.0
+    prev_z = None
+    phases = []
+    for s in rig.trace:
+        revs += s.spindle_speed / 60.0 * dt
+        z = s.axes["Z"].commanded
+        if s.line == 5 and prev_z is not None and prev_z > -40.0 >= z:
+            # interpolate the crossing within the cycle
+            frac = (prev_z + 40.0) / (prev_z - z)
+            phases.append((revs - (1 - frac) * s.spindle_speed / 60.0 * dt) % 1.0)
+        prev_z = z
+    assert len(phases) == len(lg_depths(1.3, 0.5))
+    spread = max(phases) - min(phases)
+    spread = min(spread, 1 - spread)
+    assert spread <= 500 / 60 * dt + 1e-9
+
+
+def lg_depths(height: float, first: float) -> list[float]:
+    from cnc.interp import lathe_geometry as lg
+
+    return lg.thread_depths(height, first, 0.0, 0.0, 0)
