@@ -699,3 +699,21 @@ def test_g76_haas_angle_and_cutting_methods() -> None:
     assert "PS0062" in e.message and "cutting method" in e.message
     e = err("G0 X20 A5\n")  # A is the G76 angle only
     assert "A word with no code" in e.message
+
+
+def test_a_pass_waits_for_the_index_once_and_continuous_g32_blocks_do_not() -> None:
+    from cnc.canon import SpindleSync, ThreadFeed
+
+    # two G32 blocks in a row (a thread running into a taper): one index wait, at the start
+    cmds = run("G97 S400 M3\nG0 X20 Z2\nG32 Z-20 F2\nX24 Z-30\nG0 X40\nZ2\nX20\nG32 Z-20\n")
+    kinds = [type(c).__name__ for c in cmds if isinstance(c, SpindleSync | ThreadFeed)]
+    assert kinds == ["SpindleSync", "ThreadFeed", "ThreadFeed", "SpindleSync", "ThreadFeed"]
+    # G76: one wait per pass
+    cmds = run("G97 S500 M3\nG0 X25 Z5\nG76 X18.2 Z-20 K0.9 D0.4 F1.5\n")
+    assert sum(isinstance(c, SpindleSync) for c in cmds) == 6
+    assert all(c.lead == 1.5 and c.rpm == 500.0 for c in cmds if isinstance(c, ThreadFeed))
+
+
+def test_thread_with_the_spindle_stopped_is_refused() -> None:
+    e = err("G97 S400\nG0 X20 Z2\nG32 Z-20 F2\n")
+    assert e.line == 3 and "spindle stopped" in e.message
