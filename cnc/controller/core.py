@@ -124,6 +124,7 @@ class _Run:
         self.end_kind = None  # canon.StopKind when M2/M30 was reached
         self.line = 0
         self.lines_feed: dict[int, float | None] = {}  # line -> max feed mm/min (None rapid)
+        self.thread_rpm: dict[int, float] = {}  # line -> the rpm its thread moves are fed for
         self.text_lines = source if isinstance(source, list) else None
 
 
@@ -228,6 +229,8 @@ class Controller:
         self._path_v = 0.0
         self._load = 0.0
         self._rpm = 0.0
+        self._spindle_phase = 0.0  # revolutions, mod 1 (an ideal encoder on the spindle)
+        self._spindle_index = False  # the one-revolution signal came in the last cycle
         self._cutting = False
         # tool life: the tool M6 put in the spindle and its cutting time not yet booked
         self._life_tool = 0
@@ -1159,6 +1162,10 @@ class Controller:
                     run.lines_feed[cmd.line] = max(run.lines_feed[cmd.line] or 0.0, feed)
                 if len(run.lines_feed) > 4096:
                     del run.lines_feed[next(iter(run.lines_feed))]
+                if isinstance(cmd, canon.ThreadFeed) and cmd.rpm > 0.0:
+                    run.thread_rpm[cmd.line] = cmd.rpm
+                    if len(run.thread_rpm) > 4096:
+                        del run.thread_rpm[next(iter(run.thread_rpm))]
             elif not isinstance(cmd, canon.SetPathMode):
                 run.syncs_out += 1
 
@@ -1166,6 +1173,11 @@ class Controller:
         fo = self.feed_override / 100.0 * self.acc.factor
         if self._spindle_on and not self.dry_run and not self._plc.get("SpindleAtSpeed", True):
             fo = 0.0  # feed only with the spindle at speed (docs/machine_plc.md)
+        thread_rpm = run.thread_rpm.get(run.line) if run.thread_rpm else None
+        if thread_rpm and not self.dry_run:
+            # thread cutting: the feed follows the spindle speed the NC runs (S x the
+            # spindle overrides), so the lead holds; feed override and ACC are out of effect
+            fo = self._spindle_rpm_now() / thread_rpm
         ro = self.rapid_override / 100.0
         if fo != self._fo_applied:
             run.motion.set_feed_override(fo)
@@ -1248,6 +1260,8 @@ class Controller:
             if cmd.flood and not flood0:
                 steps.append(("M", 8))
             self._coolant = (cmd.mist, cmd.flood)
+        elif isinstance(cmd, canon.SpindleSync):
+            steps.append(("INDEX", 0))
         elif isinstance(cmd, canon.ToolSelect):
             steps.append(("T", cmd.tool))
         elif isinstance(cmd, canon.ToolChange):
@@ -1277,6 +1291,9 @@ class Controller:
             if kind == "DWELL":
                 if self._t + 1e-9 < value:
                     return
+            elif kind == "INDEX":  # a thread pass starts on the spindle's index
+                if not self._spindle_index and not self.dry_run:
+                    return  # (a spindle not turning keeps the pass waiting, as on a control)
             elif kind == "STOP":
                 if run.stop != "done":
                     run.stop = value
@@ -1337,6 +1354,11 @@ class Controller:
         m = self.cutting_model
         pos = self._actual.get(m.depth_axis)
         rpm = self._rpm = self._spindle_rpm_now()
+        # the spindle's angle (revolutions, mod 1) from the speed it runs: its one-revolution
+        # signal starts a thread pass (canon.SpindleSync)
+        prev = self._spindle_phase
+        self._spindle_phase = (prev + rpm / 60.0 * dt) % 1.0
+        self._spindle_index = rpm > 0.0 and self._spindle_phase < prev
         feed = self._path_v * 60.0 if self._cutting else 0.0
         self._load = m.load(feed, rpm, pos) if self._cutting else (m.idle_load_pct if rpm else 0)
         self.acc.update(self._load, self._cutting, dt)

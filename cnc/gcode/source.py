@@ -187,3 +187,25 @@ class ProgramLibrary:
             return _read_file_from(idx.path, 0, 1), f"O{number}"
         seq = idx.seq
         return ((i + 1, seq[i]) for i in range(len(seq))), f"O{number}"
+
+
+class Pushback:
+    """A line iterator that takes lines back (`push`): a lathe cycle looks at the block after
+    it for its contour (N P) and returns the lines when the contour is elsewhere."""
+
+    __slots__ = ("_it", "_back")
+
+    def __init__(self, it: Iterable[tuple[int, str]]) -> None:
+        self._it = iter(it)
+        self._back: list[tuple[int, str]] = []
+
+    def __iter__(self) -> Pushback:
+        return self
+
+    def __next__(self) -> tuple[int, str]:
+        if self._back:
+            return self._back.pop()
+        return next(self._it)
+
+    def push(self, item: tuple[int, str]) -> None:
+        self._back.append(item)

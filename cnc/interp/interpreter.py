@@ -32,7 +32,7 @@ from cnc.canon import (
 )
 from cnc.errors import NcError
 from cnc.gcode.lexer import Block, MarkedBlock, parse_line
-from cnc.gcode.source import Lines, ProgramLibrary, main_lines, skip_leader
+from cnc.gcode.source import Lines, ProgramLibrary, Pushback, main_lines, skip_leader
 from cnc.interp import codes
 from cnc.interp.codes import fmt_g
 from cnc.interp.context import BlockRun, Classified
@@ -73,7 +73,7 @@ _EPS = 1e-9
 
 # Letters the interpreter understands, per machine kind (others: "unknown address").
 _MILL_WORDS = frozenset("XYZIJKRFSTNPQLHD")
-_LATHE_WORDS = frozenset("XZUWIKRFSTNPQLHD")
+_LATHE_WORDS = frozenset("XZUWIKRFSTNPQLHDA")  # A: the Haas G76 tool angle only
 _DIM_LETTERS = frozenset("XYZUVWIJKRQ")
 _AXIS_OF = {"X": 0, "Y": 1, "Z": 2}
 _AXIS_NAME = "XYZ"
@@ -97,7 +97,7 @@ class _Frame:
     __slots__ = ("it", "file", "number", "repeats", "call_line", "header_seen", "body_started")
 
     def __init__(self, it: Lines, file: str, number: int | None, repeats: int, call_line: int):
-        self.it = it
+        self.it = Pushback(it)  # a lathe cycle may look ahead for its contour
         self.file = file
         self.number = number
         self.repeats = repeats
@@ -156,7 +156,7 @@ class Interpreter:
         # fast-path words of a G0/G1 and of a G2/G3 block (others take the checked path)
         self._fast_line = frozenset("XZUWFN" if self._lathe else "XYZFN")
         self._fast_arc = frozenset("XZUWIKRFN" if self._lathe else "XYZIJKRFN")
-        self._codes = kt = codes.for_kind(params.kind)
+        self._codes = kt = codes.for_kind(params.kind, params.lathe_gcode_system)
         self._gtab = kt.g
         self._mtab = kt.m
         self._classified: dict[tuple[int, ...], Classified] = {}

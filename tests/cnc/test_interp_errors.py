@@ -65,9 +65,9 @@ def test_refusals_name_line_column_reason(prog, line, col, fragment) -> None:
     ("prog", "fragment"),
     [
         ("G0 Y1\n", "lathe has no Y axis"),
-        ("G71 U1 R1\n", "lathe canned cycle"),
-        ("G90 X1 Z1 F1\n", "turning cycle"),
-        ("G92 X1 Z1 F1\n", "threading cycle"),
+        ("G71 P1 Q2 D1 F1\n", "PS0063 G71: no block with sequence number N1"),
+        ("G90 X1 Z1\n", "feed move without F"),
+        ("G92 X1 Z1 F1\n", "thread cutting with no spindle speed"),
         ("G81 X1 Z1\n", "unsupported G code G81"),
         ("T0909\n", "no tool offset number 9"),
     ],
