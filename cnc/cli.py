@@ -28,8 +28,16 @@ def check_cmd(
     soft_limits: bool = typer.Option(
         True, "--soft-limits/--no-soft-limits", help="check moves against the axis travel"
     ),
+    library: Path | None = typer.Option(
+        None,
+        "--library",
+        help="folder of programs that M98 P / G65 P / G66 P call, found by their O number",
+    ),
 ) -> None:
-    """Check a part program: exit 0 when valid, else one `FILE:LINE:COL: message` per error."""
+    """Check a part program: exit 0 when valid, else one `FILE:LINE:COL: message` per error.
+
+    A program whose last block is M99 is checked as a subprogram (its M99 ends it).
+    """
     from cnc.interp import check
     from cnc.params import DecimalStyle, MachineParams
 
@@ -77,13 +85,30 @@ def check_cmd(
         params = replace(
             params, axes=tuple(replace(a, min_mm=-big, max_mm=big) for a in params.axes)
         )
+    programs = None
+    if library is not None:
+        from cnc.gcode.source import library_programs
+
+        if not library.is_dir():
+            typer.echo(f"--library {library}: not a folder", err=True)
+            raise typer.Exit(2)
+        programs, warnings = library_programs(str(library))
+        for w in warnings:
+            typer.echo(w, err=True)
     try:
         fh = open(file, encoding="latin-1", newline=None)  # noqa: SIM115 - closed below
     except OSError as err:
         typer.echo(f"{file}:0:0: cannot read: {err.strerror}", err=True)
         raise typer.Exit(1) from None
     with fh:
-        errors = check(fh, params, file=str(file), block_delete=block_delete, work_offsets=offsets)
+        errors = check(
+            fh,
+            params,
+            file=str(file),
+            block_delete=block_delete,
+            work_offsets=offsets,
+            programs=programs,
+        )
     for e in errors:
         typer.echo(str(e))
     raise typer.Exit(1 if errors else 0)

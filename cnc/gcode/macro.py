@@ -555,6 +555,20 @@ def _bin_closure(op: str, a: Expr, b: Expr, col: int) -> Expr:
 # --- statements -------------------------------------------------------------------------------
 
 
+def _combined(p: _Parser, cond: Expr) -> Expr:
+    """IF [c1] AND [c2] ... / IF [c1] OR [c2] ...: conditions joined outside the brackets
+    (Fanuc 0i-F / 30i); inside brackets AND/OR stay the bit operators."""
+    while p.is_name("AND", "OR") and p.toks[p.i + 1].val == "[":
+        op = p.next().val
+        right, _ = p.bracketed()
+        left = cond
+        if op == "AND":
+            cond = lambda env, a=left, b=right: 1.0 if a(env) and b(env) else 0.0  # noqa: E731
+        else:
+            cond = lambda env, a=left, b=right: 1.0 if a(env) or b(env) else 0.0  # noqa: E731
+    return cond
+
+
 def _loop_id(p: _Parser) -> int:
     t = p.tok
     if t.kind != "num":
@@ -646,6 +660,7 @@ def parse_macro(
             if not p.is_op("["):
                 raise p.fail("IF needs a [condition]", alarm=PS_STATEMENT)
             cond, _ = p.bracketed()
+            cond = _combined(p, cond)
             if p.is_name("GOTO"):
                 p.i += 1
                 target, _ = p.expr()

@@ -218,3 +218,48 @@ def _first(idx: _SequenceIndex | _FileIndex, number: int) -> int:
     if isinstance(idx, _FileIndex):
         return idx.found[number][1]
     return idx.found[number] + 1
+
+
+class ProgramFile:
+    """A program file on disk, as a `programs` mapping value: read when called, by offset."""
+
+    __slots__ = ("name",)
+
+    def __init__(self, path: str) -> None:
+        self.name = path
+
+    def __iter__(self) -> Iterator[str]:
+        with open(self.name, encoding="latin-1") as fh:
+            yield from fh
+
+    def __repr__(self) -> str:
+        return f"ProgramFile({self.name!r})"
+
+
+def library_programs(folder: str) -> tuple[dict[int, ProgramFile], list[str]]:
+    """The programs of a folder by O number (every O line of every file in it).
+
+    Returns the mapping for the interpreter's `programs` and warnings: an O number found in
+    two files is taken from the first (by file name) and named in a warning.
+    """
+    found: dict[int, ProgramFile] = {}
+    warnings: list[str] = []
+    for entry in sorted(os.scandir(folder), key=lambda e: e.name):
+        if not entry.is_file():
+            continue
+        pf = ProgramFile(entry.path)
+        with open(entry.path, "rb") as fh:
+            for lineno, raw in enumerate(fh, 1):
+                m = _O_LINE_BYTES.match(raw)
+                if not m:
+                    continue
+                number = int(m.group(1))
+                prev = found.get(number)
+                if prev is None:
+                    found[number] = pf
+                elif prev.name != entry.path:
+                    warnings.append(
+                        f"{entry.path}:{lineno}:1: warning: O{number} is also in {prev.name} "
+                        "(that one is used)"
+                    )
+    return found, warnings

@@ -91,6 +91,7 @@ MAX_SUB_NESTING = 10  # M98 nesting depth (Fanuc 0i: 10 levels)
 MAX_MACRO_NESTING = 5  # G65/G66 macro levels (Fanuc: 5; local variable sets 0..5)
 MAX_LOOPS = 3  # WHILE/DO nesting (Fanuc: 3, ids 1..3)
 MACRO_BUDGET = 1_000_000  # macro statements in a row without any command: an endless loop
+LOOP_WATCH_AFTER = 10_000  # backward jumps before loops are watched for a repeated state
 _EPS = 1e-9
 
 # Letters the interpreter understands, per machine kind (others: "unknown address").
@@ -225,6 +226,8 @@ class Interpreter:
         self._ends: dict[tuple[int, int, int], int | None] = {}
         self.messages: list[tuple[int, str]] = []  # #3006 operator messages (line, text)
         self._seen_errors: set[tuple[str, int, int, str]] = set()
+        self._jumps = 0  # backward jumps (GOTO, END) so far
+        self._loop_seen: dict[tuple[int, int], tuple] = {}
         self.file = file
         self.block_delete = block_delete
         self.arc_tolerance = arc_tolerance
@@ -605,11 +608,7 @@ class Interpreter:
                 raise self._err(row.refused, blk, "G", i + 1)
             grp = row.group
             if grp == "macro_call":
-                if len(blk.g) > 1 or blk.m:
-                    raise self._err(
-                        f"{row.name} takes no other G or M code in its block", blk, "G", i + 1
-                    )
-                cls.call = row
+                cls.call = row  # the other codes of the block run first (_macro_call)
                 return cls
             if (
                 grp in gset
@@ -1446,8 +1445,15 @@ class Interpreter:
         return True
 
     def _macro_call(self, blk: Block, row) -> None:
-        """G65 (call now) and G66 (call after every move until G67), with arguments."""
+        """G65 (call now) and G66 (call after every move until G67), with arguments.
+
+        Other G codes before it in the block (`G54 G65 P...`) and M codes before it take
+        effect first, as a block of their own; every word is an argument of the call.
+        """
         words = blk.words
+        others = [c for c in blk.g if c != row.number]
+        if others or blk.m:
+            self._block(Block(blk.line, blk.text, {}, others, list(blk.m)), self._frames[-1])
         if "N" in words:
             self._nword = int(words["N"])
         if "P" not in words:
@@ -1583,6 +1589,53 @@ class Interpreter:
             )
         fr.it = ((i + 1, seq[i]) for i in range(line - 1, len(seq)))
         self._switch = True
+        if line <= blk.line:
+            self._jumps += 1
+            if self._jumps > LOOP_WATCH_AFTER:
+                self._watch_loop(fr, line, blk)
+
+    def _watch_loop(self, fr: _Frame, line: int, blk: Block) -> None:
+        """A loop that comes back to a line with everything as it was the time before can
+        never end (the interpreter is deterministic): an alarm now, not after the budget.
+
+        Compared: the variables (local, common, kept, signals), the positions, the modes
+        and offsets that decide what the next blocks do. Checked only once a program has
+        jumped back LOOP_WATCH_AFTER times, so short loops pay nothing.
+        """
+        env = self.vars
+        clock = env.clock() if env.clock is not None else None
+        state = (
+            len(self._frames),
+            tuple(env.loc.items()),
+            tuple(env.common.items()),
+            tuple(env.persistent.items()),
+            tuple(env.signals.items()),
+            clock,
+            self._pos,
+            self._mach,
+            self._off,
+            self._motion,
+            self._cycle,
+            self._abs,
+            self._inch,
+            self._wcs,
+            self._tool,
+            self._f,
+            self._s,
+        )
+        key = (id(fr), line)
+        if self._loop_seen.get(key) == state:
+            raise MacroAlarm(
+                "",
+                f"endless loop: the jump back to line {line} finds every variable, "
+                "position and mode as the time before, so the program can never end",
+                blk.line,
+                getattr(blk, "col0", 1),
+                fr.file,
+            )
+        if len(self._loop_seen) > 1000:
+            self._loop_seen.clear()
+        self._loop_seen[key] = state
 
     def _seq_index(self, fr: _Frame, seq: list[str]) -> dict[int, list[int]]:
         """Sequence number -> lines of the frame's program (from its first line to its end)."""
