@@ -449,6 +449,11 @@ class Interpreter:
                 # the frame's lines ran out
                 if len(frames) == 1:
                     frames.pop()
+                    if fr.loops:
+                        err = self._open_loop(fr)
+                        if not recover:
+                            raise err
+                        self._record(err, file)
                     break
                 err = NcError(
                     f"subprogram O{fr.number} ends without M99",
@@ -457,13 +462,7 @@ class Interpreter:
                     file,
                 )
                 if fr.loops:
-                    err = MacroAlarm(
-                        PS_MISSING_END,
-                        f"DO {fr.loops[-1][0]} without END {fr.loops[-1][0]}",
-                        fr.loops[-1][1],
-                        1,
-                        file,
-                    )
+                    err = self._open_loop(fr)
                 if not recover:
                     raise err
                 self._record(err, file)
@@ -480,6 +479,10 @@ class Interpreter:
             yield from out
             out.clear()
         self._ended = self._switch = True
+
+    def _open_loop(self, fr: _Frame) -> MacroAlarm:
+        ident, line, _ = fr.loops[-1]
+        return MacroAlarm(PS_MISSING_END, f"DO {ident} without END {ident}", line, 1, fr.file)
 
     def _record(self, err: NcError, file: str) -> None:
         self._update_simple()
@@ -607,7 +610,7 @@ class Interpreter:
             if row.refused:
                 raise self._err(row.refused, blk, "G", i + 1)
             grp = row.group
-            if grp == "macro_call":
+            if row.name in ("G65", "G66"):
                 cls.call = row  # the other codes of the block run first (_macro_call)
                 return cls
             if (
@@ -1451,7 +1454,16 @@ class Interpreter:
         effect first, as a block of their own; every word is an argument of the call.
         """
         words = blk.words
-        others = [c for c in blk.g if c != row.number]
+        at = blk.g.index(row.number)
+        if len(blk.g) > at + 1:
+            raise MacroAlarm(
+                "PS0129",
+                f"G{fmt_g(blk.g[at + 1])[1:]} after {row.name} (G is not a macro argument)",
+                blk.line,
+                blk.col("G", at + 2),
+                self._frames[-1].file,
+            )
+        others = blk.g[:at]
         if others or blk.m:
             self._block(Block(blk.line, blk.text, {}, others, list(blk.m)), self._frames[-1])
         if "N" in words:
@@ -1696,17 +1708,24 @@ class Interpreter:
         line = self._find_seq(fr, n, mb.line, mb, PS_GOTO_NOT_FOUND, "GOTO", "")
         # loops left by the jump: started after the target, or ended before it
         loops = fr.loops
-        while loops and (loops[-1][1] > line or (loops[-1][2] and loops[-1][2] < line)):
+        while loops:
+            ident, start, end = loops[-1]
+            if start <= line and line <= (end or self._find_end(fr, ident, start) or line):
+                break  # the target is inside this loop: it stays open
             loops.pop()
         self._jump(fr, line, mb)
 
     def _while(self, fr: _Frame, mb: MacroBlock, true: bool, ident: int) -> None:
         loops = fr.loops
         if not (loops and loops[-1][0] == ident and loops[-1][1] == mb.line):
-            for k, rec in enumerate(loops):
-                if rec[0] == ident:  # the loop with this number was left (GOTO out of it)
-                    del loops[k:]
-                    break
+            for rec in loops:
+                if rec[0] == ident:
+                    raise MacroAlarm(
+                        PS_LOOP_NUMBER,
+                        f"DO {ident} inside the open loop DO {ident} of line {rec[1]} "
+                        "(nested loops need different numbers 1..3)",
+                        mb.line, mb.col0, fr.file,
+                    )  # fmt: skip
             if len(loops) >= MAX_LOOPS:
                 raise MacroAlarm(
                     PS_LOOP_NUMBER,
@@ -1719,7 +1738,7 @@ class Interpreter:
         if true:
             return
         rec = loops.pop()
-        end = rec[2] or self._find_end(fr, ident, mb)
+        end = rec[2] or self._find_end(fr, ident, mb.line)
         if end is None:
             raise MacroAlarm(
                 PS_MISSING_END, f"WHILE ... DO {ident} without END {ident}", mb.line, mb.col0,
@@ -1729,7 +1748,7 @@ class Interpreter:
             return  # streamed: _find_end consumed the lines up to the END
         self._jump(fr, end + 1, mb)
 
-    def _find_end(self, fr: _Frame, ident: int, mb: MacroBlock) -> int | None:
+    def _find_end(self, fr: _Frame, ident: int, line: int) -> int | None:
         seq = self._lines_of(fr)
         if seq is None:
             for lineno, text in fr.it:  # a stream: skip forward (no way back needed)
@@ -1737,11 +1756,11 @@ class Interpreter:
                 if m and int(m.group(1)) == ident:
                     return lineno
             return None
-        key = (id(seq), mb.line, ident)
+        key = (id(seq), line, ident)
         if key in self._ends:
             return self._ends[key]
         found = None
-        for i in range(mb.line, len(seq)):
+        for i in range(line, len(seq)):
             text = seq[i]
             if _O_AT.match(text):
                 break
