@@ -123,8 +123,7 @@ def test_vacant_word_is_omitted_and_assignment_to_nothing_makes_vacant() -> None
 
 def test_variables_and_expressions_in_every_word() -> None:
     ip, cmds = run(
-        "#10=1\n#2=250\n#24=-3\nG#10 X#24 Y[#24*2] Z-[1+1] F[#2*2]\n"
-        "#3=2\nG#3 X3 Y-6 R3\nM#3\n"
+        "#10=1\n#2=250\n#24=-3\nG#10 X#24 Y[#24*2] Z-[1+1] F[#2*2]\n#3=2\nG#3 X3 Y-6 R3\nM#3\n"
     )
     lines = [c for c in cmds if isinstance(c, MOTION_TYPES)]
     assert lines[0].end == (-3.0, -6.0, -2.0)
