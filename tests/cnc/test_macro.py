@@ -3,7 +3,11 @@ variables, the persistent store and the alarms, against values computed by hand.
 
 from __future__ import annotations
 
+import math
+
 import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
 
 from cnc.canon import MOTION_TYPES, ProgramStop, StopKind
 from cnc.errors import NcError
@@ -474,3 +478,77 @@ def test_macro_lines_are_parsed_once() -> None:
     a = parse_line("#1=#1+1", 7, "x.nc")
     b = parse_line("#1=#1+1", 7, "x.nc")
     assert a is b
+
+
+def test_the_docs_bolt_hole_example_runs() -> None:
+    import re
+    from pathlib import Path
+
+    doc = (Path(__file__).parents[2] / "docs" / "gcode.md").read_text()
+    body = re.search(r"```\n(O9001 \(BOLT HOLE CIRCLE.*?)```", doc, re.S).group(1)
+    call = re.search(r"called by `(G65 P9001[^`]*)`", doc).group(1)
+    ip, cmds = run(f"G90 G17 G54\nG0 Z50\n{call}\nM30\n{body}")
+    holes = [c.end for c in cmds if isinstance(c, MOTION_TYPES) and c.end[2] == -10.0]
+    want = [
+        (50 + 30 * math.cos(math.radians(a)), 40 + 30 * math.sin(math.radians(a)), -10.0)
+        for a in range(0, 360, 60)
+    ]
+    assert len(holes) == 6
+    for got, exp in zip(holes, want, strict=True):
+        assert got == pytest.approx(exp, abs=1e-9)
+
+
+@settings(max_examples=300, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(
+    st.lists(
+        st.sampled_from(
+            [
+                "#1",
+                "#2",
+                "#0",
+                "#100",
+                "#[#1]",
+                "=",
+                "[",
+                "]",
+                "+",
+                "-",
+                "*",
+                "/",
+                "1",
+                "2.5",
+                "0",
+                " ",
+                "IF",
+                "GOTO",
+                "WHILE",
+                "DO1",
+                "END1",
+                "THEN",
+                "EQ",
+                "LT",
+                "SIN",
+                "ATAN",
+                "POW",
+                ",",
+                "G1",
+                "X",
+                "N1",
+                "M99",
+                "G65",
+                "P9",
+                "MOD",
+                "AND",
+                "#3000",
+                "(A)",
+            ]
+        ),
+        max_size=12,
+    ),
+    st.integers(1, 4),
+)
+def test_random_macro_programs_end_with_an_error_or_normally(parts, lines) -> None:
+    """Never a crash (only NcError) and never a hang (the budgets), whatever the text."""
+    text = "\n".join("".join(parts[i::lines]) for i in range(lines)) + "\nN9 M30\n"
+    errs = check(text, MILL, max_blocks=20_000, macro_budget=20_000)
+    assert all(isinstance(e, NcError) for e in errs)
