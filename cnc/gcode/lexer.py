@@ -185,12 +185,6 @@ def _g_code_slow(num: str) -> int | None:
     return r if abs(v - r) < 1e-6 and r < 10000 else None
 
 
-def _starts_number(s: str, i: int) -> bool:
-    while i < len(s) and s[i] in " \t":
-        i += 1
-    return i < len(s) and (s[i].isdigit() or s[i] in "+-.")
-
-
 def parse_line(
     text: str, line: int, file: str = "<program>", least_increment: bool = False
 ) -> Block | None:
