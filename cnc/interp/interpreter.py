@@ -189,6 +189,9 @@ class Interpreter:
     `macro_variables` is the store of the common variables kept across power cycles
     (#500-#999, #10000-#10999): any mutable mapping number -> value, a vacant variable
     being an absent key (the controller passes its machine data; default: a new dict);
+    `common_variables` holds #100-#499 the same way (the controller keeps one dict from
+    program to program and clears it at reset or power off, as Fanuc; default: a new dict,
+    so they start vacant);
     `clock` gives seconds for the #3001/#3002 timers (default: time stands still);
     `macro_budget` bounds the macro statements executed in a row without any command
     coming out (an endless WHILE or GOTO loop is an alarm naming its line, not a hang);
@@ -214,11 +217,12 @@ class Interpreter:
         clock: Callable[[], float] | None = None,
         macro_budget: int = MACRO_BUDGET,
         subprogram: bool | None = False,
+        common_variables: MutableMapping[int, float] | None = None,
     ) -> None:
         self.params = params
         self.macro_budget = macro_budget
         self.subprogram = subprogram
-        self.vars = MacroVariables(self, macro_variables, clock)
+        self.vars = MacroVariables(self, macro_variables, clock, common_variables)
         self._g66: tuple[int, dict[int, float], int] | None = None
         self._mrun = 0  # macro statements since the last command came out
         self._loaded: dict[str, list[str]] = {}

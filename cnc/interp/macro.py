@@ -7,7 +7,7 @@ write. Variable ranges (Fanuc 0i-F, with the Haas NGC extension #10000-#10999):
 |---|---|---|
 | #0 | always vacant, read only | |
 | #1-#33 | local: one set per G65/G66 macro level (the arguments) | until the macro returns |
-| #100-#499 | common | cleared when the interpreter is created (power off / reset) |
+| #100-#499 | common | the injected `common` mapping (the controller clears it at reset / power off), else cleared with each interpreter |
 | #500-#999, #10000-#10999 | common, kept across power cycles | in the injected `persistent` mapping |
 | #1000-#1035, #1100-#1135 | interface signals in / out | inputs read 0 (no PLC here) |
 | #2001... | tool offsets (`_tools`) | tool memory |
@@ -65,11 +65,12 @@ class MacroVariables:
         ip: Interpreter,
         persistent: MutableMapping[int, float] | None,
         clock: Callable[[], float] | None,
+        common: MutableMapping[int, float] | None = None,
     ) -> None:
         self.ip = ip
         self.loc: dict[int, float] = {}
         self.levels: list[dict[int, float]] = [self.loc]
-        self.common: dict[int, float] = {}
+        self.common: MutableMapping[int, float] = {} if common is None else common
         self.persistent: MutableMapping[int, float] = {} if persistent is None else persistent
         self.signals: dict[int, float] = {}
         self.misc: dict[int, float] = {}

@@ -378,6 +378,10 @@ def test_persistent_variables_survive_a_new_interpreter_common_ones_do_not() -> 
     assert ip.vars.loc == {1: 7.0}  # #100 is vacant after the "power cycle"
     run("#500=#0\n", macro_variables=store)
     assert 500 not in store  # vacant is an absent key
+    common: dict[int, float] = {}
+    run("#100=3\n", common_variables=common)
+    ip, _ = run("#1=#100\n", common_variables=common)
+    assert ip.vars.loc == {1: 3.0} and common == {100: 3.0}
 
 
 def test_3006_stops_with_a_message() -> None:
