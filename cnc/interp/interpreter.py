@@ -530,7 +530,9 @@ class Interpreter:
         self._line = line = blk.line
         self._executed += 1
         if self.max_blocks is not None and self._executed > self.max_blocks:
-            raise self._err(f"program executes more than {self.max_blocks} blocks", blk)
+            err = self._err(f"program executes more than {self.max_blocks} blocks", blk)
+            err.fatal = True  # type: ignore[attr-defined]  # check stops here: it would loop
+            raise err
         # fast path: a motion block (G0..G3 at most, with only the words of its motion)
         # without any other modal change
         if self._simple and not blk.m and (not g or (len(g) == 1 and g[0] in _MOTION_CODES)):
