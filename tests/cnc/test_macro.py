@@ -556,3 +556,15 @@ def test_random_macro_programs_end_with_an_error_or_normally(parts, lines) -> No
     text = "\n".join("".join(parts[i::lines]) for i in range(lines)) + "\nN9 M30\n"
     errs = check(text, MILL, max_blocks=20_000, macro_budget=20_000)
     assert all(isinstance(e, NcError) for e in errs)
+
+
+def test_lathe_positions_in_diameter_and_tool_geometry() -> None:
+    axes = (
+        AxisParams("X", -1e6, 1e6, 30000, 3000, 5e4),
+        AxisParams("Z", -1e6, 1e6, 30000, 3000, 5e4),
+    )
+    lathe = MachineParams(kind="lathe", axes=axes)
+    ip = Interpreter(lathe, tools={1: ToolOffset(x=2.0, z=-3.0, radius=0.4)})
+    list(ip.run("G0 X40 Z5\n#100=#5001\n#101=#5003\n#102=#2701\n#103=#2801\n#104=#2901\n"))
+    c = ip.vars.common
+    assert (c[100], c[101], c[102], c[103], c[104]) == (40.0, 5.0, 4.0, -3.0, 0.4)
