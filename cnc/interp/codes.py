@@ -61,7 +61,7 @@ _STEP_TEXT = {
     Step.NON_MODAL: "G10/G28/G30/G53/G92",
     Step.MOTION: "motion (or the modal motion/cycle)",
     Step.STOP: "M0/M1/M2/M30",
-    Step.SUBPROGRAM: "M98/M99",
+    Step.SUBPROGRAM: "M98/M99, G65/G66/G67",
 }
 
 # Modal groups: table name -> Fanuc group number (for the docs; "" where Fanuc has none).
@@ -84,6 +84,8 @@ GROUPS = {
     "polar": "17",
     "mirror": "22",
     "arc_distance": "",
+    "macro_call": "00",
+    "macro_modal": "12",
     "exact_stop": "00",
     "refused": "",
     "stop": "",
@@ -155,7 +157,7 @@ def _refused(name: str, kinds: frozenset[str], message: str) -> Code:
     return Code(name, "refused", kinds, Step.MOTION, None, refused=message, doc=message)
 
 
-_MACRO = "unsupported: Fanuc Macro B ({} macro call{})"
+_MACRO_ARGS = "PLABCDEFHIJKMQRSTUVWXYZ"  # G65/G66: P L and the arguments (specification I)
 _CYCLE_WORDS = "@RQPKL"
 
 # fmt: off
@@ -270,9 +272,13 @@ CODES: tuple[Code, ...] = (
     _g("G64", "path_mode", Step.PATH_CONTROL, modes.path_mode, words="P", default=True,
        doc="continuous path, P tolerance"),
     # --- declared and refused ---
-    _refused("G65", BOTH, _MACRO.format("G65", "")),
-    _refused("G66", BOTH, _MACRO.format("G66 modal", "")),
-    _refused("G67", BOTH, _MACRO.format("G67", " cancel")),
+    # --- Macro B calls (docs/gcode.md "Fanuc Macro B") ---
+    _g("G65", "macro_call", Step.SUBPROGRAM, flow.macro_call, words=_MACRO_ARGS, needs=("P",),
+       doc="macro call: program P, L times, arguments A..Z -> #1..#26 (a new local level)"),
+    _g("G66", "macro_modal", Step.SUBPROGRAM, flow.macro_call, words=_MACRO_ARGS, needs=("P",),
+       doc="modal macro call: program P is called after every block that moves"),
+    _g("G67", "macro_modal", Step.SUBPROGRAM, flow.macro_modal_cancel, default=True,
+       doc="modal macro call cancel"),
     # --- lathe cycles (Fanuc T, G-code system A; cnc.interp.lathe_cycles) ---
     _g("G70", "nonmodal", Step.NON_MODAL, lc.finishing, LATHE, words="PQUW", owns_axes=True,
        doc="finishing: the contour N P..N Q as programmed, then back to the start"),
@@ -311,9 +317,11 @@ CODES: tuple[Code, ...] = (
     _g("M7", "coolant", Step.COOLANT, auxiliary.coolant, doc="mist coolant on (may share a block with M8)"),
     _g("M8", "coolant", Step.COOLANT, auxiliary.coolant, doc="flood coolant on"),
     _g("M9", "coolant", Step.COOLANT, auxiliary.coolant, doc="coolant off"),
-    _g("M98", "sub", Step.SUBPROGRAM, flow.call, words="PL", needs=("P",),
-       doc="call program P, L times (or `P<rrrr><nnnn>`)"),
-    _g("M99", "sub", Step.SUBPROGRAM, flow.return_, words="P", doc="return to the caller"),
+    _g("M98", "sub", Step.SUBPROGRAM, flow.call, words="PLQ", needs=("PQ",),
+       doc="call program P, L times (or `P<rrrr><nnnn>`); Q: from sequence number Q "
+           "(without P: of the current program)"),
+    _g("M99", "sub", Step.SUBPROGRAM, flow.return_, words="P",
+       doc="return to the caller; P: to the caller's sequence number P"),
 )
 # fmt: on
 
@@ -444,12 +452,16 @@ def _words_text(row: Code) -> str:
     if row.refused:
         return ""
     kinds = sorted(row.kinds)
-    texts = {" ".join(sorted(row.words_for(k), key="XYZUVWIJKRPQLDHSA".find)) for k in kinds}
+    texts = {" ".join(sorted(row.words_for(k), key=_word_order)) for k in kinds}
     if len(texts) == 1:
         return texts.pop()
-    return "; ".join(
-        f"{k}: {' '.join(sorted(row.words_for(k), key='XYZUVWIJKRPQLDHSA'.find))}" for k in kinds
-    )
+    return "; ".join(f"{k}: {' '.join(sorted(row.words_for(k), key=_word_order))}" for k in kinds)
+
+
+def _word_order(letter: str) -> tuple[int, str]:
+    """Axes, centres, then the other words; letters outside that list (macro arguments)
+    first, alphabetically (a frozenset's order is not stable between runs)."""
+    return ("XYZUVWIJKRPQLDHS".find(letter), letter)
 
 
 def _needs_text(row: Code) -> str:
