@@ -151,6 +151,7 @@ class Controller:
             section = getattr(config, "machine_data", None)
             machine_data = section.initial() if section is not None else MachineData()
         self.machine_data = machine_data
+        self._common_variables: dict[int, float] = {}  # Macro B #100-#199
         if tools is not None:  # an explicit table (tests, a DNC-side setup) replaces it
             machine_data.tools = {
                 n: ToolData(length=o.length, radius=o.radius, x=o.x, z=o.z)
@@ -1072,6 +1073,10 @@ class Controller:
             self.params,
             programs=_MemoryPrograms(self.memory),
             machine_data=self.machine_data,
+            # #500-#999 are kept in the machine data (saved with it); #100-#199 live as long
+            # as the controller: from one program to the next, cleared at power off
+            macro_variables=self.machine_data.macro_variables,
+            common_variables=self._common_variables,
             block_delete=self.block_skip,
             file=name,
             start=start,
