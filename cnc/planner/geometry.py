@@ -39,6 +39,17 @@ class Piece:
     k0: Vec3
     k1: Vec3
 
+    def __init__(self, start: Vec3, end: Vec3) -> None:
+        # Every attribute is set here, in the base class's own __init__: mypyc then knows
+        # them always defined. Otherwise it keeps a tuple of floats unboxed with no
+        # "defined" flag and takes a first item equal to its float error value (-113.0) for
+        # "never set": a line from or to X-113 raised "attribute 'end' of 'Piece'
+        # undefined" in the compiled planner.
+        self.start = start
+        self.end = end
+        self.length = 0.0
+        self.t0 = self.t1 = self.k0 = self.k1 = ZERO
+
     def point(self, s: float) -> Vec3:
         raise NotImplementedError
 
@@ -60,8 +71,7 @@ class Line(Piece):
     u: Vec3
 
     def __init__(self, start: Vec3, end: Vec3, u: Vec3 | None = None) -> None:
-        self.start = start
-        self.end = end
+        Piece.__init__(self, start, end)
         dx = end[0] - start[0]
         dy = end[1] - start[1]
         dz = end[2] - start[2]
@@ -148,8 +158,7 @@ class Arc(Piece):
         sweep: float,
         rise: float,
     ) -> None:
-        self.start = start
-        self.end = end
+        Piece.__init__(self, start, end)
         self.center = center
         self.e1 = e1
         self.e2 = e2

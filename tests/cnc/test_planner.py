@@ -359,3 +359,17 @@ def test_bad_motion_commands_are_nc_errors_with_the_line(cmd):
     with pytest.raises(NcError) as e:
         m.push(cmd)
     assert e.value.line == 5
+
+
+def test_a_piece_ending_at_minus_113_is_read_back() -> None:
+    # -113.0 is mypyc's float error value: a tuple attribute starting with it was taken for
+    # "never set" when read through the base class (compiled build only)
+    from cnc.planner.geometry import Line, Piece, arc_from_canon
+
+    def ends(p: Piece) -> tuple:
+        return p.start, p.end
+
+    line = Line((-113.0, -113.0, -113.0), (-113.0, 5.0, 0.0))
+    assert ends(line) == ((-113.0, -113.0, -113.0), (-113.0, 5.0, 0.0))
+    arc = arc_from_canon((-113.0, 0.0, 0.0), (-103.0, 10.0, 0.0), (-103.0, 0.0, 0.0), 2, True, 1)
+    assert ends(arc)[0] == (-113.0, 0.0, 0.0) and ends(arc)[1][0] == pytest.approx(-103.0)
