@@ -8,7 +8,7 @@ STAMP := $(VENV)/.installed
 MYPYC_LISTS := $(wildcard */mypyc.list */*/mypyc.list)
 MYPYC_SOURCES := $(foreach f,$(MYPYC_LISTS),$(addprefix $(dir $(f)),$(shell sed 's/\#.*//' $(f))))
 
-.PHONY: run test bench lint clean corpus corpus-baseline
+.PHONY: run test bench lint clean corpus corpus-baseline mutation
 
 # The first build takes minutes (measured 5-16 on a busy 2-core box): say so, and what runs.
 $(STAMP): pyproject.toml setup.py $(MYPYC_LISTS) $(MYPYC_SOURCES)
@@ -43,6 +43,13 @@ corpus: $(STAMP)
 # Regenerate that baseline from today's results (expected-invalid entries are kept).
 corpus-baseline: $(STAMP)
 	$(PY) -m tests.cnc.corpus_report --write
+
+# Mutation testing of the pure cores with mutmut (tests/mutation.py: targets and their bounded
+# test selections): minutes per module, so kept out of `make test`. One module:
+# `make mutation MUTATION_ARGS=dnc/rules.py`; `python -m tests.mutation --list` names them.
+MUTATION_ARGS ?=
+mutation: $(STAMP)
+	nice $(PY) -m tests.mutation --min-score 90 $(MUTATION_ARGS)
 
 bench: $(STAMP)
 	$(PY) bench/run_all.py
