@@ -2,10 +2,11 @@
 
 Each target is one pure-core module and the bounded test selection that is meant to catch
 its defects: a mutant the selection does not kill is a defect the tests would not notice.
-Every target runs in its own scratch project under build/mutation/<name>/ (symlinks to the
-packages and tests, a pyproject.toml with the project's pytest settings and a [tool.mutmut]
-block for that target), so mutmut's mutants/ copy never lands in the checkout and each
-module is measured against its own tests only (CPU is scarce: the whole suite per mutant
+Every target runs in its own scratch project, <tmp>/fmscell-mutation/<name>/ (or under
+$FMSCELL_MUTATION_DIR): a copy of the packages without compiled extensions (a mypyc module
+would shadow its mutants), the tests, and a pyproject.toml with the project's pytest settings
+and a [tool.mutmut] block for that target. mutmut's mutants/ copy never lands in the
+checkout, and each module is measured against its own tests only (CPU is scarce: the whole suite per mutant
 would take days).
 
     python -m tests.mutation                       # every target present, score table + JSON
@@ -28,11 +29,14 @@ import os
 import shutil
 import subprocess
 import sys
+import tempfile
 import tomllib
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
-WORK = ROOT / "build" / "mutation"
+WORK = Path(
+    os.environ.get("FMSCELL_MUTATION_DIR") or Path(tempfile.gettempdir()) / "fmscell-mutation"
+)
 # The packages copied into each scratch project: all of ours, so that nothing a test imports
 # falls through to an installed copy of fmscell outside the mutants/ tree.
 PACKAGES = ("drives", "plc", "cnc", "dnc", "server", "web_api")
@@ -40,7 +44,7 @@ PACKAGES = ("drives", "plc", "cnc", "dnc", "server", "web_api")
 # module -> test files (globs) that form its bounded selection
 TARGETS: dict[str, tuple[str, ...]] = {
     "drives/cia402/statemachine.py": (
-        "tests/drives/test_cia402_statemachine.py",
+        "tests/drives/test_cia402_statemachine*.py",
         "tests/drives/test_cia402_conformance.py",
     ),
     "plc/modbus/pdu.py": (
@@ -114,8 +118,9 @@ def _prepare(module: str, tests: list[str]) -> Path:
     if work.exists():
         shutil.rmtree(work)  # a stale mutants/ would report yesterday's code
     work.mkdir(parents=True)
+    skip = shutil.ignore_patterns("*.so", "*.pyd", "__pycache__", "*.pyc")
     for name in PACKAGES:
-        (work / name).symlink_to(ROOT / name, target_is_directory=True)
+        shutil.copytree(ROOT / name, work / name, ignore=skip)
     (work / "tests").symlink_to(ROOT / "tests", target_is_directory=True)
     (work / "pyproject.toml").write_text(_pyproject(module, tests))
     return work
@@ -178,7 +183,7 @@ def run_target(module: str, max_children: int) -> dict:
         "counts": counts,
         "score": round(100.0 * killed / scored, 1) if scored else None,
         "survivors": survivors,
-        "workdir": str(work.relative_to(ROOT)),
+        "workdir": str(work),
     }
 
 
