@@ -6,8 +6,12 @@ Every target runs in its own scratch project, <tmp>/fmscell-mutation/<name>/ (or
 $FMSCELL_MUTATION_DIR): a copy of the packages without compiled extensions (a mypyc module
 would shadow its mutants), the tests, and a pyproject.toml with the project's pytest settings
 and a [tool.mutmut] block for that target. mutmut's mutants/ copy never lands in the
-checkout, and each module is measured against its own tests only (CPU is scarce: the whole suite per mutant
-would take days).
+checkout, and each module is measured against its own tests only (the whole suite per
+mutant would take days).
+
+mutmut 3 runs pytest inside mutants/ with `--rootdir=.`, so the project's `pythonpath =
+["."]` puts the mutated copy first; an editable install of fmscell would still answer for a
+package missing there, which is why every package is copied, not only the target's.
 
     python -m tests.mutation                       # every target present, score table + JSON
     python -m tests.mutation drives/cia402/statemachine.py
@@ -17,8 +21,8 @@ would take days).
 Add a module by adding a line to TARGETS; a target whose source file does not exist yet is
 reported as `absent` and skipped (the allocation state machine is listed before it lands).
 The score is killed / (killed + survived + suspicious) over the mutants mutmut generated (a
-timeout, a mutant that makes a selected test hang, counts as killed); mutants no selected test reaches ("no tests") count as survivors, because that is
-what they are.
+timeout, a mutant that makes a selected test hang, counts as killed); mutants no selected
+test reaches ("no tests") count as survivors, because that is what they are.
 """
 
 from __future__ import annotations
@@ -50,8 +54,9 @@ TARGETS: dict[str, tuple[str, ...]] = {
     "plc/modbus/pdu.py": (
         "tests/plc/test_modbus_core.py",
         "tests/plc/test_modbus_frames.py",
+        "tests/plc/test_modbus_pdu*.py",
     ),
-    "dnc/rules.py": ("tests/dnc/test_rules_scheduler.py",),
+    "dnc/rules.py": ("tests/dnc/test_rules*.py",),
     "dnc/allocation.py": ("tests/dnc/test_allocation*.py",),
     "cnc/interp/modes.py": (
         "tests/cnc/test_interp_codes.py",
