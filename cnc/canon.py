@@ -53,6 +53,28 @@ class StraightFeed:
 
 
 @dataclass(frozen=True, slots=True)
+class ThreadFeed(StraightFeed):
+    """G32 (and the G76/G92 cycles' passes): a thread move, `feed` = `lead` x `rpm`.
+
+    The controller holds the lead while the spindle runs at another speed than `rpm` (an
+    override): the move's feed follows the spindle speed, and the feed override and the
+    adaptive feed are out of effect during it (Fanuc: fixed at 100 %).
+    """
+
+    lead: float = 0.0  # mm per spindle revolution, along the thread's long axis
+    rpm: float = 0.0  # the spindle speed `feed` is computed for
+
+
+@dataclass(frozen=True, slots=True)
+class SpindleSync:
+    """Before a thread pass: wait for the spindle's one-revolution signal, so every pass of
+    a thread starts at the same spindle angle and cuts the same helix (a sync point: the
+    motion stops at the end of the move before it)."""
+
+    line: int
+
+
+@dataclass(frozen=True, slots=True)
 class ArcFeed:
     """G2/G3 circular or helical interpolation.
 

@@ -37,8 +37,16 @@ def check_cmd(
     soft_limits: bool = typer.Option(
         True, "--soft-limits/--no-soft-limits", help="check moves against the axis travel"
     ),
+    library: Path | None = typer.Option(
+        None,
+        "--library",
+        help="folder of programs that M98 P / G65 P / G66 P call, found by their O number",
+    ),
 ) -> None:
-    """Check a part program: exit 0 when valid, else one `FILE:LINE:COL: message` per error."""
+    """Check a part program: exit 0 when valid, else one `FILE:LINE:COL: message` per error.
+
+    A program whose last block is M99 is checked as a subprogram (its M99 ends it).
+    """
     from cnc.cli_setup import SETUP_ERRORS, fail, machine_setup, units_warning
     from cnc.interp import Interpreter
 
@@ -49,6 +57,16 @@ def check_cmd(
         )  # fmt: skip
     except SETUP_ERRORS as err:
         raise fail(err) from None
+    programs = None
+    if library is not None:
+        from cnc.gcode.source import library_programs
+
+        if not library.is_dir():
+            typer.echo(f"--library {library}: not a folder", err=True)
+            raise typer.Exit(2)
+        programs, warnings = library_programs(str(library))
+        for w in warnings:
+            typer.echo(w, err=True)
     try:
         fh = open(file, encoding="latin-1", newline=None)  # noqa: SIM115 - closed below
     except OSError as err:
@@ -60,6 +78,8 @@ def check_cmd(
         block_delete=block_delete,
         machine_data=setup.machine_data,
         max_blocks=CHECK_MAX_BLOCKS,
+        programs=programs,
+        subprogram=None,  # decided by the program's last block (M99: a subprogram)
     )
     with fh:
         errors = interp.check_all(fh)

@@ -81,14 +81,7 @@ def plan_run(
     t = motion.ipo
     names = [a.name for a in params.axes if a.name in AXIS_INDEX]
     idx = [AXIS_INDEX[n] for n in names]
-    n = len(start)
-    prev = list(start)
-    v1 = [0.0] * n
-    a1 = [0.0] * n
-    vmax = [0.0] * n
-    amax = [0.0] * n
-    jmax = [0.0] * n
-    dev = _Deviation()
+    dev = _Deviation()  # sampled deviation: only with a trace (on_sample)
     blocks = moves = 0
     last_line = None
     feed_len = rapid_len = 0.0
@@ -118,13 +111,17 @@ def plan_run(
                 else:
                     piece = Line(pos, end)
                 if piece.length > 1e-12:  # the planner drops shorter moves too
-                    dev.add(piece)
+                    if on_sample is not None:
+                        dev.add(piece)
                     if isinstance(cmd, StraightTraverse):
                         rapid_len += piece.length
                     else:
                         feed_len += piece.length
             pos = end
 
+    from cnc.interpolator.motion import Peaks
+
+    peaks = Peaks((start[0], start[1], start[2]), t)
     while True:
         while pending is not None and motion.push(pending):
             take(pending)
@@ -136,28 +133,21 @@ def plan_run(
             dwell_left -= 1
             if dwell_left == 0:
                 motion.acknowledge()
-        s = motion.step()
-        cycles += 1
+        if on_sample is None and dwell_left == 0:
+            # no trace asked: the interpolator steps on by itself (compiled: no Python
+            # per cycle) until a sync point, room for the next block, or idle
+            s = motion.run(max_cycles + 1 - cycles, peaks, pending is not None)
+            cycles += motion.run_cycles
+        else:
+            s = motion.step()
+            cycles += 1
+            peaks.add(s.pose)
+            if on_sample is not None:
+                dev.sample(s.pose, motion.block)
+                on_sample(s)
         if cycles > max_cycles:
             raise NcError(f"plan did not finish within {max_cycles} IPO cycles")
         last = s
-        p = s.pose
-        for i in range(n):
-            v = (p[i] - prev[i]) / t
-            a = (v - v1[i]) / t
-            j = (a - a1[i]) / t
-            if abs(v) > vmax[i]:
-                vmax[i] = abs(v)
-            if abs(a) > amax[i]:
-                amax[i] = abs(a)
-            if abs(j) > jmax[i]:
-                jmax[i] = abs(j)
-            v1[i] = v
-            a1[i] = a
-        dev.sample(p, motion.block)
-        prev = list(p)
-        if on_sample is not None:
-            on_sample(s)
         if s.sync is not None:
             if isinstance(s.sync, Dwell) and s.sync.seconds > 0:
                 dwell_left = max(1, math.ceil(s.sync.seconds / t - 1e-9))
@@ -165,10 +155,12 @@ def plan_run(
                 motion.acknowledge()
         if fed_all and motion.idle and dwell_left == 0:
             break
+    vmax, amax, jmax = list(peaks.vmax), list(peaks.amax), list(peaks.jmax)
 
     def per_axis(vals) -> dict[str, float]:
         return {nm: vals[i] for nm, i in zip(names, idx, strict=True)}
 
+    ratios = limit_ratios(params, vmax, amax, jmax, names, idx)
     return {
         "blocks": blocks,
         "moves": moves,
@@ -180,9 +172,32 @@ def plan_run(
         "max_abs_velocity": per_axis(vmax),
         "max_abs_accel": per_axis(amax),
         "max_abs_jerk": per_axis(jmax),
-        "max_path_deviation_mm": dev.worst,
+        # exact, from the blends (the only departure from the programmed path); with a
+        # trace also as measured on the samples
+        "max_path_deviation_mm": motion.path.max_blend_deviation,
+        **({"sampled_path_deviation_mm": dev.worst} if on_sample is not None else {}),
+        "limit_ratio": ratios,
+        "worst_limit_ratio": max((r for ax in ratios.values() for r in ax.values()), default=0.0),
+        "replans": motion.replans,
         "units": {"velocity": "mm/s", "accel": "mm/s^2", "jerk": "mm/s^3"},
     }
+
+
+def limit_ratios(params, vmax, amax, jmax, names, idx) -> dict[str, dict[str, float]]:
+    """Per axis, each maximum over the axis's limit: {"X": {"v": .., "a": .., "j": ..}}.
+
+    The planner's claim (docs/motion.md, Limits) is that every ratio is <= 1 up to float
+    rounding; a run that shows more has found a planner bug.
+    """
+    out: dict[str, dict[str, float]] = {}
+    for nm, i in zip(names, idx, strict=True):
+        ax = params.axis(nm)
+        out[nm] = {
+            "v": vmax[i] / (ax.max_velocity / 60.0) if ax.max_velocity > 0 else math.inf,
+            "a": amax[i] / ax.max_accel if ax.max_accel > 0 else math.inf,
+            "j": jmax[i] / ax.max_jerk if ax.max_jerk > 0 else math.inf,
+        }
+    return out
 
 
 @nc_app.command("plan")

@@ -328,6 +328,12 @@ class MachineConfig(_Section):
         0.0001, gt=0, description="Least input increment under G20, inch."
     )
     lathe_diameter_mode: bool = Field(True, description="Lathe: X words are diameters.")
+    lathe_gcode_system: Literal["A", "B", "C"] = Field(
+        "A",
+        description="Lathe: Fanuc G-code system A (G90/G92/G94 cycles, G50 coordinate set,"
+        " G98/G99 feed), B (G77/G78/G79 cycles, G90/G91 absolute/incremental, G92, G94/G95)"
+        " or C (B with G70/G71 inch/metric and G72..G78 cycles); docs/gcode.md.",
+    )
     second_reference_mm: dict[str, float] | None = Field(
         None,
         description="G30 point per axis, machine coordinates, mm; missing axes use home_mm;"
@@ -383,6 +389,7 @@ class MachineConfig(_Section):
             least_increment_mm=self.least_increment_mm,
             least_increment_inch=self.least_increment_inch,
             lathe_diameter_mode=self.lathe_diameter_mode,
+            lathe_gcode_system=self.lathe_gcode_system,
             max_feed=self.max_feed,
             default_path_tolerance=self.default_path_tolerance,
             lookahead=self.lookahead,
@@ -442,6 +449,12 @@ class HostConfig(_Section):
     )
     tls: TlsConfig | None = Field(
         None, description="HTTPS certificate and key (see `host.tls`); null = plain HTTP."
+    )
+    lost_contact_s: float = Field(
+        30.0,
+        gt=0,
+        description="A machine out of contact this long is taken as lost: its allocation is"
+        " interrupted and the part rerouted (seconds).",
     )
     faults: bool = Field(
         False,

@@ -48,6 +48,7 @@ class MachineParams:
     ipo_cycle_s: float = 0.002
     second_reference_mm: tuple[float, ...] | None = None  # G30 point; None = home
     max_spindle_rpm: float | None = None  # the spindle's top speed: the G96 clamp; None = none
+    lathe_gcode_system: str = "A"  # Fanuc T G-code system A, B or C (cnc.interp.codes)
 
     def axis(self, name: str) -> AxisParams:
         for a in self.axes:

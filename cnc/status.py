@@ -96,6 +96,8 @@ class MachineStatus:
     can_bus_load: CanBusLoad = field(default_factory=CanBusLoad)
     plc_scan_time_ms: float = 0.0
     adaptive_control: str = "OFF"
+    unreferenced: tuple[str, ...] = ()  # axes not homed since power-on / losing the reference
+    cycle_start_refused: str = ""  # the NC's reason for the last refused cycle start
 
     def __post_init__(self) -> None:
         # Cheap guards against typos in the trade words; the machine builds one of these

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import dataclasses
 from functools import cache
-from typing import Any
+from typing import IO, Any
 
 MAX_STORED_ERRORS = 100
 KIND_TO_MACHINE = {"mill": "mill3", "lathe": "lathe2"}
@@ -26,11 +26,17 @@ def _params(machine_kind: str):
     return dataclasses.replace(params, axes=axes)
 
 
-def nc_checker(text: str, machine_kind: str) -> list[dict[str, Any]]:
-    """Errors as plain data ({line, col, message}) for storing with the revision."""
+def nc_checker(text: str | IO[str], machine_kind: str) -> list[dict[str, Any]]:
+    """Errors as plain data ({line, col, message}) for storing with the revision. `text`
+    may be an open text file (its path as `name`): its lines are read as the check goes,
+    never all at once (a 15 MB program as a list of lines is some 60 MB)."""
     from cnc.interp import check
 
-    errors = check(text.splitlines(), _params(machine_kind), file="program")
+    lines = text.splitlines() if isinstance(text, str) else text
+    errors = check(lines, _params(machine_kind), file="program")
     return [
         {"line": e.line, "col": e.col, "message": e.message} for e in errors[:MAX_STORED_ERRORS]
     ]
+
+
+nc_checker.reads_files = True  # type: ignore[attr-defined]  # Library hands it uploads as files

@@ -35,19 +35,56 @@ def normalise_url(url: str) -> str:
     return url
 
 
-def make_engine(url: str | None = None, **kwargs: object) -> Engine:
+#: a database that does not answer must not hang the host: how long to wait for a new
+#: connection (TCP connect, TLS, authentication; also for a free pooled connection) ...
+CONNECT_TIMEOUT_S = 5.0
+#: ... and for one statement (PostgreSQL statement_timeout; SQLite's busy timeout, the time
+#: a statement waits for another process's write lock)
+STATEMENT_TIMEOUT_S = 30.0
+
+
+def make_engine(
+    url: str | None = None,
+    *,
+    connect_timeout_s: float = CONNECT_TIMEOUT_S,
+    statement_timeout_s: float = STATEMENT_TIMEOUT_S,
+    **kwargs: object,
+) -> Engine:
+    """An engine with connect and statement time-outs (a hung database costs a request at
+    most those, as DatabaseUnavailable, never a thread for ever)."""
     url = normalise_url(database_url(url))
     if url.startswith("sqlite"):
         if ":memory:" not in url and url.rstrip("/") != "sqlite:":
             # One pooled connection per transfer thread (twenty dispatches at once): past the
             # pool the overflow connections were opened and closed per transaction, 10 ms each.
             kwargs = {"pool_size": 20, "max_overflow": 20, **kwargs}
-        engine = create_engine(url, connect_args={"timeout": 30}, **kwargs)
+        engine = create_engine(url, connect_args={"timeout": statement_timeout_s}, **kwargs)
         event.listen(engine, "connect", _sqlite_pragmas)
         _one_writer_at_a_time(engine)
     else:
-        engine = create_engine(url, pool_pre_ping=True, **kwargs)
+        engine = create_engine(
+            url,
+            pool_pre_ping=True,
+            pool_timeout=connect_timeout_s,
+            connect_args=postgresql_timeouts(connect_timeout_s, statement_timeout_s),
+            **kwargs,
+        )
     return engine
+
+
+def postgresql_timeouts(connect_timeout_s: float, statement_timeout_s: float) -> dict:
+    """libpq connection parameters: connect_timeout (whole seconds, at least 2, as libpq
+    takes no less) bounds connecting; statement_timeout and lock_timeout (server side, ms)
+    bound each statement; TCP keepalives notice a peer that is gone within about 20 s."""
+    ms = max(1, round(statement_timeout_s * 1000))
+    return {
+        "connect_timeout": max(2, int(-(-connect_timeout_s // 1))),
+        "options": f"-c statement_timeout={ms} -c lock_timeout={ms}",
+        "keepalives": 1,
+        "keepalives_idle": 10,
+        "keepalives_interval": 5,
+        "keepalives_count": 2,
+    }
 
 
 def _sqlite_pragmas(dbapi_conn, _record) -> None:  # noqa: ANN001 - DB-API connection

@@ -10,6 +10,7 @@ from sqlalchemy import bindparam, func, insert, select, update
 from sqlalchemy.orm import Session, sessionmaker
 
 from dnc import models as m
+from dnc.allocation import DEFAULT_LOST_CONTACT_S, dispatch_phase
 from dnc.db import transaction
 from dnc.dispatch import FAILED, DispatchRequest, create_dispatches
 from dnc.errors import InvalidUpload, NotFound, WorkflowError
@@ -20,10 +21,13 @@ from dnc.scheduler import (
     AllocationState,
     Complete,
     Decisions,
+    Fail,
     Interrupt,
     JobState,
     MachineView,
     MarkRunning,
+    Note,
+    Reroute,
     decide,
 )
 
@@ -36,6 +40,8 @@ QUEUED, RUNNING, INTERRUPTED, COMPLETED, CANCELLED = (
 )
 OPEN_STATES = (QUEUED, RUNNING, INTERRUPTED)
 ACTIVE_ALLOCATIONS = ("dispatched", "running")
+# the allocations a tick steps: the active ones and the interrupted ones whose part waits
+STEPPED_ALLOCATIONS = (*ACTIVE_ALLOCATIONS, "interrupted")
 
 
 @dataclass(frozen=True, slots=True)
@@ -116,7 +122,10 @@ class Jobs:
             return job_info(job)
 
     def cancel(self, job_id: int, *, actor: str = "unknown") -> JobInfo:
-        """Stop allocating new parts; parts already running on a machine finish normally."""
+        """Stop allocating new parts; parts already running on a machine finish normally.
+
+        The next scheduler tick calls off the job's allocations whose program has not been
+        started (their dispatches with them), which frees their machines."""
         now = self._now()
         with transaction(self._sessions) as s:
             job = s.get(m.Job, job_id, with_for_update=True)
@@ -156,6 +165,8 @@ class Jobs:
                     status=a.status,
                     dispatch_id=a.dispatch_id,
                     reason=a.reason,
+                    note=a.note,
+                    rerouted_to=a.rerouted_to,
                 )
                 for a in rows
             ]
@@ -188,22 +199,40 @@ class Scheduler:
         *,
         rule: str = "fifo",
         now: Callable[[], datetime] | None = None,
+        lost_contact_s: float = DEFAULT_LOST_CONTACT_S,
     ) -> None:
+        if not lost_contact_s > 0:
+            raise ValueError(f"lost_contact_s must be > 0, got {lost_contact_s}")
         self._sessions = sessions
         self._status = machine_status
+        self.lost_contact_s = lost_contact_s
         self.rule_name = rule.lower()
         self._rule = rule_named(rule)
         self._now = now or (lambda: datetime.now(UTC))
 
     def tick(self) -> Decisions:
-        machines = self._status()
+        # A dispatch the tick calls off may have moved on to `starting` since it was read
+        # (the transfer worker claims its start in a transaction of its own): then the whole
+        # tick is rolled back and decided again from the new state.
+        for _ in range(_RACE_RETRIES):
+            try:
+                return self._tick()
+            except _DispatchMovedOn:
+                continue
+        return self._tick()
+
+    def _tick(self) -> Decisions:
         now = self._now()
         with transaction(self._sessions) as s:
             # Core reads and writes on the tables, a statement per kind of row for the whole
             # tick: ORM objects for a thousand jobs and a unit of work per dispatch were most
             # of a tick's time.
             jobs = s.execute(_OPEN_JOBS).all()
-            allocs = s.execute(_ACTIVE_ALLOCATIONS).all()
+            allocs = s.execute(_STEPPED).all()
+            # The machines are looked at after the database is read: a dispatch read as
+            # done was confirmed running before it was written, so the look that follows
+            # shows the cycle, its part or its end, never the moment before the start.
+            machines = self._status()
             decisions = decide(
                 [
                     JobState(
@@ -227,7 +256,11 @@ class Scheduler:
                         a.machine,
                         a.parts_at_start,
                         a.status == "running",
-                        bool(a.dispatch_failed),
+                        a.dispatch_state == FAILED,
+                        dispatch=dispatch_phase(a.dispatch_state),
+                        program=f"O{a.number:04d}" if a.number is not None else None,
+                        state=a.status,
+                        note=a.note or "",
                     )
                     for a in allocs
                 ],
@@ -235,9 +268,17 @@ class Scheduler:
                 self._rule,
                 self.rule_name,
                 now,
+                lost_contact_s=self.lost_contact_s,
             )
             _Tick(s, self.rule_name, now, jobs, allocs).apply(decisions)
         return decisions
+
+
+class _DispatchMovedOn(Exception):
+    """A dispatch to call off was no longer pending, transferring or verifying."""
+
+
+_RACE_RETRIES = 3
 
 
 class _Tick:
@@ -256,14 +297,24 @@ class _Tick:
         self.events: list[tuple[str, str, int | None, dict]] = []
 
     def apply(self, decisions: Decisions) -> None:
-        new_active = self._allocate(decisions.of(Allocate))
+        s = self.s
+        # Dispatches called off first: if one has moved on meanwhile, nothing of the tick
+        # is written and it is decided again.
+        self._call_off([a for a in decisions.of(Interrupt) if a.cancel_dispatch])
+        new_active, new_ids = self._allocate(decisions.of(Allocate))
         ended, alloc_updates = set(), []
+
+        def end(alloc_id: int, status: str, **values) -> None:
+            row = dict(b_id=alloc_id, b_status=status, b_ended=self.now)
+            alloc_updates.append(row | {"b_rerouted": values.get("rerouted_to")})
+
+        notes = []
         for action in decisions.actions:
             if isinstance(action, Complete):
                 alloc = self.allocs[action.allocation_id]
                 job = self.jobs[action.job_id]
                 ended.add(alloc.id)
-                alloc_updates.append(dict(b_id=alloc.id, b_status="completed", b_ended=self.now))
+                end(alloc.id, "completed")
                 self.done[job.id] = min(job.quantity, self.done[job.id] + action.parts)
                 self._decision(
                     "complete", job.id, alloc.machine, f"part counter of {alloc.machine} advanced"
@@ -271,38 +322,88 @@ class _Tick:
             elif isinstance(action, Interrupt):
                 alloc = self.allocs[action.allocation_id]
                 ended.add(alloc.id)
-                alloc_updates.append(dict(b_id=alloc.id, b_status="interrupted", b_ended=self.now))
+                end(alloc.id, "interrupted")
                 self._decision("interrupt", action.job_id, alloc.machine, action.reason)
                 self.events.append(
                     (
                         "job.interrupt",
                         "job",
                         action.job_id,
-                        dict(machine=alloc.machine, reason=action.reason),
+                        dict(machine=alloc.machine, reason=action.reason, allocation_id=alloc.id),
                     )
                 )
+            elif isinstance(action, Reroute):
+                alloc = self.allocs[action.allocation_id]
+                to = new_ids[action.to]
+                end(alloc.id, "rerouted", rerouted_to=to)
+                self._decision(
+                    "reroute", action.job_id, alloc.machine, f"part rerouted to allocation {to}"
+                )
+            elif isinstance(action, Fail):
+                alloc = self.allocs[action.allocation_id]
+                end(alloc.id, "failed")
+                self._decision("fail", action.job_id, alloc.machine, action.reason)
+            elif isinstance(action, Note):
+                alloc = self.allocs[action.allocation_id]
+                notes.append(dict(b_id=alloc.id, b_note=action.text))
+                self._decision("note", action.job_id, alloc.machine, action.text)
             elif isinstance(action, MarkRunning):
                 alloc_updates.append(
-                    dict(b_id=action.allocation_id, b_status="running", b_ended=None)
+                    dict(
+                        b_id=action.allocation_id, b_status="running", b_ended=None, b_rerouted=None
+                    )
                 )
-        s = self.s
         if alloc_updates:
             s.execute(_SET_ALLOCATION, alloc_updates)
+        if notes:
+            s.execute(_SET_NOTE, notes)
         done_updates = [
             dict(b_id=i, b_done=done) for i, done in self.done.items() if done != self.jobs[i].done
         ]
         if done_updates:
             s.execute(_SET_DONE, done_updates)
-        active = {a.job_id for a in self.allocs.values() if a.id not in ended} | new_active
+        active = {
+            a.job_id
+            for a in self.allocs.values()
+            if a.id not in ended and a.status in ACTIVE_ALLOCATIONS
+        } | new_active
         self._settle_job_states(active)
         if self.decisions:
             s.execute(_INSERT_DECISION, self.decisions)
         record_many(s, now=self.now, actor="scheduler", entries=self.events)
 
-    def _allocate(self, actions: list[Allocate]) -> set[int]:
-        """Allocations and their dispatches for the whole tick; returns the jobs allocated."""
+    def _call_off(self, interrupts: list[Interrupt]) -> None:
+        """Fail the dispatches of allocations interrupted before their program started, so
+        the transfer worker can never start them (its start is conditional on the state)."""
+        interrupts = [a for a in interrupts if self.allocs[a.allocation_id].dispatch_id]
+        if not interrupts:
+            return
+        rows = [
+            dict(
+                b_id=self.allocs[a.allocation_id].dispatch_id,
+                b_now=self.now,
+                b_error=f"called off: allocation {a.allocation_id} interrupted ({a.reason})",
+            )
+            for a in interrupts
+        ]
+        for row, action in zip(rows, interrupts, strict=True):
+            if self.s.execute(_CALL_OFF, row).first() is None:
+                raise _DispatchMovedOn(row["b_id"])
+            alloc = self.allocs[action.allocation_id]
+            self.events.append(
+                (
+                    "dispatch.failed",
+                    "dispatch",
+                    row["b_id"],
+                    dict(machine=alloc.machine, state=FAILED, error=row["b_error"]),
+                )
+            )
+
+    def _allocate(self, actions: list[Allocate]) -> tuple[set[int], list[int]]:
+        """Allocations and their dispatches for the whole tick; returns the jobs allocated
+        and the new allocations' ids in the order of the actions."""
         if not actions:
-            return set()
+            return set(), []
         s, now = self.s, self.now
         # The n-th allocation of a job gets key job-<id>-allocation-<n>: unique, and the same
         # again if a tick rolled back by a crash is taken up after a restart.
@@ -351,7 +452,7 @@ class _Tick:
                     ),
                 )
             )
-        return {a.job_id for a in actions}
+        return {a.job_id for a in actions}, list(alloc_ids)
 
     def _settle_job_states(self, active: set[int]) -> None:
         """Each job's status from its parts: completed, running, interrupted or queued."""
@@ -396,6 +497,8 @@ class _Tick:
 _JOBS = m.Job.__table__
 _ALLOCATIONS = m.Allocation.__table__
 _DISPATCHES = m.Dispatch.__table__
+_REVISIONS = m.Revision.__table__
+_PROGRAMS = m.Program.__table__
 # Cancelled jobs stay in view only while a part of theirs is still on a machine.
 _OPEN_JOBS = (
     select(
@@ -420,21 +523,35 @@ _OPEN_JOBS = (
     .order_by(_JOBS.c.id)
     .with_for_update()
 )
-# Active allocations with whether their dispatch failed, in one query.
-_ACTIVE_ALLOCATIONS = (
+# The allocations a tick steps, with their dispatch's state and their program's number.
+_STEPPED = (
     select(
         _ALLOCATIONS.c.id,
         _ALLOCATIONS.c.job_id,
         _ALLOCATIONS.c.machine,
         _ALLOCATIONS.c.parts_at_start,
         _ALLOCATIONS.c.status,
-        (_DISPATCHES.c.state == FAILED).label("dispatch_failed"),
+        _ALLOCATIONS.c.dispatch_id,
+        _ALLOCATIONS.c.note,
+        _DISPATCHES.c.state.label("dispatch_state"),
+        _PROGRAMS.c.number,
     )
     .select_from(
         _ALLOCATIONS.outerjoin(_DISPATCHES, _DISPATCHES.c.id == _ALLOCATIONS.c.dispatch_id)
+        .outerjoin(_REVISIONS, _REVISIONS.c.id == _DISPATCHES.c.revision_id)
+        .outerjoin(_PROGRAMS, _PROGRAMS.c.id == _REVISIONS.c.program_id)
     )
-    .where(_ALLOCATIONS.c.status.in_(ACTIVE_ALLOCATIONS))
+    .where(_ALLOCATIONS.c.status.in_(STEPPED_ALLOCATIONS))
     .order_by(_ALLOCATIONS.c.id)
+)
+_CALL_OFF = (
+    update(_DISPATCHES)
+    .where(
+        _DISPATCHES.c.id == bindparam("b_id"),
+        _DISPATCHES.c.state.in_(("pending", "transferring", "verifying")),
+    )
+    .values(state=FAILED, error=bindparam("b_error"), updated_at=bindparam("b_now"))
+    .returning(_DISPATCHES.c.id)
 )
 _ALLOCATION_COUNTS = (
     select(_ALLOCATIONS.c.job_id, func.count())
@@ -445,14 +562,23 @@ _INTERRUPTED_OPEN_JOBS = (
     select(_ALLOCATIONS.c.job_id)
     .distinct()
     .join(_JOBS, _JOBS.c.id == _ALLOCATIONS.c.job_id)
-    .where(_ALLOCATIONS.c.status == INTERRUPTED, _JOBS.c.status.in_(OPEN_STATES))
+    .where(_ALLOCATIONS.c.status.in_((INTERRUPTED, "rerouted")), _JOBS.c.status.in_(OPEN_STATES))
 )
 _INSERT_ALLOCATION = insert(_ALLOCATIONS).returning(_ALLOCATIONS.c.id, sort_by_parameter_order=True)
 _INSERT_DECISION = insert(m.Decision.__table__)
 _SET_ALLOCATION = (
     update(_ALLOCATIONS)
     .where(_ALLOCATIONS.c.id == bindparam("b_id"))
-    .values(status=bindparam("b_status"), ended_at=bindparam("b_ended"))
+    .values(
+        status=bindparam("b_status"),
+        ended_at=bindparam("b_ended"),
+        rerouted_to=bindparam("b_rerouted"),
+    )
+)
+_SET_NOTE = (
+    update(_ALLOCATIONS)
+    .where(_ALLOCATIONS.c.id == bindparam("b_id"))
+    .values(note=bindparam("b_note"))
 )
 _SET_DONE = update(_JOBS).where(_JOBS.c.id == bindparam("b_id")).values(done=bindparam("b_done"))
 _SET_JOB_STATUS = (

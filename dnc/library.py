@@ -37,6 +37,7 @@ from dnc.tape import (
     read_header,
     sha256_of,
 )
+from dnc.upload import ProgramUpload
 
 DRAFT, RELEASED, OBSOLETE = "draft", "released", "obsolete"
 IMPORT_SUFFIXES = {".nc", ".ngc", ".tap", ".txt", ".iso", ".cnc"}
@@ -113,7 +114,7 @@ class Library:
         *,
         number: int,
         name: str,
-        text: str | bytes,
+        text: str | bytes | ProgramUpload,
         machine_kind: str = "mill",
         description: str = "",
         tags: Iterable[str] = (),
@@ -130,6 +131,8 @@ class Library:
             raise InvalidUpload("program name must not be empty")
         text = self._decode(text, name)
         check = self._check(text, machine_kind)
+        digest = text.sha256 if isinstance(text, ProgramUpload) else None
+        text = _stored(text)
         with transaction(self._sessions) as s:
             taken = s.scalar(
                 select(m.Program.id).where(
@@ -156,14 +159,14 @@ class Library:
                 raise Conflict(f"program O{number:04d} already exists") from exc
             for tag in sorted({t.strip() for t in tags if t.strip()}):
                 s.add(m.ProgramTag(program_id=prog.id, tag=tag))
-            rev = self._add_revision(s, prog, text, check, author, comment, source)
+            rev = self._add_revision(s, prog, text, check, author, comment, source, digest)
             self._record(s, author, "program.create", "program", prog.id, number=number, name=name)
             return self._program_info(s, prog), _revision_info(rev)
 
     def add_revision(
         self,
         program_id: int,
-        text: str | bytes,
+        text: str | bytes | ProgramUpload,
         *,
         author: str = "unknown",
         comment: str = "",
@@ -174,9 +177,11 @@ class Library:
             kind, name = prog.machine_kind, prog.name
         text = self._decode(text, name)
         check = self._check(text, kind)
+        digest = text.sha256 if isinstance(text, ProgramUpload) else None
+        text = _stored(text)
         with transaction(self._sessions) as s:
             prog = self._get_program(s, program_id)
-            rev = self._add_revision(s, prog, text, check, author, comment, source)
+            rev = self._add_revision(s, prog, text, check, author, comment, source, digest)
             return _revision_info(rev)
 
     def receive_from_machine(self, machine: str, text: str | bytes) -> RevisionInfo:
@@ -567,15 +572,22 @@ class Library:
 
     # ------------------------------------------------------------------------------ internals
 
-    def _decode(self, text: str | bytes, name: str) -> str:
+    def _decode(self, text: str | bytes | ProgramUpload, name: str) -> str | ProgramUpload:
+        if isinstance(text, ProgramUpload):
+            return text if text.finished else text.finish()
         if isinstance(text, bytes):
             return decode_program(text, limit=self.upload_limit, name=name)
         check_size(len(text.encode("utf-8", "surrogatepass")), limit=self.upload_limit, name=name)
         return normalise_text(text, name=name)
 
-    def _check(self, text: str, machine_kind: str) -> list[dict[str, Any]]:
+    def _check(self, text: str | ProgramUpload, machine_kind: str) -> list[dict[str, Any]]:
         if self._checker is None:
             return []
+        if isinstance(text, ProgramUpload):
+            if getattr(self._checker, "reads_files", False):
+                with text.line_file() as lines:
+                    return self._checker(lines, machine_kind)
+            return self._checker(text.text(), machine_kind)
         return self._checker(text, machine_kind)
 
     def _add_revision(
@@ -587,10 +599,14 @@ class Library:
         author: str,
         comment: str,
         source: str,
+        digest: str | None = None,
     ) -> m.Revision:
-        digest = sha256_of(text)
+        # an upload hashed its stored form as it streamed in: no second pass (and copy)
+        digest = digest or sha256_of(text)
+        # stored text is ASCII (dnc.tape.normalise_text): characters are bytes, no encoding
+        size = len(text) if text.isascii() else len(text.encode("utf-8"))
         if s.get(m.Content, digest) is None:
-            s.add(m.Content(sha256=digest, size=len(text.encode("utf-8")), text=text))
+            s.add(m.Content(sha256=digest, size=size, text=text))
         seq = (
             s.scalar(select(func.max(m.Revision.seq)).where(m.Revision.program_id == prog.id)) or 0
         ) + 1
@@ -598,7 +614,7 @@ class Library:
             program_id=prog.id,
             seq=seq,
             sha256=digest,
-            size=len(text.encode("utf-8")),
+            size=size,
             lines=count_lines(text),
             author=author,
             comment=comment,
@@ -750,6 +766,11 @@ _PROGRAM_SHIFT = 32
 def _match(text: str):
     """FTS5 phrase for `text`: with the trigram tokenizer, a case-folded substring match."""
     return literal_column("revision_text").op("MATCH")('"' + text.replace('"', '""') + '"')
+
+
+def _stored(text: str | ProgramUpload) -> str:
+    """The text to store: an upload is read back from its file once, after the check."""
+    return text.text() if isinstance(text, ProgramUpload) else text
 
 
 def _text_drives_from_index(

@@ -200,11 +200,14 @@ class Allocation(Base):
     job_id: Mapped[int] = mapped_column(ForeignKey("jobs.id"), index=True)
     machine: Mapped[str] = mapped_column(String(64), index=True)
     parts_at_start: Mapped[int] = mapped_column(Integer)
-    status: Mapped[str] = mapped_column(
-        String(16), index=True
-    )  # dispatched|running|completed|interrupted
+    # dispatched | running | completed | interrupted | rerouted | failed (dnc/allocation.py)
+    status: Mapped[str] = mapped_column(String(16), index=True)
     dispatch_id: Mapped[int | None] = mapped_column(ForeignKey("dispatches.id"), nullable=True)
     reason: Mapped[str] = mapped_column(Text, default="")
+    # the last alarm or warning noted while the machine cut on (not interrupting)
+    note: Mapped[str] = mapped_column(Text, default="")
+    # the allocation that makes this one's part again (status rerouted)
+    rerouted_to: Mapped[int | None] = mapped_column(Integer, nullable=True)
     created_at: Mapped[datetime] = mapped_column(Timestamp)
     ended_at: Mapped[datetime | None] = mapped_column(Timestamp, nullable=True)
 

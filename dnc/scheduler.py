@@ -12,9 +12,23 @@ idle machine and makes rerouting after an alarm exact: only the interrupted part
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from datetime import datetime
 
+from dnc.allocation import (
+    ACTIVE,
+    COMPLETED,
+    DEFAULT_LOST_CONTACT_S,
+    DISPATCHED,
+    INTERRUPTED,
+    RUNNING,
+    START_FAILED,
+    STARTED,
+    Alloc,
+    Look,
+    settle,
+    step,
+)
 from dnc.rules import JobView, Rule
 
 IDLE, BUSY, ALARM, OFFLINE = "idle", "busy", "alarm", "offline"
@@ -27,6 +41,28 @@ class MachineView:
     state: str  # idle | busy | alarm | offline (from the monitoring model)
     part_count: int
     groups: tuple[str, ...] = ()
+    # What the allocation state machine looks at (dnc.allocation.Look); None = derive it
+    # from `state` (busy = in cycle; offline = contact lost).
+    connected: bool | None = None
+    offline_s: float = 0.0
+    in_cycle: bool | None = None
+    program: str | None = None
+    estop: bool = False
+    alarm: str | None = None  # a FAULT-level alarm's text ("" if unknown); None = none
+    warnings: tuple[str, ...] = ()
+
+    def look(self) -> Look:
+        alarm = self.alarm if self.alarm is not None else ("" if self.state == ALARM else None)
+        return Look(
+            connected=self.state != OFFLINE if self.connected is None else self.connected,
+            offline_s=self.offline_s,
+            in_cycle=self.state == BUSY if self.in_cycle is None else self.in_cycle,
+            program=self.program,
+            part_count=self.part_count,
+            alarm=alarm,
+            estop=self.estop,
+            warnings=self.warnings,
+        )
 
 
 @dataclass(frozen=True, slots=True)
@@ -51,6 +87,17 @@ class AllocationState:
     parts_at_start: int  # the machine's part counter when the allocation was made
     running: bool  # the machine has been seen busy with it
     dispatch_failed: bool = False
+    # The dispatch's phase (dnc.allocation.DISPATCH_PHASES); None = derive it from
+    # `dispatch_failed` (failed, else started).
+    dispatch: str | None = None
+    program: str | None = None  # O1234: the program the allocation runs
+    state: str | None = None  # None = running/dispatched from `running`; or "interrupted"
+    note: str = ""  # the last note recorded on it
+
+    def alloc(self, job_open: bool) -> Alloc:
+        phase = self.dispatch or (START_FAILED if self.dispatch_failed else STARTED)
+        state = self.state or (RUNNING if self.running else DISPATCHED)
+        return Alloc(state, self.machine, self.parts_at_start, phase, self.program, job_open)
 
 
 @dataclass(frozen=True, slots=True)
@@ -78,6 +125,32 @@ class Interrupt:
     allocation_id: int
     job_id: int
     reason: str
+    cancel_dispatch: bool = False  # its program was never started: call the dispatch off
+
+
+@dataclass(frozen=True, slots=True)
+class Reroute:
+    """An interrupted allocation's part goes to this tick's `to`-th Allocate."""
+
+    allocation_id: int
+    job_id: int
+    to: int
+
+
+@dataclass(frozen=True, slots=True)
+class Fail:
+    allocation_id: int
+    job_id: int
+    reason: str
+
+
+@dataclass(frozen=True, slots=True)
+class Note:
+    """Recorded on the allocation (an alarm or warning while the machine cut on)."""
+
+    allocation_id: int
+    job_id: int
+    text: str
 
 
 @dataclass
@@ -95,40 +168,48 @@ def decide(
     rule: Rule,
     rule_name: str,
     now: datetime,
+    *,
+    lost_contact_s: float = DEFAULT_LOST_CONTACT_S,
 ) -> Decisions:
     out = Decisions()
     by_name = {m.name: m for m in machines}
     busy_machines: set[str] = set()
     active_parts: dict[int, int] = {}
     done_now: dict[int, int] = {j.id: j.done for j in jobs}
+    open_jobs = {j.id for j in jobs if not j.cancelled}
+    # interrupted allocations whose part waits for a machine, oldest first, per job
+    waiting_reroute: dict[int, list[AllocationState]] = {}
+
+    def hold(alloc: AllocationState) -> None:
+        busy_machines.add(alloc.machine)
+        active_parts[alloc.job_id] = active_parts.get(alloc.job_id, 0) + 1
 
     for alloc in allocations:
+        a = alloc.alloc(alloc.job_id in open_jobs)
+        if a.state == INTERRUPTED:
+            waiting_reroute.setdefault(alloc.job_id, []).append(alloc)
+            continue
+        if a.state not in ACTIVE:
+            continue
         mach = by_name.get(alloc.machine)
-        if mach is None or mach.state == OFFLINE:
-            # Lost contact is not a failure: the machine keeps running the program in its
-            # memory and we resynchronise its part counter when it answers again.
-            busy_machines.add(alloc.machine)
-            active_parts[alloc.job_id] = active_parts.get(alloc.job_id, 0) + 1
-            continue
-        if mach.part_count > alloc.parts_at_start:
-            out.actions.append(Complete(alloc.id, alloc.job_id, 1))
-            done_now[alloc.job_id] = done_now.get(alloc.job_id, 0) + 1
-            if mach.state == BUSY:
+        # a machine gone from the cell's configuration is as lost as one that stopped answering
+        look = mach.look() if mach is not None else Look(connected=False, offline_s=float("inf"))
+        nxt = step(a, look, lost_contact_s=lost_contact_s)
+        if nxt.note and nxt.note != alloc.note:
+            out.actions.append(Note(alloc.id, alloc.job_id, nxt.note))
+        if nxt.state == COMPLETED:
+            out.actions.append(Complete(alloc.id, alloc.job_id, nxt.parts))
+            done_now[alloc.job_id] = done_now.get(alloc.job_id, 0) + nxt.parts
+            if mach is not None and mach.state != IDLE:
                 busy_machines.add(mach.name)
-            continue
-        if mach.state == ALARM or alloc.dispatch_failed:
-            why = (
-                f"machine {mach.name} raised an alarm"
-                if mach.state == ALARM
-                else f"dispatch to {mach.name} failed"
-            )
-            out.actions.append(Interrupt(alloc.id, alloc.job_id, why))
-            busy_machines.add(mach.name)
-            continue
-        if mach.state == BUSY and not alloc.running:
-            out.actions.append(MarkRunning(alloc.id))
-        busy_machines.add(mach.name)
-        active_parts[alloc.job_id] = active_parts.get(alloc.job_id, 0) + 1
+        elif nxt.state == INTERRUPTED:
+            out.actions.append(Interrupt(alloc.id, alloc.job_id, nxt.reason, nxt.cancel_dispatch))
+            busy_machines.add(alloc.machine)  # taken again at the next look, not this one
+            waiting_reroute.setdefault(alloc.job_id, []).append(alloc)
+        else:
+            if nxt.state == RUNNING and a.state == DISPATCHED:
+                out.actions.append(MarkRunning(alloc.id))
+            hold(alloc)
 
     def remaining(job: JobState) -> int:
         return job.quantity - done_now[job.id] - active_parts.get(job.id, 0)
@@ -142,6 +223,7 @@ def decide(
     # idle machine of the class then takes the best-ranked job that still has parts left.
     rankings: dict[tuple[str, tuple[str, ...]], list] = {}
     by_id = {j.id: j for j in waiting}
+    allocated = 0
     for mach in idle:
         key = (mach.kind, mach.groups)
         if key not in rankings:
@@ -166,5 +248,16 @@ def decide(
                 )
             )
             active_parts[best.job.id] = active_parts.get(best.job.id, 0) + 1
+            # the job's oldest interrupted part is the one this allocation makes again
+            queue = waiting_reroute.get(best.job.id)
+            if queue:
+                out.actions.append(Reroute(queue.pop(0).id, best.job.id, allocated))
+            allocated += 1
             break
+    # Interrupted parts of a closed job have nowhere to go.
+    for job_id, queue in waiting_reroute.items():
+        for alloc in queue:
+            if job_id not in open_jobs:
+                end = settle(replace(alloc.alloc(False), state=INTERRUPTED), rerouted_to=None)
+                out.actions.append(Fail(alloc.id, job_id, end.reason))
     return out

@@ -48,23 +48,49 @@ def check_size(size: int, *, limit: int, name: str = "upload") -> None:
         )
 
 
+#: the first character outside what a stored program may hold: ISO 6983 / EIA tape carries
+#: the 7-bit ISO 646 code (printable 0x20..0x7E) and, as block ends and spacing, LF, CR, TAB;
+#: DC1-DC4 are stripped (tape reader control). Anything else is refused with where it is.
+_OUTSIDE = re.compile(r"[^\t\n\r\x11-\x14\x20-\x7e]")
+_STRIP_CONTROL = dict.fromkeys(_STRIPPED_CONTROL)
+
+
 def normalise_text(text: str, *, name: str = "upload") -> str:
-    out = []
-    for offset, ch in enumerate(text):
-        code = ord(ch)
-        if code < 0x20 or code == 0x7F:
-            if code in _STRIPPED_CONTROL:
-                continue
-            if code not in _ALLOWED_CONTROL:
-                raise InvalidUpload(
-                    f"{name}: binary data (control character 0x{code:02X}) at offset {offset}",
-                    offset=offset,
-                )
-        out.append(ch)
-    text = "".join(out).replace("\r\n", "\n").replace("\r", "\n")
+    """The stored form of a program text, or InvalidUpload naming the first character
+    outside the ISO 6983 / EIA character set: its byte offset (in the UTF-8 text), line and
+    column (1-based), and what it is. A non-ASCII character would be stored, pass the NC
+    check and then fail the 7-bit tape at dispatch."""
+    bad = _OUTSIDE.search(text)
+    if bad is not None:
+        raise _outside(text, bad.start(), name)
+    text = text.translate(_STRIP_CONTROL).replace("\r\n", "\n").replace("\r", "\n")
     if not text.strip() or not text.strip("%\n \t"):
         raise InvalidUpload(f"{name}: the program is empty")
     return text
+
+
+def _outside(text: str, at: int, name: str) -> InvalidUpload:
+    ch = text[at]
+    code = ord(ch)
+    before = text[:at]
+    line = before.count("\n") + 1
+    column = at - (before.rfind("\n") + 1) + 1
+    offset = len(before.encode("utf-8", "surrogatepass"))
+    where = dict(offset=offset, line=line, column=column)
+    if code < 0x20 or code == 0x7F:
+        return InvalidUpload(
+            f"{name}: binary data (control character 0x{code:02X}) at offset {offset} "
+            f"(line {line}, column {column})",
+            **where,
+        )
+    utf8 = ch.encode("utf-8", "surrogatepass").hex(" ").upper()
+    return InvalidUpload(
+        f"{name}: character {ch!r} (U+{code:04X}, bytes {utf8}) at byte offset {offset}, "
+        f"line {line}, column {column} is outside the ISO 6983 / EIA character set "
+        "(7-bit ISO code: printable ASCII, TAB, LF, CR); a machine's tape cannot carry it",
+        character=f"U+{code:04X}",
+        **where,
+    )
 
 
 def _even_parity(byte: int) -> bool:

@@ -21,7 +21,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from datetime import UTC, datetime, timedelta
 
-from sqlalchemy import bindparam, or_, select, update
+from sqlalchemy import bindparam, exists, or_, select, update
 from sqlalchemy.orm import Session, sessionmaker
 
 from dnc import models as m
@@ -41,8 +41,11 @@ log = logging.getLogger(__name__)
 STARTING = "starting"
 
 ClientFactory = Callable[[str, int, dict], DncClient]
-Starter = Callable[[str, int], None]
-"""(machine name, program number) -> None: cycle start through the machine's remote panel."""
+Starter = Callable[[str, int], "int | None"]
+"""(machine name, program number) -> the machine's part counter just before cycle start was
+pressed (None if unknown): cycle start through the machine's remote panel. The counter is
+written as the allocation's baseline with the confirmed start, so a part an operator made
+between the allocation and the start is never counted as the allocation's."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -76,10 +79,16 @@ class TransferWorker:
         starter: Starter | None = None,
         retry: RetryPolicy | None = None,
         now: Callable[[], datetime] | None = None,
+        part_counter: Callable[[str], int | None] | None = None,
     ) -> None:
         self._sessions = sessions
         self._client = client_factory
         self._starter = starter
+        # The machine's part counter as the host sees it (None: unknown). Read before the
+        # start is claimed and written as the allocation's baseline with the claim, so a
+        # host killed between pressing cycle start and confirming it leaves a baseline that
+        # does not count an operator's earlier part as the job's.
+        self._part_counter = part_counter
         self.retry = retry or RetryPolicy()
         self._now = now or (lambda: datetime.now(UTC))
         self._recovered = False
@@ -175,6 +184,10 @@ class TransferWorker:
         except Exception as exc:
             failure = TransferError("read", f"revision text {found.sha256[:12]}: {exc}")
             return self._fail(dispatch_id, job["attempts"], failure)
+        if (unsendable := _outside_tape_code(text)) is not None:
+            # stored before uploads were held to the ISO character set: the 7-bit tape
+            # cannot carry it, on this attempt or any other
+            return self._fail(dispatch_id, job["attempts"], unsendable)
         try:
             host, port = _address(job["address"], dispatch_id)
             client = self._client(host, port, job["profile"])
@@ -185,7 +198,8 @@ class TransferWorker:
                 else:
                     result = client.send_program(text, number=job["number"])
                     sent = result.bytes_sent
-                    self._step(snap, VERIFYING, bytes_sent=sent)
+                    if not self._step(snap, VERIFYING, bytes_sent=sent):
+                        return self._called_off(dispatch_id)
                     verified = self._verify(client, job, text, result.sha256)
             if job["start"]:
                 if self._starter is None:
@@ -193,15 +207,30 @@ class TransferWorker:
                         "start",
                         "start requested but this host has no cycle-start path to the machine",
                     )
-                self._step(snap, STARTING, bytes_sent=sent, verified=verified)
+                # Claimed under the database's write lock, conditional on the dispatch not
+                # having been called off and its allocation still active: a part whose
+                # allocation the scheduler interrupted is never started.
+                before = self._part_counter(job["machine"]) if self._part_counter else None
+                if not self._step(
+                    snap, STARTING, bytes_sent=sent, verified=verified, start=True, baseline=before
+                ):
+                    return self._called_off(dispatch_id)
                 try:
-                    self._starter(job["machine"], job["number"])
+                    baseline = self._starter(job["machine"], job["number"])
                 except Exception as exc:
                     raise TransferError("start", f"cycle start failed: {exc}") from exc
-            self._step(snap, DONE, bytes_sent=sent, verified=verified, error=None)
+            else:
+                baseline = None
+            done = dict(bytes_sent=sent, verified=verified, error=None)
+            if not self._step(snap, DONE, baseline=baseline, **done):
+                return self._called_off(dispatch_id)
             return DONE
         except TransferError as exc:
             return self._fail(dispatch_id, job["attempts"], exc)
+        except Exception as exc:  # a bug costs one attempt, recorded, never a dispatch stuck
+            log.exception("dispatch %d: attempt failed", dispatch_id)
+            failure = TransferError("internal", f"{type(exc).__name__}: {exc}")
+            return self._fail(dispatch_id, job["attempts"], failure)
 
     # ------------------------------------------------------------------------------ helpers
 
@@ -232,7 +261,9 @@ class TransferWorker:
         now = self._now()
         retry = exc.retryable and attempts < self.retry.max_attempts
         with transaction(self._sessions) as s:
-            row = s.get(m.Dispatch, dispatch_id)
+            row = s.get(m.Dispatch, dispatch_id, with_for_update=True)
+            if row.state not in _WORKER_STATES:
+                return row.state  # called off by the scheduler meanwhile: it stays so
             row.bytes_sent = max(row.bytes_sent, exc.sent)
             error = f"{exc.kind}: {exc.message}"
             if retry:
@@ -243,24 +274,46 @@ class TransferWorker:
                 self._set(s, row, FAILED, now, error=error)
             return row.state
 
-    def _step(self, snap: dict, state: str, **values) -> None:
+    def _step(
+        self,
+        snap: dict,
+        state: str,
+        *,
+        start: bool = False,
+        baseline: int | None = None,
+        **values,
+    ) -> bool:
         """Move a claimed dispatch on: one UPDATE and its event, from the claim's snapshot
-        (only this worker writes a dispatch it has claimed, so the snapshot is the row)."""
+        (only this worker writes a dispatch it has claimed, so the snapshot is the row).
+
+        False if the scheduler has called the dispatch off meanwhile (or, for the start,
+        its allocation is no longer active): nothing is written then."""
         now = self._now()
-        snap.update(values, state=state)
         with transaction(self._sessions) as s:
-            s.execute(
-                _STEP,
+            moved = s.execute(
+                _START if start else _STEP,
                 dict(
                     dispatch_id=snap["id"],
                     state=state,
                     updated_at=now,
-                    bytes_sent=snap["bytes_sent"],
-                    verified=snap["verified"],
-                    error=snap["error"],
+                    bytes_sent=values.get("bytes_sent", snap["bytes_sent"]),
+                    verified=values.get("verified", snap["verified"]),
+                    error=values.get("error", snap["error"]),
                 ),
-            )
+            ).first()
+            if moved is None:
+                return False
+            if isinstance(baseline, int):
+                s.execute(_BASELINE, dict(b_dispatch=snap["id"], b_parts=baseline))
+            snap.update(values, state=state)
             _event(s, snap, now)
+            return True
+
+    def _called_off(self, dispatch_id: int) -> str:
+        with transaction(self._sessions) as s:
+            state = s.scalar(select(_D.c.state).where(_D.c.id == dispatch_id))
+        log.info("dispatch %s called off by the scheduler: not started", dispatch_id)
+        return state
 
     def _set(self, s: Session, row: m.Dispatch, state: str, now: datetime, **values) -> None:
         row.state, row.updated_at = state, now
@@ -299,16 +352,40 @@ _CLAIM = (
 _CONTENT = select(m.Content.__table__.c.text).where(
     m.Content.__table__.c.sha256 == bindparam("sha")
 )
+# The states only the worker moves a claimed dispatch through; the scheduler may call a
+# dispatch off (failed) before its start, so every step is conditional on still being in one.
+_WORKER_STATES = (TRANSFERRING, VERIFYING, STARTING)
+_STEP_VALUES = dict(
+    state=bindparam("state"),
+    updated_at=bindparam("updated_at"),
+    bytes_sent=bindparam("bytes_sent"),
+    verified=bindparam("verified"),
+    error=bindparam("error"),
+)
 _STEP = (
     update(_D)
-    .where(_D.c.id == bindparam("dispatch_id"))
-    .values(
-        state=bindparam("state"),
-        updated_at=bindparam("updated_at"),
-        bytes_sent=bindparam("bytes_sent"),
-        verified=bindparam("verified"),
-        error=bindparam("error"),
+    .where(_D.c.id == bindparam("dispatch_id"), _D.c.state.in_(_WORKER_STATES))
+    .values(**_STEP_VALUES)
+    .returning(_D.c.id)
+)
+_A = m.Allocation.__table__
+_START = (
+    update(_D)
+    .where(
+        _D.c.id == bindparam("dispatch_id"),
+        _D.c.state.in_((TRANSFERRING, VERIFYING)),
+        ~exists().where(_A.c.dispatch_id == _D.c.id, _A.c.status.not_in(("dispatched", "running"))),
     )
+    .values(**_STEP_VALUES)
+    .returning(_D.c.id)
+)
+_BASELINE = (
+    update(_A)
+    .where(
+        _A.c.dispatch_id == bindparam("b_dispatch"),
+        _A.c.status.in_(("dispatched", "running")),
+    )
+    .values(parts_at_start=bindparam("b_parts"))
 )
 TEXT_CACHE_CHARS = 64 * 1024 * 1024
 _EVENT_FIELDS = (
@@ -388,3 +465,17 @@ def _address(address: str, dispatch_id: int) -> tuple[str, int]:
             "connect", f"machine has no DNC address (got {address!r}) for dispatch {dispatch_id}"
         )
     return host, int(port)
+
+
+def _outside_tape_code(text: str) -> TransferError | None:
+    """A failure naming the first character the ISO 7-bit tape cannot carry, or None."""
+    if text.isascii():
+        return None
+    at = next(i for i, ch in enumerate(text) if ord(ch) > 0x7F)
+    before = text[:at]
+    line, column = before.count("\n") + 1, at - (before.rfind("\n") + 1) + 1
+    return TransferError(
+        "encode",
+        f"character {text[at]!r} (U+{ord(text[at]):04X}) at line {line}, column {column} is "
+        "outside the ISO 7-bit tape code; the revision cannot be sent (upload a corrected one)",
+    )

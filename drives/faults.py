@@ -130,6 +130,68 @@ _KINDS = (
 #: Every fault kind by name, for the cell's fault endpoints.
 FAULT_KINDS: dict[str, FaultKind] = {k.name: k for k in _KINDS}
 
+#: How each kind is detected on the default machine (what reports it, within which bound of
+#: machine time from the injection, on a moving axis), or why it is not. Tested by
+#: tests/cnc/test_recovery.py for every kind that a bound is given for; docs/recovery.md.
+DETECTION: dict[str, str] = {
+    "load_force": "above the drive's peak force: NC following error (3010) within 50 ms; "
+    "a force the drive holds near its peak current: I2t 0x2350 within ~3 s",
+    "blocked": "NC following error (3010) within 50 ms of moving; at a standstill not at all",
+    "encoder_break": "EMCY 0x7305 within 1 sub-step (< 10 ms at the NC)",
+    "encoder_jump": "EMCY 0x7305 within 1 sub-step (< 10 ms at the NC)",
+    "inverter_fault": "EMCY 0x2310 within 1 sub-step (< 10 ms at the NC)",
+    "supply_loss": "EMCY 0x3130 after 20 ms (< 30 ms at the NC)",
+    "mains_voltage": "swell above 420 V link: EMCY 0x3210 within 1 sub-step; sag: EMCY 0x3220 "
+    "once the link has sagged below 200 V (seconds, with the load: < 3 s at 150 V)",
+    "chopper_failure": "EMCY 0x7111 from the drive's brake check (every 100 ms): < 102 ms, "
+    "before braking energy could lift the link to the 420 V trip (0x3210)",
+    "ambient_temperature": "heat-sink sensor (5 s lag behind the cabinet air): warning bit 7 "
+    "above 75 degC, EMCY 0x4210 above 85 degC: 11.5 s at 90 degC; the winding model's 0x4310 "
+    "comes much later",
+    "winding_temperature": "above 150 degC: EMCY 0x4310 within 1 sub-step; above 130 degC: "
+    "statusword warning bit 7 only",
+    "backlash": "UNDETECTABLE BY DESIGN in a semi-closed loop: the motor encoder does not see "
+    "the dead band between nut and table; only a second (linear) encoder or a ballbar test "
+    "shows it (larger contour error at reversals)",
+    "drop": "the machine's master: no TPDO1 for 5 SYNC cycles -> 0x8100 cyclic feedback lost "
+    "(12 ms at 2 ms); heartbeat lost 0x8130 after 3 x 100 ms; one lost frame is tolerated",
+    "drop_rpdo": "the drive's RPDO deadline 0x1400:5 (the machine's master writes 50 ms): EMCY "
+    "0x8250 RPDO timeout -> fault (0x6007 = 1) within 52 ms; one lost frame is tolerated",
+    "corrupt": "the machine's master: the destroyed TPDO1s are missing -> 0x8100 cyclic "
+    "feedback lost after 5 SYNC cycles (12 ms); one destroyed frame is tolerated",
+    "delay": "the machine's master: no TPDO1 in its SYNC cycle for 5 cycles -> 0x8100 "
+    "(12 ms) when the delay exceeds 5 cycles; a single late frame is tolerated",
+    "bus_off": "the machine's master: no TPDO1 for 5 SYNC cycles -> 0x8100 (12 ms); heartbeat "
+    "lost 0x8130 after 3 x 100 ms",
+    "babble": "the machine's master: the starved axes' TPDO1s missing -> 0x8100 (12 ms); "
+    "heartbeats lost 0x8130 after 3 x 100 ms",
+    "power_cycle": "boot-up frame at the master: drive fault within one cycle (< 10 ms)",
+}
+
+#: What brings the machine back (docs/recovery.md): after the cause is gone, one RESET (the
+#: fault reset edge 0x6040 bit 7, the master restarts a rebooted drive), then home.
+RECOVERY: dict[str, str] = {
+    "load_force": "remove the force; after I2t let the motor rest ~3 s; RESET; home",
+    "blocked": "free the slide; RESET; home",
+    "encoder_break": "repair the encoder cable; RESET; home (the position is lost)",
+    "encoder_jump": "RESET; home (the position is lost)",
+    "inverter_fault": "the drive needs service; RESET is refused while it is shorted",
+    "supply_loss": "restore the mains; RESET; home",
+    "mains_voltage": "restore the mains level; RESET; home",
+    "chopper_failure": "replace the brake chopper / resistor; RESET; home",
+    "ambient_temperature": "cool the cabinet; RESET when the winding is below 130 degC; home",
+    "winding_temperature": "let the motor cool below 130 degC; RESET; home",
+    "backlash": "re-preload or replace the nut; compensate backlash in the NC",
+    "drop": "fix the cable / connector; RESET (the heartbeat is back); home",
+    "drop_rpdo": "fix the cable; RESET; home",
+    "corrupt": "fix the termination / cable; RESET; home",
+    "delay": "reduce the bus load; RESET; home",
+    "bus_off": "fix the line; RESET (the node recovers); home",
+    "babble": "remove the babbling node; RESET; home",
+    "power_cycle": "RESET (the master restarts the drive: NMT reset communication, PDO "
+    "configuration, NMT start); home (the position is lost)",
+}
+
 
 def describe() -> list[dict]:
     """FAULT_KINDS as plain data (JSON for an endpoint)."""
@@ -139,6 +201,8 @@ def describe() -> list[dict]:
             "target": k.target,
             "description": k.description,
             "expect": k.expect,
+            "detection": DETECTION.get(k.name, ""),
+            "recovery": RECOVERY.get(k.name, ""),
             "params": [
                 {"name": p.name, "unit": p.unit, "default": p.default, "min": p.low, "max": p.high}
                 for p in k.params

@@ -43,8 +43,9 @@ from plc.signals import (
     signals,
 )
 
-# everything the host may write, and nothing else
-WRITABLE = "%MX0.0-%MX0.4,%MW0-%MW5"
+# everything the host may write, and nothing else; overrides outside 0..200 % are refused
+# by the face with exception 03 (illegal data value), never wrapped or clamped
+WRITABLE = "%MX0.0-%MX0.4,%MW0-%MW2=0..200,%MW3-%MW5"
 
 COMMAND_COILS = {s.name: s.modbus[1] for s in signals(HOST_TO_PLC) if s.area == "MX"}
 COMMAND_REGISTERS = {s.name: s.modbus[1] for s in signals(HOST_TO_PLC) if s.area == "MW"}

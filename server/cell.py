@@ -158,13 +158,19 @@ class Cell:
             ).start()
             self.monitor = MonitoringModel(self.agent, self.links)
             self._wait_connected(ready_timeout_s)
-            self.scheduler = Scheduler(self.sessions, self.monitor.views, rule=self.rule)
+            self.scheduler = Scheduler(
+                self.sessions,
+                self.monitor.views,
+                rule=self.rule,
+                lost_contact_s=self.config.host.lost_contact_s,
+            )
             self.host_requests = HostRequests()
             self.worker = TransferWorker(
                 self.sessions,
                 client_factory=self._dnc_client,
                 starter=self._audited(make_starter(self.links, self.monitor)),
                 retry=RetryPolicy(max_attempts=3, base_s=0.5, cap_s=5.0),
+                part_counter=lambda name: self.monitor.status(name)["counters"]["part_count"],
             )
             self.worker.recover()
             self.alarm_watch = AlarmWatch(self.sessions, self.monitor)
@@ -445,7 +451,7 @@ class Cell:
     # ------------------------------------------------------------------ faults
     def fault_types(self) -> list[dict]:
         from cnc.machine.faults import DRIVE_ALIASES, PLC_ALIASES
-        from drives.faults import FAULT_KINDS
+        from drives.faults import DETECTION, FAULT_KINDS, RECOVERY
         from plc.machine_io import FAULTS
 
         out = []
@@ -458,6 +464,8 @@ class Cell:
                         {"name": p.name, "unit": p.unit, "default": p.default} for p in kind.params
                     ],
                     "description": getattr(kind, "description", "") or "",
+                    "detection": DETECTION.get(name, ""),
+                    "recovery": RECOVERY.get(name, ""),
                 }
             )
         for alias, (kind, _) in DRIVE_ALIASES.items():

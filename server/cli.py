@@ -6,6 +6,7 @@ from pathlib import Path
 
 import typer
 
+from cam.cli import cam_app
 from cnc.cli import nc_app
 from cnc.cli_machine import machine as machine_command
 from dnc.cli import dnc_app
@@ -22,6 +23,7 @@ app.add_typer(nc_app, name="nc")
 app.add_typer(plc_app, name="plc")
 app.add_typer(drives_app, name="drives")
 app.add_typer(dnc_app, name="dnc")
+app.add_typer(cam_app, name="cam")
 
 
 @app.command()

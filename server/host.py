@@ -22,6 +22,11 @@ IN_CYCLE = frozenset({"ACTIVE", "INTERRUPTED", "FEED_HOLD", "OPTIONAL_STOP", "PR
 CONDITIONS = ("nc_cond", "plc_cond", "bus_cond", "dnc_cond", "servo")
 
 
+def _text(value) -> str:
+    """An EVENT's text; UNAVAILABLE (nothing reported) reads as empty."""
+    return "" if value in (None, "UNAVAILABLE") else str(value)
+
+
 def _num(text: str) -> float | None:
     try:
         return float(text)
@@ -32,9 +37,19 @@ def _num(text: str) -> float | None:
 class MonitoringModel:
     """Each machine's live status, from the MTConnect agent's current values."""
 
-    def __init__(self, agent, links: Mapping[str, MachineLink]) -> None:
+    def __init__(
+        self,
+        agent,
+        links: Mapping[str, MachineLink],
+        *,
+        monotonic: Callable[[], float] = time.monotonic,
+    ) -> None:
         self.agent = agent
         self.links = dict(links)
+        self._monotonic = monotonic
+        # when each machine was first seen without contact (cleared when it answers again);
+        # a host that restarts starts counting afresh, which only delays a reroute
+        self._lost_since: dict[str, float] = {}
 
     def status(self, name: str) -> dict:
         a, link = self.agent, self.links[name]
@@ -54,6 +69,7 @@ class MonitoringModel:
                         }
                     )
         connected = a.state[name].connected
+        ref = v("referenced") or ""
         feed = _num(v("path_feedrate"))
         part_count = _num(v("part_count"))
         return {
@@ -80,6 +96,13 @@ class MonitoringModel:
                 "mode": v(f"{spindle}mode"),
             },
             "alarms": alarms,
+            # homed since power-on / the last loss of reference (None: not reported)
+            "referenced": (
+                True if ref == "REFERENCED" else False if ref.startswith("NOT_REFERENCED") else None
+            ),
+            "unreferenced_axes": ref.split()[1:] if ref.startswith("NOT_REFERENCED") else [],
+            # the NC's reason for the last refused cycle start ("" after a start or select)
+            "cycle_start_refused": _text(v("start_refused")),
             "counters": {"part_count": None if part_count is None else int(part_count)},
             "bus_load": {
                 "mean_percent": _num(v("bus_load")),
@@ -93,7 +116,10 @@ class MonitoringModel:
 
     def state(self, name: str) -> str:
         """idle | busy | alarm | offline, as the scheduler sees the machine."""
-        s = self.status(name)
+        return self._state(self.status(name))
+
+    @staticmethod
+    def _state(s: dict) -> str:
         if not s["connected"] or s["availability"] != "AVAILABLE":
             return OFFLINE
         # an alarm first: a machine stopped by one may still say INTERRUPTED or FEED_HOLD
@@ -103,14 +129,47 @@ class MonitoringModel:
             return BUSY
         if s["mode"] != "AUTOMATIC":
             return OFFLINE  # in the operator's hands (REF, JOG, MDI): not for the cell
+        if s["referenced"] is False:
+            # READY in AUTO but not homed (a reset after a fault that lost the reference):
+            # it cannot cut, a part on it is lost, and nothing is dispatched to it until
+            # the operator homes it (warning 3031 says so per axis)
+            return ALARM
         return IDLE
+
+    def offline_s(self, name: str, connected: bool) -> float:
+        """How long contact with the machine has been lost (0 while it answers)."""
+        if connected:
+            self._lost_since.pop(name, None)
+            return 0.0
+        now = self._monotonic()
+        return now - self._lost_since.setdefault(name, now)
 
     def views(self) -> list[MachineView]:
         out = []
         for name, link in self.links.items():
-            count = self.status(name)["counters"]["part_count"]
-            out.append(MachineView(name, link.kind, self.state(name), count or 0))
+            s = self.status(name)
+            faults = [a for a in s["alarms"] if a["level"] == "FAULT"]
+            out.append(
+                MachineView(
+                    name,
+                    link.kind,
+                    self._state(s),
+                    s["counters"]["part_count"] or 0,
+                    connected=bool(s["connected"]),
+                    offline_s=self.offline_s(name, bool(s["connected"])),
+                    in_cycle=s["execution"] in IN_CYCLE,
+                    program=s["program"] or "",
+                    estop=s["emergency_stop"] == "TRIGGERED",
+                    alarm=_alarm_text(faults[0]) if faults else None,
+                    warnings=tuple(_alarm_text(a) for a in s["alarms"] if a not in faults),
+                )
+            )
         return out
+
+
+def _alarm_text(alarm: dict) -> str:
+    code = f"{alarm['code']} " if alarm.get("code") else ""
+    return f"{alarm['condition']} {alarm['level']} {code}{alarm['text'] or ''}".strip()
 
 
 class AlarmWatch:
@@ -155,16 +214,21 @@ class AlarmWatch:
         return len(changes)
 
 
+class StartRefused(MachineUnavailable):
+    """The NC refused the cycle start; the text carries its reason."""
+
+
 def make_starter(
     links: Mapping[str, MachineLink],
     monitor: MonitoringModel,
     timeout_s: float = 30.0,
     repress_s: float = 5.0,
-) -> Callable[[str, int], None]:
+) -> Callable[[str, int], int | None]:
     """The transfer worker's cycle start: select the program and press cycle start on the
-    machine's Modbus remote panel, and wait until the machine reports it running."""
+    machine's Modbus remote panel, and wait until the machine reports it running. Returns
+    the machine's part counter from just before the press (the allocation's baseline)."""
 
-    def start(machine: str, number: int) -> None:
+    def start(machine: str, number: int) -> int | None:
         link = links[machine]
         name = f"O{number:04d}"
         before = monitor.status(machine)["counters"]["part_count"]
@@ -181,6 +245,13 @@ def make_starter(
             s = monitor.status(machine)
             if s["execution"] in IN_CYCLE and s["program"] == name:
                 return True
+            if s["cycle_start_refused"] and s["program"] == name:
+                # the NC said no (not homed, an alarm, the door...): say why now, not after
+                # the timeout
+                raise StartRefused(
+                    f"{machine}: cycle start of {name} refused by the NC: "
+                    f"{s['cycle_start_refused']}"
+                )
             # a very short program may have run and ended between two looks
             if (s["counters"]["part_count"] or 0) > (before or 0):
                 return True
@@ -203,6 +274,9 @@ def make_starter(
 
         try:
             wait_for(running, timeout_s, f"{machine}: {name} running")
+            return before
+        except StartRefused:
+            raise
         except MachineUnavailable as exc:
             panel = link.panel_status()
             if panel.get("CycleStartRefused"):

@@ -260,7 +260,7 @@ def test_the_image_installs_the_healthcheck_and_the_cell_file():
     dockerfile = (ROOT / "docker" / "Dockerfile").read_text()
     assert re.search(r"^FROM python:3\.11", dockerfile, re.M)
     assert "COPY docker/healthcheck.py /usr/local/bin/fmscell-healthcheck" in dockerfile
-    for package in ("server", "web_api", "dnc", "cnc", "plc", "drives"):
+    for package in ("server", "web_api", "dnc", "cam", "cnc", "plc", "drives"):
         assert f"COPY {package} ./{package}" in dockerfile, package
     assert re.search(r"^USER (?!root)", dockerfile, re.M), "the services run unprivileged"
     ignored = (ROOT / "docker" / "Dockerfile.dockerignore").read_text().split()

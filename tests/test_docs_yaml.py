@@ -1,5 +1,6 @@
 """Every YAML snippet in the docs that is a cell or machine file is accepted by the loader
-(cnc.config), so a reader who copies one gets a working file."""
+(cnc.config; a 5-axis post description by cam.machine5), so a reader who copies one gets a
+working file."""
 
 from __future__ import annotations
 
@@ -9,6 +10,7 @@ from pathlib import Path
 import pytest
 import yaml
 
+from cam.machine5 import load_mill5
 from cnc.config import load_cell_config, load_machine_config
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -44,6 +46,8 @@ def test_yaml_snippet_is_accepted_by_the_loader(where, text):
         load_cell_config(doc)
     elif set(doc) <= {"host"}:
         load_cell_config({"machines": ONE_MACHINE, **doc})
+    elif doc.get("kind") == "mill5" and "kinematics" in doc:
+        load_mill5(doc)  # the CAM post's description of the 5-axis machine (docs/cam.md)
     elif "kind" in doc or "base" in doc:
         load_machine_config(doc)
     else:

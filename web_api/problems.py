@@ -16,6 +16,7 @@ from fastapi.exceptions import RequestValidationError
 from fastapi.responses import JSONResponse
 from pydantic import BaseModel, Field
 from starlette.exceptions import HTTPException as StarletteHTTPException
+from starlette.routing import Match
 from starlette.types import ASGIApp, Message, Receive, Scope, Send
 
 from dnc.errors import DncError
@@ -202,10 +203,15 @@ def install_problem_handlers(app: FastAPI, base: str) -> None:
         detail = exc.detail if isinstance(exc.detail, str) else json.dumps(exc.detail)
         if exc.status_code == 404 and detail == "Not Found":
             detail = f"no route {request.method} {request.url.path}"
+        headers = exc.headers
         if exc.status_code == 405:
+            allowed = allowed_methods(request)
             detail = f"{request.method} is not allowed on {request.url.path}"
+            if allowed:
+                detail += f"; allowed: {', '.join(allowed)}"
+                headers = {**(headers or {}), "Allow": ", ".join(allowed)}
         return problem_response(
-            request.url.path, base, exc.status_code, kind, detail, headers=exc.headers
+            request.url.path, base, exc.status_code, kind, detail, headers=headers
         )
 
     @app.exception_handler(Exception)
@@ -218,6 +224,24 @@ def install_problem_handlers(app: FastAPI, base: str) -> None:
             "internal",
             f"the server failed on this request ({type(exc).__name__}); it has been logged",
         )
+
+
+_METHODS = ("GET", "HEAD", "POST", "PUT", "PATCH", "DELETE", "OPTIONS")
+
+
+def allowed_methods(request: Request) -> list[str]:
+    """Every method some route of the app takes on this request's path (RFC 9110 §15.5.6:
+    the Allow header of a 405 lists them all). Starlette answers with the methods of the
+    first route whose path matched, so a path served by a GET route and a POST route said
+    only "POST" to a PUT. Each method is tried against the whole route table (included
+    routers nest their routes), which costs nothing on the paths that answer."""
+    routes = request.app.router.routes
+    allowed = []
+    for method in _METHODS:
+        scope = {**request.scope, "method": method}
+        if any(route.matches(scope)[0] == Match.FULL for route in routes):
+            allowed.append(method)
+    return allowed
 
 
 class BodySizeLimit:

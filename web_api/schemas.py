@@ -10,7 +10,7 @@ from __future__ import annotations
 from datetime import datetime
 from typing import Annotated, Any, Literal
 
-from pydantic import AwareDatetime, BaseModel, ConfigDict, Field, StringConstraints
+from pydantic import AwareDatetime, BaseModel, BeforeValidator, ConfigDict, Field, StringConstraints
 
 from dnc.tape import MAX_PROGRAM_NUMBER  # O1..O99999999
 
@@ -29,8 +29,23 @@ MachineName = Annotated[
 Comment = Annotated[str, StringConstraints(pattern=r"^[^\x00]*$", max_length=2000)]
 
 
+def _datetime_text(value: Any) -> Any:
+    if value is None or isinstance(value, (str, datetime)):
+        return value
+    raise ValueError("a date and time is an ISO 8601 string with a UTC offset, not a number")
+
+
+#: JSON has no datetime: the ISO 8601 string is parsed (lax), anything else refused (a
+#: number is no "seconds since 1970" guess)
+DateTimeText = Annotated[AwareDatetime, BeforeValidator(_datetime_text), Field(strict=False)]
+
+
 class _In(BaseModel):
-    model_config = ConfigDict(extra="forbid")
+    """Request bodies are strict: JSON `true` is no program number and `"1"` no revision id
+    (lax pydantic made them 1). A JSON integer is still a valid float. Only a datetime is
+    taken from its JSON string form (JSON has no datetime type)."""
+
+    model_config = ConfigDict(extra="forbid", strict=True)
 
 
 class ProgramCreate(_In):
@@ -64,7 +79,7 @@ class DispatchRequest(_In):
 class JobCreate(_In):
     revision_id: DbId
     quantity: int = Field(ge=1, le=1_000_000)
-    due_at: AwareDatetime | None = None
+    due_at: DateTimeText | None = None
     priority: int = Field(default=0, ge=-1000, le=1000)
     machine_group: MachineName | None = None
     cycle_time_s: float = Field(default=60.0, gt=0, le=1e7, allow_inf_nan=False)
@@ -170,9 +185,12 @@ class Job(BaseModel):
 class Allocation(BaseModel):
     id: int
     machine: str
+    # dnc/allocation.py: dispatched, running, completed, interrupted, rerouted, failed
     status: str
     dispatch_id: int | None
     reason: str | None
+    note: str = ""  # an alarm or warning noted while the machine cut on
+    rerouted_to: int | None = None  # the allocation that makes this one's part again
 
 
 class Decision(BaseModel):

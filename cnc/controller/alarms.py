@@ -25,6 +25,7 @@ AXES_DISABLED = 3002
 FOLLOWING_ERROR = 3010
 PROGRAM_ERROR = 3020
 HOMING_FAILED = 3030
+NOT_REFERENCED = 3031  # a warning per axis that lost its reference: home the machine
 DRIVE_FAULT = 3040
 BUS_FAULT = 3041
 DRIP_ABORTED = 3050
@@ -115,6 +116,12 @@ class AlarmList:
             keep.append(e)
         self._entries = keep
         return [e.alarm for e in keep]
+
+    def clear(self, number: int, axis: str | None = None) -> None:
+        """Drop the alarm `number` of `axis` (a SELF alarm whose condition ended)."""
+        self._entries = [
+            e for e in self._entries if not (e.alarm.number == number and e.alarm.axis == axis)
+        ]
 
     def nc_count(self) -> int:
         """Active alarms raised by the NC side (not mirrors of the PLC's)."""

@@ -124,6 +124,7 @@ class _Run:
         self.end_kind = None  # canon.StopKind when M2/M30 was reached
         self.line = 0
         self.lines_feed: dict[int, float | None] = {}  # line -> max feed mm/min (None rapid)
+        self.thread_rpm: dict[int, float] = {}  # line -> the rpm its thread moves are fed for
         self.text_lines = source if isinstance(source, list) else None
 
 
@@ -150,6 +151,7 @@ class Controller:
             section = getattr(config, "machine_data", None)
             machine_data = section.initial() if section is not None else MachineData()
         self.machine_data = machine_data
+        self._common_variables: dict[int, float] = {}  # Macro B #100-#199
         if tools is not None:  # an explicit table (tests, a DNC-side setup) replaces it
             machine_data.tools = {
                 n: ToolData(length=o.length, radius=o.radius, x=o.x, z=o.z)
@@ -228,6 +230,8 @@ class Controller:
         self._path_v = 0.0
         self._load = 0.0
         self._rpm = 0.0
+        self._spindle_phase = 0.0  # revolutions, mod 1 (an ideal encoder on the spindle)
+        self._spindle_index = False  # the one-revolution signal came in the last cycle
         self._cutting = False
         # tool life: the tool M6 put in the spindle and its cutting time not yet booked
         self._life_tool = 0
@@ -236,6 +240,9 @@ class Controller:
         self._ro_applied = -1.0
         self._status = MachineStatus()
         self._status_key = None
+        self._start_refused = ""  # why the last cycle start was refused (until a start/select)
+        self._unreferenced: tuple[str, ...] = ()
+        self._was_referenced: set[str] = set()  # axes referenced at least once
 
     # ================================================================ public API ===========
     @property
@@ -348,6 +355,7 @@ class Controller:
             self._plc_requests()
         self._manage_enable(fb)
         self._homing_step(fb)
+        self._watch_reference()
         if not fb.enabled or fb.homing or self._homing:
             # drives off or homing: the command follows the actual position (no jump later)
             self._cmd = dict(self._actual)
@@ -415,10 +423,15 @@ class Controller:
             raise CommandRefused(why[1])
         self.selected = number
         self._final = "READY"
+        self._start_refused = ""
         self._event(f"program O{number:04d} selected")
 
     def _cmd_cycle_start(self) -> None:
-        self._cycle_start()
+        try:
+            self._cycle_start()
+        except CommandRefused as exc:
+            self._start_refused = exc.reason
+            raise
 
     def _cmd_feed_hold(self) -> None:
         ex = self._execution()
@@ -463,6 +476,7 @@ class Controller:
         self._event(f"ACC {'on' if on else 'off'} limit {self.acc.limit_pct:g} %")
 
     def _cmd_alarm_reset(self) -> None:
+        self._start_refused = ""
         kept = self._alarms.reset(self._active_causes())
         self._event(f"alarm reset: {len(kept)} alarm(s) remain")
 
@@ -634,6 +648,7 @@ class Controller:
         self._start(_Run("AUTO", name, self._motion(), self._interpreter(name), lines))
 
     def _start(self, run: _Run) -> None:
+        self._start_refused = ""
         run.motion.set_single_block(self.single_block)
         self._run = run
         self._hold = False
@@ -673,6 +688,7 @@ class Controller:
             e.number in (al.DRIVE_FAULT, al.BUS_FAULT, al.FOLLOWING_ERROR, al.AXES_DISABLED)
             for e in self._alarms.active
         )
+        self._start_refused = ""
         kept = self._alarms.reset(self._active_causes())
         if drive_faults and not self._estop:
             self._axis("fault_reset")
@@ -731,6 +747,7 @@ class Controller:
             try:
                 self._cycle_start()
             except CommandRefused as exc:
+                self._start_refused = exc.reason
                 self._event(f"PLC: {exc.reason}")
         # the PLC alarm the NC sees: the lowest active number, mirrored as a SELF alarm
         number = int(plc.get("PlcAlarmNumber", 0)) if plc.get("PlcAlarm", False) else 0
@@ -749,6 +766,7 @@ class Controller:
             if why is None:
                 self.selected = number
                 self._final = "READY"
+                self._start_refused = ""
                 self._event(f"program O{number:04d} selected (PLC)")
                 self._select_answer = (True, 0)
             else:
@@ -913,7 +931,11 @@ class Controller:
                 or self._t - self._enable_sent_at >= self.settings.enable_retry_s - 1e-9
             )
             free = self._axis_cmd == "none"  # a fault reset or homing goes first
-            if due and free and not self._alarms.has(al.FOLLOWING_ERROR):
+            # with a drive, bus or following-error alarm active the drives stay off until
+            # the operator's reset (it sends the fault reset first): enabling a drive in FAULT
+            # only fails again, every retry period, with an alarm of its own
+            held = (al.FOLLOWING_ERROR, al.DRIVE_FAULT, al.BUS_FAULT)
+            if due and free and not any(self._alarms.has(n) for n in held):
                 self._axis("enable")
                 self._enable_sent_at = self._t
         elif not want and self._want_enable and fb.enabled and not self._estop:
@@ -947,6 +969,35 @@ class Controller:
                 return
             self._homing = ""
             self._event(f"homed {' '.join(self._homing_done)}")
+
+    def _watch_reference(self) -> None:
+        """Which axes are not referenced (`MachineStatus.unreferenced`: before the first
+        homing, after an E-stop, a quick stop, an encoder fault, a drive that rebooted): the
+        status says so at once, not first at a refused cycle start. An axis that *loses* its
+        reference also raises the warning 3031 "axis X not referenced: home the machine"
+        (rule self: homing ends it, RESET does not); at power-on the status alone says it,
+        as a control shows "reference return" before the first homing without an alarm."""
+        ref = self._ref
+        missing = tuple(a for a in self.axes if not (ref[a] and self._fb_homed(a)))
+        if missing == self._unreferenced:
+            return
+        for a in self._unreferenced:
+            if a not in missing:
+                self._alarms.clear(al.NOT_REFERENCED, a)
+                self._was_referenced.add(a)
+        for a in missing:
+            if a not in self._unreferenced and a in self._was_referenced:
+                self._alarms.raise_(
+                    al.NOT_REFERENCED,
+                    f"axis {a} not referenced: home the machine (REF mode, home)",
+                    self._t,
+                    axis=a,
+                    rule=al.SELF,
+                    cause="reference",
+                    severity="WARNING",
+                )
+                self._event(f"axis {a} lost its reference: home the machine")
+        self._unreferenced = missing
 
     def _homing_failed(self, why: str) -> None:
         self._homing = ""
@@ -1022,6 +1073,10 @@ class Controller:
             self.params,
             programs=_MemoryPrograms(self.memory),
             machine_data=self.machine_data,
+            # #500-#999 are kept in the machine data (saved with it); #100-#199 live as long
+            # as the controller: from one program to the next, cleared at power off
+            macro_variables=self.machine_data.macro_variables,
+            common_variables=self._common_variables,
             block_delete=self.block_skip,
             file=name,
             start=start,
@@ -1112,6 +1167,10 @@ class Controller:
                     run.lines_feed[cmd.line] = max(run.lines_feed[cmd.line] or 0.0, feed)
                 if len(run.lines_feed) > 4096:
                     del run.lines_feed[next(iter(run.lines_feed))]
+                if isinstance(cmd, canon.ThreadFeed) and cmd.rpm > 0.0:
+                    run.thread_rpm[cmd.line] = cmd.rpm
+                    if len(run.thread_rpm) > 4096:
+                        del run.thread_rpm[next(iter(run.thread_rpm))]
             elif not isinstance(cmd, canon.SetPathMode):
                 run.syncs_out += 1
 
@@ -1119,6 +1178,11 @@ class Controller:
         fo = self.feed_override / 100.0 * self.acc.factor
         if self._spindle_on and not self.dry_run and not self._plc.get("SpindleAtSpeed", True):
             fo = 0.0  # feed only with the spindle at speed (docs/machine_plc.md)
+        thread_rpm = run.thread_rpm.get(run.line) if run.thread_rpm else None
+        if thread_rpm and not self.dry_run:
+            # thread cutting: the feed follows the spindle speed the NC runs (S x the
+            # spindle overrides), so the lead holds; feed override and ACC are out of effect
+            fo = self._spindle_rpm_now() / thread_rpm
         ro = self.rapid_override / 100.0
         if fo != self._fo_applied:
             run.motion.set_feed_override(fo)
@@ -1201,6 +1265,8 @@ class Controller:
             if cmd.flood and not flood0:
                 steps.append(("M", 8))
             self._coolant = (cmd.mist, cmd.flood)
+        elif isinstance(cmd, canon.SpindleSync):
+            steps.append(("INDEX", 0))
         elif isinstance(cmd, canon.ToolSelect):
             steps.append(("T", cmd.tool))
         elif isinstance(cmd, canon.ToolChange):
@@ -1230,6 +1296,9 @@ class Controller:
             if kind == "DWELL":
                 if self._t + 1e-9 < value:
                     return
+            elif kind == "INDEX":  # a thread pass starts on the spindle's index
+                if not self._spindle_index and not self.dry_run:
+                    return  # (a spindle not turning keeps the pass waiting, as on a control)
             elif kind == "STOP":
                 if run.stop != "done":
                     run.stop = value
@@ -1290,6 +1359,11 @@ class Controller:
         m = self.cutting_model
         pos = self._actual.get(m.depth_axis)
         rpm = self._rpm = self._spindle_rpm_now()
+        # the spindle's angle (revolutions, mod 1) from the speed it runs: its one-revolution
+        # signal starts a thread pass (canon.SpindleSync)
+        prev = self._spindle_phase
+        self._spindle_phase = (prev + rpm / 60.0 * dt) % 1.0
+        self._spindle_index = rpm > 0.0 and self._spindle_phase < prev
         feed = self._path_v * 60.0 if self._cutting else 0.0
         self._load = m.load(feed, rpm, pos) if self._cutting else (m.idle_load_pct if rpm else 0)
         self.acc.update(self._load, self._cutting, dt)
@@ -1353,6 +1427,8 @@ class Controller:
             self.part_count,
             self._estop,
             self.acc.state(self._cutting),
+            self._unreferenced,
+            self._start_refused,
         )
         if key == self._status_key:
             return self._status  # nothing changed: the same snapshot (cheap when idle)
@@ -1380,6 +1456,8 @@ class Controller:
             part_count=self.part_count,
             emergency_stop="TRIGGERED" if self._estop else "ARMED",
             adaptive_control=self.acc.state(self._cutting),
+            unreferenced=self._unreferenced,
+            cycle_start_refused=self._start_refused,
         )
 
     def _event(self, text: str) -> None:

@@ -19,7 +19,10 @@ plain DNC package sending through a serial-to-TCP bridge works unchanged. A port
 shared `secret` takes nothing before `AUTH <secret>` (-> OK AUTH) as the connection's first
 line; anything else answers `ERR 2011 ...` and closes. Errors answer
 `ERR <alarm> <text>`; the ones the seed calls alarms (parity, transfer cut off, memory full,
-overrun) also raise the machine alarm through `on_alarm`.
+overrun) also raise the machine alarm through `on_alarm`. A program load (READ) cut off or
+abandoned before its closing `%` (a host killed mid-transfer, a client that hangs up) only
+discards the partial tape: memory keeps what it had, and the machine is told through
+`on_warning`, not an alarm that would take it out of the cell until a reset.
 """
 
 from __future__ import annotations
@@ -70,6 +73,7 @@ ALARM_OVERRUN = 2010
 ALARM_AUTH = 2011  # no or a wrong AUTH line on a port with a shared secret
 ALARM_BAD_DATA = 2012  # machine data refused: the reply names the JSON pointer and why
 MACHINE_DATA_MAX = 1 << 20  # bytes of one TOOLS/OFFSETS PUT body
+ALARM_EIGHT_BIT = 2013  # a byte with bit 7 set on a port without parity: not tape code
 FATAL_TO_CONNECTION = {
     ALARM_PARITY,
     ALARM_CUT_OFF,
@@ -79,6 +83,7 @@ FATAL_TO_CONNECTION = {
     ALARM_BLOCK_TOO_LONG,
     ALARM_UNKNOWN_COMMAND,
     ALARM_AUTH,
+    ALARM_EIGHT_BIT,
 }
 RAISES_ALARM = {ALARM_PARITY, ALARM_CUT_OFF, ALARM_MEMORY_FULL, ALARM_OVERRUN, ALARM_TIMEOUT}
 
@@ -126,9 +131,9 @@ def sha256_text(text: str) -> str:
 
 
 class DncError(Exception):
-    def __init__(self, alarm: int, text: str) -> None:
+    def __init__(self, alarm: int, text: str, *, warning: bool = False) -> None:
         super().__init__(f"{alarm} {text}")
-        self.alarm, self.text = alarm, text
+        self.alarm, self.text, self.warning = alarm, text, warning
 
 
 @dataclass
@@ -154,6 +159,7 @@ class DncPort(TcpFace):
         idle_timeout_s: float = 30.0,
         drip: Callable[[], DripBuffer] | None = None,
         on_alarm: Callable[[int, str], None] | None = None,
+        on_warning: Callable[[int, str], None] | None = None,
         policy: Policy | None = None,
         machine_data: MachineDataAccess | None = None,
         xoff_slack_bytes: int = 256,
@@ -167,6 +173,7 @@ class DncPort(TcpFace):
         self.idle_timeout_s = idle_timeout_s
         self._drip = drip
         self._on_alarm = on_alarm or (lambda n, t: None)
+        self._on_warning = on_warning or (lambda n, t: log.warning("DNC %s: %s", n, t))
         self._policy = policy or (lambda op, n: None)
         self._machine_data = machine_data
         self.xoff_slack = xoff_slack_bytes
@@ -325,7 +332,9 @@ class DncPort(TcpFace):
 
     def _error(self, exc: DncError) -> None:
         self.stats.errors[exc.alarm] = self.stats.errors.get(exc.alarm, 0) + 1
-        if exc.alarm in RAISES_ALARM:
+        if exc.warning:
+            self._on_warning(exc.alarm, exc.text)
+        elif exc.alarm in RAISES_ALARM:
             self._on_alarm(exc.alarm, exc.text)
 
     async def _receive_tape(self, conn: _Conn, pushback: bytes, on_block, on_blocks=None) -> None:
@@ -352,6 +361,12 @@ class DncPort(TcpFace):
                     raise DncError(
                         ALARM_PARITY, f"parity error at byte {ev.offset}; program rejected"
                     )
+                elif ev.kind == "eight_bit":
+                    raise DncError(
+                        ALARM_EIGHT_BIT,
+                        f"8-bit byte 0x{ev.code:02X} at byte {ev.offset} (line {ev.line}) on a "
+                        "7-bit port without parity; program rejected",
+                    )
                 elif ev.kind == "overlong":
                     raise DncError(
                         ALARM_BLOCK_TOO_LONG,
@@ -366,6 +381,8 @@ class DncPort(TcpFace):
                 raise DncError(
                     ALARM_TIMEOUT, f"no data for {self.idle_timeout_s:g} s; transfer abandoned"
                 ) from None
+            except ConnectionError:  # reset by the sender: cut off as much as a hang-up
+                data = b""
             if not data:
                 what = "closing %" if decoder.started else "tape start %"
                 raise DncError(
@@ -396,7 +413,16 @@ class DncPort(TcpFace):
             fits()
             lines.extend(blocks)
 
-        await self._receive_tape(conn, pushback, keep, keep_all)
+        try:
+            await self._receive_tape(conn, pushback, keep, keep_all)
+        except DncError as exc:
+            if exc.alarm not in (ALARM_CUT_OFF, ALARM_TIMEOUT):
+                raise
+            # Nothing of a load is stored before its closing %, so memory is as it was and
+            # the machine is fit to run: a message, not an alarm that needs a reset.
+            raise DncError(
+                exc.alarm, f"{exc.text}; program discarded, memory unchanged", warning=True
+            ) from None
         number = number or program_number(lines)
         if number is None:
             raise DncError(ALARM_NO_NUMBER, "no program number: the first block needs an O word")
@@ -450,6 +476,13 @@ class DncPort(TcpFace):
             text = self.memory.get(number)
         except KeyError:
             raise DncError(ALARM_NOT_IN_MEMORY, f"program O{number:04d} not in memory") from None
+        if not text.isascii():  # loaded by another way than the tape: say so, do not drop
+            at = next(i for i, ch in enumerate(text) if ord(ch) > 0x7F)
+            raise DncError(
+                ALARM_EIGHT_BIT,
+                f"program O{number:04d} holds {text[at]!r} (U+{ord(text[at]):04X}) on line "
+                f"{text.count(chr(10), 0, at) + 1}, outside the 7-bit tape code; cannot punch",
+            )
         await conn.send_tape(text)
         self.stats.programs_punched += 1
 

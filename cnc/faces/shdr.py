@@ -88,6 +88,9 @@ def shdr_items(axes: Sequence[str]) -> tuple[ShdrItem, ...]:
         ShdrItem("rapid_ovr", "EVENT", "PATH_FEEDRATE_OVERRIDE", "Path", "RAPID"),
         ShdrItem("part_count", "EVENT", "PART_COUNT", "Path"),
         ShdrItem("acc", "EVENT", "x:ADAPTIVE_CONTROL", "Path"),
+        # REFERENCED, or NOT_REFERENCED and the axes that need homing ("NOT_REFERENCED X Z")
+        ShdrItem("referenced", "EVENT", "x:REFERENCED", "Controller"),
+        ShdrItem("start_refused", "EVENT", "x:CYCLE_START_REFUSED", "Path"),
         ShdrItem(DRIVE_CONDITION, "CONDITION", "ACTUATOR", "Axes"),
     ]
     for name in axes:
@@ -183,6 +186,12 @@ class ShdrFormatter:
             "rapid_ovr": _num(status.rapid_override, 0),
             "part_count": str(status.part_count),
             "acc": status.adaptive_control,
+            "referenced": (
+                "NOT_REFERENCED " + " ".join(status.unreferenced)
+                if status.unreferenced
+                else "REFERENCED"
+            ),
+            "start_refused": escape(status.cycle_start_refused),
             f"{s}speed": _num(status.spindle_speed, 1),
             f"{s}load": _num(status.spindle_load, 1),
             f"{s}ovr": _num(status.spindle_override, 0),

@@ -3,7 +3,9 @@
 Pure functions and an incremental decoder, shared by the machine's DNC port and the host's
 transfer client so that both ends agree byte for byte.
 
-The character set is ISO 7-bit. With parity on, bit 7 of every byte is set so that the byte
+The character set is ISO 7-bit. Without parity, a byte with bit 7 set cannot be tape code: the
+decoder reports it (`eight_bit`, with its offset and line) and stops, so the program is
+rejected instead of stored with a replacement character. With parity on, bit 7 of every byte is set so that the byte
 holds an even number of ones (ISO 840 / EIA RS-358 tape, "7E" on a serial line); a byte with
 odd parity is a parity error, which the seed (000_nc_book.md, DNC) says must reject the
 program. Flow and punch control use the device control characters a Fanuc remote buffer
@@ -72,11 +74,12 @@ def encode_program(text: str, *, parity: bool = False, leader: int = 0) -> bytes
 
 @dataclass(frozen=True, slots=True)
 class TapeEvent:
-    kind: str  # start | line | lines | end | control | parity_error | overlong
+    kind: str  # start | line | lines | end | control | parity_error | eight_bit | overlong
     text: str = ""
     offset: int = 0  # byte offset in the stream
-    code: int = 0  # the control character, for kind == "control"
+    code: int = 0  # the control character (control), the offending byte (eight_bit)
     lines: Sequence[str] = ()  # for kind == "lines" (feed_runs only): consecutive blocks
+    line: int = 0  # eight_bit: the line of the stream it is on (1 = the first)
 
 
 # Decoder states
@@ -96,6 +99,7 @@ class TapeDecoder:
     parity: bool = False
     max_block: int = 4096
     offset: int = 0
+    line: int = 1  # line of the stream the next byte is on (LFs fed so far + 1)
     _state: int = _LEADER
     _block: bytearray = field(default_factory=bytearray)
 
@@ -125,7 +129,10 @@ class TapeDecoder:
 
     def _feed(self, data: bytes, runs: bool) -> list[TapeEvent]:
         if not self.parity:
-            return self._feed_plain(data, runs)
+            if data.isascii() or self._state >= _DONE:
+                self.line += data.count(b"\n")
+                return self._feed_plain(data, runs)
+            return self._feed_eight_bit(data, runs)
         bad = data.translate(_ODD_MARK).find(1)
         if bad < 0:
             return self._feed_plain(data.translate(_STRIP), runs)
@@ -133,6 +140,20 @@ class TapeDecoder:
         if self._state < _DONE:
             self._state = _FAILED
             events.append(TapeEvent("parity_error", offset=self.offset))
+        self.offset += len(data) - bad
+        return events
+
+    def _feed_eight_bit(self, data: bytes, runs: bool) -> list[TapeEvent]:
+        """Without parity every byte must be 7-bit: decode up to the first that is not,
+        then fail there (after the closing `%` the trailer is ignored, as always)."""
+        bad = next(i for i, b in enumerate(data) if b > 0x7F)
+        head = data[:bad]
+        events = self._feed_plain(head, runs)
+        line = self.line + head.count(b"\n")
+        self.line = line + data.count(b"\n", bad)
+        if self._state < _DONE:
+            self._state = _FAILED
+            events.append(TapeEvent("eight_bit", offset=self.offset, code=data[bad], line=line))
         self.offset += len(data) - bad
         return events
 

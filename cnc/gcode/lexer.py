@@ -23,7 +23,6 @@ from cnc.program_memory import MAX_PROGRAM_NUMBER
 # number is checked by float(), so "1.2.3" fails there and goes to the diagnosis.
 _TOKEN = re.compile(r"([A-Z])([-+]?[0-9.]+)|(.)", re.S)
 _SQUEEZE = str.maketrans("", "", " \t\r\n\v\f\x00\x7f")
-_MACRO_WORDS = ("GOTO", "WHILE", "IF", "THEN", "DO", "END", "EQ", "NE", "GT", "GE", "LT", "LE")
 
 # G numbers are kept as int(10 * value) so G50.1 and G51.1 stay exact and dict lookups fast.
 _G_CODE: dict[str, int] = {}
@@ -135,13 +134,6 @@ def find_col(text: str, letter: str, nth: int = 1) -> int:
 
 def _diagnose(text: str, line: int, file: str) -> NcError:
     """Say where and why a line that failed the fast match is malformed."""
-    for i, c in enumerate(text):
-        if c == "#":
-            return NcError("unsupported: Fanuc Macro B (# variables)", line, i + 1, file)
-        if c in "[]":
-            return NcError("unsupported: Fanuc Macro B (bracket expressions)", line, i + 1, file)
-        if c == "=":
-            return NcError("unsupported: Fanuc Macro B (assignment '=')", line, i + 1, file)
     i = 0
     n = len(text)
     upper = text.upper()
@@ -158,9 +150,6 @@ def _diagnose(text: str, line: int, file: str) -> NcError:
         if c == "%":
             return NcError("'%' (tape start/end) must stand alone in its block", line, col, file)
         if "A" <= c <= "Z":
-            for kw in _MACRO_WORDS:
-                if upper.startswith(kw, i) and not _starts_number(upper, i + 1):
-                    return NcError(f"unsupported: Fanuc Macro B ({kw})", line, col, file)
             j = i + 1
             while j < n and upper[j] in " \t":
                 j += 1
@@ -196,20 +185,16 @@ def _g_code_slow(num: str) -> int | None:
     return r if abs(v - r) < 1e-6 and r < 10000 else None
 
 
-def _starts_number(s: str, i: int) -> bool:
-    while i < len(s) and s[i] in " \t":
-        i += 1
-    return i < len(s) and (s[i].isdigit() or s[i] in "+-.")
-
-
 def parse_line(
     text: str, line: int, file: str = "<program>", least_increment: bool = False
 ) -> Block | None:
     """Lex one source line into a Block; None for a blank or comment-only line.
 
     Raises NcError (with line and column) for malformed words, unterminated comments,
-    unknown characters, fractions and Fanuc Macro B syntax.
+    unknown characters and fractions. A Fanuc Macro B line (variables, expressions,
+    IF/WHILE/GOTO/DO/END) comes back as a `cnc.gcode.macro.MacroBlock`.
     """
+    raw = text
     if "(" in text or ";" in text or ")" in text:
         text = blank_comments(text, line, file)
     body = text.strip()
@@ -217,18 +202,18 @@ def parse_line(
         return None
     first = body[0]
     if first in _MARKS:
-        return _parse_marked(text, body, line, file, least_increment)
+        return _parse_marked(text, body, line, file, least_increment, raw)
     squeezed = body.replace(" ", "")
     if "\t" in squeezed:
         squeezed = squeezed.replace("\t", "")
-    return _words(Block(line, text), squeezed.upper(), text, line, file, least_increment)
+    return _words(Block(line, text), squeezed.upper(), text, line, file, least_increment, raw)
 
 
 _MARKS = frozenset("%/Oo:")
 
 
 def _parse_marked(
-    text: str, body: str, line: int, file: str, least_increment: bool
+    text: str, body: str, line: int, file: str, least_increment: bool, raw: str
 ) -> Block | None:
     blk = MarkedBlock(line, text)
     if body[0] == "%":
@@ -260,14 +245,22 @@ def _parse_marked(
                 file,
             )
         squeezed = squeezed[m.end() :]
-    return _words(blk, squeezed, text, line, file, least_increment)
+    return _words(blk, squeezed, text, line, file, least_increment, raw)
 
 
 def _words(
-    blk: Block, squeezed: str, text: str, line: int, file: str, least_increment: bool
+    blk: Block,
+    squeezed: str,
+    text: str,
+    line: int,
+    file: str,
+    least_increment: bool,
+    raw: str = "",
 ) -> Block:
     pairs = _TOKEN.findall(squeezed)
     if not _fill(blk, pairs, text, line, file):
+        if _MACRO_HINT.search(squeezed):
+            return _macro(blk, text, raw or text, line, file)
         cleaned = squeezed.translate(_SQUEEZE)  # other control characters (CR, VT, NUL...)
         if cleaned == squeezed:
             raise _diagnose(text, line, file)
@@ -296,6 +289,28 @@ def _words(
     return blk
 
 
+# A line that failed the word match is Macro B when it has any of these (then the macro
+# parser says where and why, with the Fanuc alarm number).
+_MACRO_HINT = re.compile(r"[#\[\]=]|GOTO|WHILE|IF|DO\d|END\d")
+_MACRO_CACHE: dict[tuple[str, int, str], Block] = {}
+_MACRO_CACHE_MAX = 50_000
+
+
+def _macro(blk: Block, text: str, raw: str, line: int, file: str) -> Block:
+    """A Macro B line, parsed once per (text, line, file) and kept (loops re-read lines)."""
+    key = (raw, line, file)
+    hit = _MACRO_CACHE.get(key)
+    if hit is not None:
+        return hit
+    from cnc.gcode.macro import parse_macro
+
+    mb = parse_macro(text, raw, line, file, blk if type(blk) is MarkedBlock else None)
+    if len(_MACRO_CACHE) >= _MACRO_CACHE_MAX:
+        _MACRO_CACHE.clear()
+    _MACRO_CACHE[key] = mb
+    return mb
+
+
 def _fill(blk: Block, pairs: list[tuple[str, str, str]], text: str, line: int, file: str) -> bool:
     """Store the words of one block; False when the block holds anything but words."""
     words = blk.words
@@ -313,6 +328,12 @@ def _fill(blk: Block, pairs: list[tuple[str, str, str]], text: str, line: int, f
                     )
                 blk.g.append(code)
             elif letter == "M":
+                if blk.g and (650 in blk.g or 660 in blk.g):
+                    # G65/G66 macro call: M is argument #13, not an M code
+                    if letter in words:
+                        return False
+                    words[letter] = float(num)
+                    continue
                 if "." in num or num[0] in "+-" or len(num) > 9:
                     raise NcError(
                         f"malformed M code M{num}", line, find_col(text, "M", len(blk.m) + 1), file

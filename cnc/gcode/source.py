@@ -20,6 +20,7 @@ import itertools
 import os
 import re
 from collections.abc import Iterable, Iterator, Mapping, Sequence
+from typing import NamedTuple
 
 Lines = Iterator[tuple[int, str]]  # (1-based line number, text)
 
@@ -168,12 +169,18 @@ class ProgramLibrary:
         self.in_file = _index_for(lines)
         self.main_file = file
 
-    def open(self, number: int) -> tuple[Lines, str] | None:
-        """(numbered lines starting at the program's O line or first line, file name)."""
+    def main_source(self) -> list[str] | str | None:
+        """The main program's lines for jumps (GOTO, WHILE): a list, a file path or None."""
+        return _source_of(self.in_file)
+
+    def open(self, number: int) -> Opened | None:
+        """Program O`number`: its lines, file name, source for jumps and first line number."""
         if self.in_file is not None:
             hit = self.in_file.find(number)
             if hit is not None:
-                return hit, self.main_file
+                return Opened(
+                    hit, self.main_file, _source_of(self.in_file), _first(self.in_file, number)
+                )
         if number not in self.programs:
             return None
         idx = self._mapped.get(number)
@@ -184,6 +191,97 @@ class ProgramLibrary:
                 idx = _SequenceIndex(list(prog))
             self._mapped[number] = idx
         if isinstance(idx, _FileIndex):
-            return _read_file_from(idx.path, 0, 1), f"O{number}"
+            hit = idx.find(number)  # a library file may hold several programs
+            if hit is not None:
+                return Opened(hit, idx.path, idx.path, idx.found[number][1])
+            return Opened(_read_file_from(idx.path, 0, 1), idx.path, idx.path, 1)
         seq = idx.seq
-        return ((i + 1, seq[i]) for i in range(len(seq))), f"O{number}"
+        return Opened(((i + 1, seq[i]) for i in range(len(seq))), f"O{number}", seq, 1)
+
+
+class Opened(NamedTuple):
+    lines: Lines
+    file: str
+    source: list[str] | str | None  # random access for jumps: lines, a file path, or None
+    start: int  # line number of the program's first line (its O line)
+
+
+def _source_of(idx: _SequenceIndex | _FileIndex | None):
+    if isinstance(idx, _SequenceIndex):
+        return idx.seq
+    if isinstance(idx, _FileIndex):
+        return idx.path
+    return None
+
+
+def _first(idx: _SequenceIndex | _FileIndex, number: int) -> int:
+    if isinstance(idx, _FileIndex):
+        return idx.found[number][1]
+    return idx.found[number] + 1
+
+
+class ProgramFile:
+    """A program file on disk, as a `programs` mapping value: read when called, by offset."""
+
+    __slots__ = ("name",)
+
+    def __init__(self, path: str) -> None:
+        self.name = path
+
+    def __iter__(self) -> Iterator[str]:
+        with open(self.name, encoding="latin-1") as fh:
+            yield from fh
+
+    def __repr__(self) -> str:
+        return f"ProgramFile({self.name!r})"
+
+
+def library_programs(folder: str) -> tuple[dict[int, ProgramFile], list[str]]:
+    """The programs of a folder by O number (every O line of every file in it).
+
+    Returns the mapping for the interpreter's `programs` and warnings: an O number found in
+    two files is taken from the first (by file name) and named in a warning.
+    """
+    found: dict[int, ProgramFile] = {}
+    warnings: list[str] = []
+    for entry in sorted(os.scandir(folder), key=lambda e: e.name):
+        if not entry.is_file():
+            continue
+        pf = ProgramFile(entry.path)
+        with open(entry.path, "rb") as fh:
+            for lineno, raw in enumerate(fh, 1):
+                m = _O_LINE_BYTES.match(raw)
+                if not m:
+                    continue
+                number = int(m.group(1))
+                prev = found.get(number)
+                if prev is None:
+                    found[number] = pf
+                elif prev.name != entry.path:
+                    warnings.append(
+                        f"{entry.path}:{lineno}:1: warning: O{number} is also in {prev.name} "
+                        "(that one is used)"
+                    )
+    return found, warnings
+
+
+class Pushback:
+    """A line iterator that takes lines back (`push`): a lathe cycle looks at the block after
+    it for its contour (N P) and returns the lines when the contour is elsewhere."""
+
+    __slots__ = ("_it", "_back")
+
+    def __init__(self, it: Iterable[tuple[int, str]]) -> None:
+        self._it = iter(it)
+        self._back: list[tuple[int, str]] = []
+
+    def __iter__(self) -> Pushback:
+        return self
+
+    def __next__(self) -> tuple[int, str]:
+        if self._back:
+            return self._back.pop()
+        return next(self._it)
+
+    def push(self, item: tuple[int, str]) -> None:
+        self._back.append(item)

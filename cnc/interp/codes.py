@@ -22,6 +22,7 @@ from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
 from cnc.interp import auxiliary, compensation, flow, modes, motion, offsets
+from cnc.interp import lathe_cycles as lc
 from cnc.interp import transform_codes as xf
 from cnc.interp.context import Step
 
@@ -60,7 +61,7 @@ _STEP_TEXT = {
     Step.NON_MODAL: "G10/G28/G30/G53/G92",
     Step.MOTION: "motion (or the modal motion/cycle)",
     Step.STOP: "M0/M1/M2/M30",
-    Step.SUBPROGRAM: "M98/M99",
+    Step.SUBPROGRAM: "M98/M99, G65/G66/G67",
 }
 
 # Modal groups: table name -> Fanuc group number (for the docs; "" where Fanuc has none).
@@ -83,6 +84,8 @@ GROUPS = {
     "polar": "17",
     "mirror": "22",
     "arc_distance": "",
+    "macro_call": "00",
+    "macro_modal": "12",
     "exact_stop": "00",
     "refused": "",
     "stop": "",
@@ -154,7 +157,7 @@ def _refused(name: str, kinds: frozenset[str], message: str) -> Code:
     return Code(name, "refused", kinds, Step.MOTION, None, refused=message, doc=message)
 
 
-_MACRO = "unsupported: Fanuc Macro B ({} macro call{})"
+_MACRO_ARGS = "PLABCDEFHIJKMQRSTUVWXYZ"  # G65/G66: P L and the arguments (specification I)
 _CYCLE_WORDS = "@RQPKL"
 
 # fmt: off
@@ -220,7 +223,8 @@ CODES: tuple[Code, ...] = (
     _g("G73", "cycle", Step.MOTION, motion.motion, MILL, words=_CYCLE_WORDS, doc="high-speed peck drilling"),
     _g("G74", "cycle", Step.MOTION, motion.motion, MILL, words=_CYCLE_WORDS, doc="left-hand tapping"),
     _g("G76", "cycle", Step.MOTION, motion.motion, MILL, words=_CYCLE_WORDS, doc="fine boring"),
-    _g("G80", "cycle", Step.MOTION, motion.motion, MILL, default=True, doc="canned cycle cancel"),
+    _g("G80", "cycle", Step.MOTION, motion.motion, default=True,
+       doc="canned cycle cancel (lathe: also G32/G90/G92/G94; a no-op in a safe-start line)"),
     _g("G81", "cycle", Step.MOTION, motion.motion, MILL, words=_CYCLE_WORDS, doc="drilling"),
     _g("G82", "cycle", Step.MOTION, motion.motion, MILL, words=_CYCLE_WORDS, doc="spot drilling, dwell"),
     _g("G83", "cycle", Step.MOTION, motion.motion, MILL, words=_CYCLE_WORDS, doc="peck drilling"),
@@ -268,14 +272,38 @@ CODES: tuple[Code, ...] = (
     _g("G64", "path_mode", Step.PATH_CONTROL, modes.path_mode, words="P", default=True,
        doc="continuous path, P tolerance"),
     # --- declared and refused ---
-    _refused("G65", BOTH, _MACRO.format("G65", "")),
-    _refused("G66", BOTH, _MACRO.format("G66 modal", "")),
-    _refused("G67", BOTH, _MACRO.format("G67", " cancel")),
-    *(_refused(f"G{n}", LATHE, "unsupported: lathe canned cycle") for n in range(70, 77)),
-    _refused("G90", LATHE, "unsupported: lathe turning cycle (G90, system A)"),
-    _refused("G92", LATHE, "unsupported: lathe threading cycle (G92, system A)"),
-    _refused("G94", LATHE, "unsupported: lathe facing cycle (G94, system A)"),
-    _refused("G32", LATHE, "unsupported: lathe threading (G32)"),
+    # --- Macro B calls (docs/gcode.md "Fanuc Macro B") ---
+    _g("G65", "macro_call", Step.SUBPROGRAM, flow.macro_call, words=_MACRO_ARGS, needs=("P",),
+       doc="macro call: program P, L times, arguments A..Z -> #1..#26 (a new local level)"),
+    _g("G66", "macro_modal", Step.SUBPROGRAM, flow.macro_call, words=_MACRO_ARGS, needs=("P",),
+       doc="modal macro call: program P is called after every block that moves"),
+    _g("G67", "macro_modal", Step.SUBPROGRAM, flow.macro_modal_cancel, default=True,
+       doc="modal macro call cancel"),
+    # --- lathe cycles (Fanuc T, G-code system A; cnc.interp.lathe_cycles) ---
+    _g("G70", "nonmodal", Step.NON_MODAL, lc.finishing, LATHE, words="PQUW", owns_axes=True,
+       doc="finishing: the contour N P..N Q as programmed, then back to the start"),
+    _g("G71", "nonmodal", Step.NON_MODAL, lc.stock_removal, LATHE, words="PQUWR",
+       owns_axes=True,
+       doc="stock removal in turning: U depth R retract; P Q U W F (D depth, R1 type II)"),
+    _g("G72", "nonmodal", Step.NON_MODAL, lc.stock_removal, LATHE, words="PQUWR",
+       owns_axes=True, doc="stock removal in facing: W depth R retract; P Q U W F (D depth)"),
+    _g("G73", "nonmodal", Step.NON_MODAL, lc.pattern_repeating, LATHE, words="PQUWRIK",
+       owns_axes=True, doc="pattern repeating: U W R divisions; P Q U W F (Haas I K D)"),
+    _g("G74", "nonmodal", Step.NON_MODAL, lc.grooving, LATHE, words="@PQRIK", owns_axes=True,
+       doc="face grooving / peck drilling: R retract; X Z P Q R F (Haas I K)"),
+    _g("G75", "nonmodal", Step.NON_MODAL, lc.grooving, LATHE, words="@PQRIK", owns_axes=True,
+       doc="OD grooving: R retract; X Z P Q R F (Haas I K)"),
+    _g("G76", "nonmodal", Step.NON_MODAL, lc.multi_threading, LATHE, words="@PQRIKA",
+       owns_axes=True,
+       doc="multi-pass threading: P mmrraa Q R; X Z R P Q F (Haas X Z K D I A P F)"),
+    _g("G32", "cycle", Step.MOTION, motion.motion, LATHE, words="@",
+       doc="thread cutting, F lead; spindle-synchronised feed (modal)"),
+    _g("G90", "cycle", Step.MOTION, motion.motion, LATHE, words="@R",
+       doc="turning cycle (modal): X Z R taper F"),
+    _g("G92", "cycle", Step.MOTION, motion.motion, LATHE, words="@R",
+       doc="threading cycle (modal): X Z R taper F lead"),
+    _g("G94", "cycle", Step.MOTION, motion.motion, LATHE, words="@R",
+       doc="facing cycle (modal): X Z R taper F"),
     # --- M codes ---
     _g("M0", "stop", Step.STOP, flow.stop, doc="program stop"),
     _g("M1", "stop", Step.STOP, flow.stop, doc="optional stop (per the machine's switch)"),
@@ -289,9 +317,11 @@ CODES: tuple[Code, ...] = (
     _g("M7", "coolant", Step.COOLANT, auxiliary.coolant, doc="mist coolant on (may share a block with M8)"),
     _g("M8", "coolant", Step.COOLANT, auxiliary.coolant, doc="flood coolant on"),
     _g("M9", "coolant", Step.COOLANT, auxiliary.coolant, doc="coolant off"),
-    _g("M98", "sub", Step.SUBPROGRAM, flow.call, words="PL", needs=("P",),
-       doc="call program P, L times (or `P<rrrr><nnnn>`)"),
-    _g("M99", "sub", Step.SUBPROGRAM, flow.return_, words="P", doc="return to the caller"),
+    _g("M98", "sub", Step.SUBPROGRAM, flow.call, words="PLQ", needs=("PQ",),
+       doc="call program P, L times (or `P<rrrr><nnnn>`); Q: from sequence number Q "
+           "(without P: of the current program)"),
+    _g("M99", "sub", Step.SUBPROGRAM, flow.return_, words="P",
+       doc="return to the caller; P: to the caller's sequence number P"),
 )
 # fmt: on
 
@@ -321,13 +351,72 @@ def table(letter: str, kind: str) -> dict[int, Code]:
     return out
 
 
+# Fanuc T G-code systems B and C: number -> the row (by its system A name, or a mill row's
+# name for the codes system A's lathe does not have) it stands for. A number not listed
+# keeps its system A row; `None` removes it.
+_LATHE_B = {
+    "G50": None,  # coordinate setting is G92
+    "G90": "mill:G90",  # absolute
+    "G91": "mill:G91",  # incremental
+    "G92": "lathe:G50",  # coordinate system setting, S maximum spindle speed
+    "G94": "mill:G94",  # feed per minute
+    "G95": "mill:G95",  # feed per revolution
+    "G98": "mill:G98",  # return to the initial level
+    "G99": "mill:G99",  # return to the R level
+    "G77": "lathe:G90",  # turning cycle
+    "G78": "lathe:G92",  # threading cycle
+    "G79": "lathe:G94",  # facing cycle
+}
+_LATHE_C = {
+    **_LATHE_B,
+    "G79": None,
+    "G20": "lathe:G90",  # turning cycle
+    "G21": "lathe:G92",  # threading cycle
+    "G24": "lathe:G94",  # facing cycle
+    "G70": "lathe:G20",  # inch
+    "G71": "lathe:G21",  # mm
+    "G72": "lathe:G70",  # finishing
+    "G73": "lathe:G71",  # stock removal in turning
+    "G74": "lathe:G72",  # stock removal in facing
+    "G75": "lathe:G73",  # pattern repeating
+    "G76": "lathe:G74",  # face grooving / peck drilling
+    "G77": "lathe:G75",  # OD grooving
+    "G78": "lathe:G76",  # multi-pass threading
+}
+GCODE_SYSTEMS = {"A": {}, "B": _LATHE_B, "C": _LATHE_C}
+
+
+def _number(name: str) -> int:
+    whole, _, frac = name[1:].partition(".")
+    return int(whole) * 10 + (int(frac) if frac else 0)
+
+
+def _renamed(kind: str, system: str) -> dict[int, Code]:
+    """The lathe's G table under G-code system B or C (rows keep their system A names)."""
+    base = table("G", kind)
+    if kind != "lathe" or system == "A":
+        return base
+    tables = {"lathe": base, "mill": table("G", "mill")}
+    out = dict(base)
+    renames = GCODE_SYSTEMS[system]
+    for name in renames:
+        out.pop(_number(name), None)
+    for name, target in renames.items():
+        if target is not None:
+            src, _, row = target.partition(":")
+            out[_number(name)] = tables[src][_number(row)]
+    return out
+
+
 class KindTable:
     """The table as one machine kind reads it, resolved once (`for_kind`)."""
 
     __slots__ = ("g", "m", "g_words", "m_words", "g_needs", "m_needs")
 
-    def __init__(self, kind: str) -> None:
-        self.g = table("G", kind)
+    def __init__(self, kind: str, system: str = "A") -> None:
+        if system not in GCODE_SYSTEMS:
+            raise ValueError(f"G-code system {system!r} is not A, B or C")
+        self.g = _renamed(kind, system)
         self.m = table("M", kind)
         self.g_words = {n: row.words_for(kind) for n, row in self.g.items()}
         self.m_words = {n: row.words_for(kind) for n, row in self.m.items()}
@@ -336,8 +425,9 @@ class KindTable:
 
 
 @functools.cache
-def for_kind(kind: str) -> KindTable:
-    return KindTable(kind)
+def for_kind(kind: str, system: str = "A") -> KindTable:
+    """The table of a machine kind; a lathe reads it in G-code system `system` (A, B, C)."""
+    return KindTable(kind, system)
 
 
 def fmt_g(code: int) -> str:
@@ -362,12 +452,16 @@ def _words_text(row: Code) -> str:
     if row.refused:
         return ""
     kinds = sorted(row.kinds)
-    texts = {" ".join(sorted(row.words_for(k), key="XYZUVWIJKRPQLDHS".find)) for k in kinds}
+    texts = {" ".join(sorted(row.words_for(k), key=_word_order)) for k in kinds}
     if len(texts) == 1:
         return texts.pop()
-    return "; ".join(
-        f"{k}: {' '.join(sorted(row.words_for(k), key='XYZUVWIJKRPQLDHS'.find))}" for k in kinds
-    )
+    return "; ".join(f"{k}: {' '.join(sorted(row.words_for(k), key=_word_order))}" for k in kinds)
+
+
+def _word_order(letter: str) -> tuple[int, str]:
+    """Axes, centres, then the other words; letters outside that list (macro arguments)
+    first, alphabetically (a frozenset's order is not stable between runs)."""
+    return ("XYZUVWIJKRPQLDHS".find(letter), letter)
 
 
 def _needs_text(row: Code) -> str:

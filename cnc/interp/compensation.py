@@ -10,6 +10,9 @@ from typing import TYPE_CHECKING
 
 from cnc.interp.gnum import G43, G49
 
+# Lathe cycles whose D is their own word (cnc.interp.lathe_cycles), not a radius offset.
+D_WORD_CYCLES = frozenset(("G70", "G71", "G72", "G73", "G74", "G75", "G76"))
+
 if TYPE_CHECKING:
     from cnc.gcode.lexer import Block
     from cnc.interp.context import BlockRun, Context
@@ -20,6 +23,9 @@ def cutter_comp(ip: Context, run: BlockRun) -> None:
 
 
 def d_word(ip: Context, run: BlockRun) -> None:
+    nonmodal = run.rows.get("nonmodal")
+    if nonmodal is not None and nonmodal.name in D_WORD_CYCLES and ip._lathe:
+        return  # a lathe cycle's D (depth of cut, passes, Haas clearance): the cycle's word
     if "cutter_comp" not in run.g:  # G41/G42 read their own D
         ip._d = ip._int_word(run.blk, "D")
 

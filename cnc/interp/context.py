@@ -84,6 +84,7 @@ class Classified:
         "used_with",
         "steps",
         "plans",
+        "call",
     )
 
     def __init__(self) -> None:
@@ -99,6 +100,7 @@ class Classified:
         self.used_with: dict[int, frozenset[str]] = {}
         self.steps: list = []
         self.plans: dict[int, list] = {}
+        self.call: Code | None = None  # G65/G66: the block is a macro call with arguments
 
 
 class BlockRun:
@@ -218,3 +220,5 @@ class Context(Protocol):
     # program flow
     def _call(self, blk: Block) -> None: ...
     def _return(self, blk: Block) -> None: ...
+    def _macro_call(self, blk: Block, row: Code) -> None: ...
+    def _macro_modal_cancel(self) -> None: ...

@@ -13,6 +13,7 @@ from typing import TYPE_CHECKING
 
 from cnc.canon import Dwell, ProgramStop, Spindle, SpindleDirection, StopKind
 from cnc.gcode.lexer import Block
+from cnc.interp import lathe_cycles
 from cnc.interp.gnum import G73, G74, G76, G80, G82, G83, G84, G85, G86, G87, G88, G89, G98
 
 if TYPE_CHECKING:
@@ -48,6 +49,9 @@ def cancel(ip: Context) -> None:
 
 def cycle_block(ip: Context, blk: Block, code: int | None, exact: bool) -> None:
     """A block in the cycle group or under a modal cycle: set the cycle data, drill."""
+    if ip._lathe:  # G80 and the lathe's modal cycles G32 G90 G92 G94
+        lathe_cycles.cancel_or_cycle(ip, blk, code, exact)
+        return
     words = blk.words
     cd: CycleData = ip.cyc
     if code == G80:

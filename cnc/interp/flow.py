@@ -1,4 +1,4 @@
-"""Program flow: G4 dwell, M0/M1/M2/M30 stops, M98/M99 subprograms."""
+"""Program flow: G4 dwell, M0/M1/M2/M30 stops, M98/M99 subprograms, G65/G66/G67 macro calls."""
 
 from __future__ import annotations
 
@@ -50,3 +50,15 @@ def call(ip: Context, run: BlockRun) -> None:
 
 def return_(ip: Context, run: BlockRun) -> None:
     ip._return(run.blk)
+
+
+def macro_call(ip: Context, run: BlockRun) -> None:
+    """G65/G66: the interpreter takes such a block whole (its words are arguments)."""
+    ip._macro_call(
+        run.blk, run.rows["macro_call"] if "macro_call" in run.rows else run.rows["macro_modal"]
+    )
+
+
+def macro_modal_cancel(ip: Context, run: BlockRun) -> None:
+    """G67: no more modal macro calls."""
+    ip._macro_modal_cancel()

@@ -14,7 +14,8 @@ Coordinates move through these stages (docs/gcode.md, "Coordinates"):
 from __future__ import annotations
 
 import math
-from collections.abc import Iterable, Iterator, Mapping
+import re
+from collections.abc import Callable, Iterable, Iterator, Mapping, MutableMapping
 from operator import itemgetter
 from typing import TYPE_CHECKING
 
@@ -23,16 +24,39 @@ from cnc.canon import (
     CanonCommand,
     Plane,
     Pose,
+    ProgramStop,
     Spindle,
     SpindleDirection,
+    StopKind,
     StraightFeed,
     StraightTraverse,
     ToolChange,
     ToolSelect,
 )
 from cnc.errors import NcError
-from cnc.gcode.lexer import Block, MarkedBlock, parse_line
-from cnc.gcode.source import Lines, ProgramLibrary, main_lines, skip_leader
+from cnc.gcode.lexer import Block, parse_line
+from cnc.gcode.macro import (
+    ASSIGN,
+    DO,
+    END,
+    GOTO,
+    IF_GOTO,
+    IF_THEN,
+    PS_DNC_JUMP,
+    PS_GOTO_NOT_FOUND,
+    PS_LOOP_NUMBER,
+    PS_MACRO_NESTING,
+    PS_MISSING_END,
+    PS_NESTING,
+    PS_PROGRAM_NOT_FOUND,
+    PS_SEQUENCE_NOT_FOUND,
+    WHILE,
+    WORDS,
+    MacroAlarm,
+    MacroBlock,
+    build_block,
+)
+from cnc.gcode.source import Lines, ProgramLibrary, Pushback, main_lines, skip_leader
 from cnc.interp import codes
 from cnc.interp.codes import fmt_g
 from cnc.interp.context import BlockRun, Classified
@@ -56,6 +80,7 @@ from cnc.interp.gnum import (
     M7_M8,
     M8,
 )
+from cnc.interp.macro import MacroVariables, alarm_number, arguments
 from cnc.interp.state import ModalState, ToolOffset
 from cnc.interp.transform import Transform
 from cnc.params import DecimalStyle, MachineParams
@@ -69,11 +94,15 @@ ARC_TOLERANCE_MM = 0.01  # |start radius - end radius| allowed (000_nc_book TV-I
 MAX_SUB_NESTING = 10  # M98 nesting depth (Fanuc 0i: 10 levels)
 MAX_TOOL_OFFSET = 999  # H/D/T offset numbers (= cnc.machine_data.MAX_TOOL_OFFSET)
 EXTENDED_OFFSETS = 48  # G54.1 P1..P48; work offset list index = 6 + P
+MAX_MACRO_NESTING = 5  # G65/G66 macro levels (Fanuc: 5; local variable sets 0..5)
+MAX_LOOPS = 3  # WHILE/DO nesting (Fanuc: 3, ids 1..3)
+MACRO_BUDGET = 1_000_000  # macro statements in a row without any command: an endless loop
+LOOP_WATCH_AFTER = 10_000  # backward jumps before loops are watched for a repeated state
 _EPS = 1e-9
 
 # Letters the interpreter understands, per machine kind (others: "unknown address").
 _MILL_WORDS = frozenset("XYZIJKRFSTNPQLHD")
-_LATHE_WORDS = frozenset("XZUWIKRFSTNPQLHD")
+_LATHE_WORDS = frozenset("XZUWIKRFSTNPQLHDA")  # A: the Haas G76 tool angle only
 _DIM_LETTERS = frozenset("XYZUVWIJKRQ")
 _AXIS_OF = {"X": 0, "Y": 1, "Z": 2}
 _AXIS_NAME = "XYZ"
@@ -94,16 +123,61 @@ _CLASSIFIED_MAX = 4096  # distinct G/M combinations remembered per interpreter
 
 
 class _Frame:
-    __slots__ = ("it", "file", "number", "repeats", "call_line", "header_seen", "body_started")
+    """One program level: main, M98 subprogram or G65/G66 macro.
 
-    def __init__(self, it: Lines, file: str, number: int | None, repeats: int, call_line: int):
-        self.it = it
+    `src` gives random access for jumps (GOTO, WHILE/END, M99 P): the lines as a list, a
+    file path (read into memory on the first jump) or None (a stream: no jumps, PS0123);
+    `start` is the line number of the program's first line; `loops` the open WHILE/DO
+    loops as [loop id, line of the WHILE/DO]; `macro` whether it has a local variable
+    level of its own (G65/G66), `args` its arguments (a repeat gets them afresh).
+    """
+
+    __slots__ = (
+        "it",
+        "file",
+        "number",
+        "repeats",
+        "call_line",
+        "header_seen",
+        "body_started",
+        "src",
+        "start",
+        "loops",
+        "macro",
+        "modal_call",
+        "args",
+    )
+
+    def __init__(
+        self,
+        it: Lines,
+        file: str,
+        number: int | None,
+        repeats: int,
+        call_line: int,
+        src: list[str] | str | None = None,
+        start: int = 1,
+    ):
+        self.it = Pushback(it)  # a lathe cycle may look ahead for its contour
         self.file = file
         self.number = number
         self.repeats = repeats
         self.call_line = call_line
         self.header_seen = False
         self.body_started = False
+        self.src = src
+        self.start = start
+        self.loops: list[list[int]] = []
+        self.macro = False
+        self.modal_call = False
+        self.args: dict[int, float] | None = None
+
+
+# a sequence number at the start of a line (after '/' and comments): GOTO / M99 P targets
+_N_AT = re.compile(r"\s*(?:/\d?\s*)?(?:\([^)]*\)\s*)*[Nn]\s*(\d+)")
+_O_AT = re.compile(r"\s*(?:/\d?\s*)?[Oo:]\s*\d")
+_END_OF = re.compile(r"(?<![A-Z])END\s*(\d+)")
+_COMMENT = re.compile(r"\([^)]*\)|;.*")
 
 
 class Interpreter:
@@ -122,7 +196,20 @@ class Interpreter:
     `block_delete` is the BLOCK DELETE switch (`/` blocks are skipped when True);
     `start` is the machine position in mm (default: every axis at its reference point);
     `max_blocks` bounds the number of executed blocks (None: unbounded) so a checker can
-    refuse programs whose subprogram repeats would run for ever.
+    refuse programs whose subprogram repeats would run for ever;
+    `macro_variables` is the store of the common variables kept across power cycles
+    (#500-#999, #10000-#10999): any mutable mapping number -> value, a vacant variable
+    being an absent key (the controller passes its machine data; default: a new dict);
+    `common_variables` holds #100-#499 the same way (the controller keeps one dict from
+    program to program and clears it at reset or power off, as Fanuc; default: a new dict,
+    so they start vacant);
+    `clock` gives seconds for the #3001/#3002 timers (default: time stands still);
+    `macro_budget` bounds the macro statements executed in a row without any command
+    coming out (an endless WHILE or GOTO loop is an alarm naming its line, not a hang);
+    `subprogram`: what an M99 in the main program does: False (default) refuses it (on
+    the control it would repeat the program for ever), True ends the program there (a
+    subprogram checked on its own), None decides by the file: a program whose M99 is its
+    last block is a subprogram.
     """
 
     def __init__(
@@ -138,10 +225,27 @@ class Interpreter:
         arc_tolerance: float = ARC_TOLERANCE_MM,
         max_blocks: int | None = None,
         machine_data: MachineData | None = None,
+        macro_variables: MutableMapping[int, float] | None = None,
+        clock: Callable[[], float] | None = None,
+        macro_budget: int = MACRO_BUDGET,
+        subprogram: bool | None = False,
+        common_variables: MutableMapping[int, float] | None = None,
     ) -> None:
         self.params = params
         self._md = machine_data
         self.units_programmed = False  # a G20/G21 was read (else the power-on unit holds)
+        self.macro_budget = macro_budget
+        self.subprogram = subprogram
+        self.vars = MacroVariables(self, macro_variables, clock, common_variables)
+        self._g66: tuple[int, dict[int, float], int] | None = None
+        self._mrun = 0  # macro statements since the last command came out
+        self._loaded: dict[str, list[str]] = {}
+        self._nindex: dict[tuple[int, int], dict[int, list[int]]] = {}
+        self._ends: dict[tuple[int, int, int], int | None] = {}
+        self.messages: list[tuple[int, str]] = []  # #3006 operator messages (line, text)
+        self._seen_errors: set[tuple[str, int, int, str]] = set()
+        self._jumps = 0  # backward jumps (GOTO, END) so far
+        self._loop_seen: dict[tuple[int, int], tuple] = {}
         self.file = file
         self.block_delete = block_delete
         self.arc_tolerance = arc_tolerance
@@ -153,10 +257,11 @@ class Interpreter:
             style = DecimalStyle(machine_data.decimal_style)
         self._li = style is DecimalStyle.LEAST_INCREMENT
         self._words_ok = _LATHE_WORDS if self._lathe else _MILL_WORDS
+        self._axis_words = frozenset("XZUW" if self._lathe else "XYZ")
         # fast-path words of a G0/G1 and of a G2/G3 block (others take the checked path)
         self._fast_line = frozenset("XZUWFN" if self._lathe else "XYZFN")
         self._fast_arc = frozenset("XZUWIKRFN" if self._lathe else "XYZIJKRFN")
-        self._codes = kt = codes.for_kind(params.kind)
+        self._codes = kt = codes.for_kind(params.kind, params.lathe_gcode_system)
         self._gtab = kt.g
         self._mtab = kt.m
         self._classified: dict[tuple[int, ...], Classified] = {}
@@ -346,7 +451,9 @@ class Interpreter:
         self._ended = False
         frames = self._frames
         frames.clear()
-        frames.append(_Frame(skip_leader(main_lines(lines)), self.file, None, 1, 0))
+        frames.append(
+            _Frame(skip_leader(main_lines(lines)), self.file, None, 1, 0, self._lib.main_source())
+        )
         out = self._out
         li = self._li
         while frames and not self._ended:
@@ -363,7 +470,10 @@ class Interpreter:
                         raise
                     out.clear()
                     self._record(err, file)
+                    if getattr(err, "fatal", False):
+                        self._ended = self._switch = True  # an alarm stops the program
                 if out:
+                    self._mrun = 0
                     if len(out) == 1:
                         yield out[0]
                     else:
@@ -375,6 +485,11 @@ class Interpreter:
                 # the frame's lines ran out
                 if len(frames) == 1:
                     frames.pop()
+                    if fr.loops:
+                        err = self._open_loop(fr)
+                        if not recover:
+                            raise err
+                        self._record(err, file)
                     break
                 err = NcError(
                     f"subprogram O{fr.number} ends without M99",
@@ -382,10 +497,14 @@ class Interpreter:
                     1,
                     file,
                 )
+                if fr.loops:
+                    err = self._open_loop(fr)
                 if not recover:
                     raise err
                 self._record(err, file)
                 frames.pop()
+                if fr.macro:
+                    self.vars.pop()
         try:
             self._flush_comp()
         except NcError as err:
@@ -397,10 +516,20 @@ class Interpreter:
             out.clear()
         self._ended = self._switch = True
 
+    def _open_loop(self, fr: _Frame) -> MacroAlarm:
+        ident, line, _ = fr.loops[-1]
+        return MacroAlarm(PS_MISSING_END, f"DO {ident} without END {ident}", line, 1, fr.file)
+
     def _record(self, err: NcError, file: str) -> None:
         self._update_simple()
         if err.file == "<program>" and file != "<program>":
             err.file = file
+        key = (err.file, err.line, err.col, err.message)
+        if key in self._seen_errors:
+            # the same error again: the program loops (a macro loop or repeats); stop here
+            self._ended = self._switch = True
+            return
+        self._seen_errors.add(key)
         self.errors.append(err)
         if len(self.errors) >= CHECK_MAX_ERRORS:
             self._ended = self._switch = True
@@ -417,8 +546,13 @@ class Interpreter:
     # --- one block --------------------------------------------------------------------
 
     def _block(self, blk: Block, fr: _Frame) -> None:
-        if type(blk) is MarkedBlock and self._marks(blk, fr):
-            return
+        if type(blk) is not Block:
+            if self._marks(blk, fr):  # type: ignore[arg-type]
+                return
+            if type(blk) is MacroBlock:
+                blk = self._macro(blk, fr)  # type: ignore[assignment]
+                if blk is None:
+                    return
         if not fr.body_started:
             fr.body_started = True
         words = blk.words
@@ -428,7 +562,9 @@ class Interpreter:
         self._line = line = blk.line
         self._executed += 1
         if self.max_blocks is not None and self._executed > self.max_blocks:
-            raise self._err(f"program executes more than {self.max_blocks} blocks", blk)
+            err = self._err(f"program executes more than {self.max_blocks} blocks", blk)
+            err.fatal = True  # type: ignore[attr-defined]  # check stops here: it would loop
+            raise err
         # fast path: a motion block (G0..G3 at most, with only the words of its motion)
         # without any other modal change
         if self._simple and not blk.m and (not g or (len(g) == 1 and g[0] in _MOTION_CODES)):
@@ -471,6 +607,9 @@ class Interpreter:
             cls = self._classify(blk)
             if len(self._classified) < _CLASSIFIED_MAX:
                 self._classified[key] = cls
+        if cls.call is not None:
+            self._macro_call(blk, cls.call)
+            return
         self._check_words(blk, cls)
         n = words.get("N")
         if n is not None:
@@ -486,6 +625,14 @@ class Interpreter:
         for handler in plan:
             handler(self, run)
         self._update_simple()
+        if (
+            self._g66 is not None
+            and cls.owner is None
+            and not words.keys().isdisjoint(self._axis_words)
+            and not any(f.modal_call for f in self._frames)
+        ):
+            number, args, reps = self._g66
+            self._push_macro(number, args, reps, blk, modal_call=True)
 
     def _classify(self, blk: Block) -> Classified:
         """The block's codes -> table rows by modal group; two codes of a group are refused."""
@@ -501,6 +648,9 @@ class Interpreter:
             if row.refused:
                 raise self._err(row.refused, blk, "G", i + 1)
             grp = row.group
+            if row.name in ("G65", "G66"):
+                cls.call = row  # the other codes of the block run first (_macro_call)
+                return cls
             if (
                 grp in gset
                 or (grp == "cycle" and code != G80 and "motion" in gset)
@@ -603,12 +753,17 @@ class Interpreter:
     def _update_simple(self) -> None:
         """Whether the next plain motion block may take the fast path."""
         comp = self._comp
-        self._simple = self._cycle == G80 and not self._xf_on and (comp is None or not comp.active)
+        self._simple = (
+            self._cycle == G80
+            and not self._xf_on
+            and (comp is None or not comp.active)
+            and self._g66 is None
+        )
         self._plainxyz = (
             self._simple and self._abs and not self._polar and not self._inch and not self._lathe
         )
 
-    def _marks(self, blk: MarkedBlock, fr: _Frame) -> bool:
+    def _marks(self, blk, fr: _Frame) -> bool:
         """Tape marks, block delete and O headers; True when the block is done with."""
         main = len(self._frames) == 1
         if blk.tape:
@@ -1312,12 +1467,44 @@ class Interpreter:
         self._g92 = g92
         self._refresh_offsets(resync=True)
 
-    # --- subprograms ------------------------------------------------------------------
+    # --- subprograms and macros ------------------------------------------------------
+
+    def _open(self, number: int, blk: Block, letter: str, what: str):
+        opened = self._lib.open(number)
+        if opened is None:
+            raise MacroAlarm(
+                PS_PROGRAM_NOT_FOUND,
+                f"{what}: program O{number} not found",
+                blk.line,
+                blk.col(letter),
+                self._frames[-1].file,
+            )
+        return opened
+
+    def _nesting(self, blk: Block) -> None:
+        if len(self._frames) > MAX_SUB_NESTING:
+            raise MacroAlarm(
+                PS_NESTING,
+                f"subprogram nesting deeper than {MAX_SUB_NESTING} levels (recursion?)",
+                blk.line,
+                blk.col("M") if blk.m else blk.col("G"),
+                self._frames[-1].file,
+            )
 
     def _call(self, blk: Block) -> None:
         words = blk.words
+        cur = self._frames[-1]
         if "P" not in words:
-            raise self._err("M98 needs P (program number)", blk, "M")
+            if "Q" not in words:
+                raise self._err("M98 needs P (program number) or Q (sequence number)", blk, "M")
+            # M98 Q: call a part of the current program, from sequence number Q
+            self._nesting(blk)
+            q = self._int_word(blk, "Q")
+            fr = _Frame(iter(()), cur.file, cur.number, 1, blk.line, cur.src, cur.start)
+            line = self._find_seq(fr, q, 0, blk, PS_SEQUENCE_NOT_FOUND, "M98 Q", "Q")
+            self._frames.append(fr)
+            self._jump(fr, line, blk)
+            return
         p = self._int_word(blk, "P")
         if p > MAX_PROGRAM_NUMBER or p < 1:
             raise self._err(f"M98 P{p}: program number outside 1..{MAX_PROGRAM_NUMBER}", blk, "P")
@@ -1334,33 +1521,402 @@ class Interpreter:
             raise self._err(f"M98 repeat count above {MAX_REPEAT}", blk, "L")
         if reps == 0:
             return
-        if len(self._frames) > MAX_SUB_NESTING:
-            raise self._err(
-                f"subprogram nesting deeper than {MAX_SUB_NESTING} levels (recursion?)", blk, "M"
-            )
-        opened = self._lib.open(number)
-        if opened is None:
-            raise self._err(f"M98: program O{number} not found", blk, "P")
-        it, file = opened
-        self._frames.append(_Frame(it, file, number, reps, blk.line))
+        self._nesting(blk)
+        it, file, src, start = self._open(number, blk, "P", "M98")
+        fr = _Frame(it, file, number, reps, blk.line, src, start)
+        if "Q" in words:
+            q = self._int_word(blk, "Q")
+            line = self._find_seq(fr, q, 0, blk, PS_SEQUENCE_NOT_FOUND, "M98 Q", "Q")
+            self._frames.append(fr)
+            self._jump(fr, line, blk)
+            return
+        self._frames.append(fr)
         self._switch = True
 
     def _return(self, blk: Block) -> None:
+        words = blk.words
+        fr = self._frames[-1]
         if len(self._frames) == 1:
+            if "P" in words:  # M99 P in the main program: jump to the sequence number
+                p = self._int_word(blk, "P")
+                line = self._find_seq(fr, p, blk.line, blk, PS_SEQUENCE_NOT_FOUND, "M99 P", "P")
+                self._jump(fr, line, blk)
+                return
+            if self.subprogram or (self.subprogram is None and self._rest_is_empty(fr, blk)):
+                self._ended = self._switch = True  # a subprogram on its own: it ends here
+                return
             raise self._err(
                 "M99 in the main program would repeat it for ever (no caller to return to)",
                 blk,
                 "M",
             )
-        if "P" in blk.words:
-            raise self._err("M99 P (return to a sequence number) is not supported", blk, "P")
-        fr = self._frames.pop()
+        self._frames.pop()
         self._switch = True
+        if fr.macro:
+            self.vars.pop()
         if fr.repeats > 1:
             opened = self._lib.open(fr.number)  # type: ignore[arg-type]
             assert opened is not None
-            nf = _Frame(opened[0], opened[1], fr.number, fr.repeats - 1, fr.call_line)
+            nf = _Frame(opened[0], opened[1], fr.number, fr.repeats - 1, fr.call_line,
+                        opened[2], opened[3])  # fmt: skip
+            if fr.macro:
+                nf.macro, nf.modal_call, nf.args = True, fr.modal_call, fr.args
+                self.vars.push(fr.args or {})
             self._frames.append(nf)
+            return
+        if "P" in words:
+            p = self._int_word(blk, "P")
+            caller = self._frames[-1]
+            line = self._find_seq(caller, p, fr.call_line, blk, PS_SEQUENCE_NOT_FOUND, "M99 P", "P")
+            self._jump(caller, line, blk)
+
+    def _rest_is_empty(self, fr: _Frame, blk: Block) -> bool:
+        """Whether nothing but blanks, comments and '%' follow `blk` in the main program."""
+        seq = self._lines_of(fr)
+        if seq is None:
+            return False
+        for i in range(blk.line, len(seq)):
+            text = _COMMENT.sub("", seq[i]).strip()
+            if not text or text.startswith("%"):
+                continue
+            return bool(_O_AT.match(text))  # the next program of the file starts
+        return True
+
+    def _macro_call(self, blk: Block, row) -> None:
+        """G65 (call now) and G66 (call after every move until G67), with arguments.
+
+        Other G codes before it in the block (`G54 G65 P...`) and M codes before it take
+        effect first, as a block of their own; every word is an argument of the call.
+        """
+        words = blk.words
+        at = blk.g.index(row.number)
+        if len(blk.g) > at + 1:
+            raise MacroAlarm(
+                "PS0129",
+                f"G{fmt_g(blk.g[at + 1])[1:]} after {row.name} (G is not a macro argument)",
+                blk.line,
+                blk.col("G", at + 2),
+                self._frames[-1].file,
+            )
+        others = blk.g[:at]
+        if others or blk.m:
+            self._block(Block(blk.line, blk.text, {}, others, list(blk.m)), self._frames[-1])
+        if "N" in words:
+            self._nword = int(words["N"])
+        if "P" not in words:
+            raise self._err(f"{row.name} needs P (program number)", blk, "G")
+        number = self._int_word(blk, "P")
+        reps = self._int_word(blk, "L") if "L" in words else 1
+        if reps > MAX_REPEAT:
+            raise self._err(f"{row.name} repeat count above {MAX_REPEAT}", blk, "L")
+        try:
+            args = arguments(words, blk.col("G"))
+        except MacroAlarm as err:
+            err.line, err.file = blk.line, self._frames[-1].file
+            raise
+        if row.name == "G66":
+            self._lib_check(number, blk)
+            self._g66 = (number, args, reps)
+            self._update_simple()
+            return
+        if reps:
+            self._push_macro(number, args, reps, blk)
+
+    def _lib_check(self, number: int, blk: Block) -> None:
+        self._open(number, blk, "P", "G66")
+
+    def _push_macro(
+        self, number: int, args: dict[int, float], reps: int, blk: Block, modal_call: bool = False
+    ) -> None:
+        if self.vars.depth >= MAX_MACRO_NESTING:
+            raise MacroAlarm(
+                PS_MACRO_NESTING,
+                f"macro calls nested deeper than {MAX_MACRO_NESTING} levels (recursion?)",
+                blk.line,
+                blk.col("G"),
+                self._frames[-1].file,
+            )
+        self._nesting(blk)
+        it, file, src, start = self._open(number, blk, "P", "G66" if modal_call else "G65")
+        fr = _Frame(it, file, number, reps, blk.line, src, start)
+        fr.macro, fr.modal_call, fr.args = True, modal_call, args
+        self.vars.push(args)
+        self._frames.append(fr)
+        self._switch = True
+
+    def _macro_modal_cancel(self) -> None:
+        self._g66 = None
+        self._update_simple()
+
+    # --- macro statements -------------------------------------------------------------
+
+    def _macro(self, mb: MacroBlock, fr: _Frame) -> Block | None:
+        """Execute a macro statement; a words block comes back as the plain Block it means."""
+        self._line = mb.line
+        if mb.seq is not None:
+            self._nword = mb.seq
+        kind = mb.kind
+        env = self.vars
+        try:
+            if kind == WORDS:
+                return build_block(mb, env, fr.file, self._li)
+            self._executed += 1
+            if self.max_blocks is not None and self._executed > self.max_blocks:
+                raise MacroAlarm("", f"program executes more than {self.max_blocks} blocks")
+            self._mrun += 1
+            if self._mrun > self.macro_budget:
+                raise MacroAlarm(
+                    "",
+                    f"endless loop? {self.macro_budget} macro statements in a row without "
+                    "a move or any other command (macro budget)",
+                )
+            args = mb.args
+            if kind == ASSIGN:
+                self._assign(args, mb, fr)
+            elif kind == IF_GOTO:
+                if args[0](env):
+                    self._goto(fr, args[1](env), mb)
+            elif kind == IF_THEN:
+                if args[0](env):
+                    self._assign(args[1], mb, fr)
+            elif kind == WHILE:
+                self._while(fr, mb, bool(args[0](env)), args[1])
+            elif kind == DO:
+                self._while(fr, mb, True, args[0])
+            elif kind == END:
+                self._end(fr, mb, args[0])
+            elif kind == GOTO:
+                self._goto(fr, args[0](env), mb)
+        except MacroAlarm as err:
+            if err.line == 0:
+                err.line = mb.line
+                err.col = err.col or mb.col0
+            if err.file == "<program>":
+                err.file = fr.file
+            raise
+        return None
+
+    def _assign(self, assigns, mb: MacroBlock, fr: _Frame) -> None:
+        env = self.vars
+        for target, expr, col in assigns:
+            n = target if type(target) is int else target(env)
+            v = expr(env)
+            if n == 3000:
+                number = alarm_number(v, col)
+                raise MacroAlarm(str(number), f"macro alarm: {mb.comment or '(no message)'}",
+                                 mb.line, col, fr.file)  # fmt: skip
+            if n == 3006:
+                self.messages.append((mb.line, mb.comment))
+                self._emit(ProgramStop(mb.line, StopKind.PROGRAM_STOP))
+                continue
+            env.set(n, v, col)
+
+    def _lines_of(self, fr: _Frame) -> list[str] | None:
+        src = fr.src
+        if src is None or not isinstance(src, str):
+            return src
+        lines = self._loaded.get(src)
+        if lines is None:
+            with open(src, encoding="latin-1", newline=None) as fh:
+                lines = fh.read().split("\n")
+            self._loaded[src] = lines
+        return lines
+
+    def _jump(self, fr: _Frame, line: int, blk: Block) -> None:
+        """Go on in frame `fr` at `line` (1-based; past the end: the program's end)."""
+        seq = self._lines_of(fr)
+        if seq is None:
+            raise MacroAlarm(
+                PS_DNC_JUMP,
+                "GOTO, WHILE/END and M99 P need the program in memory or in a file "
+                "(a streamed program cannot jump back)",
+                blk.line,
+                1,
+                fr.file,
+            )
+        fr.it = ((i + 1, seq[i]) for i in range(line - 1, len(seq)))
+        self._switch = True
+        if line <= blk.line:
+            self._jumps += 1
+            if self._jumps > LOOP_WATCH_AFTER:
+                self._watch_loop(fr, line, blk)
+
+    def _watch_loop(self, fr: _Frame, line: int, blk: Block) -> None:
+        """A loop that comes back to a line with everything as it was the time before can
+        never end (the interpreter is deterministic): an alarm now, not after the budget.
+
+        Compared: the variables (local, common, kept, signals), the positions, the modes
+        and offsets that decide what the next blocks do. Checked only once a program has
+        jumped back LOOP_WATCH_AFTER times, so short loops pay nothing.
+        """
+        env = self.vars
+        clock = env.clock() if env.clock is not None else None
+        state = (
+            len(self._frames),
+            tuple(env.loc.items()),
+            tuple(env.common.items()),
+            tuple(env.persistent.items()),
+            tuple(env.signals.items()),
+            clock,
+            self._pos,
+            self._mach,
+            self._off,
+            self._motion,
+            self._cycle,
+            self._abs,
+            self._inch,
+            self._wcs,
+            self._tool,
+            self._f,
+            self._s,
+        )
+        key = (id(fr), line)
+        if self._loop_seen.get(key) == state:
+            raise MacroAlarm(
+                "",
+                f"endless loop: the jump back to line {line} finds every variable, "
+                "position and mode as the time before, so the program can never end",
+                blk.line,
+                getattr(blk, "col0", 1),
+                fr.file,
+            )
+        if len(self._loop_seen) > 1000:
+            self._loop_seen.clear()
+        self._loop_seen[key] = state
+
+    def _seq_index(self, fr: _Frame, seq: list[str]) -> dict[int, list[int]]:
+        """Sequence number -> lines of the frame's program (from its first line to its end)."""
+        key = (id(seq), fr.start)
+        idx = self._nindex.get(key)
+        if idx is None:
+            idx = {}
+            header = body = False
+            for i in range(fr.start - 1, len(seq)):
+                text = seq[i]
+                if _O_AT.match(text):
+                    if header or body:
+                        break
+                    header = True
+                    continue
+                stripped = text.strip()
+                if stripped.startswith("%"):
+                    if body:
+                        break
+                    continue
+                if stripped:
+                    body = True
+                m = _N_AT.match(text)
+                if m:
+                    idx.setdefault(int(m.group(1)), []).append(i + 1)
+            self._nindex[key] = idx
+        return idx
+
+    def _find_seq(
+        self, fr: _Frame, n, cur: int, blk: Block, alarm: str, what: str, letter: str
+    ) -> int:
+        """The line of sequence number `n` in the frame's program: the first after `cur`,
+        else the first from the program's start (Fanuc searches on, then from the top)."""
+        col = blk.col(letter) if letter else getattr(blk, "col0", 1)
+        if n is None or n != int(n) or not 1 <= n <= 99999:
+            shown = "vacant" if n is None else f"{n:g}"
+            raise MacroAlarm(alarm, f"{what} {shown}: not a sequence number 1..99999",
+                             blk.line, col, fr.file)  # fmt: skip
+        seq = self._lines_of(fr)
+        if seq is None:
+            raise MacroAlarm(
+                PS_DNC_JUMP,
+                f"{what}: a streamed program cannot search sequence numbers",
+                blk.line,
+                col,
+                fr.file,
+            )
+        lines = self._seq_index(fr, seq).get(int(n))
+        if not lines:
+            raise MacroAlarm(alarm, f"{what} {int(n)}: sequence number N{int(n)} not found",
+                             blk.line, col, fr.file)  # fmt: skip
+        for ln in lines:
+            if ln > cur:
+                return ln
+        return lines[0]
+
+    def _goto(self, fr: _Frame, n, mb: MacroBlock) -> None:
+        line = self._find_seq(fr, n, mb.line, mb, PS_GOTO_NOT_FOUND, "GOTO", "")
+        # loops left by the jump: started after the target, or ended before it
+        loops = fr.loops
+        while loops:
+            ident, start, end = loops[-1]
+            if start <= line and line <= (end or self._find_end(fr, ident, start) or line):
+                break  # the target is inside this loop: it stays open
+            loops.pop()
+        self._jump(fr, line, mb)
+
+    def _while(self, fr: _Frame, mb: MacroBlock, true: bool, ident: int) -> None:
+        loops = fr.loops
+        if not (loops and loops[-1][0] == ident and loops[-1][1] == mb.line):
+            for rec in loops:
+                if rec[0] == ident:
+                    raise MacroAlarm(
+                        PS_LOOP_NUMBER,
+                        f"DO {ident} inside the open loop DO {ident} of line {rec[1]} "
+                        "(nested loops need different numbers 1..3)",
+                        mb.line, mb.col0, fr.file,
+                    )  # fmt: skip
+            if len(loops) >= MAX_LOOPS:
+                raise MacroAlarm(
+                    PS_LOOP_NUMBER,
+                    f"DO {ident}: loops nested deeper than {MAX_LOOPS}",
+                    mb.line,
+                    mb.col0,
+                    fr.file,
+                )
+            loops.append([ident, mb.line, 0])
+        if true:
+            return
+        rec = loops.pop()
+        end = rec[2] or self._find_end(fr, ident, mb.line)
+        if end is None:
+            raise MacroAlarm(
+                PS_MISSING_END, f"WHILE ... DO {ident} without END {ident}", mb.line, mb.col0,
+                fr.file,
+            )  # fmt: skip
+        if fr.src is None:
+            return  # streamed: _find_end consumed the lines up to the END
+        self._jump(fr, end + 1, mb)
+
+    def _find_end(self, fr: _Frame, ident: int, line: int) -> int | None:
+        seq = self._lines_of(fr)
+        if seq is None:
+            for lineno, text in fr.it:  # a stream: skip forward (no way back needed)
+                m = _END_OF.search(_COMMENT.sub("", text).upper())
+                if m and int(m.group(1)) == ident:
+                    return lineno
+            return None
+        key = (id(seq), line, ident)
+        if key in self._ends:
+            return self._ends[key]
+        found = None
+        for i in range(line, len(seq)):
+            text = seq[i]
+            if _O_AT.match(text):
+                break
+            m = _END_OF.search(_COMMENT.sub("", text).upper())
+            if m and int(m.group(1)) == ident:
+                found = i + 1
+                break
+        self._ends[key] = found
+        return found
+
+    def _end(self, fr: _Frame, mb: MacroBlock, ident: int) -> None:
+        loops = fr.loops
+        if not loops or loops[-1][0] != ident:
+            inner = f" (loop DO {loops[-1][0]} is still open)" if loops else ""
+            raise MacroAlarm(
+                PS_LOOP_NUMBER, f"END {ident} without a matching DO {ident}{inner}", mb.line,
+                mb.col0, fr.file,
+            )  # fmt: skip
+        rec = loops[-1]
+        rec[2] = mb.line
+        self._jump(fr, rec[1], mb)
 
 
 CHECK_MAX_ERRORS = 1000
@@ -1377,6 +1933,9 @@ def check(
     max_blocks: int = 5_000_000,
     block_delete: bool = False,
     machine_data: MachineData | None = None,
+    macro_variables: MutableMapping[int, float] | None = None,
+    macro_budget: int = MACRO_BUDGET,
+    subprogram: bool | None = None,
 ) -> list[NcError]:
     """Interpret a whole program and return ALL its errors (at most CHECK_MAX_ERRORS).
 
@@ -1392,5 +1951,8 @@ def check(
         max_blocks=max_blocks,
         block_delete=block_delete,
         machine_data=machine_data,
+        macro_variables=macro_variables,
+        macro_budget=macro_budget,
+        subprogram=subprogram,
     )
     return interp.check_all(lines)

@@ -9,7 +9,7 @@ from __future__ import annotations
 from typing import TYPE_CHECKING
 
 from cnc.canon import PathMode, SetPathMode
-from cnc.interp.gnum import G20, G61, G90, G90_1, G95, G96, G99
+from cnc.interp.gnum import G61, G90, G90_1, G95, G96, G99
 
 if TYPE_CHECKING:
     from cnc.interp.context import BlockRun, Context
@@ -18,9 +18,8 @@ INCH = 25.4
 
 
 def units(ip: Context, run: BlockRun) -> None:
-    code = run.g["units"]
     ip.units_programmed = True  # `nc check` warns about programs that never say G20/G21
-    inch = code == G20
+    inch = run.rows["units"].name == "G20"  # lathe system C writes it G70
     if inch != ip._inch:
         if ip._moved:
             raise ip._err(

@@ -71,7 +71,9 @@ def reference_return(ip: Context, run: BlockRun) -> None:
     ip._out.append(StraightTraverse(blk.line, mt, run.exact))
     ip._mach = mt
     ip._pos = ip._prog_from_machine()
-    ip._moved = True
+    # The return itself goes to a machine point whatever the unit, so it does not fix the
+    # program's unit: Haas programs start `G28` before their `G20` (an intermediate point
+    # is a programmed position and counted as motion by _line_to).
 
 
 def machine_move(ip: Context, run: BlockRun) -> None:

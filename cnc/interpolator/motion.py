@@ -21,7 +21,7 @@ from cnc.canon import ArcFeed, SetPathMode, StraightFeed, StraightTraverse
 from cnc.errors import NcError
 from cnc.interpolator.sample import Sample
 from cnc.params import MachineParams
-from cnc.planner.geometry import Vec, Vec3
+from cnc.planner.geometry import Line, Vec, Vec3
 from cnc.planner.limits import AxisLimits
 from cnc.planner.path import Path
 from cnc.planner.profile import INF, PlanMemo, Row, Span, partition, partition_again, solve
@@ -29,7 +29,57 @@ from cnc.planner.scurve import change_distance
 
 DROP_EVERY: Final = 256
 
-__all__ = ["Motion", "Sample"]
+__all__ = ["Motion", "Peaks", "Sample"]
+
+
+class Peaks:
+    """Per-axis maxima of |v|, |a|, |j| over IPO samples, by the discrete definition of
+    docs/motion.md (backward differences, at rest before the first sample).
+
+    Kept here so that it runs compiled with the interpolator: `Motion.run` feeds it every
+    pose without a Python-level loop (`nc plan` without a trace).
+    """
+
+    t: float
+    p: Vec3
+    v: Vec3
+    a: Vec3
+    vmax: Vec3
+    amax: Vec3
+    jmax: Vec3
+
+    def __init__(self, start: Vec3, ipo: float) -> None:
+        self.t = ipo
+        self.p = (float(start[0]), float(start[1]), float(start[2]))
+        self.v = self.a = (0.0, 0.0, 0.0)
+        self.vmax = self.amax = self.jmax = (0.0, 0.0, 0.0)
+
+    def add(self, pose: Vec3) -> None:
+        t = self.t
+        p0, p1, p2 = self.p
+        v0, v1, v2 = self.v
+        a0, a1, a2 = self.a
+        x0, x1, x2 = pose
+        w0, w1, w2 = (x0 - p0) / t, (x1 - p1) / t, (x2 - p2) / t
+        b0, b1, b2 = (w0 - v0) / t, (w1 - v1) / t, (w2 - v2) / t
+        j0, j1, j2 = (b0 - a0) / t, (b1 - a1) / t, (b2 - a2) / t
+        self.p = (x0, x1, x2)
+        self.v = (w0, w1, w2)
+        self.a = (b0, b1, b2)
+        self.vmax = _absmax(self.vmax, w0, w1, w2)
+        self.amax = _absmax(self.amax, b0, b1, b2)
+        self.jmax = _absmax(self.jmax, j0, j1, j2)
+
+
+def _absmax(m: Vec3, x: float, y: float, z: float) -> Vec3:
+    m0, m1, m2 = m
+    if x < 0.0:
+        x = -x
+    if y < 0.0:
+        y = -y
+    if z < 0.0:
+        z = -z
+    return (x if x > m0 else m0, y if y > m1 else m1, z if z > m2 else m2)
 
 
 class Motion:
@@ -64,6 +114,8 @@ class Motion:
     _urgent: bool
     _sb_wait: bool
     replans: int
+    fallbacks: int
+    run_cycles: int
     _memo: PlanMemo
     _lookahead: int  # params.lookahead (params is frozen)
 
@@ -112,6 +164,8 @@ class Motion:
         self._urgent = False
         self._sb_wait = False
         self.replans = 0
+        self.fallbacks = 0  # re-plans refused because the running plan had to stay
+        self.run_cycles = 0  # cycles the last `run` stepped
         # spans of the last plan by their inputs: a re-plan for new blocks rebuilds only
         # the spans whose inputs changed (see profile.solve)
         self._memo = PlanMemo()
@@ -246,13 +300,36 @@ class Motion:
         self._advance(self.ipo)
         return Sample(tnow, self._pose, self._v, self._line)
 
+    def run(self, limit: int, peaks: Peaks, feeding: bool) -> Sample:
+        """`step()` up to `limit` times (at least once), each pose into `peaks`; returns
+        the last sample. Stops early after a cycle that reports a sync command, when the
+        machine is idle, or, while the caller has blocks to push (`feeding`), as soon
+        as the look-ahead has room for one: the samples are those of calling `step()`
+        in a loop that pushes whenever there is room, without a Python-level loop."""
+        s = self.step()
+        peaks.add(self._pose)  # s.pose, typed as the pose it is
+        n = 1
+        while n < limit and s.sync is None:
+            if feeding and self._lookahead > self.path.blocks - self._blocks_done:
+                break
+            if self.idle:
+                break
+            s = self.step()
+            peaks.add(self._pose)
+            n += 1
+        self.run_cycles = n
+        return s
+
     # -- internals ----------------------------------------------------------------------
     def _ahead(self) -> bool:
         return self._s < self.path.end_s
 
     def _protect_s(self) -> float:
+        """Path the running plan covers: a new block's blend never reshapes it, so the
+        plan stays valid whatever the new block asks for (see `_replan`). It ends at the
+        stoppable tail (`_tail_start`), so blends still use all of the last line."""
         if self._si < len(self._spans):
-            return self._spans[self._si].s1
+            return self._spans[-1].s1
         return self._s
 
     def _in_coast(self) -> bool:
@@ -311,15 +388,47 @@ class Motion:
                 spans = self._plan_single_block(k, s0, v0, fo, ro)
             else:
                 path = self.path
-                parts = partition_again(segs, k, s0, fo, ro, self.ipo, self._memo, path.changed_s)
+                tail = self._tail_start(s0)
+                parts = partition_again(
+                    segs, k, s0, fo, ro, self.ipo, self._memo, path.changed_s, tail
+                )
                 path.changed_s = INF
-                spans, _ok = solve(parts, v0, self.ipo, self._memo)
+                spans, ok = solve(parts, v0, self.ipo, self._memo)
+                if not ok and not urgent and self._si < len(self._spans):
+                    # The new blocks ask for less than the committed state can give (a
+                    # plan from it would break a limit). The running plan stays: it ends
+                    # at rest before any path the new blocks could change, so it is still
+                    # valid; the re-plan is tried again next cycle from a later state.
+                    self._dirty = True
+                    self.fallbacks += 1
+                    return
         if lead is not None:
             spans.insert(0, lead)
         self._spans = spans
         self._si = 0
         self._t = 0.0
         self._hint = 0
+
+    def _tail_start(self, s0: float) -> float:
+        """Where the plan must come to rest: the start of the last piece while the next
+        block may still reshape it (INF when the path end is final or already reached).
+
+        The next block's G64 blend may use up all of the last line not yet committed, and
+        its junctions then ask for speeds no plan made before could know: so the window
+        keeps a stoppable tail, the plan covers only path that can no longer change, and
+        a re-plan never has to demand more than the limits from a committed state.
+        """
+        if self._eop:
+            return INF
+        segs = self.path.segs
+        if not segs:
+            return INF
+        last = segs[-1]
+        if last.exact or last.sync_after or not isinstance(last.geom, Line):
+            return INF  # only a line is blended, and not before an exact stop or sync point
+        if last.s0 <= s0:
+            return INF  # already on it (look-ahead 1, or resting there): runs to its end
+        return last.s0
 
     def _lead(self, urgent: bool) -> Span | None:
         """The part of the current motion that must run on as planned (a != 0 now)."""

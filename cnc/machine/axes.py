@@ -24,6 +24,10 @@ from cnc.controller import IdealAxes as _ControllerIdealAxes
 HOMING_METHOD = 19  # falling edge of a positive home switch (dog active above its edge)
 VELOCITY_FEEDFORWARD = 1.0  # unless drives.plant.loops.velocity_feedforward says otherwise
 HOME_DOG_BEFORE_M = 0.030  # power-on position: this far below the dog (m, table coordinates)
+# Communication monitoring on the machine's bus (docs/recovery.md): each drive faults when
+# its RPDO stops for 50 ms (0x1400:5, EMCY 0x8250), the master reports an axis whose TPDO1
+# is missing for 5 consecutive SYNC cycles (lost, destroyed or late: 0x8100)
+MONITORING = {"rpdo_deadline_ms": 50, "feedback_timeout_cycles": 5}
 
 
 # EMCY codes the ideal axes report for the drive fault kinds (what the real drive would send)
@@ -131,6 +135,7 @@ class CanopenAxes:
                 ipo_cycle_s=self.ipo_s,
                 master_node_id=127,
                 following_error_every=1,
+                **MONITORING,
             )
             try:
                 self.group.plan()
@@ -145,6 +150,7 @@ class CanopenAxes:
                     ipo_cycle_s=self.ipo_s,
                     master_node_id=127,
                     following_error_every=0,
+                    **MONITORING,
                 )
             self.injector = FaultInjector(self.drives)
             self.group.boot()
@@ -214,6 +220,12 @@ class CanopenAxes:
                     self._fresh += ((axis, 0, f"drive sequence {cmd}: {exc}"),)
             self._note_faults(self.group.take_faults())
         targets = {n: v for n, v in outputs.targets.items() if n in self.drives}
+        if cmd == "home":
+            # the controller computed this cycle's targets before the homing ran: for the
+            # axes just homed they are positions in the old (unreferenced) frame, a jump of
+            # up to the whole travel; those axes hold where homing left them
+            for n in outputs.home_axes or self.names:
+                targets.pop(n, None)
         for n, v in targets.items():
             if not math.isfinite(v):
                 raise ValueError(f"axis {n}: target {v!r} is not finite")

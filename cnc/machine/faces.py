@@ -44,6 +44,7 @@ class MachineFaces:
                 parity=self.dnc_parity,
                 drip=self._drip,
                 on_alarm=lambda n, text: m.raise_face_alarm(n, text, "DNC"),
+                on_warning=lambda n, text: m.raise_face_alarm(n, text, "DNC", "WARNING"),
                 policy=getattr(ctl, "policy", None),
                 secret=ports.secret,
                 machine_data=self._machine_data if hasattr(ctl, "machine_data") else None,

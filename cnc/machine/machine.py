@@ -28,6 +28,12 @@ PANEL_BUTTONS = ("PanelCycleStart", "PanelFeedHold", "PanelReset")
 _UNSET = object()
 
 
+#: the declared epoch of lockstep timestamps: 2000-01-01T00:00:00Z. A virtual stream starts
+#: there, at machine time 0, so it can never be mistaken for a real one (cf. a controller whose
+#: clock was never set) and two lockstep runs give byte-identical SHDR streams.
+LOCKSTEP_EPOCH = 946_684_800.0
+
+
 class Machine:
     """A machine built from a `cnc.config.MachineConfig`.
 
@@ -42,7 +48,10 @@ class Machine:
     candump: a text stream for the CAN frames in candump log format, or None.
     event_log_path: JSONL file for the event log (the ring is always kept).
     shdr_every: publish the status to the SHDR face every n IPO cycles (default: each scan).
-    epoch: SHDR timestamps are `epoch + machine time` (virtual: byte-identical streams).
+    epoch: in lockstep, SHDR timestamps are `epoch + machine time` (default
+        `LOCKSTEP_EPOCH`, 2000-01-01T00:00:00Z: byte-identical streams, and a date no real
+        observation carries). A realtime runner sets `wall_clock` (time.time): each
+        timestamp is then the wall clock (UTC) at publish, whatever the machine's pace.
     state_dir: the machine's state directory: its machine data (tools, offsets, kept
         parameters) is loaded from `<state_dir>/<name>.machine-data.json` when the file
         exists (else the configuration's `machine_data` section) and saved there atomically
@@ -64,7 +73,7 @@ class Machine:
         event_log_path: str | None = None,
         event_capacity: int = 10_000,
         shdr_every: int | None = None,
-        epoch: float = 1_800_000_000.0,
+        epoch: float | None = None,
         substep: float | None = None,
         state_dir: str | None = None,
         machine_data=None,
@@ -84,7 +93,9 @@ class Machine:
             )
         self.plc_every = round(ratio)
         self.shdr_every = shdr_every or self.plc_every
-        self.epoch = epoch
+        self.epoch = LOCKSTEP_EPOCH if epoch is None else epoch
+        #: set by a realtime runner: SHDR timestamps from this clock instead of epoch + t
+        self.wall_clock: Callable[[], float] | None = None
         self.axis_names = tuple(config.axes)
         self.events = EventLog(event_capacity, event_log_path)
         self.schedule = FaultSchedule(
@@ -195,7 +206,7 @@ class Machine:
             self.trace.row(self.t, self.last_targets, fb.actual, status.line)
         self._watch_alarms(status)
         if self.cycle % self.shdr_every == 0 and self.shdr is not None:
-            self.shdr.publish(self.full_status(), self.epoch + self.t)
+            self.shdr.publish(self.full_status(), self.timestamp())
         if self.machine_data_file is not None and self.cycle % self.plc_every == 0:
             md = self.controller.machine_data
             if md.revision != self._md_saved and not self.controller.in_cycle:
@@ -210,6 +221,12 @@ class Machine:
 
         save(self.machine_data_file, md)
         self._md_saved = md.revision
+
+    def timestamp(self) -> float:
+        """Seconds since the Unix epoch (UTC) for what the machine reports now: the wall
+        clock under a realtime runner, the declared epoch plus machine time in lockstep."""
+        clock = self.wall_clock
+        return clock() if clock is not None else self.epoch + self.t
 
     def _scan_until(self, t: float) -> None:
         now_ms = t * 1000.0 + 1e-6
@@ -385,15 +402,19 @@ class Machine:
         """Run `fn` on the machine's thread at the start of the next cycle (faces use it)."""
         self._inbox.put(fn)
 
-    def raise_face_alarm(self, number: int, text: str, source: str = "DNC") -> None:
-        """Thread-safe: an alarm raised by a face (DNC parity error, transfer cut off...)."""
-        alarm = Alarm(number, text, source=source, time=self.t)
+    def raise_face_alarm(
+        self, number: int, text: str, source: str = "DNC", severity: str = "FAULT"
+    ) -> None:
+        """Thread-safe: an alarm raised by a face (DNC parity error, overrun...), or with
+        severity WARNING a message that leaves the machine fit to run (a program load cut
+        off); both stay in the alarm list until a reset."""
+        alarm = Alarm(number, text, source=source, severity=severity, time=self.t)
 
         def add() -> None:
             self.face_alarms.append(alarm)
             self.events.add(
                 self.t,
-                "alarm",
+                "alarm" if severity == "FAULT" else "message",
                 f"{source} {number}: {text}",
                 {"number": number, "source": source, "axis": None, "line": 0},
             )

@@ -57,7 +57,8 @@ class RealtimeRunner:
     `FMSCELL_MACHINE_RT_PRIORITY`, 0 = off) asks SCHED_FIFO N for the stepping thread, as
     LinuxCNC's servo thread has, and puts the thread back to its old scheduling when `run()`
     returns; a refusal is reported in `scheduling` and the runner goes on as it can.
-    `prepare()` collects and freezes ahead of `run()`. The fast clock takes none of this: it
+    `prepare()` collects and freezes ahead of `run()`. The machine's SHDR timestamps come
+    from `wall_clock` (default `time.time`, UTC) once a runner owns it. The fast clock takes none of this: it
     never sleeps while cutting, so a FIFO thread would take a whole CPU from the rest of the
     process, and the slack the collector waits for never comes.
     """
@@ -70,6 +71,7 @@ class RealtimeRunner:
         idle_speed: float | None = None,
         rt_priority: int | None = None,
         spin_s: float = SPIN_S,
+        wall_clock=time.time,
     ) -> None:
         self.spin_s = spin_s
         if rt_priority is None:
@@ -96,6 +98,10 @@ class RealtimeRunner:
         self._lock = threading.Lock()
         self._prepared = False  # RealtimeProcess held (prepare())
         machine.runner = self
+        # a paced machine (real time or the fast clock) reports wall-clock (UTC) timestamps:
+        # a host or an MTConnect client compares them with its own clock, and machine time
+        # falls behind the wall clock whenever the machine runs slow or is paused
+        machine.wall_clock = wall_clock
 
     @property
     def paused(self) -> bool:

@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
-from collections.abc import Iterable, Mapping
+from collections.abc import Iterable, Mapping, MutableMapping
 from dataclasses import dataclass
 from typing import Any
 
@@ -191,6 +191,66 @@ def _xyz(value: Any, pointer: str) -> tuple[float, float, float]:
     raise MachineDataError("must be [x, y, z] or {x, y, z} in mm", pointer)
 
 
+KEPT_VARIABLES = (range(500, 1000), range(10000, 11000))  # Fanuc #500-#999, Haas #10000+
+
+
+class KeptVariables(MutableMapping):
+    """Macro B common variables kept across power cycles (#500-#999, Haas #10000-#10999), as
+    the interpreter's `macro_variables` store: a vacant variable is an absent key. Each
+    write counts the owner's revision, so the machine saves them like its offsets."""
+
+    __slots__ = ("_owner", "_values")
+
+    def __init__(self, owner: MachineData) -> None:
+        self._owner = owner
+        self._values: dict[int, float] = {}
+
+    def __getitem__(self, number: int) -> float:
+        return self._values[number]
+
+    def __setitem__(self, number: int, value: float) -> None:
+        p = f"/macro_variables/{number}"
+        if not isinstance(number, int) or not any(number in r for r in KEPT_VARIABLES):
+            raise MachineDataError("a kept macro variable is #500-#999 or #10000-#10999", p)
+        if isinstance(value, bool) or not isinstance(value, int | float):
+            raise MachineDataError(f"must be a number, got {value!r}", p)
+        if not math.isfinite(value):
+            raise MachineDataError(f"must be finite, got {value!r}", p)
+        if self._values.get(number) != float(value):
+            self._values[number] = float(value)
+            self._owner.revision += 1
+
+    def __delitem__(self, number: int) -> None:
+        del self._values[number]
+        self._owner.revision += 1
+
+    def __iter__(self):
+        return iter(list(self._values))
+
+    def __len__(self) -> int:
+        return len(self._values)
+
+    def to_dict(self) -> dict[str, float]:
+        values = dict(self._values)
+        return {str(n): values[n] for n in sorted(values)}
+
+    def load(self, data: Any, pointer: str = "/macro_variables") -> None:
+        """Replace all from {"<n>": value}; all or nothing."""
+        if not isinstance(data, Mapping):
+            raise MachineDataError("must be an object {number: value}", pointer)
+        scratch = KeptVariables(self._owner)
+        for key, v in data.items():
+            try:
+                n = int(str(key))
+            except ValueError:
+                raise MachineDataError(
+                    "variable number must be an integer", f"{pointer}/{key}"
+                ) from None
+            scratch[n] = v
+        self._values = scratch._values
+        self._owner.revision += 1
+
+
 class MachineData:
     """Tool offsets, work offsets, the G92 shift and the parameters kept across power cycles.
 
@@ -213,6 +273,7 @@ class MachineData:
         self.g92: tuple[float, float, float] = (0.0, 0.0, 0.0)
         self.power_on_units = "mm"
         self.decimal_style: str | None = None
+        self.macro_variables = KeptVariables(self)
         self.revision = 0
         for n, t in (tools or {}).items():
             self.set_tool(n, t)
@@ -239,6 +300,8 @@ class MachineData:
         out.g92 = self.g92
         out.power_on_units = self.power_on_units
         out.decimal_style = self.decimal_style
+        out.macro_variables = KeptVariables(out)
+        out.macro_variables._values = dict(self.macro_variables._values)
         out.revision = self.revision
         return out
 
@@ -315,6 +378,7 @@ class MachineData:
         self.g92 = other.g92
         self.power_on_units = other.power_on_units
         self.decimal_style = other.decimal_style
+        self.macro_variables._values = dict(other.macro_variables._values)
         self.revision += 1
 
     # --- JSON form ----------------------------------------------------------------------
@@ -339,6 +403,7 @@ class MachineData:
             "tools": self.tools_dict(),
             **self.offsets_dict(),
             "parameters": self.parameters_dict(),
+            "macro_variables": self.macro_variables.to_dict(),
         }
 
     @classmethod
@@ -347,9 +412,17 @@ class MachineData:
         if not isinstance(data, Mapping):
             raise MachineDataError(f"must be an object, got {type(data).__name__}", "")
         for key in data:
-            if key not in ("format", "tools", "work_offsets", "g92", "parameters"):
+            if key not in (
+                "format",
+                "tools",
+                "work_offsets",
+                "g92",
+                "parameters",
+                "macro_variables",
+            ):
                 raise MachineDataError(
-                    "unknown key (format, tools, work_offsets, g92, parameters)", f"/{key}"
+                    "unknown key (format, tools, work_offsets, g92, parameters, macro_variables)",
+                    f"/{key}",
                 )
         if data.get("format", 1) != 1:
             raise MachineDataError(f"unknown format {data.get('format')!r}", "/format")
@@ -368,6 +441,7 @@ class MachineData:
             power_on_units=params.get("power_on_units", "mm"),
             decimal_style=params.get("decimal_style"),
         )
+        md.macro_variables.load(data.get("macro_variables", {}))
         md.revision = 0
         return md
 

@@ -10,7 +10,7 @@ is then an exact stop.
 from __future__ import annotations
 
 from collections.abc import Iterable
-from math import isinf, isnan
+from math import cos, isinf, isnan
 from typing import Final
 
 from cnc.canon import ArcFeed, PathMode, SetPathMode, StraightFeed, StraightTraverse
@@ -209,6 +209,7 @@ class Path:
     blocks: int
     max_feed: float
     head_sync: list
+    max_blend_deviation: float
 
     def __init__(self, params: MachineParams, lim: AxisLimits, start: Vec) -> None:
         self.params = params
@@ -229,6 +230,9 @@ class Path:
         self.blocks = 0
         self.max_feed = params.max_feed / 60.0
         self.head_sync = []  # sync commands before any pending segment
+        # largest distance of a G64 blend from its two lines (at its middle): the path's
+        # only departure from the programmed geometry (`nc plan` reports it)
+        self.max_blend_deviation = 0.0
 
     @property
     def segs(self) -> list[Segment]:
@@ -363,6 +367,9 @@ class Path:
             arc = blend_arc(pg.end, pg.u, sg.u, prev.tolerance, rest, avail2) if rest > 0 else None
             if arc is not None:
                 d = arc.trim
+                dev = arc.r0 * (1.0 - cos(0.5 * arc.sweep))
+                if dev > self.max_blend_deviation:
+                    self.max_blend_deviation = dev
                 lim = self.lim
                 bseg = Segment(
                     arc, prev.line, prev.block, prev.feed, -1, lim, False, prev.tolerance

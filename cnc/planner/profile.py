@@ -159,6 +159,9 @@ class Span:
         "coast_in_t",
         "coast_out_t",
         "accel_limit",
+        "room",
+        "reserve_out",
+        "fits",
     )
 
     s0: float
@@ -174,6 +177,9 @@ class Span:
     coast_in_t: float
     coast_out_t: float
     accel_limit: float  # the tangential acceleration limit it was planned with
+    room: float  # the length its speed changes were planned in (see `_span`)
+    reserve_out: float  # the length kept at its end for a coast at the end junction's cap
+    fits: bool  # its phases cover no more than its length (else a plan is infeasible)
 
     def __init__(
         self,
@@ -200,6 +206,9 @@ class Span:
         self.coast_in_t = 0.0  # leading/trailing constant-speed time around a junction
         self.coast_out_t = 0.0
         self.accel_limit = 0.0
+        self.room = 0.0
+        self.reserve_out = 0.0
+        self.fits = True
 
     def state(self, t: float, hint: int = 0) -> tuple[float, float, float, int]:
         """(s, v, a, phase index) at time t into the span; s is absolute and clamped."""
@@ -380,20 +389,55 @@ def _span(
     cin: float,
     cout: float,
     stop: bool,
+    room: float,
+    reserve_out: float,
 ) -> Span:
-    """The S-curve of one part: from v to v1 under vmax, coasts of cin/cout seconds."""
+    """The S-curve of one part: from v to v1 under vmax, coasts of cin/cout seconds.
+
+    The speed changes are planned within `room`, the length `solve` left for them (the
+    part without the lengths reserved for its coasts at the junctions' caps), not within
+    all that the coasts at the actual speeds leave: a re-plan that starts inside this
+    span counts the same reserve for the coast at its end, so every state this span
+    passes through can still meet v1 in the new plan's accounting (a stoppable tail; see
+    docs/motion.md, Re-planning). What the coasts leave over is run at constant speed:
+    up to `reserve_out` minus the end coast at v1 just before that coast, the rest in
+    the cruise.
+    """
+    planned_room = room
     middle = s1 - s0 - cin * v - cout * v1
+    if middle < 0.0:
+        middle = 0.0
+    if room > middle or room < 0.0 or v1 <= 0.0:
+        room = middle  # (ending at rest: no coast at the end, nothing to keep for it)
+    spare = middle - room
+    hold = 0.0  # constant v1 before the end coast
+    if v1 > 0.0 and spare > 0.0:
+        hold = reserve_out - cout * v1
+        if hold > spare:
+            hold = spare
+        elif hold < 0.0:
+            hold = 0.0
+        if hold > 2.0 * cout * v1:
+            # v1 below a third of the reserved coast speed: holding it would crawl for
+            # more than 2 coasts; plan the changes in all the length as before (a re-plan
+            # inside this span may then find no room and keep this plan, see Motion)
+            room = middle
+            spare = 0.0
+            hold = 0.0
     # the phases of span_phases, integrated into rows as they come
     out = _Rows(v)
     if cin:  # the leading coast: constant speed
         out.rows.append((0.0, cin, 0.0, v, 0.0, 0.0))
         out.ss = cin * v
         out.tt = cin
-    vp, cruise = _span_peak(v, v1, vmax, middle if middle > 0.0 else 0.0, at, jt)
+    vp, cruise = _span_peak(v, v1, vmax, room, at, jt)
+    cruise += spare - hold
     out.change(v, vp, at, jt)
     if cruise > 0.0 and vp > 0.0:
         out.add(cruise / vp, 0.0)
     out.change(vp, v1, at, jt)
+    if hold > 0.0:
+        out.add(hold / v1, 0.0)
     if cout:
         out.add(cout, 0.0)
     rows = out.rows
@@ -403,6 +447,10 @@ def _span(
     sp.coast_in_t = cin
     sp.coast_out_t = cout
     sp.accel_limit = at
+    sp.room = planned_room
+    sp.reserve_out = reserve_out
+    length = s1 - s0
+    sp.fits = out.ss <= length + 1e-9 * length + 1e-12
     return sp
 
 
@@ -454,9 +502,11 @@ def partition_again(
     ipo: float,
     memo: PlanMemo,
     changed_s: float,
+    stop_s: float = INF,
 ) -> list[Part]:
-    """`partition(segs, k, s_start, feed_ovr, rapid_ovr, False, None, ipo=ipo)`, taking the
-    parts of the previous such call (kept in `memo`) where nothing they depend on changed.
+    """`partition(segs, k, s_start, feed_ovr, rapid_ovr, False, stop_s, ipo=ipo)` (no stop
+    point when `stop_s` is INF), taking the parts of the previous such call (kept in
+    `memo`) where nothing they depend on changed.
 
     A part that ends at piece e depends on the pieces up to e + 1 (the next speed cap)
     and, once the cut reaches one of its boundaries, not on where the cut began. So the
@@ -469,19 +519,22 @@ def partition_again(
     key = (feed_ovr, rapid_ovr)
     ends: dict[float, int] | None = memo.part_ends if memo.part_key == key else None
     n = len(segs)
+    has_stop = stop_s < INF
+    stop_at = stop_s if has_stop else 0.0
     while True:
-        hit = _cut(segs, k, s_start, feed_ovr, rapid_ovr, False, False, 0.0, INF, ipo, raw, ends)
+        hit = _cut(
+            segs, k, s_start, feed_ovr, rapid_ovr, False, has_stop, stop_at, INF, ipo, raw, ends
+        )
         if hit < 0:
             break
-        # the cut met a boundary of the previous cut: take its parts while unchanged
+        # the cut met a boundary of the previous cut: take its parts while unchanged (not
+        # a part that ended at the previous stop: the stop may have moved on since)
         old = memo.part_raw
         j = hit + 1
         m = len(old)
-        while j < m and old[j].s1 < changed_s:
+        while j < m and old[j].s1 < changed_s and not old[j].stop and old[j].s1 < stop_s:
             raw.append(old[j].copy())
             j += 1
-        if raw[-1].stop:
-            break  # a taken part ended the plan (the next stop)
         s_next = raw[-1].s1
         k = bisect_left(segs, s_next, key=_seg_start)
         if k >= n:
@@ -704,9 +757,10 @@ def solve(
         # the coasts actually run at v and v1 (<= the caps reserved above)
         cin = t3 if p.coast_in and v > 0.0 else 0.0
         cout = t3 if p.coast_out and v1 > 0.0 else 0.0
+        res_out = t3 * p.end_cap if p.coast_out else 0.0
         stop = p.stop and i == n - 1
         if smemo is None:
-            sp = _span(p.s0, p.s1, p.vmax, at, jt, v, v1, cin, cout, stop)
+            sp = _span(p.s0, p.s1, p.vmax, at, jt, v, v1, cin, cout, stop, length, res_out)
         else:
             # a span of the last plan that starts here, if all its inputs are these
             # (compared one by one: cheaper than hashing all of them into the key)
@@ -722,11 +776,15 @@ def solve(
                 and got.coast_in_t == cin
                 and got.coast_out_t == cout
                 and got.stop == stop
+                and got.room == length
+                and got.reserve_out == res_out
             ):
                 sp = got
             else:
-                sp = _span(p.s0, p.s1, p.vmax, at, jt, v, v1, cin, cout, stop)
+                sp = _span(p.s0, p.s1, p.vmax, at, jt, v, v1, cin, cout, stop, length, res_out)
             fresh[p.s0] = sp
+        if not sp.fits:
+            ok = False
         spans.append(sp)
         v = v1
     if memo is not None:

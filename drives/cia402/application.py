@@ -65,6 +65,11 @@ _QUICK_STOP_ACTIVE: Final = State.QUICK_STOP_ACTIVE
 _NOT_READY_TO_SWITCH_ON: Final = State.NOT_READY_TO_SWITCH_ON
 # not Final: mypyc can leave a Final tuple constant unset (as cnc/planner/geometry.py notes)
 _ENERGIZED = (_OPERATION_ENABLED, _QUICK_STOP_ACTIVE, State.FAULT_REACTION_ACTIVE)
+# the drive's own hardware monitors (`_monitor_device`)
+DEVICE_TAU_S: Final = 5.0  # heat-sink sensor lag behind the cabinet air
+DEVICE_WARNING_C: Final = 75.0  # statusword bit 7; a 0x4210 fault resets below it
+DEVICE_TRIP_C: Final = 85.0  # -> 0x4210 excess temperature device
+CHOPPER_CHECK_S: Final = 0.1  # brake check period: an open chopper faults 0x7111 within it
 _STRUCT: Final = {
     ("i8", 1): "<b",
     ("u8", 1): "<B",
@@ -179,6 +184,8 @@ class Drive402:
         self._hm: HM.HomingRun | None = None
         self._hm_status = HM.HomingStatus.NOT_STARTED
         self._halt_stopped = False
+        self.device_temp = self.plant.ambient  # heat-sink sensor, degC
+        self._chopper_open_s = 0.0  # time since the brake check found the chopper open
 
     def power_on_reset(self) -> None:
         """NMT reset node / power cycle: objects back to defaults, incremental position lost."""
@@ -304,6 +311,31 @@ class Drive402:
         for _ in range(n - done):
             self._substep(h)
         self.time += dt_s
+        self._monitor_device(dt_s)
+
+    def _monitor_device(self, dt_s: float) -> None:
+        """The drive's monitors of its own hardware, once per tick (not per plant sub-step):
+
+        * device temperature: the heat-sink sensor follows the cabinet air with a first-order
+          lag (DEVICE_TAU_S; the power stage's own losses are not modelled): warning bit 7
+          above DEVICE_WARNING_C, fault 0x4210 above DEVICE_TRIP_C;
+        * brake check (as a Danfoss drive's "brake check"): the chopper circuit is tested
+          every CHOPPER_CHECK_S; an open chopper or resistor faults 0x7111 at the next test
+          instead of waiting for braking energy to trip the link at 420 V.
+        """
+        p = self.plant
+        self.device_temp += (p.ambient - self.device_temp) * (1.0 - math.exp(-dt_s / DEVICE_TAU_S))
+        fault = 0
+        if self.device_temp > DEVICE_TRIP_C:
+            fault = 0x4210
+        if p.chopper_failed:
+            self._chopper_open_s += dt_s
+            if self._chopper_open_s >= CHOPPER_CHECK_S - 1e-9:
+                fault = fault or 0x7111
+        else:
+            self._chopper_open_s = 0.0
+        if fault and self._power_state not in (State.FAULT, State.FAULT_REACTION_ACTIVE):
+            self._raise_fault(fault)
 
     def _csp_substeps(self, h: float, n: int) -> int:
         """`_substep` specialised for plain CSP following in OPERATION ENABLED; returns how
@@ -582,6 +614,10 @@ class Drive402:
             return p.vdc > d.dc_link.chopper_on
         if code == 0x4310:
             return p.winding_temp > d.thermal.warning
+        if code == 0x4210:
+            return self.device_temp > DEVICE_WARNING_C
+        if code == 0x7111:
+            return p.chopper_failed
         if code == 0x2350:
             return p.i2t > d.thermal.i2t_warning_fraction * p.i2t_limit
         return False
@@ -964,7 +1000,11 @@ class Drive402:
         if p.vdc >= self._voltage_present:  # `p.voltage_present`, inlined
             sw |= SW_VOLTAGE_ENABLED
         # `p.warnings`, inlined
-        if p.winding_temp > self._warning_temp or p.i2t > self._i2t_warning_fraction * p._i2t_limit:
+        if (
+            p.winding_temp > self._warning_temp
+            or p.i2t > self._i2t_warning_fraction * p._i2t_limit
+            or self.device_temp > DEVICE_WARNING_C
+        ):
             sw |= SW_WARNING
         if self._limit_active or p.velocity_limited:
             sw |= SW_INTERNAL_LIMIT

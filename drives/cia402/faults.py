@@ -65,6 +65,20 @@ FAULTS: dict[int, FaultSpec] = {
             "1 sub-step after V_dc < undervoltage_trip, power stage on",
         ),
         FaultSpec(
+            0x4210,
+            "excess temperature device",
+            ER_GENERIC | ER_TEMPERATURE,
+            False,
+            "1 cycle after the heat-sink sensor exceeds device_trip (85 degC)",
+        ),
+        FaultSpec(
+            0x7111,
+            "brake chopper failure",
+            ER_GENERIC | ER_VOLTAGE,
+            False,
+            "the brake check: chopper_check (100 ms) after the chopper circuit opens",
+        ),
+        FaultSpec(
             0x4310,
             "excess temperature drive",
             ER_GENERIC | ER_TEMPERATURE,

@@ -105,6 +105,9 @@ class _Axis:
         self.hb_last: float | None = None
         self.hb_lost = False
         self.active: list[AxisFault] = []
+        self.restarting = False  # the master itself asked for the boot-up (not a fault)
+        self.missed = 0  # consecutive SYNC cycles without this axis's TPDO1
+        self.feedback_lost = False
 
 
 class _Line:
@@ -151,6 +154,18 @@ class _Line:
                 self.bus.remove_listener(self._receive)
 
 
+#: What the operator does when a fault reset is refused because the cause is still there.
+REMEDIES = {
+    0x2310: "the power stage is shorted: the drive needs service",
+    0x2350: "I2t above 80 %: let the motor rest (a few seconds unloaded), then reset",
+    0x3130: "no mains at the drive: restore the supply, then reset",
+    0x3210: "DC link above the chopper level: check the mains and the brake chopper",
+    0x3220: "DC link below 250 V: restore the mains, then reset",
+    0x4310: "winding above 130 degC: let the motor cool, then reset",
+    0x7305: "encoder signal lost: check the encoder cable, then reset and home",
+}
+
+
 class AxisGroup:
     """A CiA 402 axis group on one or more CAN lines. See the module docstring.
 
@@ -178,6 +193,14 @@ class AxisGroup:
     following_error_every:
         Map 0x60F4 following error into TPDO2 sent every n-th SYNC (0 = not mapped,
         feedback then carries None). TPDO1 (6 bytes) cannot also hold it.
+    rpdo_deadline_ms:
+        Write 0x1400:5 (RPDO deadline, CiA 301) so a drive whose RPDO1 stops arriving faults
+        (EMCY 0x8250 -> 0x6007 reaction) after this long (0 = off).
+    feedback_timeout_cycles:
+        The master's own check of the cyclic feedback: an axis whose TPDO1 has not arrived
+        for this many consecutive SYNC cycles (lost, destroyed or late) is reported as a
+        fault 0x8100 "cyclic feedback lost" (0 = off; the heartbeat still catches a node
+        that falls silent, after 3 heartbeat periods).
     sync_watchdog:
         Write 0x1006 = IPO cycle so a drive faults (0x8100) when SYNC stops for 1.5 cycles.
     bitrate:
@@ -198,6 +221,8 @@ class AxisGroup:
         heartbeat_timeout_factor: float = 3.0,
         master_node_id: int | None = None,
         following_error_every: int = 1,
+        rpdo_deadline_ms: int = 0,
+        feedback_timeout_cycles: int = 0,
         sync_watchdog: bool = False,
         bitrate: int = 1_000_000,
         eds_path: str = EDS_PATH,
@@ -233,6 +258,14 @@ class AxisGroup:
         self.master_node_id = master_node_id
         self.following_error_every = following_error_every
         self.sync_watchdog = sync_watchdog
+        if not 0 <= rpdo_deadline_ms <= 0xFFFF:
+            raise ValueError(
+                f"axis group: rpdo_deadline_ms must be 0..65535, got {rpdo_deadline_ms}"
+            )
+        if feedback_timeout_cycles < 0:
+            raise ValueError("axis group: feedback_timeout_cycles must be >= 0")
+        self.rpdo_deadline_ms = rpdo_deadline_ms
+        self.feedback_timeout_cycles = feedback_timeout_cycles
         self.bitrate = bitrate
         self.boot_timeout_s = boot_timeout_s
         self.stats = CycleStats()
@@ -362,7 +395,7 @@ class AxisGroup:
             if state == 0:
                 axis.booted = True
                 axis.known = False
-                if self._running:
+                if self._running and not axis.restarting:
                     self._report(
                         axis, 0, 0, "drive rebooted (boot-up seen): power cycle or reset", "bootup"
                     )
@@ -478,6 +511,7 @@ class AxisGroup:
             (0x1600, 1, 0x60400010),
             (0x1600, 2, 0x607A0020),
             (0x1600, 0, 2),
+            *([(0x1400, 5, self.rpdo_deadline_ms)] if self.rpdo_deadline_ms else []),
             (0x1400, 1, 0x200 + n),
             (0x1401, 1, off | (0x300 + n)),
             (0x1402, 1, off | (0x400 + n)),
@@ -691,6 +725,7 @@ class AxisGroup:
                         f"heartbeat lost (none for {limit * 1e3:.0f} ms)",
                         "heartbeat",
                     )
+                self._watch_feedback(axis)
                 if axis.sw & power.SW_FAULT and not axis.active:
                     self._report(
                         axis,
@@ -700,6 +735,30 @@ class AxisGroup:
                         " without an EMCY",
                         "statusword",
                     )
+
+    def _watch_feedback(self, axis: _Axis) -> None:
+        """The cyclic feedback check (under the lock): TPDO1 of this cycle seen or not."""
+        limit = self.feedback_timeout_cycles
+        if not limit or not axis.known or axis.restarting:
+            axis.missed = 0
+            return
+        if axis.rx_cycle == self.cycle_count:
+            axis.missed = 0
+            if axis.feedback_lost:
+                axis.feedback_lost = False
+                axis.active = [f for f in axis.active if f.source != "feedback"]
+            return
+        axis.missed += 1
+        if axis.missed >= limit and not axis.feedback_lost:
+            axis.feedback_lost = True
+            self._report(
+                axis,
+                0x8100,
+                0,
+                f"cyclic feedback lost: no TPDO1 for {axis.missed} SYNC cycles "
+                f"({axis.missed * self.ipo_cycle_s * 1e3:.0f} ms; lost, destroyed or late frames)",
+                "feedback",
+            )
 
     # ------------------------------------------------------------------ waiting
     def _wait(self, done, timeout_s: float, message) -> None:
@@ -772,11 +831,20 @@ class AxisGroup:
         except AxisError as exc:
             if exc.axes:
                 raise
-            stuck = [a for a in chosen if power.state_name(a.sw) != "OPERATION ENABLED"]
+            stuck = [
+                a for a in chosen if not a.known or power.state_name(a.sw) != "OPERATION ENABLED"
+            ]
             raise AxisError(
                 "; ".join(
                     f"axis {a.name} (node {a.node_id}) did not reach OPERATION ENABLED within "
-                    f"{timeout_s} s: {power.state_name(a.sw) if a.known else 'no TPDO'} "
+                    f"{timeout_s} s: "
+                    + (
+                        power.state_name(a.sw)
+                        if a.known
+                        else "no TPDO since NMT start (rebooted or silent: fault_reset() "
+                        "restarts it)"
+                    )
+                    + " "
                     f"(statusword 0x{a.sw:04X})"
                     for a in stuck
                 ),
@@ -802,6 +870,7 @@ class AxisGroup:
     def fault_reset(self, axes: Iterable[str] | None = None, timeout_s: float = 0.1) -> None:
         """Fault reset edge (0x00 then 0x80) for faulted axes; AxisError if one stays in FAULT."""
         selected = self._select(axes)
+        self.restart([a.name for a in selected if self._needs_restart(a)])
         with self._cond:  # faults of drives that are not in FAULT (e.g. a heartbeat) just clear
             for axis in selected:
                 if not axis.sw & power.SW_FAULT:
@@ -809,6 +878,7 @@ class AxisGroup:
         chosen = [a for a in selected if a.sw & power.SW_FAULT]
         if not chosen:
             return
+        t_reset = self._now()  # the faults this reset acknowledges were reported by now
         for axis in chosen:
             axis.cw = power.CW_DISABLE_VOLTAGE
         self.cycle()
@@ -825,8 +895,10 @@ class AxisGroup:
             raise AxisError(
                 "; ".join(
                     f"axis {a.name} (node {a.node_id}) still in FAULT after fault reset "
-                    f"(0x603F={self._error_code(a)}): the cause is still present"
+                    f"(0x603F={code}): the cause is still present"
+                    + (f": {REMEDIES[int(code, 16)]}" if int(code, 16) in REMEDIES else "")
                     for a in stuck
+                    for code in [self._error_code(a).replace("unreadable", "0x0000")]
                 ),
                 tuple(a.name for a in stuck),
             ) from None
@@ -835,8 +907,72 @@ class AxisGroup:
                 axis.cw = power.CW_DISABLE_VOLTAGE
         with self._cond:
             for axis in chosen:
-                axis.active.clear()
+                # a fault the drive raised after the reset (its EMCY came in while we waited)
+                # is a new one: it stays, and the drive's statusword says FAULT again
+                axis.active = [f for f in axis.active if f.time > t_reset]
                 axis.hb_lost = False
+
+    @staticmethod
+    def _needs_restart(axis: _Axis) -> bool:
+        """The drive rebooted (power cycle, its own reset) or sends no TPDO: its PDO mapping
+        and heartbeat settings are gone (CiA 301 defaults after a reset)."""
+        return not axis.known or any(f.source == "bootup" for f in axis.active)
+
+    def restart(self, axes: Iterable[str] | None = None, timeout_s: float | None = None) -> None:
+        """Bring drives back onto the cyclic traffic after a reboot or a bus-off: NMT reset
+        communication, wait for the boot-up, write the configuration again by SDO, NMT start,
+        wait for the first TPDO. AxisError names a drive that does not come back."""
+        chosen = self._select(axes)
+        if not chosen:
+            return
+        limit = timeout_s if timeout_s is not None else self.boot_timeout_s
+        with self._cond:
+            for axis in chosen:
+                axis.booted = False
+                axis.known = False
+                axis.restarting = True
+        try:
+            self._restart(chosen, limit)
+        finally:
+            with self._cond:
+                for axis in chosen:
+                    axis.restarting = False
+        logger.info("restarted %s", ", ".join(a.name for a in chosen))
+
+    def _restart(self, chosen: list[_Axis], limit: float) -> None:
+        for axis in chosen:
+            line = self._lines[axis.cfg.line]
+            line.network.send_message(0x000, bytes([0x82, axis.node_id]))
+
+        def names(which: list[_Axis]) -> str:
+            return ", ".join(f"axis {a.name} (node {a.node_id})" for a in which)
+
+        self._wait(
+            lambda: all(a.booted for a in chosen),
+            limit,
+            lambda: (
+                f"no boot-up within {limit} s after NMT reset communication from "
+                + names([a for a in chosen if not a.booted])
+            ),
+        )
+        for axis in chosen:
+            for index, sub, value in self._configuration(axis):
+                self._sdo_write(axis, index, sub, value)
+            self._lines[axis.cfg.line].network.send_message(0x000, bytes([0x01, axis.node_id]))
+        now = self._now()
+        with self._cond:
+            for axis in chosen:
+                axis.cw = power.CW_DISABLE_VOLTAGE
+                axis.hb_last = now
+                axis.hb_lost = False
+        self._run_cycles(
+            lambda fb: all(a.known for a in chosen),
+            limit,
+            "first TPDO after NMT start from " + names(chosen),
+        )
+        with self._cond:  # the boot-up and heartbeat reports are answered by the restart
+            for axis in chosen:
+                axis.active = [f for f in axis.active if f.source not in ("bootup", "heartbeat")]
 
     def disable(self, axes: Iterable[str] | None = None, timeout_s: float = 2.0) -> None:
         """Controlled stop: Disable operation (0x07, ramp per 0x605C), then Shutdown (0x06)."""

@@ -8,6 +8,13 @@ Everything is read-only unless listed. Two spellings, mixable in one comma-separ
 
 Tables: `coil` (alias `coils`, `co`) and `hr` (alias `holding`). Discrete inputs, input
 registers, %IX and %IW cannot be listed: Modbus has no function that writes them.
+
+A register range may carry the values it accepts, as IEC INT (signed 16-bit):
+
+    %MW0-%MW2=0..200,hr:1030=-100..100
+
+A write with any value outside is refused whole with exception 03 (illegal data value), as a
+real control refuses an override of 65535 % instead of wrapping it to something else.
 """
 
 from __future__ import annotations
@@ -44,6 +51,7 @@ class AllowEntry:
     first: int
     last: int
     text: str
+    values: tuple[int, int] | None = None  # accepted INT values, inclusive (registers only)
 
 
 class AllowList:
@@ -84,6 +92,7 @@ class AllowList:
     def resolve(self, mb_map: ModbusMap) -> WriteGuard:
         """Bind to `mb_map`; AllowListError if a listed range lies outside the map."""
         ranges: dict[Table, list[tuple[int, int]]] = {"coil": [], "hr": []}
+        limits: list[tuple[int, int, int, int]] = []
         for e in self.entries:
             if e.space in ("coil", "hr"):
                 table = e.space
@@ -100,15 +109,32 @@ class AllowList:
                 except ValueError as err:
                     raise AllowListError(f"writable: {e.text!r}: {err}") from None
             ranges[table].append((first, last + 1))
-        return WriteGuard({t: _merge(r) for t, r in ranges.items()})
+            if e.values is not None:
+                limits.append((first, last + 1, *e.values))
+        return WriteGuard({t: _merge(r) for t, r in ranges.items()}, limits)
 
 
 class WriteGuard:
     """Allow-list resolved to merged half-open Modbus address ranges per writable table."""
 
-    def __init__(self, ranges: dict[Table, list[tuple[int, int]]]) -> None:
+    def __init__(
+        self,
+        ranges: dict[Table, list[tuple[int, int]]],
+        limits: list[tuple[int, int, int, int]] | None = None,
+    ) -> None:
         self._ranges = ranges
         self._starts = {t: [a for a, _ in r] for t, r in ranges.items()}
+        #: holding-register value limits: (first, end, lowest, highest)
+        self._limits = tuple(limits or ())
+
+    def values_allowed(self, address: int, values: tuple[int, ...]) -> bool:
+        """True when every INT value written from holding register `address` on lies in
+        the value range listed for its register (registers without one take any value)."""
+        for first, end, low, high in self._limits:
+            for i in range(max(first, address), min(end, address + len(values))):
+                if not low <= values[i - address] <= high:
+                    return False
+        return True
 
     def allows(self, table: Table, address: int, count: int) -> bool:
         """True when every address in `address .. address+count-1` is listed."""
@@ -132,7 +158,28 @@ def _merge(ranges: list[tuple[int, int]]) -> list[tuple[int, int]]:
     return merged
 
 
+_VALUES = re.compile(r"\s*(-?\d+)\s*\.\.\s*(-?\d+)\s*$")
+
+
 def _parse_item(item: str) -> AllowEntry:
+    item, eq, values_txt = item.partition("=")
+    entry = _parse_addresses(item.strip())
+    if not eq:
+        return entry
+    if entry.space not in ("hr", "QW", "MW"):
+        raise AllowListError("a value range (=LOW..HIGH) applies to registers only")
+    m = _VALUES.match(values_txt)
+    if not m:
+        raise AllowListError(f"value range {values_txt!r} is not LOW..HIGH (e.g. =0..200)")
+    low, high = int(m.group(1)), int(m.group(2))
+    if not -32768 <= low <= high <= 32767:
+        raise AllowListError(f"value range {low}..{high} is not an ordered INT range")
+    return AllowEntry(
+        entry.space, entry.first, entry.last, f"{entry.text}={low}..{high}", (low, high)
+    )
+
+
+def _parse_addresses(item: str) -> AllowEntry:
     if item.startswith("%"):
         return _parse_iec(item)
     table_txt, sep, rng = item.partition(":")

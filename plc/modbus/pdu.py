@@ -165,7 +165,9 @@ class PduHandler:
         _expect_size(pdu, 5)
         (address,) = struct.unpack_from(">H", pdu, 1)
         pieces = self._resolve_writable("hr", address, 1)
-        return pdu, _word_batch(pieces, struct.unpack_from(">h", pdu, 3))
+        values = struct.unpack_from(">h", pdu, 3)
+        self._check_values(address, values)
+        return pdu, _word_batch(pieces, values)
 
     def _write_multiple_coils(self, pdu: bytes, snap: Snapshot) -> Result:
         byte_count = _expect_counted_size(pdu, 6)
@@ -183,6 +185,7 @@ class PduHandler:
             raise _Refused(ILLEGAL_DATA_VALUE)
         pieces = self._resolve_writable("hr", address, count)
         values = struct.unpack_from(f">{count}h", pdu, 6)
+        self._check_values(address, values)
         return pdu[:5], _word_batch(pieces, values)
 
     def _read_write_registers(self, pdu: bytes, snap: Snapshot) -> Result:
@@ -198,8 +201,9 @@ class PduHandler:
             raise _Refused(ILLEGAL_DATA_VALUE)
         read_pieces = self._resolve("hr", r_addr, r_count)
         write_pieces = self._resolve_writable("hr", w_addr, w_count)
-        words = _gather_words(snap, read_pieces)
         values = struct.unpack_from(f">{w_count}h", pdu, 10)
+        self._check_values(w_addr, values)
+        words = _gather_words(snap, read_pieces)
         response = bytes((0x17, 2 * r_count)) + _pack_words(words)
         return response, _word_batch(write_pieces, values)
 
@@ -235,6 +239,12 @@ class PduHandler:
         if pieces is None:
             raise _Refused(ILLEGAL_DATA_ADDRESS)
         return pieces
+
+    def _check_values(self, address: int, values: tuple[int, ...]) -> None:
+        """Refuse the whole write (03) if a value lies outside its register's listed range:
+        the last check, after the address ones, like a device validating the data it took."""
+        if not self.guard.values_allowed(address, values):
+            raise _Refused(ILLEGAL_DATA_VALUE)
 
     def _resolve_writable(self, table: Table, address: int, count: int) -> list[Piece]:
         pieces = self._resolve(table, address, count)

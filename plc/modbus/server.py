@@ -64,6 +64,7 @@ class FaceStats:
     connections_open: int = 0
     connections_total: int = 0
     connections_refused: int = 0
+    connections_evicted: int = 0
     requests: int = 0
     exceptions: int = 0
     write_batches: int = 0
@@ -81,8 +82,16 @@ class ModbusFace:
     write; everything else is read-only. Port 0 binds an ephemeral port (see `bound_port`).
 
     Timeouts: a connection holding part of a frame for `frame_timeout` seconds, or silent
-    for `idle_timeout` seconds (None: never), is closed. At most `max_connections` clients
-    are served at once; further ones are accepted and closed at once.
+    for `idle_timeout` seconds (None: never), is closed.
+
+    Connection limits: at most `max_connections` clients at once, and at most
+    `max_connections_per_client` from one source address. A new connection that would break
+    a limit is admitted and the least recently active connection makes room for it: the
+    newcomer's own address's at the per-address limit, else one of the address holding the
+    most connections. So idle connections never lock the face (a new client, e.g. the host's
+    remote panel on its fresh connection per command, always gets in); only a connection
+    with a write answer outstanding is never evicted, and if every candidate has one, the
+    newcomer is refused.
 
     `allowed_clients` (IP addresses or networks, e.g. ["127.0.0.1", "10.1.0.0/16"]) refuses
     connections from any other source address; None accepts every client.
@@ -112,6 +121,7 @@ class ModbusFace:
         mb_map: ModbusMap | None = None,
         unit_id: int | None = None,
         max_connections: int = 16,
+        max_connections_per_client: int = 8,
         frame_timeout: float = 5.0,
         idle_timeout: float | None = 120.0,
         ack_after_scan: bool = False,
@@ -130,6 +140,8 @@ class ModbusFace:
             raise ValueError(f"ModbusFace: unit_id {unit_id} outside 0..255")
         if max_connections < 1:
             raise ValueError("ModbusFace: max_connections must be >= 1")
+        if max_connections_per_client < 1:
+            raise ValueError("ModbusFace: max_connections_per_client must be >= 1")
         if frame_timeout <= 0 or (idle_timeout is not None and idle_timeout <= 0):
             raise ValueError("ModbusFace: timeouts must be > 0")
         self.get_snapshot = get_snapshot
@@ -146,6 +158,7 @@ class ModbusFace:
         self.port = port
         self.unit_id = unit_id
         self.max_connections = max_connections
+        self.max_connections_per_client = min(max_connections_per_client, max_connections)
         self.frame_timeout = frame_timeout
         self.idle_timeout = idle_timeout
         self.ack_after_scan = ack_after_scan
@@ -312,6 +325,39 @@ class ModbusFace:
                     log.info("%s: idle for %.3g s, closing", conn.peer, self.idle_timeout)
                     conn.close()
 
+    def _make_room(self, newcomer: _Connection) -> bool:
+        """Evict one connection if `newcomer` would break a limit; False: no room (every
+        candidate has a write answer outstanding), refuse the newcomer."""
+        conns = self._connections
+        same = [c for c in conns if c.address == newcomer.address]
+        if len(same) >= self.max_connections_per_client:
+            candidates = same
+        elif len(conns) >= self.max_connections:
+            # the address holding the most connections gives one up: one busy HMI host
+            # cannot starve the others, and a single flooding address pays for itself
+            held: dict[str, int] = {}
+            for c in conns:
+                held[c.address] = held.get(c.address, 0) + 1
+            most = max(held.values())
+            candidates = [c for c in conns if held[c.address] == most]
+        else:
+            return True
+        evictable = [c for c in candidates if not c._waiting]
+        if not evictable:
+            return False
+        victim = min(evictable, key=_Connection.last_active)
+        conns.discard(victim)
+        self.stats.connections_open -= 1
+        self.stats.connections_evicted += 1
+        log.warning(
+            "%s: evicted (idle %.3g s) to admit %s",
+            victim.peer,
+            _monotonic() - victim.last_active(),
+            newcomer.peer,
+        )
+        victim.close()
+        return True
+
 
 def _peer_allowed(peer, networks) -> bool:
     try:
@@ -334,6 +380,7 @@ class _Connection(asyncio.Protocol):
         self.decoder = MbapDecoder()
         self.transport: asyncio.Transport | None = None
         self.peer = "?"
+        self.address = "?"
         self.last_rx = 0.0
         self.partial_since: float | None = None
         self.closed = False
@@ -351,6 +398,7 @@ class _Connection(asyncio.Protocol):
         self.transport = transport  # type: ignore[assignment]
         peer = transport.get_extra_info("peername")
         self.peer = f"{peer[0]}:{peer[1]}" if peer else "?"
+        self.address = str(peer[0]) if peer else "?"
         self.last_rx = _monotonic()
         face = self.face
         if face.allowed_clients is not None and not _peer_allowed(peer, face.allowed_clients):
@@ -359,15 +407,24 @@ class _Connection(asyncio.Protocol):
             self.closed = True
             transport.close()
             return
-        if len(face._connections) >= face.max_connections:
+        if not face._make_room(self):
             self.stats.connections_refused += 1
-            log.warning("%s: refused, %d connections open", self.peer, len(face._connections))
+            log.warning(
+                "%s: refused, %d connections open, each awaiting a write answer",
+                self.peer,
+                len(face._connections),
+            )
             self.closed = True
             transport.close()
             return
         face._connections.add(self)
         self.stats.connections_open += 1
         self.stats.connections_total += 1
+
+    def last_active(self) -> float:
+        """When this client last completed a request (or connected): a trickled partial
+        frame does not count as activity."""
+        return self.partial_since if self.partial_since is not None else self.last_rx
 
     def connection_lost(self, exc: Exception | None) -> None:
         if self in self.face._connections:

@@ -61,8 +61,10 @@ def select(document: ET.Element, path: str) -> set[str]:
             raise PathError(part)
         try:
             found = holder.findall(rel)
-        except (SyntaxError, KeyError, TypeError, ValueError) as exc:
-            raise PathError(f"{part}: {exc}") from None
+        except Exception:  # noqa: BLE001 - ElementPath's own failure is no client's business
+            # the answer names the path the client sent, never the parser's exception text
+            # (e.g. "//Foo[" made ElementPath raise "'NoneType' object is not callable")
+            raise PathError(part) from None
         for el in found:
             if el.tag == "DataItem":
                 ids.add(el.get("id", ""))

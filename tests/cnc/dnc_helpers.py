@@ -17,6 +17,7 @@ class Machine:
     def __init__(self, *, capacity=4096, parity=False, drip_capacity=1024, policy=None):
         self.memory = ProgramMemory(capacity)
         self.alarms: list[tuple[int, str]] = []
+        self.warnings: list[tuple[int, str]] = []
         self.drip_buffers: list[DripBuffer] = []
         self.loop = LoopThread("dnc-test").start()
 
@@ -30,6 +31,7 @@ class Machine:
             parity=parity,
             drip=new_drip,
             on_alarm=lambda n, t: self.alarms.append((n, t)),
+            on_warning=lambda n, t: self.warnings.append((n, t)),
             policy=policy,
             idle_timeout_s=5,
         )

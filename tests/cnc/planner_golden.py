@@ -34,17 +34,17 @@ from cnc.params import MachineParams
 from cnc.planner.profile import partition, solve
 
 GOLDEN = {
-    "events": "6c5c0ba997f5186213b5529e5a22ceb8102a4890ea7b96a18f1c6fd8cf1f491d",
+    "events": "f690f32ea6ee1d6f359b65640ad97478a9a23b26be01905d9948598d699556e3",
     "bench_path_pieces": "4988196e4868d2367f40d68bf9542ffb27058635f1aa98173b92d220e407c3d5",
-    "bench_path_plans": "c9d55bec4635746400bca57437423242fab2bb48bba9edbd8d3d1ea4d2317220",
-    "bench_path_trace": "d6e2b0fea0da6aeb9347809cdca64b092eed118832f4629dda6d63e27985e8ef",
+    "bench_path_plans": "b234321debfa75dbe2eea3e78d12c7bf55d08e447ea9c640fda15a4688f0cc0a",
+    "bench_path_trace": "b935b41783971d3fd66b9aa0e3f385d5a583e040bf1712e54f630ed77a4f1287",
     "circle": "95b3e29ab6fd27d1788b2b00e8534b856a0af3e6842116b3e054aacfb96a488a",
-    "mixed": "9d010c02f01e6ebac2b10c7346f846892dce84abca55a719d9b92430ac269f93",
+    "mixed": "501fb9e5ff0224382c60692387c96383a1e82daf95720fadb514f261d723bfc7",
     "mixed_single_block": "42e3405c7d0c3c9b645ff2e08494724543ffd7eb71496bf1850de3faaec06c14",
-    "hold_and_overrides": "b99e59a8521f636f8b634c425f004496fde47e747d381b0b343633b4aae77dba",
-    "ipo_half_ms": "4564f15927ccbdf7ecac836df54f00e9b76bf758a3afcbfc6b8a4fbfbb1ad3f7",
+    "hold_and_overrides": "388cf47a139246bcdf6feb5ca7693276476be2f131ffee5f623c4b96a7275fa9",
+    "ipo_half_ms": "beef69378d8034570d050c897e070e5e546bd92a9bb0d3188817b4c99aaf7e35",
     "ipo_eight_ms": "c421dd70d48023e601ca2e82345e552df7c049e2cf0af071abca83f667c76afc",
-    "random": "10bd11feca0c6201f7ca56b8d6348812bbfdb0081f024918f4a903e03eebe458",
+    "random": "198c1119451ce76a4d8d9536ddf7c82e0c647eb47db5d11bbca66af3d54882cc",
 }
 
 

@@ -38,7 +38,7 @@ def test_broken_program_lists_every_error() -> None:
         f"{path}:4:1: feed move without F",
         f"{path}:5:1: unsupported G code G5",
         f"{path}:6:8: unknown address E",
-        f"{path}:7:1: unsupported: Fanuc Macro B (# variables)",
+        f"{path}:7:1: PS0116 #0 is always vacant (read only)",
         f"{path}:8:14: unterminated comment: '(' without ')'",
     ]
 

@@ -294,21 +294,29 @@ def test_estop_quick_stops_raises_alarm_and_requires_homing():
     assert rig.ex == "STOPPED"
     st = rig.outputs.status
     assert st.emergency_stop == "TRIGGERED"
-    assert [a.number for a in st.alarms] == [3001]
+    lost = [(3031, "X"), (3031, "Y"), (3031, "Z")]  # warnings: home the machine
+    assert [a.number for a in st.alarms if a.severity == "FAULT"] == [3001]
+    assert [(a.number, a.axis) for a in st.alarms if a.severity == "WARNING"] == lost
+    assert st.unreferenced == ("X", "Y", "Z")
     assert not any(rig.ctl.referenced.values())
     # reset while the E-stop is still active keeps the alarm
     rig.cmd("reset")
-    assert [a.number for a in rig.ctl.alarms] == [3001]
+    assert [a.number for a in rig.ctl.alarms if a.severity == "FAULT"] == [3001]
     rig.plc.out["EStopActive"] = False
     rig.plc.out["AxisEnable"] = True
     rig.step(5)
     rig.cmd("reset")
-    assert rig.ctl.alarms == ()
+    # RESET clears the E-stop alarm, not the lost reference: the machine says so
+    assert [(a.number, a.axis) for a in rig.ctl.alarms] == lost
+    assert all(a.severity == "WARNING" for a in rig.ctl.alarms)
     rig.step(10)
     rig.cmd("select_program", number=2000)
     with pytest.raises(CommandRefused, match=r"machine not homed \(X, Y, Z\)"):
         rig.cmd("cycle_start")
+    rig.step(1)  # the status of the next cycle carries the reason
+    assert "not homed" in rig.outputs.status.cycle_start_refused
     rig.home()
+    assert rig.ctl.alarms == () and rig.outputs.status.unreferenced == ()
     rig.cmd("cycle_start")
     rig.until(lambda: rig.ex == "PROGRAM_COMPLETED")
 

@@ -145,3 +145,54 @@ def test_config_machine_data_errors_name_the_key(section, key, fragment) -> None
         load_machine_config({"machines": {"m": {"base": "mill3", "machine_data": section}}})
     text = str(ei.value)
     assert f"machines.m.{key}" in text and fragment in text, text
+
+
+# --- Macro B variables kept across power cycles (#500-#999) and across programs (#100) ---
+
+SET_VARIABLES = """%
+O1004
+#500 = -42.5
+#100 = 7
+M30
+%
+"""
+USE_VARIABLES = """%
+O1005
+G90 G0 X#500 Y-[#100]
+M30
+%
+"""
+
+
+def test_macro_variables_500_and_100_outlive_their_program() -> None:
+    rig = Rig(programs={1004: SET_VARIABLES, 1005: USE_VARIABLES}, machine_data=MachineData())
+    rig.home()
+    rig.run_program(1004)
+    assert rig.ex == "PROGRAM_COMPLETED", rig.ctl.alarms
+    assert dict(rig.ctl.machine_data.macro_variables) == {500: -42.5}
+    rig.run_program(1005)
+    assert rig.ex == "PROGRAM_COMPLETED", rig.ctl.alarms
+    assert (rig.pos("X"), rig.pos("Y")) == pytest.approx((-42.5, -7.0))
+
+
+def test_kept_variables_are_saved_with_the_machine_data_and_checked() -> None:
+    md = MachineData()
+    before = md.revision
+    md.macro_variables[999] = 1.25
+    assert md.revision > before
+    assert md.to_dict()["macro_variables"] == {"999": 1.25}
+    again = MachineData.from_dict(json.loads(json.dumps(md.to_dict())))
+    assert dict(again.macro_variables) == {999: 1.25} and again == md
+    assert dict(md.copy().macro_variables) == {999: 1.25}
+    for number, value, fragment in [
+        (100, 1.0, "#500-#999"),
+        (1000, 1.0, "#500-#999"),
+        (500, float("nan"), "finite"),
+        (500, True, "number"),
+    ]:
+        with pytest.raises(MachineDataError, match=fragment) as err:
+            md.macro_variables[number] = value
+        assert err.value.pointer == f"/macro_variables/{number}"
+    with pytest.raises(MachineDataError) as err:
+        MachineData.from_dict({"macro_variables": {"500": 1.0, "77": 2.0}})
+    assert err.value.pointer == "/macro_variables/77"

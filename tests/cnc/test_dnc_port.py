@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import contextlib
 import socket
+import struct
 import threading
 import time
 
@@ -77,14 +78,67 @@ def test_parity_error_rejects_the_program_and_raises_an_alarm(parity_machine):
     assert parity_machine.alarms[0][0] == 2001
 
 
-def test_transfer_cut_off_stores_nothing(machine):
+def test_transfer_cut_off_stores_nothing_and_raises_no_alarm(machine):
     with machine.raw() as s:
         s.sendall(b"READ\n" + encode_program(PROG)[:30])
         s.shutdown(socket.SHUT_WR)
         answer = read_all(s)
     assert b"ERR 2004 transfer cut off before the closing %" in answer
     assert machine.memory.directory() == []
-    assert machine.alarms == [(2004, answer.decode().split(" ", 2)[2].strip())]
+    text = answer.decode().split(" ", 2)[2].strip()
+    assert text.endswith("; program discarded, memory unchanged")
+    # a message for the operator, not an alarm that takes the machine out of the cell
+    assert machine.alarms == [] and machine.warnings == [(2004, text)]
+
+
+NEW = PROG.replace("(PLATE)", "(PLATE REV B)").replace("X50", "X60")
+
+
+@pytest.mark.parametrize(
+    "cut",
+    [
+        pytest.param(lambda tape: b"READ\n", id="READ then hang up before the tape"),
+        pytest.param(lambda tape: b"READ\n" + tape[:25], id="hang up mid-tape"),
+        pytest.param(lambda tape: b"READ O1234\n" + tape[:-2], id="hang up before the closing %"),
+        pytest.param(lambda tape: tape[:-2], id="plain tape without its closing %"),
+    ],
+)
+def test_a_cut_off_load_keeps_the_program_in_memory_and_the_port_usable(machine, cut):
+    with machine.client() as c:
+        old = c.send_program(PROG)
+    with machine.raw() as s:  # a client (or a host killed mid-transfer) that goes away
+        s.sendall(cut(encode_program(NEW)))
+        s.close()
+    deadline = time.monotonic() + 5.0
+    while not machine.warnings and time.monotonic() < deadline:
+        time.sleep(0.01)  # the port notices the hang-up on its own thread
+    assert [n for n, _ in machine.warnings] == [2004] and machine.alarms == []
+    assert machine.memory.get(1234) == canonical_text(PROG)
+    with machine.client() as c:  # the port and the machine carry on
+        assert sha256_text(c.punch(1234)) == old.sha256
+        new = c.send_program(NEW)
+    assert new.sha256 == sha256_text(canonical_text(NEW))
+
+
+@pytest.mark.parametrize("reset", [False, True], ids=["FIN", "RST"])
+def test_a_host_killed_mid_transfer_leaves_memory_as_it_was(machine, reset):
+    """The host's connection ends half way through a load: closed by the kernel of a killed
+    host (FIN), or reset (RST, as from a host whose machine went down)."""
+    with machine.client() as c:
+        old = c.send_program(PROG)
+    big = "%\nO1234\n" + "G1 X1 Y1 F100\n" * 150 + "M30\n%\n"
+    s = machine.raw()
+    s.sendall(b"READ\n" + encode_program(big)[:1000])
+    if reset:
+        s.setsockopt(socket.SOL_SOCKET, socket.SO_LINGER, struct.pack("ii", 1, 0))
+    s.close()
+    deadline = time.monotonic() + 5.0
+    while not machine.warnings and time.monotonic() < deadline:
+        time.sleep(0.01)
+    assert machine.alarms == [] and [n for n, _ in machine.warnings] == [2004]
+    assert "program discarded, memory unchanged" in machine.warnings[0][1]
+    with machine.client() as c:
+        assert sha256_text(c.punch(1234)) == old.sha256
 
 
 def test_program_larger_than_memory_is_refused_with_drip_feed_suggested(machine):

@@ -178,3 +178,14 @@ def test_a_neck_ahead_is_still_a_gouge() -> None:
     slot = "G17 G21 G90\nG0 X-20 Y-20\nG1 Z-5 F500\nG42 D1 X0\nY40\nX6\nY-20\nG40 X30\nM30\n"
     with pytest.raises(NcError, match="gouge"):
         list(Interpreter(MILL, tools={1: ToolOffset(radius=5.0)}).run(slot))
+
+
+# --- a reference return does not fix the program's unit -----------------------------------
+
+
+def test_g20_after_a_bare_g28_is_taken() -> None:
+    # Haas lathe programs (enier-lathe-nims1001) start `G28`, then `G20` with the tool call
+    moves = [c for c in run("G28\nG20 G90\nG0 X1 Z1\nM30\n") if isinstance(c, StraightTraverse)]
+    assert moves[-1].end[0] == pytest.approx(25.4)
+    with pytest.raises(NcError, match="unit change after motion"):
+        run("G28 X0\nG20\nG0 X1\nM30\n")  # an intermediate point is a programmed position

@@ -143,8 +143,12 @@ def test_estop_quick_stops_raises_an_alarm_and_needs_homing_again(machine):
         ("drive:Y:undervoltage", "Y", 0x3130, 0.05),
         ("drive:Z:overtemperature", "Z", 0x4310, 0.01),
         ("drive:Z:power_cycle", "Z", 0x0000, 0.01),
-        ("bus:bus_off:X", "X", 0x8130, 0.3 + 0.01),  # 3 x 100 ms heartbeat, + a cycle
-        ("bus:drop:Y:count=0", "Y", 0x8130, 0.3 + 0.01),
+        # the master misses the axis's TPDO1 for 5 SYNC cycles (10 ms), + a cycle; the
+        # heartbeat (3 x 100 ms) would tell later
+        ("bus:bus_off:X", "X", 0x8100, 0.012),
+        ("bus:drop:Y:count=0", "Y", 0x8100, 0.012),
+        ("bus:drop_rpdo:Z:count=0", "Z", 0x8250, 0.052),  # the drive's RPDO deadline
+        ("drive:X:chopper_failure", "X", 0x7111, 0.102),  # the brake check's period
     ],
 )
 def test_each_drive_fault_reaches_the_nc_within_its_bound(spec, axis, code, bound_s):

@@ -134,15 +134,23 @@ def test_dnc_parity_error_rejects_the_program_and_raises_a_machine_alarm():
         m.close()
 
 
-def test_dnc_transfer_cut_off_is_not_stored_and_alarms(machine):
+def test_dnc_transfer_cut_off_is_not_stored_and_leaves_the_machine_fit_to_run(machine):
+    with DncClient("127.0.0.1", port(machine, "dnc"), timeout_s=5) as c:
+        c.send_program(PROG)
     with socket.create_connection(("127.0.0.1", port(machine, "dnc")), timeout=5) as s:
-        s.sendall(b"READ\n" + encode_program(PROG)[:40])
+        s.sendall(b"READ\n" + encode_program(PROG.replace("X-150", "X-120"))[:60])
         s.shutdown(socket.SHUT_WR)
         answer = _read_all(s)
     assert b"ERR 2004" in answer
     machine.step(1)
-    assert 10 not in machine.memory
-    assert 2004 in [a.number for a in machine.alarms]
+    assert "X-150" in machine.memory.get(10)  # the program in memory is the old one
+    # a WARNING (MTConnect Warning, the host's monitoring records it), no FAULT
+    assert [(a.number, a.severity) for a in machine.full_status().alarms] == [(2004, "WARNING")]
+    machine.command("select_program", number=10)
+    machine.command("cycle_start")  # no reset needed
+    machine.step(5)
+    assert machine.status.execution == "ACTIVE"
+    assert machine.run_until(lambda m: m.status.execution == "PROGRAM_COMPLETED", 30.0)
 
 
 SLOW = """%
@@ -226,9 +234,9 @@ def test_shdr_stream_of_a_running_machine(machine):
     assert "|program|O0010" in text
     assert "|Xact|-150.0000" in text or "Xact|-150.0000" in text
     assert "|mode|AUTOMATIC" in text
-    # virtual-time timestamps: epoch + machine time
+    # lockstep: the declared epoch (2000-01-01T00:00:00Z) + machine time, a few seconds
     first = text.splitlines()[1].split("|")[0]
-    assert first.startswith("2027-01-15T08:")
+    assert first.startswith("2000-01-01T00:00:")
 
 
 def test_modbus_remote_panel_cycle_start_through_a_pymodbus_client(machine):

@@ -60,6 +60,14 @@ def test_plan_prints_one_json_object_with_the_figures(prog):
         assert rep["max_abs_velocity"][ax.name] <= ax.max_velocity / 60 * (1 + 1e-9)
         assert rep["max_abs_accel"][ax.name] <= ax.max_accel * (1 + 1e-9)
         assert rep["max_abs_jerk"][ax.name] <= ax.max_jerk * (1 + 1e-9)
+        # the limit ratios are the maxima over the limits, per axis
+        r = rep["limit_ratio"][ax.name]
+        assert r["v"] == pytest.approx(rep["max_abs_velocity"][ax.name] / (ax.max_velocity / 60))
+        assert r["a"] == pytest.approx(rep["max_abs_accel"][ax.name] / ax.max_accel)
+        assert r["j"] == pytest.approx(rep["max_abs_jerk"][ax.name] / ax.max_jerk)
+    worst = max(v for ax in rep["limit_ratio"].values() for v in ax.values())
+    assert rep["worst_limit_ratio"] == worst
+    assert 0.5 < worst <= 1.0 + 1e-9
     # the dwell is part of the cycle time
     assert rep["cycle_time_s"] > 0.25
 
@@ -159,3 +167,53 @@ def test_deviation_is_measured_against_the_block_being_run(tmp_path):
     assert 0.0 < rep["max_path_deviation_mm"] <= 0.01 + 1e-9
     assert rep["path_length_mm"] == pytest.approx(3 * 80.0, rel=1e-12)
     assert rep["final_position"] == {"X": -20.0, "Y": -20.0, "Z": 0.0}
+
+
+def _corners(n: int, feed: float, tol: float) -> list:
+    """A square spiral of n lines with G64 P`tol` blends, a dwell and a rapid between."""
+    cmds: list = [SetPathMode(1, PathMode.CONTINUOUS, tol)]
+    x = y = 0.0
+    for i in range(n):
+        step = 2.0 + 0.5 * i
+        if i % 4 == 0:
+            x -= step
+        elif i % 4 == 1:
+            y -= step
+        elif i % 4 == 2:
+            x += 0.7 * step
+        else:
+            y += 0.7 * step
+        cmds.append(StraightFeed(i + 2, (x, y, -1.0 - 0.01 * i), feed))
+        if i == n // 2:
+            cmds.append(Dwell(i + 2, 0.05))
+            cmds.append(StraightTraverse(i + 2, (x - 5.0, y, -1.0)))
+    return cmds
+
+
+@pytest.mark.parametrize(
+    ("feed", "tol", "lookahead"), [(600.0, 0.01, 200), (3000.0, 0.05, 5), (9000.0, 0.002, 50)]
+)
+def test_the_summary_without_a_trace_equals_the_sampled_one(feed, tol, lookahead):
+    """Without a trace `plan_run` steps natively (`Motion.run`) and takes the deviation in
+    closed form from the blends; with one it samples in Python. Cycle time and maxima
+    are the same to the bit (the same samples); the closed-form deviation is the exact
+    largest one (at the blend's middle, where the distances to its two lines cross), so
+    the samples' may fall short of it by what the distance drops over half a sample
+    spacing from there: sin(theta/2) v T / 2 <= F T / 2 (the path speed never exceeds
+    the programmed feed F at override 1)."""
+    params = MachineParams(lookahead=lookahead)
+    cmds = _corners(24, feed, tol)
+    fast = plan_run(params, cmds, (0.0, 0.0, 0.0))
+    seen = []
+    slow = plan_run(params, cmds, (0.0, 0.0, 0.0), on_sample=seen.append)
+    assert len(seen) == round(slow["cycle_time_s"] / 0.002)
+    for key in ("cycle_time_s", "max_abs_velocity", "max_abs_accel", "max_abs_jerk"):
+        assert fast[key] == slow[key], key
+    assert fast["limit_ratio"] == slow["limit_ratio"]
+    assert fast["final_position"] == slow["final_position"]
+    assert "sampled_path_deviation_mm" not in fast
+    sampled = slow["sampled_path_deviation_mm"]
+    assert fast["max_path_deviation_mm"] == slow["max_path_deviation_mm"]
+    assert 0.0 < sampled <= fast["max_path_deviation_mm"] + 1e-12
+    assert fast["max_path_deviation_mm"] - sampled <= feed / 60.0 * 0.002 / 2 + 1e-12
+    assert fast["max_path_deviation_mm"] <= tol + 1e-12

@@ -55,6 +55,11 @@ VALUE_CASES = [
     ({"can_bus_load": CanBusLoad(31.04, 48.96)}, "bus_load|31.0|bus_load_peak|49.0"),
     ({"plc_scan_time_ms": 0.8125}, "plc_scan|0.812"),
     ({"adaptive_control": "LIMITING"}, "acc|LIMITING"),
+    ({"unreferenced": ("X", "Z")}, "referenced|NOT_REFERENCED X Z"),
+    (
+        {"cycle_start_refused": "cycle start refused: machine not homed (X)"},
+        "start_refused|cycle start refused: machine not homed (X)",
+    ),
 ]
 
 

@@ -33,10 +33,13 @@ def test_work_offsets_unknown_to_the_host_do_not_fail_soft_limits():
 def test_lathe_programs_are_checked_as_lathe():
     lathe = "%\nO2000\nG18 G21\nG97 S1000 M3\nG0 X40 Z2\nG1 Z-20 F0.2\nM30\n%\n"
     assert nc_checker(lathe, "lathe") == []
-    # On a lathe (Fanuc G code system A) G90 is the turning cycle, not absolute mode.
-    assert (
-        "turning cycle"
-        in nc_checker(lathe.replace("G18 G21", "G18 G21 G90"), "lathe")[0]["message"]
+    # On a lathe (Fanuc G code system A) G90 is the turning cycle, not absolute mode: its
+    # X Z are a cutting pass that needs a feed, and G91 does not exist (U W are incremental).
+    cycle = lathe.replace("G1 Z-20 F0.2", "G90 X30 Z-20")
+    assert nc_checker(cycle, "lathe")[0]["message"] == "feed move without F"
+    assert nc_checker(cycle.replace("Z-20", "Z-20 F0.2"), "lathe") == []
+    assert nc_checker(lathe.replace("G18 G21", "G18 G21 G91"), "lathe")[0]["message"] == (
+        "unsupported G code G91"
     )
 
 

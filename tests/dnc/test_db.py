@@ -119,3 +119,48 @@ def test_text_index_survives_a_round_trip_through_0004_and_follows_revisions(tmp
         conn.exec_driver_sql(f"DELETE FROM revisions WHERE program_id = {other.id} AND seq = 2")
     assert lib.search(text="(drill)").items == []
     assert [p.number for p in lib.search(text="face mill").items] == [1]
+
+
+def test_0006_allocation_outcomes_down_and_up_again(tmp_path):
+    """0006's downgrade folds `rerouted` and `failed` back into 0005's `interrupted`; after
+    the upgrade the scheduler settles those again (rerouted with the job's next allocation,
+    failed once the job is closed)."""
+    from datetime import UTC, datetime
+
+    from dnc.jobs import Jobs, Scheduler
+    from dnc.scheduler import MachineView
+
+    from .conftest import fake_checker
+
+    t0 = datetime(2026, 11, 26, 6, 0, tzinfo=UTC)
+    eng = make_engine(f"sqlite:///{tmp_path / 'm.db'}")
+    migrate(eng)
+    sessions = session_factory(eng)
+    lib = Library(sessions, checker=fake_checker)
+    lib.register_machine("mill1", "mill")
+    _, rev = lib.create_program(number=1, name="p", text=PROG.format(n="0001"))
+    lib.release(rev.id, approver="a", comment="ok")
+    jobs = Jobs(sessions, now=lambda: t0)
+    job = jobs.create(revision_id=rev.id, quantity=1)
+    state = {"s": "idle"}
+    sched = Scheduler(sessions, lambda: [MachineView("mill1", "mill", state["s"], 0)])
+    sched.tick()  # allocation 1, dispatched
+    state["s"] = "alarm"
+    sched.tick()  # interrupted (its dispatch called off)
+    state["s"] = "idle"
+    sched.tick()  # allocation 2 reroutes it
+    jobs.cancel(job.id)
+    sched.tick()  # allocation 2 called off, then failed: the job is closed
+    assert [a["status"] for a in jobs.allocations(job.id)] == ["rerouted", "failed"]
+
+    downgrade(eng, "0005")
+    columns = {c["name"] for c in sa.inspect(eng).get_columns("allocations")}
+    assert not {"note", "rerouted_to"} & columns
+    with eng.connect() as conn:
+        statuses = conn.execute(sa.text("SELECT status FROM allocations ORDER BY id")).scalars()
+        assert list(statuses) == ["interrupted", "interrupted"]
+
+    migrate(eng)
+    sched.tick()
+    assert [a["status"] for a in jobs.allocations(job.id)] == ["failed", "failed"]
+    eng.dispose()

@@ -51,6 +51,14 @@ class FakeCell:
         return list(self.m.values())
 
 
+def worker_started(sessions):
+    """What the transfer worker does for every pending dispatch: load, verify, cycle start."""
+    from sqlalchemy import text
+
+    with sessions() as s, s.begin():
+        s.execute(text("UPDATE dispatches SET state = 'done' WHERE state = 'pending'"))
+
+
 def test_job_needs_a_released_revision_and_sane_values(sessions, cell):
     jobs = Jobs(sessions)
     with pytest.raises(WorkflowError, match="is draft; jobs need a released revision"):
@@ -108,6 +116,7 @@ def test_quantity_four_spreads_over_both_mills_and_completes(sessions, cell):
     assert all(a["dispatch_id"] for a in allocs)
     assert jobs.get(job.id).status == "running"
     for _ in range(2):  # both mills make a part, then take the next one
+        worker_started(sessions)
         status.set("mill1", "busy")
         status.set("mill2", "busy")
         sched.tick()
@@ -134,10 +143,17 @@ def test_alarm_interrupts_and_reroutes_the_remaining_quantity(sessions, cell):
     sched.tick()
     allocs = jobs.allocations(job.id)
     assert [(a["machine"], a["status"]) for a in allocs] == [
-        ("mill1", "interrupted"),
+        ("mill1", "rerouted"),
         ("mill2", "dispatched"),
     ]
-    assert "machine mill1 raised an alarm" in [d["reason"] for d in jobs.decisions(job_id=job.id)]
+    assert allocs[0]["rerouted_to"] == allocs[1]["id"]
+    reasons = [d["reason"] for d in jobs.decisions(job_id=job.id)]
+    assert "machine mill1 raised an alarm" in reasons
+    assert f"part rerouted to allocation {allocs[1]['id']}" in reasons
+    # the interrupted part's program had not been started: its dispatch is called off, so
+    # the transfer worker can never start it later
+    called_off = Dispatches(sessions).get(allocs[0]["dispatch_id"])
+    assert called_off.state == "failed" and "called off: allocation" in called_off.error
 
 
 def test_a_restarted_scheduler_rebuilds_state_and_duplicates_nothing(sessions, cell):
@@ -158,6 +174,7 @@ def test_cancel_stops_new_allocations_but_lets_running_parts_finish(sessions, ce
     job = jobs.create(revision_id=cell["released"], quantity=5)
     sched = Scheduler(sessions, status, now=lambda: T0)
     sched.tick()
+    worker_started(sessions)
     jobs.cancel(job.id)
     status.finish_part("mill1")
     sched.tick()

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import re
+
 import pytest
 from sqlalchemy import func, select, text
 
@@ -298,3 +300,33 @@ def test_name_search_ignores_case_on_every_backend(library):
     library.create_program(number=1, name="Bracket LEFT", text=PROG.replace("O1000", "O1"))
     assert [p.number for p in library.search(query="bracket left").items] == [1]
     assert [p.number for p in library.search(query="BRACKET l").items] == [1]
+
+
+@pytest.mark.parametrize(
+    ("text", "says", "where"),
+    [
+        ("%\nO1\n(CAF\u00c9)\nM30\n%\n", "character '\u00c9' (U+00C9, bytes C3 89)", (9, 3, 5)),
+        ("O1\nG0 X1\u00b0\n", "character '\u00b0' (U+00B0, bytes C2 B0)", (8, 2, 6)),
+        ("O1\nG0 X1\n(\u2013)\n", "(U+2013, bytes E2 80 93)", (10, 3, 2)),
+        ("O1\nG0 X1\x01\n", "control character 0x01", (8, 2, 6)),
+        ("O1\nG0 X1\x7f\n", "control character 0x7F", (8, 2, 6)),
+    ],
+)
+def test_program_text_is_held_to_the_iso_6983_character_set(library, text, says, where):
+    """A non-ASCII character passed the NC check and the release, then wedged the dispatch
+    (issue 14, item 9): refused at upload with the byte offset, line and column."""
+    with pytest.raises(InvalidUpload, match=re.escape(says)) as info:
+        library.create_program(number=1, name="a", text=text)
+    d = info.value.detail
+    assert (d["offset"], d["line"], d["column"]) == where
+    assert f"line {where[1]}" in str(info.value) and f"column {where[2]}" in str(info.value)
+    assert library.search().items == []
+
+
+def test_dnc_import_refuses_a_file_outside_the_character_set(library, tmp_path):
+    (tmp_path / "O0007.nc").write_bytes("%\nO0007\nG0 X1 (\u00d8 10)\nM30\n%\n".encode())
+    (tmp_path / "O0008.nc").write_bytes(b"%\nO0008\nG0 X1\nM30\n%\n")
+    results = {p.name: r for p, r in library.import_path(tmp_path)}
+    assert isinstance(results["O0007.nc"], InvalidUpload)
+    assert "U+00D8" in str(results["O0007.nc"]) and "line 3, column 8" in str(results["O0007.nc"])
+    assert not isinstance(results["O0008.nc"], Exception)

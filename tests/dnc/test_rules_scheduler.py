@@ -140,3 +140,83 @@ def test_group_and_cancel_limit_eligibility():
         T0,
     )
     assert [(a.job_id, a.machine) for a in d.of(Allocate)] == [(1, "mill2")]
+
+
+# -- boundaries a mutation of dnc/rules.py would cross (issue 14, test strength) -------------
+
+
+@pytest.mark.parametrize("rule", [fifo, spt, edd, critical_ratio])
+def test_priority_one_is_a_class_above_zero_and_named_in_the_reason(rule):
+    # the smallest priority that is not the default: `priority > 1` or `priority >= 0`
+    # would treat it wrongly
+    jobs = [jv(1, created=0, due=1, remaining=1), jv(2, prio=1, created=99, remaining=99)]
+    ranked = rule(jobs, T0)
+    assert [r.job.id for r in ranked] == [2, 1]
+    assert ranked[0].reason.startswith("priority 1; ")
+    assert not ranked[1].reason.startswith("priority")  # priority 0 is not shown
+    negative = rule([jv(1, prio=-1), jv(2, created=5)], T0)
+    assert [r.job.id for r in negative] == [2, 1]  # below the default class
+    assert negative[1].reason.startswith("priority -1; ")
+
+
+def test_zero_processing_time_ranks_by_slack_without_dividing_by_zero():
+    # zero remaining (or a zero cycle time) makes the processing time 0: CR is the slack
+    # itself, and SPT ranks it first
+    jobs = [
+        jv(1, due=60, remaining=0, cycle=60.0),  # slack 3600 s
+        jv(2, due=30, remaining=5, cycle=0.0),  # slack 1800 s
+        jv(3, due=120, remaining=1, cycle=1.0),  # 1 s, slack 7200 s -> CR 7200
+    ]
+    cr = critical_ratio(jobs, T0)
+    assert [(r.job.id, r.key) for r in cr] == [(2, 1800.0), (1, 3600.0), (3, 7200.0)]
+    late = critical_ratio([jv(1, due=-10, remaining=0)], T0)[0]
+    assert late.key == -600.0 and late.reason == "CR: critical ratio -600 (late)"
+    s = spt(jobs, T0)
+    assert [(r.job.id, r.key) for r in s] == [(1, 0.0), (2, 0.0), (3, 1.0)]
+    assert s[0].reason == "SPT: remaining processing time 0.0 s (0 x 60.0 s)"
+
+
+@pytest.mark.parametrize(
+    "due_min, late",
+    [(9, True), (10, False), (11, False)],  # 600 s of work: due in 10 min is CR exactly 1.0
+)
+def test_critical_ratio_of_exactly_one_is_on_time(due_min, late):
+    (ranked,) = critical_ratio([jv(1, due=due_min, remaining=10, cycle=60.0)], T0)
+    assert ranked.key == pytest.approx(due_min / 10)
+    assert ranked.reason.endswith(" (late)") is late
+    if due_min == 10:
+        assert ranked.key == 1.0 and ranked.reason == "CR: critical ratio 1"
+
+
+@pytest.mark.parametrize("rule", [fifo, spt, edd, critical_ratio])
+def test_equal_keys_are_ordered_by_job_id_whatever_the_input_order(rule):
+    same = [jv(i, created=0, due=60, remaining=2, cycle=30.0) for i in (7, 3, 5)]
+    for jobs in (same, same[::-1], [same[1], same[0], same[2]]):
+        assert [r.job.id for r in rule(jobs, T0)] == [3, 5, 7]
+    # and the id only breaks ties: a better key wins over a lower id
+    better = jv(9, created=-1, due=20, remaining=1, cycle=30.0)
+    assert rule([*same, better], T0)[0].job.id == 9
+    # within a priority class too, and never across classes
+    mixed = [jv(8, prio=1, created=0, due=60, remaining=2, cycle=30.0), *same]
+    assert [r.job.id for r in rule(mixed, T0)] == [8, 3, 5, 7]
+
+
+def test_jobs_without_due_date_go_last_under_edd_and_cr_in_id_order():
+    jobs = [jv(4), jv(2), jv(3, due=600)]
+    for rule in (edd, critical_ratio):
+        ranked = rule(jobs, T0)
+        assert [r.job.id for r in ranked] == [3, 2, 4]
+        assert ranked[1].key == float("inf")
+    assert edd(jobs, T0)[1].reason == "EDD: due never"
+
+
+def test_a_short_processing_time_divides_the_slack():
+    # 0.5 s of work due in 1 min: CR 120, not the slack of 60 s (only 0 s is special)
+    (ranked,) = critical_ratio([jv(1, due=1, remaining=1, cycle=0.5)], T0)
+    assert ranked.key == 120.0
+
+
+@pytest.mark.parametrize("rule", [fifo, spt, edd, critical_ratio])
+def test_every_priority_is_its_own_class(rule):
+    jobs = [jv(1, prio=1), jv(2, prio=2, created=9, remaining=9), jv(3, prio=7, created=99)]
+    assert [r.job.id for r in rule(jobs, T0)] == [3, 2, 1]

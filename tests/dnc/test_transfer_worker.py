@@ -289,3 +289,37 @@ def test_a_value_many_dispatches_need_at_once_is_worked_out_once():
     assert weighed.get("none", lambda: "text") == "text"
     memo.get("third", lambda: "x")
     assert memo.get("rev", lambda: "again") == "again"  # the oldest went past the limit
+
+
+def test_a_text_the_tape_cannot_carry_fails_the_dispatch_with_where_not_transferring(
+    library, sessions, machine, released, monkeypatch
+):
+    """A revision stored before uploads were held to the ISO character set (issue 14, item
+    9: a UnicodeEncodeError in the worker left the dispatch in `transferring` for ever): the
+    attempt fails, recorded with the character and its line, and is not retried."""
+    register(library, machine.port.bound_port)
+    worker = TransferWorker(sessions, retry=RetryPolicy(max_attempts=3, base_s=1))
+    did = dispatch(sessions, released)
+    monkeypatch.setattr(worker, "_text", lambda sha: "%\nO1234\n(PLATTE F\u00dcR A)\nM30\n%\n")
+    worker.run_once()
+    d = Dispatches(sessions).get(did)
+    assert (d.state, d.attempts, d.bytes_sent) == ("failed", 1, 0), (d.state, d.error)
+    assert d.error.startswith("encode: character '\u00dc' (U+00DC) at line 3, column 10")
+    assert 1234 not in machine.memory
+
+
+def test_an_unexpected_error_in_an_attempt_is_recorded_not_left_transferring(
+    library, sessions, machine, released
+):
+    def broken_client(host, port, profile):
+        raise ValueError("a bug in the client factory")
+
+    register(library, machine.port.bound_port)
+    worker = TransferWorker(
+        sessions, client_factory=broken_client, retry=RetryPolicy(max_attempts=3)
+    )
+    did = dispatch(sessions, released)
+    worker.run_once()
+    d = Dispatches(sessions).get(did)
+    assert d.state == "failed", (d.state, d.error)
+    assert d.error == "internal: ValueError: a bug in the client factory"

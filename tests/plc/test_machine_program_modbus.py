@@ -59,12 +59,12 @@ def test_remote_feed_hold_reset_and_overrides(cell):
     panel.feed_hold()
     plc.scan()
     assert plc.nc.get("FeedHold") and panel.status()["FeedHold"]
-    panel.set_feed_override(250)
-    panel.set_spindle_override(-3)
+    panel.set_feed_override(120)
+    panel.set_spindle_override(0)
     panel.set_rapid_override(25)
     plc.scan()
     st = panel.status()
-    assert (st["FeedOverride"], st["SpindleOverride"], st["RapidOverride"]) == (200, 0, 25)
+    assert (st["FeedOverride"], st["SpindleOverride"], st["RapidOverride"]) == (120, 0, 25)
     plc.io.inject("air_pressure_loss")
     plc.scan()
     assert panel.status()["PlcAlarmNumber"] == 1040
@@ -73,6 +73,37 @@ def test_remote_feed_hold_reset_and_overrides(cell):
     plc.scan()
     st = panel.status()
     assert st["PlcAlarmNumber"] == 0 and st["NcReset"] and not st["FeedHold"]
+
+
+@pytest.mark.parametrize("value", [65535, 201, 250, 0x8000, -3])
+def test_out_of_range_override_is_refused_with_exception_03(cell, value):
+    """A real control refuses an override outside 0..200 % (issue 14, item 12: 65535 had
+    set 0 %): exception 03, nothing queued, the override unchanged."""
+    plc, panel, client = cell
+    panel.set_feed_override(80)
+    plc.scan()
+    rr = client.write_register(1024, value & 0xFFFF)  # RemFeedOvr, holding register 1024
+    assert rr.isError() and rr.exception_code == 3
+    rr = client.write_registers(1024, [100, 100, value & 0xFFFF])  # FC16 refused whole
+    assert rr.isError() and rr.exception_code == 3
+    with pytest.raises(RemotePanelError):
+        panel.set_spindle_override(value)
+    plc.scan()
+    st = panel.status()
+    assert (st["FeedOverride"], st["SpindleOverride"]) == (80, 100)
+
+
+def test_ladder_still_limits_an_override_written_around_the_face(cell):
+    """Defence in depth: a value that reaches the image by another way is limited by the
+    program's own rung to 0..200."""
+    from plc.image import Write
+
+    plc, panel, _ = cell
+    plc.rt.writes.put((Write("MW", 0, (250,)), Write("MW", 2, (-3,))))
+    plc.scan()
+    plc.scan()
+    st = panel.status()
+    assert (st["FeedOverride"], st["SpindleOverride"]) == (200, 0)
 
 
 def test_remote_mode_request(cell):

@@ -60,6 +60,12 @@ def test_allow_list_parses(text, coil, hr):
         ("%QW0-%MW3", "range runs from %QW into %MW"),
         ("%QZ1", "not an IEC address"),
         ("hr:0-9, %MW0-x", "col 9"),
+        ("coil:0-3=0..1", "applies to registers only"),
+        ("%MX0.0=0..1", "applies to registers only"),
+        ("%MW0=0-200", "is not LOW..HIGH"),
+        ("%MW0=", "is not LOW..HIGH"),
+        ("hr:3=200..0", "not an ordered INT range"),
+        ("hr:3=0..40000", "not an ordered INT range"),
     ],
 )
 def test_allow_list_errors(text, message):
@@ -88,10 +94,32 @@ def test_allow_list_against_map(text, message):
         allow.resolve(MAP)
 
 
+@pytest.mark.parametrize(
+    ("address", "values", "ok"),
+    [
+        (1024, (0,), True),
+        (1024, (200,), True),
+        (1024, (201,), False),
+        (1024, (-1,), False),  # 65535 on the wire
+        (1022, (-5, 7, 100), True),  # %QW1022..1023 take any value, %MW0 is in range
+        (1022, (-5, 7, 300), False),
+        (1026, (200, -9), True),  # %MW2 limited, %MW3 not
+        (1030, (-100,), True),
+        (1030, (-101,), False),
+    ],
+)
+def test_allow_list_value_ranges(address, values, ok):
+    guard = AllowList.parse("hr:1000-1023,%MW0-%MW2=0..200,%MW3,hr:1030=-100..100").resolve(MAP)
+    assert guard.values_allowed(address, values) is ok
+
+
 def test_allow_list_round_trips_as_text():
     allow = AllowList.parse("coil:0-3, %MW0-99")
     assert str(allow) == "coil:0-3,%MW0-99"
     assert AllowList.parse(str(allow)).resolve(MAP).ranges("hr") == [(1024, 1124)]
+    limited = AllowList.parse("%MW0 - %MW2 = 0 .. 200")
+    assert str(limited) == "%MW0-%MW2=0..200"
+    assert str(AllowList.parse(str(limited))) == str(limited)
 
 
 @pytest.mark.parametrize(

@@ -8,7 +8,7 @@ from server.cli import app
 def test_top_level_help_lists_every_group():
     result = CliRunner().invoke(app, ["--help"])
     assert result.exit_code == 0
-    for group in ("run", "nc", "plc", "drives"):
+    for group in ("run", "nc", "plc", "drives", "cam"):
         assert group in result.output
 
 

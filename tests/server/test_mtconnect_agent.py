@@ -280,6 +280,25 @@ def test_bad_or_empty_path_is_invalid_xpath(path):
     assert message.startswith("The path could not be parsed. Invalid syntax:")
 
 
+@pytest.mark.parametrize(
+    "path", ["//Foo[", "//Foo[@", "//Foo[1", "//Foo]", "//Foo[@name=']", "//*[@x='1'][", "//["]
+)
+@pytest.mark.parametrize("kind", ["current", "sample"])
+def test_unparsable_path_answers_the_reference_agent_error_without_python_text(kind, path):
+    """cppagent's answer to a path it cannot parse: the message names the path, nothing
+    else (issue 14, item 12: "//Foo[" leaked "'NoneType' object is not callable")."""
+    a = small_agent()
+    status, text = doc(a, kind, path=path)
+    assert status == 400
+    assert error_code(text) == (
+        "INVALID_PATH",
+        f"The path could not be parsed. Invalid syntax: {path}",
+    )
+    for leak in ("NoneType", "object", "Traceback", "callable", "Exception"):
+        assert leak not in text
+    assert schema_problems(text) == []
+
+
 @pytest.mark.parametrize("kind", ["probe", "current", "sample"])
 def test_unknown_device(kind):
     status, text = small_agent().request(kind, "nope", {})

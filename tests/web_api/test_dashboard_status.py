@@ -85,6 +85,14 @@ WARNING = {"condition": "plc_cond", "level": "WARNING", "code": "2001", "text": 
         (cell(execution="READY", alarms=[WARNING]), ["warning", "READY"]),
         (cell(execution="ACTIVE", alarms=[FAULT]), ["alarm", "ALARM"]),
         (cell(emergency_stop="TRIGGERED"), ["alarm", "E-STOP"]),
+        # reset gave READY with no alarm, but the axes lost their reference
+        (cell(referenced=False, unreferenced_axes=["X", "Z"]), ["warning", "NOT REFERENCED"]),
+        (cell(referenced=True, unreferenced_axes=[]), ["idle", "READY"]),
+        (cell(unreferenced_axes=["Y"], alarms=[FAULT]), ["alarm", "ALARM"]),
+        (
+            {"availability": "AVAILABLE", "unreferenced": ["X"], "alarms": []},
+            ["warning", "NOT REFERENCED"],
+        ),
         # a machine's own snapshot (MachineStatus names)
         ({"availability": "AVAILABLE", "execution": "ACTIVE", "alarms": []}, ["active", "ACTIVE"]),
         ({"availability": "AVAILABLE", "alarms": [{"severity": "FAULT"}]}, ["alarm", "ALARM"]),

@@ -74,6 +74,8 @@ def test_sample_paging_by_next_sequence(client, agent):
         ("/mtconnect/sample?count=many", 400, "INVALID_REQUEST"),
         ("/mtconnect/nope/current", 404, "NO_DEVICE"),
         ("/mtconnect/current?path=//Bogus", 400, "INVALID_PATH"),
+        ("/mtconnect/current?path=//Foo[", 400, "INVALID_PATH"),
+        ("/mtconnect/m1/sample?path=//Foo[@name=", 400, "INVALID_PATH"),
         ("/mtconnect/m1/assets/x", 404, "INVALID_URI"),
         ("/mtconnect/sample?interval=-5", 400, "OUT_OF_RANGE"),
         ("/mtconnect/sample?interval=10&heartbeat=0", 400, "OUT_OF_RANGE"),

@@ -33,6 +33,8 @@ class FaultType(BaseModel):
     target: str
     params: list[FaultParam]
     description: str = ""
+    detection: str = ""  # what reports it and within which bound, or why nothing does
+    recovery: str = ""  # what brings the machine back (docs/recovery.md)
 
 
 class FaultCreate(BaseModel):

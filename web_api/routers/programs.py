@@ -2,7 +2,9 @@
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
+import threading
 from pathlib import PurePath
 from typing import Annotated, Any
 
@@ -13,7 +15,9 @@ from fastapi.responses import JSONResponse
 from pydantic import BaseModel, ValidationError
 from starlette.datastructures import UploadFile
 
+from dnc.errors import InvalidUpload
 from dnc.tape import MAX_PROGRAM_NUMBER, read_header
+from dnc.upload import ProgramUpload
 from web_api.problems import ApiProblem, problem_doc
 from web_api.routers import Services, decode_cursor, get_services, next_link
 from web_api.routers.auth import Programmer, Viewer
@@ -74,9 +78,10 @@ def _invalid(errors: list, prefix: tuple = ("body",)) -> RequestValidationError:
 
 async def read_upload(
     request: Request, model: type[BaseModel], services: Services
-) -> tuple[BaseModel, str | bytes, str | None]:
-    """The validated fields, the program text (str from JSON, bytes from a file) and the
-    file name. JSON and multipart bodies get the same validation and the same problems."""
+) -> tuple[BaseModel, str | ProgramUpload, str | None]:
+    """The validated fields, the program text (str from JSON, a streamed ProgramUpload from
+    a file, which the caller closes) and the file name. JSON and multipart bodies get the
+    same validation and the same problems."""
     ctype = request.headers.get("content-type", "").split(";")[0].strip().lower()
     if ctype == "application/json" or ctype.endswith("+json"):
         try:
@@ -95,26 +100,73 @@ async def read_upload(
                 [{"type": "missing", "loc": ("file",), "msg": "a file part named 'file'"}]
             )
         limit = services.settings.upload_limit_bytes
-        data = await upload.read(limit + 1)
-        if len(data) > limit:
-            raise _too_large(len(data), services, at_least=True)
+        # streamed: validated and hashed chunk by chunk into a temporary file, never the
+        # whole file in memory (see dnc.upload)
+        spooled = ProgramUpload(limit=limit, name=upload.filename or "upload")
+        refused: InvalidUpload | None = None
+        try:
+            while chunk := await upload.read(UPLOAD_CHUNK):
+                spooled.feed(chunk)
+        except InvalidUpload as exc:
+            if "limit" in exc.detail:
+                spooled.close()
+                raise _too_large(spooled.size, services, at_least=True) from None
+            refused = exc  # said after the fields' own problems, as before
         values: dict[str, Any] = {
             k: form[k] for k in FORM_FIELDS if k in model.model_fields and k in form
         }
         if "tags" in values:
             values["tags"] = [t.strip() for t in str(values["tags"]).split(",") if t.strip()]
         if "number" in model.model_fields:
-            _fill_from_header(values, data, upload.filename)
+            _fill_from_header(values, spooled.head, upload.filename)
         try:
-            fields = model.model_validate({**values, "text": ""})
+            # form fields are text by nature: "1001" is the number 1001 here (lax), while
+            # a JSON body is strict
+            fields = model.model_validate({**values, "text": ""}, strict=False)
         except ValidationError as exc:
+            spooled.close()
             raise _invalid(exc.errors()) from None
-        return fields, data, upload.filename
+        if refused is not None:
+            spooled.close()
+            raise refused
+        return fields, spooled, upload.filename
     raise ApiProblem(
         415,
         "unsupported-media-type",
         f"send application/json or multipart/form-data, not {ctype or 'no content type'!r}",
     )
+
+
+UPLOAD_CHUNK = 1 << 20
+#: a program larger than this is NC-checked and stored by at most HEAVY_AT_ONCE requests at
+#: a time: the check of a 15 MB program holds CPU for seconds, and several at once only
+#: share the CPU while each holds its text, so peak memory grew with every concurrent upload
+HEAVY_BYTES = 1 << 20
+HEAVY_AT_ONCE = 2
+_heavy_slots = threading.BoundedSemaphore(HEAVY_AT_ONCE)
+
+
+async def _heavy(text: str | ProgramUpload, work):
+    """Run the library call in the thread pool; a large program waits for a heavy slot
+    (in its worker thread, so no event loop is tied to the slots)."""
+    size = text.size if isinstance(text, ProgramUpload) else len(text)
+    if size < HEAVY_BYTES:
+        return await run_in_threadpool(work)
+
+    def in_a_slot():
+        with _heavy_slots:
+            return work()
+
+    return await run_in_threadpool(in_a_slot)
+
+
+@contextlib.contextmanager
+def _closing(text: str | ProgramUpload):
+    try:
+        yield
+    finally:
+        if isinstance(text, ProgramUpload):
+            text.close()
 
 
 def _fill_from_header(values: dict, data: bytes, filename: str | None) -> None:
@@ -160,18 +212,20 @@ def _too_large(size: int, services: Services, at_least: bool = False) -> ApiProb
 async def create_program(request: Request, services: Svc, principal: Programmer) -> JSONResponse:
     fields, text, filename = await read_upload(request, ProgramCreate, services)
     comment = fields.comment or (f"uploaded as {filename}" if filename else "")
-    program, revision = await run_in_threadpool(
-        lambda: services.library.create_program(
-            number=fields.number,
-            name=fields.name,
-            text=text,
-            machine_kind=fields.machine_kind,
-            description=fields.description,
-            tags=fields.tags,
-            author=principal.user,
-            comment=comment,
+    with _closing(text):
+        program, revision = await _heavy(
+            text,
+            lambda: services.library.create_program(
+                number=fields.number,
+                name=fields.name,
+                text=text,
+                machine_kind=fields.machine_kind,
+                description=fields.description,
+                tags=fields.tags,
+                author=principal.user,
+                comment=comment,
+            ),
         )
-    )
     body = ProgramCreated(program=program_out(program), revision=revision_out(revision))
     return JSONResponse(
         body.model_dump(mode="json"),
@@ -244,11 +298,13 @@ async def add_revision(
 ) -> JSONResponse:
     fields, text, filename = await read_upload(request, RevisionCreate, services)
     comment = fields.comment or (f"uploaded as {filename}" if filename else "")
-    revision = await run_in_threadpool(
-        lambda: services.library.add_revision(
-            program_id, text, author=principal.user, comment=comment
+    with _closing(text):
+        revision = await _heavy(
+            text,
+            lambda: services.library.add_revision(
+                program_id, text, author=principal.user, comment=comment
+            ),
         )
-    )
     return JSONResponse(
         revision_out(revision).model_dump(mode="json"),
         status_code=201,

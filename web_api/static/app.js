@@ -226,11 +226,19 @@ function renderMachine(m) {
   $(".m-bus-text", t).textContent = bl ? `${fmt(bl.mean, 1)} % (peak ${fmt(bl.peak, 1)} %)` : "—";
 
   const alarms = s?.alarms || [];
+  const notes = [];
+  if ((s?.unreferenced || []).length) {
+    notes.push(el("li", { class: "warning" }, `axis ${s.unreferenced.join(", ")} not referenced: home the machine`));
+  }
+  if (s?.cycle_start_refused) {
+    notes.push(el("li", { class: "warning" }, `${s.cycle_start_refused}`));
+  }
   $(".m-alarms", t).replaceChildren(
     ...alarms.map((a) =>
       el("li", { class: (a.severity || "FAULT").toLowerCase() },
         `${a.source || "NC"} ${a.number ?? ""}${a.axis ? ` [${a.axis}]` : ""}: ${a.text ?? ""}`),
     ),
+    ...notes,
   );
   $(".m-faults", t).hidden = !faultPanelShown();
 }

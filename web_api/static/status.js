@@ -43,6 +43,8 @@ export function statusView(s) {
     part_count: s.counters?.part_count,
     can_bus_load: s.bus_load ? { mean: s.bus_load.mean_percent, peak: s.bus_load.peak_percent } : null,
     plc_scan_time_ms: s.plc?.scan_time_ms,
+    unreferenced: s.unreferenced_axes || [],
+    cycle_start_refused: s.cycle_start_refused || "",
   };
 }
 
@@ -55,6 +57,9 @@ export function machineState(s) {
   const ex = s.execution || "READY";
   if (ex === "ACTIVE") return ["active", "ACTIVE"];
   if (["FEED_HOLD", "INTERRUPTED", "OPTIONAL_STOP", "PROGRAM_STOPPED"].includes(ex)) return ["hold", ex];
+  // reset gives READY without an alarm, but the axes may have lost their reference: the
+  // tile says so rather than READY (the cell does not dispatch to it until it is homed)
+  if ((s.unreferenced || []).length) return ["warning", "NOT REFERENCED"];
   if ((s.alarms || []).length) return ["warning", ex];
   return ["idle", ex];
 }

@@ -4,7 +4,7 @@ G0 X-10 Y-10
 G1 X-20
 G5 X-1
 G0 X-1 E2 (unknown address)
-#100=1
+#0=1 (MACRO B: #0 IS READ ONLY)
 G1 X-30 F100 (unterminated comment
 M30
 %

@@ -1,0 +1,274 @@
+"""Issue 14 items 1 and 2 in a whole cell over HTTP: an operator reset of a cutting machine
+frees it and the job still completes; a FAULT while the machine cuts on (lube level low) is
+recorded, does not interrupt, and no part is made twice."""
+
+from __future__ import annotations
+
+import pytest
+
+from tests.cell.conftest import poll, upload_released
+from tests.cell.test_cell_faults import STOPPING_PROGRAM, status
+
+pytestmark = pytest.mark.timeout(180)
+
+
+def command(api, machine, name):
+    r = api("operator").post(f"/api/machines/{machine}/commands", json={"command": name})
+    assert r.status_code == 202, r.text
+
+
+def job_of(api, job):
+    return api("viewer").get(f"/api/jobs/{job}").json()
+
+
+def continue_stopped_parts(api):
+    """The operators at the mills press cycle start after each M0."""
+    for name in ("mill1", "mill2"):
+        if status(api, name)["execution"] == "PROGRAM_STOPPED":
+            command(api, name, "cycle_start")
+
+
+def parts_made(api):
+    return sum(status(api, n)["counters"]["part_count"] or 0 for n in ("mill1", "mill2"))
+
+
+def test_an_operator_reset_of_a_cutting_machine_frees_it_and_the_job_completes(make_cell):
+    _, api = make_cell()
+    rev = upload_released(api, STOPPING_PROGRAM, number=1002)
+    job = api("operator").post("/api/jobs", json={"revision_id": rev, "quantity": 2}).json()["id"]
+    for name in ("mill1", "mill2"):
+        poll(lambda n=name: status(api, n)["execution"] == "PROGRAM_STOPPED", 60, f"{name} at M0")
+    command(api, "mill1", "reset")  # the part on mill1 is abandoned: READY, no part
+
+    def interrupted():
+        allocs = job_of(api, job)["allocations"]
+        return [a for a in allocs if a["machine"] == "mill1" and a["status"] != "running"]
+
+    (ended,) = poll(interrupted, 30, "mill1's allocation ended after the reset")[:1]
+    assert ended["status"] in ("interrupted", "rerouted"), ended
+
+    def completed():
+        continue_stopped_parts(api)
+        j = job_of(api, job)
+        return j["status"] == "completed" and j
+
+    done = poll(completed, 120, "job completed after the reset", interval_s=0.2)
+    assert done["done"] == 2
+    states = sorted(a["status"] for a in done["allocations"])
+    assert states == ["completed", "completed", "rerouted"], done["allocations"]
+    assert any(
+        d["action"] == "interrupt" and "cycle on mill1 ended without a part" in d["reason"]
+        for d in done["decisions"]
+    ), done["decisions"]
+    assert parts_made(api) == 2  # nothing made twice
+
+
+# One slow move (84 s of machine time) and M30: the lube fault lands while it cuts.
+SLOW_PROGRAM = """%
+O1003 (E2E ONE SLOW MOVE)
+N10 G21 G90 G17
+N20 G1 X0 Y-100 F300
+N30 M30
+%
+"""
+
+
+def test_a_fault_while_the_machine_cuts_on_does_not_interrupt_its_part(make_cell):
+    _, api = make_cell(faults=True)
+    rev = upload_released(api, SLOW_PROGRAM, number=1003)
+    job = api("operator").post("/api/jobs", json={"revision_id": rev, "quantity": 1}).json()["id"]
+    name = poll(
+        lambda: next(
+            (n for n in ("mill1", "mill2") if status(api, n)["execution"] == "ACTIVE"), None
+        ),
+        60,
+        "a mill cutting",
+        interval_s=0.01,
+    )
+    r = api("admin").post(
+        f"/api/machines/{name}/faults", json={"type": "lube_level_low", "target": "plc"}
+    )
+    assert r.status_code == 201, r.text
+    # the PLC's lube alarm is a FAULT that refuses the next cycle start, not this one
+    alarm = poll(
+        lambda: [a for a in status(api, name)["alarms"] if a["level"] == "FAULT"],
+        30,
+        f"{name} lube alarm",
+        interval_s=0.01,
+    )
+    assert status(api, name)["execution"] == "ACTIVE", alarm
+
+    def completed():
+        j = job_of(api, job)
+        return j["status"] == "completed" and j
+
+    done = poll(completed, 120, "job completed", interval_s=0.2)
+    assert done["done"] == 1
+    assert [(a["machine"], a["status"]) for a in done["allocations"]] == [(name, "completed")]
+    assert "alarm while cutting on" in done["allocations"][0]["note"]
+    assert [d["action"] for d in done["decisions"]] == ["allocate", "note", "complete"]
+    assert parts_made(api) == 1
+
+
+def test_a_machine_process_killed_mid_part_loses_its_part_to_another_machine(tmp_path):
+    """Issue 14 item 6: machines in their own processes; mill1's process is killed while it
+    cuts. Past the cell's contact time-out its allocation is interrupted and the part
+    rerouted; the job completes on mill2 with each part made once."""
+    import json
+    import os
+    import signal
+
+    from cnc.config import load_cell_config
+    from server.cell import Cell
+    from tests.cell.conftest import Api, serve
+    from tests.cell.test_cell_restart import RESTART_PROGRAM
+
+    ports = {"host": "127.0.0.1", "dnc": 0, "modbus": 0, "shdr": 0}
+    config = load_cell_config(
+        {
+            "machines": {n: {"base": "mill3", "ports": ports} for n in ("mill1", "mill2")},
+            "host": {"lost_contact_s": 2.0},
+        }
+    )
+    cell = Cell(
+        config,
+        clock="fast",
+        database_url=f"sqlite:///{tmp_path}/cell.db",
+        processes=True,
+        ideal_axes=True,
+        state_dir=tmp_path,
+    ).start()
+    server, thread, sock = serve(cell)
+    api = Api(f"http://127.0.0.1:{sock.getsockname()[1]}")
+    try:
+        rev = upload_released(api, RESTART_PROGRAM)
+        job = api("operator").post("/api/jobs", json={"revision_id": rev, "quantity": 3})
+        job = job.json()["id"]
+        poll(lambda: status(api, "mill1")["execution"] == "ACTIVE", 90, "mill1 cutting", 0.01)
+        pid = json.loads((tmp_path / "mill1.machine.json").read_text())["pid"]
+        os.kill(pid, signal.SIGKILL)
+
+        def lost():
+            allocs = job_of(api, job)["allocations"]
+            return [a for a in allocs if a["machine"] == "mill1" and a["status"] != "running"]
+
+        poll(lost, 60, "mill1's allocation ended after its process was killed")
+
+        def completed():
+            j = job_of(api, job)
+            return j["status"] == "completed" and j
+
+        done = poll(completed, 120, "job completed on mill2", interval_s=0.2)
+        assert done["done"] == 3
+        lost_parts = [a for a in done["allocations"] if a["machine"] == "mill1"]
+        assert lost_parts[-1]["status"] == "rerouted", done["allocations"]
+        assert any(
+            d["action"] == "interrupt" and "contact with mill1 lost" in d["reason"]
+            for d in done["decisions"]
+        )
+        mill1_parts = sum(a["status"] == "completed" for a in lost_parts)
+        assert status(api, "mill2")["counters"]["part_count"] == 3 - mill1_parts
+    finally:
+        api.close()
+        server.should_exit = True
+        thread.join(20)
+        sock.close()
+        cell.stop()
+
+
+def test_a_machine_process_killed_and_restarted_frees_its_allocation(tmp_path):
+    """Issue 14 item 1: mill1's process is killed while it cuts and started again on the
+    same ports (the operator's restart), well within the contact time-out. The new control
+    is READY with no program and its part counter at 0: the allocation ends, the part is
+    made again, and the job completes with each part made once."""
+    import json
+    import os
+    import signal
+    import socket
+    import subprocess
+
+    from cnc.config import load_cell_config
+    from server.cell import Cell
+    from server.supervisor import machine_command
+    from tests.cell.conftest import Api, serve
+    from tests.cell.test_cell_restart import RESTART_PROGRAM
+
+    def free_port() -> int:
+        with socket.socket() as s:
+            s.bind(("127.0.0.1", 0))
+            return s.getsockname()[1]
+
+    machines = {
+        n: {
+            "base": "mill3",
+            "ports": {
+                "host": "127.0.0.1",
+                "dnc": free_port(),
+                "modbus": free_port(),
+                "shdr": free_port(),
+            },
+        }
+        for n in ("mill1", "mill2")
+    }
+    config = load_cell_config({"machines": machines, "host": {"lost_contact_s": 120.0}})
+    cell = Cell(
+        config,
+        clock="fast",
+        database_url=f"sqlite:///{tmp_path}/cell.db",
+        processes=True,
+        ideal_axes=True,
+        state_dir=tmp_path,
+    ).start()
+    server, thread, sock = serve(cell)
+    api = Api(f"http://127.0.0.1:{sock.getsockname()[1]}")
+    restarted = None
+    try:
+        rev = upload_released(api, RESTART_PROGRAM)
+        job = api("operator").post("/api/jobs", json={"revision_id": rev, "quantity": 3})
+        job = job.json()["id"]
+        poll(lambda: status(api, "mill1")["execution"] == "ACTIVE", 90, "mill1 cutting", 0.01)
+        state_file = tmp_path / "mill1.machine.json"
+        before_kill = status(api, "mill1")["counters"]["part_count"] or 0  # dies with it
+        os.kill(json.loads(state_file.read_text())["pid"], signal.SIGKILL)
+        poll(lambda: not status(api, "mill1")["connected"], 30, "mill1 seen lost")
+        state_file.unlink()
+        log = open(tmp_path / "mill1.restarted.log", "ab")  # noqa: SIM115
+        restarted = subprocess.Popen(
+            machine_command(
+                tmp_path / "fmscell-cell.yaml",
+                "mill1",
+                ready_file=state_file,
+                fast=True,
+                simulation=False,
+                ideal=True,
+            ),
+            stdin=subprocess.DEVNULL,
+            stdout=log,
+            stderr=log,
+        )
+        log.close()
+
+        def completed():
+            j = job_of(api, job)
+            return j["status"] == "completed" and j
+
+        done = poll(completed, 150, "job completed after mill1's restart", interval_s=0.2)
+        assert done["done"] == 3
+        interrupts = [d for d in done["decisions"] if d["action"] == "interrupt"]
+        assert [d["machine"] for d in interrupts] == ["mill1"], interrupts
+        assert "contact" not in interrupts[0]["reason"]  # the restart, not the time-out
+        assert sorted(a["status"] for a in done["allocations"]).count("rerouted") == 1
+        assert parts_made(api) + before_kill == 3  # nothing made twice
+    finally:
+        if restarted is not None:
+            restarted.terminate()
+            try:
+                restarted.wait(20)
+            except subprocess.TimeoutExpired:
+                restarted.kill()
+                restarted.wait(5)
+        api.close()
+        server.should_exit = True
+        thread.join(20)
+        sock.close()
+        cell.stop()

@@ -1,0 +1,110 @@
+"""The host's view of a machine that lost its reference, through the real chain: a lockstep
+machine's status -> its SHDR lines -> the MTConnect agent -> the monitoring model. A machine
+that is not homed is not idle for the scheduler, and a refused cycle start is reported with
+the NC's reason at once (not as a silent timeout)."""
+
+from __future__ import annotations
+
+import pytest
+
+from cnc.config import builtin_machine
+from cnc.faces.shdr import ShdrFormatter
+from cnc.machine import Machine
+from dnc.scheduler import ALARM, IDLE
+from server.host import MonitoringModel, StartRefused, make_starter
+from server.mtconnect.agent import Agent
+from server.mtconnect.model import build_device
+from server.supervisor import MachineLink
+
+PROGRAM = "%\nO0100\nG90 G0 X-100 Y-100 Z-20\nM30\n%\n"
+
+
+class Cell:
+    """One lockstep machine whose status reaches an agent as SHDR lines."""
+
+    def __init__(self) -> None:
+        self.m = Machine(builtin_machine("mill3"), "m1")
+        axes = self.m.axis_names
+        self.fmt = ShdrFormatter(axes)
+        self.agent = Agent([build_device("m1", axes)], ignore_timestamps=True)
+        self.agent.connected("m1")
+        self.prev = None
+        self.link = MachineLink("m1", "mill", "127.0.0.1", {}, axes, 1 << 20, local=self.m)
+        self.monitor = MonitoringModel(self.agent, {"m1": self.link})
+
+    def publish(self) -> None:
+        state = self.fmt.state(self.m.full_status())
+        for line in self.fmt.diff_states(self.prev, state, "2026-01-01T00:00:00Z"):
+            self.agent.ingest_line("m1", line)
+        self.prev = state
+
+    def step(self, n: int) -> None:
+        self.m.step(n)
+        self.publish()
+
+
+@pytest.fixture
+def cell():
+    c = Cell()
+    yield c
+    c.m.close()
+
+
+def test_unreferenced_machine_is_not_idle_and_says_which_axes(cell):
+    m = cell.m
+    m.command("mode", mode="AUTO")
+    cell.step(50)
+    s = cell.monitor.status("m1")
+    assert s["referenced"] is False and s["unreferenced_axes"] == ["X", "Y", "Z"]
+    assert s["mode"] == "AUTOMATIC" and s["execution"] == "READY" and not s["alarms"]
+    # READY, AUTO, no alarm before the first homing: still not for the cell
+    assert cell.monitor.state("m1") == ALARM
+    m.power_on()
+    cell.publish()
+    s = cell.monitor.status("m1")
+    assert s["referenced"] is True and s["unreferenced_axes"] == []
+    assert cell.monitor.state("m1") == IDLE
+
+
+def test_a_drive_that_loses_its_position_drops_the_reference_until_homed(cell):
+    m = cell.m
+    m.power_on()
+    cell.publish()
+    assert cell.monitor.state("m1") == IDLE
+    m.inject("drive:Y:power_cycle")
+    cell.step(50)
+    m.press("PanelReset")
+    cell.step(50)
+    s = cell.monitor.status("m1")
+    assert not [a for a in s["alarms"] if a["level"] == "FAULT"], s["alarms"]
+    assert s["referenced"] is False and "Y" in s["unreferenced_axes"]
+    assert cell.monitor.state("m1") == ALARM
+    # the axes quick-stopped by the fault lost their reference: a warning each
+    warnings = {(a["code"], a["text"]) for a in s["alarms"] if a["level"] == "WARNING"}
+    assert ("3031", "axis Y not referenced: home the machine (REF mode, home)") in warnings
+
+
+def test_a_refused_cycle_start_reports_the_ncs_reason_at_once(cell, monkeypatch):
+    m = cell.m
+    m.command("mode", mode="AUTO")
+    number = m.load_program(PROGRAM)
+    cell.step(10)
+
+    def select_program(n: int, timeout_s: float = 20.0) -> None:
+        m.command("select_program", number=n)
+        cell.step(5)
+
+    def panel(action: str, value=None) -> None:
+        assert action == "cycle_start"
+        m.press("PanelCycleStart")
+        cell.step(3 * m.plc_every)
+
+    monkeypatch.setattr(cell.link, "select_program", select_program)
+    monkeypatch.setattr(cell.link, "panel", panel)
+    start = make_starter({"m1": cell.link}, cell.monitor, timeout_s=30.0)
+    with pytest.raises(StartRefused) as err:
+        start("m1", number)
+    assert "refused by the NC" in str(err.value)
+    assert "machine not homed (X, Y, Z)" in str(err.value)
+    # the reason is in the API's status too, until the next select or start
+    assert "not homed" in cell.monitor.status("m1")["cycle_start_refused"]
