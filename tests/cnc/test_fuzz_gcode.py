@@ -94,7 +94,9 @@ def _run_all(text: str, params: MachineParams) -> None:
         assert err.line >= 0 and err.col >= 0 and err.message
         stopped = err
     _ = interp.state  # the snapshot works in any state
-    errs = check(text, params, programs=SUBS, tools=TOOLS, max_blocks=20_000)
+    # the checker set up as the run: an M99 in the main program is refused (subprogram=False,
+    # the interpreter's default; `check` alone decides that by the file)
+    errs = check(text, params, programs=SUBS, tools=TOOLS, max_blocks=20_000, subprogram=False)
     assert all(isinstance(e, NcError) for e in errs)
     if stopped is None:
         assert errs == [], f"run() completed, check() reports {errs[0]}"
