@@ -169,14 +169,16 @@ def test_host_killed_mid_job_and_restarted_loses_and_duplicates_nothing(tmp_path
         assert sorted(d["id"] for d in dispatches) == sorted(dispatch_ids)
         # Every dispatch is done, except one whose cycle start the crash interrupted (the
         # other mill's, when the kill lands in its `starting`): the restarted host fails it
-        # rather than risk a second start, and its part is still counted once, from the
-        # machine's counter, by its completed allocation.
+        # rather than risk a second start. Its allocation either completed (the machine had
+        # taken the start: the part counted once, from the machine's counter) or was
+        # rerouted (it had not: the part made by another allocation); the counts above hold
+        # either way.
         in_doubt = [d for d in dispatches if d["state"] != "done"]
         assert len(in_doubt) <= 1, dispatches
         for d in in_doubt:
             assert d["state"] == "failed" and "host stopped while starting" in d["error"], d
             (alloc,) = [a for a in done["allocations"] if a["dispatch_id"] == d["id"]]
-            assert alloc["status"] == "completed"
+            assert alloc["status"] in ("completed", "rerouted"), alloc
     finally:
         if host.poll() is None:
             host.send_signal(signal.SIGTERM)
