@@ -8,7 +8,7 @@ STAMP := $(VENV)/.installed
 MYPYC_LISTS := $(wildcard */mypyc.list */*/mypyc.list)
 MYPYC_SOURCES := $(foreach f,$(MYPYC_LISTS),$(addprefix $(dir $(f)),$(shell sed 's/\#.*//' $(f))))
 
-.PHONY: run test bench lint clean corpus corpus-baseline
+.PHONY: run test bench lint clean corpus corpus-baseline mutation coverage
 
 # The first build takes minutes (measured 5-16 on a busy 2-core box): say so, and what runs.
 $(STAMP): pyproject.toml setup.py $(MYPYC_LISTS) $(MYPYC_SOURCES)
@@ -43,6 +43,35 @@ corpus: $(STAMP)
 # Regenerate that baseline from today's results (expected-invalid entries are kept).
 corpus-baseline: $(STAMP)
 	$(PY) -m tests.cnc.corpus_report --write
+
+# Mutation testing of the pure cores with mutmut (tests/mutation.py: targets and their bounded
+# test selections): minutes per module, so kept out of `make test`. One module:
+# `make mutation MUTATION_ARGS=dnc/rules.py`; `python -m tests.mutation --list` names them.
+MUTATION_ARGS ?=
+mutation: $(STAMP)
+	nice $(PY) -m tests.mutation --min-score 90 $(MUTATION_ARGS)
+
+# Line + branch coverage of the suite, subprocesses included (pyproject [tool.coverage.run]);
+# server/ first, then everything. mypyc-compiled modules cannot be traced and are left out of
+# the report (FMSCELL_PURE_PYTHON=1 installs measure them too). One folder:
+# `make coverage COVERAGE_ARGS=tests/server`. COVERAGE_FILE is absolute so that subprocesses
+# running in a test's tmp_path write their data here too.
+COVERAGE_ARGS ?=
+comma := ,
+empty :=
+space := $(empty) $(empty)
+COVERAGE_OMIT := $(subst $(space),$(comma),$(strip $(MYPYC_SOURCES) */migrations/*))
+coverage: $(STAMP)
+	rm -rf build/coverage && mkdir -p build/coverage
+	-COVERAGE_FILE=$(CURDIR)/build/coverage/.coverage \
+		$(PY) -m coverage run -m pytest -n 2 -q -p no:cacheprovider $(COVERAGE_ARGS)
+	$(PY) -m coverage combine -q
+	@echo "==> server/"
+	$(PY) -m coverage report --include='server/*' --omit='$(COVERAGE_OMIT)'
+	@echo "==> all packages"
+	$(PY) -m coverage report --omit='$(COVERAGE_OMIT)' --format=total \
+		| sed 's/^/total: /;s/$$/ %/'
+	$(PY) -m coverage html -q -d build/coverage/html --omit='$(COVERAGE_OMIT)'
 
 bench: $(STAMP)
 	$(PY) bench/run_all.py

@@ -222,11 +222,17 @@ def make_starter(
     links: Mapping[str, MachineLink],
     monitor: MonitoringModel,
     timeout_s: float = 30.0,
-    repress_s: float = 5.0,
+    look_s: float = 5.0,
 ) -> Callable[[str, int], int | None]:
     """The transfer worker's cycle start: select the program and press cycle start on the
     machine's Modbus remote panel, and wait until the machine reports it running. Returns
-    the machine's part counter from just before the press (the allocation's baseline)."""
+    the machine's part counter from just before the press (the allocation's baseline).
+
+    Cycle start is pressed once. The host's view of the machine (SHDR -> agent) trails the
+    machine, by seconds on a loaded host: READY with the program selected and the counter
+    unchanged may be a start taken and not yet seen, or a part already made. A second press
+    on that view made a part twice; after `look_s` without news the starter asks the NC
+    itself (in cycle, on the Modbus face) and otherwise waits for the view to catch up."""
 
     def start(machine: str, number: int) -> int | None:
         link = links[machine]
@@ -239,7 +245,7 @@ def make_starter(
             f"{machine}: program {name} selected",
         )
         link.panel("cycle_start")
-        pressed = [time.monotonic(), 1]
+        looked = [time.monotonic()]
 
         def running() -> bool:
             s = monitor.status(machine)
@@ -255,21 +261,15 @@ def make_starter(
             # a very short program may have run and ended between two looks
             if (s["counters"]["part_count"] or 0) > (before or 0):
                 return True
-            # Under heavy load a remote cycle start has been seen not to be taken (the
-            # machine stays READY with the program selected and the counter unchanged). The
-            # operator's answer is to press again; the NC refuses a start while in a cycle,
-            # so a press that crosses a late start does nothing.
-            if (
-                s["execution"] == "READY"
-                and s["program"] == name
-                and time.monotonic() - pressed[0] > repress_s
-                and pressed[1] < 3
-            ):
-                log.warning(
-                    "%s: cycle start not taken after %.0f s: pressed again", machine, repress_s
-                )
-                link.panel("cycle_start")
-                pressed[0], pressed[1] = time.monotonic(), pressed[1] + 1
+            # No news yet: ask the NC on its own face, now and then (a Modbus round trip)
+            if time.monotonic() - looked[0] > look_s:
+                looked[0] = time.monotonic()
+                try:
+                    with link.remote_panel() as panel:
+                        if panel.nc_state()["NcInCycle"]:
+                            return True
+                except MachineUnavailable:
+                    pass  # the face is busy or gone: the view and the timeout decide
             return False
 
         try:

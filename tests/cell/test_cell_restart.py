@@ -18,7 +18,7 @@ import yaml
 
 from tests.cell.conftest import KEYS, MILL_PROGRAM, Api, poll, upload_released
 
-pytestmark = pytest.mark.timeout(180)
+pytestmark = pytest.mark.timeout(600)
 
 # A part long enough to be seen cutting: at the fast clock a machine runs as fast as the
 # CPU allows, and the short e2e part can be over between two polls of a busy host.
@@ -109,30 +109,38 @@ def test_host_killed_mid_job_and_restarted_loses_and_duplicates_nothing(tmp_path
 
         def mid_job():
             try:
-                return both_cutting()
+                return cutting()
             except httpx.TransportError as exc:  # a keep-alive connection closed under us
                 seen_errors.append(repr(exc))
                 assert host.poll() is None, (tmp_path / "host.log").read_text()[-3000:]
                 return False
 
-        def both_cutting():
+        def cutting():
+            # Mid-job, a mill cutting a part whose transfer is done: the moment a host crash
+            # must not cost a part or make one twice. Not "both mills at once": the transfers
+            # are one at a time, and on a loaded host each takes longer than a cut, so the
+            # two mills take turns and are never seen cutting together.
             j = api("viewer").get(f"/api/jobs/{job}").json()
             if not 1 <= j["done"] < quantity - 2:
                 return False
-            ms = {
-                n: api("viewer").get(f"/api/machines/{n}").json()["status"]
-                for n in ("mill1", "mill2")
-            }
-            r = api("viewer").get("/api/dispatches")
+            r = api("viewer").get("/api/dispatches", params={"limit": 100})
             # (a dispatch in the worker's `starting` state does not fit the API's schema yet)
             if r.status_code != 200:
                 seen_errors.append(r.text[:300])
                 return False
-            return all(s["execution"] == "ACTIVE" for s in ms.values()) and all(
-                d["state"] == "done" for d in r.json()["items"]
-            )
+            latest: dict[str, dict] = {}
+            for d in r.json()["items"]:
+                if d["machine"] not in latest or d["id"] > latest[d["machine"]]["id"]:
+                    latest[d["machine"]] = d
+            for name in ("mill1", "mill2"):
+                status = api("viewer").get(f"/api/machines/{name}").json()["status"]
+                if status["execution"] == "ACTIVE" and latest.get(name, {}).get("state") == "done":
+                    return name
+            return False
 
-        poll(mid_job, 60, "both mills cutting mid-job", interval_s=0.02)
+        # bounds, not waits: each poll ends as soon as its condition holds; the margins are
+        # for a host at load 20, where a part takes several times its quiet-box time
+        poll(mid_job, 120, "a mill cutting mid-job", interval_s=0.02)
         host.send_signal(signal.SIGKILL)
         host.wait(10)
         # the machines did not go down with their host, and keep cutting
@@ -146,7 +154,7 @@ def test_host_killed_mid_job_and_restarted_loses_and_duplicates_nothing(tmp_path
             j = api("viewer").get(f"/api/jobs/{job}").json()
             return j["status"] == "completed" and j
 
-        done = poll(completed, 60, "job completed after the restart", interval_s=0.2)
+        done = poll(completed, 240, "job completed after the restart", interval_s=0.2)
         assert done["done"] == quantity
         counts = {
             n: api("viewer").get(f"/api/machines/{n}").json()["status"]["counters"]["part_count"]
@@ -159,7 +167,18 @@ def test_host_killed_mid_job_and_restarted_loses_and_duplicates_nothing(tmp_path
         assert len(set(dispatch_ids)) == len(dispatch_ids)  # one dispatch per allocation
         dispatches = api("viewer").get("/api/dispatches", params={"limit": 100}).json()["items"]
         assert sorted(d["id"] for d in dispatches) == sorted(dispatch_ids)
-        assert all(d["state"] == "done" for d in dispatches), dispatches
+        # Every dispatch is done, except one whose cycle start the crash interrupted (the
+        # other mill's, when the kill lands in its `starting`): the restarted host fails it
+        # rather than risk a second start. Its allocation either completed (the machine had
+        # taken the start: the part counted once, from the machine's counter) or was
+        # rerouted (it had not: the part made by another allocation); the counts above hold
+        # either way.
+        in_doubt = [d for d in dispatches if d["state"] != "done"]
+        assert len(in_doubt) <= 1, dispatches
+        for d in in_doubt:
+            assert d["state"] == "failed" and "host stopped while starting" in d["error"], d
+            (alloc,) = [a for a in done["allocations"] if a["dispatch_id"] == d["id"]]
+            assert alloc["status"] in ("completed", "rerouted"), alloc
     finally:
         if host.poll() is None:
             host.send_signal(signal.SIGTERM)

@@ -1,4 +1,5 @@
-"""Fuzz: random text and random valid-looking programs give canonical commands or NcError.
+"""Fuzz: random text and random valid-looking programs give canonical commands or NcError,
+and `Interpreter.run()` agrees with `check()` on where the first error is.
 
 Nothing else may escape (no IndexError, ZeroDivisionError, RecursionError...), and every
 example finishes in bounded time (pytest-timeout guards the whole test; the interpreter is
@@ -72,16 +73,49 @@ SUBS = {
 }
 
 
+def _where(err: NcError) -> tuple[str, int, int, str]:
+    return (err.file, err.line, err.col, err.message)
+
+
 def _run_all(text: str, params: MachineParams) -> None:
+    """Run the program, then check it, and hold the two to each other: `run()` stops at
+    exactly the first error `check()` reports (same file, line, column and message), and a
+    program `run()` completes is one `check()` finds nothing wrong with. The checker is the
+    interpreter in recovery mode, so up to the first error the two must agree block for
+    block; a difference is a state the recovery path leaks backwards or a run that stops
+    (or carries on) where the checker does not."""
     interp = Interpreter(params, programs=SUBS, tools=TOOLS, max_blocks=20_000)
+    stopped: NcError | None = None
+    commands = []
     try:
-        for _ in interp.run(text):
-            pass
+        for cmd in interp.run(text):
+            commands.append(cmd)
     except NcError as err:
         assert err.line >= 0 and err.col >= 0 and err.message
+        stopped = err
     _ = interp.state  # the snapshot works in any state
-    errs = check(text, params, programs=SUBS, tools=TOOLS, max_blocks=20_000)
+    # the checker set up as the run: an M99 in the main program is refused (subprogram=False,
+    # the interpreter's default; `check` alone decides that by the file)
+    errs = check(text, params, programs=SUBS, tools=TOOLS, max_blocks=20_000, subprogram=False)
     assert all(isinstance(e, NcError) for e in errs)
+    if stopped is None:
+        assert errs == [], f"run() completed, check() reports {errs[0]}"
+    else:
+        assert errs, f"run() stopped at {stopped}, check() reports nothing"
+        assert _where(errs[0]) == _where(stopped), (
+            f"run() stopped at {stopped}, check() reports {errs[0]} first"
+        )
+    # a second run of the same text on a fresh interpreter gives the same commands and stop
+    again = Interpreter(params, programs=SUBS, tools=TOOLS, max_blocks=20_000)
+    replay = []
+    try:
+        for cmd in again.run(text):
+            replay.append(cmd)
+    except NcError as err:
+        assert stopped is not None and _where(err) == _where(stopped)
+    else:
+        assert stopped is None
+    assert replay == commands
 
 
 @settings(max_examples=150, deadline=None, suppress_health_check=[HealthCheck.too_slow])

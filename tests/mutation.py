@@ -1,0 +1,237 @@
+"""Mutation testing of the pure cores with mutmut (`make mutation`, kept out of `make test`).
+
+Each target is one pure-core module and the bounded test selection that is meant to catch
+its defects: a mutant the selection does not kill is a defect the tests would not notice.
+Every target runs in its own scratch project, <tmp>/fmscell-mutation/<name>/ (or under
+$FMSCELL_MUTATION_DIR): a copy of the packages without compiled extensions (a mypyc module
+would shadow its mutants), the tests, and a pyproject.toml with the project's pytest settings
+and a [tool.mutmut] block for that target. mutmut's mutants/ copy never lands in the
+checkout, and each module is measured against its own tests only (the whole suite per
+mutant would take days).
+
+mutmut 3 runs pytest inside mutants/ with `--rootdir=.`, so the project's `pythonpath =
+["."]` puts the mutated copy first; an editable install of fmscell would still answer for a
+package missing there, which is why every package is copied, not only the target's.
+
+    python -m tests.mutation                       # every target present, score table + JSON
+    python -m tests.mutation drives/cia402/statemachine.py
+    python -m tests.mutation --list
+    python -m tests.mutation --min-score 90        # exit 1 when a target scores lower
+
+Add a module by adding a line to TARGETS; a target whose source file does not exist yet is
+reported as `absent` and skipped (the allocation state machine is listed before it lands).
+The score is killed / (killed + survived + suspicious) over the mutants mutmut generated (a
+timeout, a mutant that makes a selected test hang, counts as killed); mutants no selected
+test reaches ("no tests") count as survivors, because that is what they are.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import shutil
+import subprocess
+import sys
+import tempfile
+import tomllib
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+WORK = Path(
+    os.environ.get("FMSCELL_MUTATION_DIR") or Path(tempfile.gettempdir()) / "fmscell-mutation"
+)
+# The packages copied into each scratch project: all of ours, so that nothing a test imports
+# falls through to an installed copy of fmscell outside the mutants/ tree.
+PACKAGES = ("drives", "plc", "cnc", "dnc", "server", "web_api")
+
+# module -> test files (globs) that form its bounded selection
+TARGETS: dict[str, tuple[str, ...]] = {
+    "drives/cia402/statemachine.py": (
+        "tests/drives/test_cia402_statemachine*.py",
+        "tests/drives/test_cia402_conformance.py",
+    ),
+    "plc/modbus/pdu.py": (
+        "tests/plc/test_modbus_core.py",
+        "tests/plc/test_modbus_frames.py",
+        "tests/plc/test_modbus_pdu*.py",
+    ),
+    "dnc/rules.py": ("tests/dnc/test_rules*.py",),
+    # the table of every state x machine event (the cell and model tests run a scheduler on
+    # SQLite: minutes per mutant)
+    "dnc/allocation.py": ("tests/dnc/test_allocation.py",),
+    "cnc/interp/modes.py": (
+        "tests/cnc/test_interp_codes.py",
+        "tests/cnc/test_interp_code_table.py",
+        "tests/cnc/test_interp_errors.py",
+        "tests/cnc/test_interp_motion.py",
+    ),
+    "cnc/interp/offsets.py": (
+        "tests/cnc/test_interp_codes.py",
+        "tests/cnc/test_interp_errors.py",
+        "tests/cnc/test_interp_motion.py",
+        "tests/cnc/test_machine_data.py",
+    ),
+}
+
+# mutmut's result names (its `exit_code_to_status`) grouped for the score
+# A timeout is a kill: the mutant made a selected test hang, which the suite notices.
+KILLED = {"killed", "caught by type check", "timeout"}
+NOT_KILLED = {"survived", "no tests", "suspicious", "segfault"}
+
+
+def _slug(module: str) -> str:
+    return module.removesuffix(".py").replace("/", ".")
+
+
+def _selection(globs: tuple[str, ...]) -> list[str]:
+    files: list[str] = []
+    for pattern in globs:
+        files += sorted(str(p.relative_to(ROOT)) for p in ROOT.glob(pattern))
+    return files
+
+
+def _pyproject(module: str, tests: list[str]) -> str:
+    """The scratch project's pyproject: the real pytest settings plus this target's mutmut."""
+    real = tomllib.loads((ROOT / "pyproject.toml").read_text())
+    pytest_opts = real["tool"]["pytest"]["ini_options"]
+
+    def arr(items) -> str:
+        return "[" + ", ".join(json.dumps(str(x)) for x in items) + "]"
+
+    lines = ["[tool.pytest.ini_options]"]
+    for key, value in pytest_opts.items():
+        if key == "testpaths":
+            continue
+        lines.append(f"{key} = {arr(value) if isinstance(value, list) else json.dumps(value)}")
+    lines += [
+        "",
+        "[tool.mutmut]",
+        f"source_paths = {arr(PACKAGES)}",
+        f"only_mutate = {arr([module])}",
+        # the scratch copies are thrown away: no pytest cache beside them
+        f"pytest_add_cli_args = {arr(['-p', 'no:cacheprovider'])}",
+        f"pytest_add_cli_args_test_selection = {arr(tests)}",
+        # the tree's files other than .py (EDS, ladder programs) are copied with the packages;
+        # the reference material is reached through FMSCELL_SHARED, never copied
+        "use_git_change_detection = false",
+        "",
+    ]
+    return "\n".join(lines)
+
+
+def _prepare(module: str, tests: list[str]) -> Path:
+    work = WORK / _slug(module)
+    if work.exists():
+        shutil.rmtree(work)  # a stale mutants/ would report yesterday's code
+    work.mkdir(parents=True)
+    skip = shutil.ignore_patterns("*.so", "*.pyd", "__pycache__", "*.pyc")
+    for name in PACKAGES:
+        shutil.copytree(ROOT / name, work / name, ignore=skip)
+    (work / "tests").symlink_to(ROOT / "tests", target_is_directory=True)
+    (work / "pyproject.toml").write_text(_pyproject(module, tests))
+    return work
+
+
+def _env() -> dict[str, str]:
+    env = dict(os.environ)
+    # the scratch project's own directory is put first by mutmut; the checkout must not be on
+    # the path (it would shadow the mutants), the shared reference material must be found
+    env.pop("PYTHONPATH", None)
+    extra = os.environ.get("FMSCELL_MUTMUT_PATH")  # a mutmut installed with --target
+    if extra:
+        env["PYTHONPATH"] = extra
+    env.setdefault("FMSCELL_SHARED", str(ROOT.parent / "shared"))
+    return env
+
+
+def _results(work: Path, env: dict[str, str]) -> dict[str, str]:
+    out = subprocess.run(
+        [sys.executable, "-m", "mutmut", "results", "--all", "true"],
+        cwd=work,
+        env=env,
+        capture_output=True,
+        text=True,
+        check=True,
+    ).stdout
+    status: dict[str, str] = {}
+    for line in out.splitlines():
+        name, sep, result = line.strip().rpartition(": ")
+        if sep and name:
+            status[name] = result.strip()
+    return status
+
+
+def run_target(module: str, max_children: int) -> dict:
+    tests = _selection(TARGETS[module])
+    if not (ROOT / module).exists():
+        return {"module": module, "status": "absent"}
+    if not tests:
+        return {"module": module, "status": "no tests", "selection": list(TARGETS[module])}
+    work = _prepare(module, tests)
+    env = _env()
+    cmd = [sys.executable, "-m", "mutmut", "run", "--max-children", str(max_children)]
+    proc = subprocess.run(cmd, cwd=work, env=env, capture_output=True, text=True)
+    if proc.returncode != 0:
+        sys.stderr.write(proc.stdout[-4000:] + proc.stderr[-4000:])
+        return {"module": module, "status": f"mutmut failed ({proc.returncode})"}
+    status = _results(work, env)
+    counts: dict[str, int] = {}
+    for result in status.values():
+        counts[result] = counts.get(result, 0) + 1
+    killed = sum(n for r, n in counts.items() if r in KILLED)
+    scored = killed + sum(n for r, n in counts.items() if r in NOT_KILLED)
+    survivors = sorted(n for n, r in status.items() if r in NOT_KILLED)
+    return {
+        "module": module,
+        "status": "ok",
+        "tests": tests,
+        "mutants": len(status),
+        "counts": counts,
+        "score": round(100.0 * killed / scored, 1) if scored else None,
+        "survivors": survivors,
+        "workdir": str(work),
+    }
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("modules", nargs="*", help="targets to run (default: all of TARGETS)")
+    ap.add_argument("--list", action="store_true", help="print the targets and exit")
+    ap.add_argument("--max-children", type=int, default=1, help="parallel mutant runs")
+    ap.add_argument("--min-score", type=float, default=None, help="fail below this score (%%)")
+    args = ap.parse_args(argv)
+    if args.list:
+        for module, globs in TARGETS.items():
+            present = "" if (ROOT / module).exists() else "  (absent)"
+            print(f"{module}{present}: {' '.join(_selection(globs)) or ' '.join(globs)}")
+        return 0
+    unknown = [m for m in args.modules if m not in TARGETS]
+    if unknown:
+        ap.error(f"not a mutation target: {', '.join(unknown)} (see --list)")
+    reports = []
+    for module in args.modules or list(TARGETS):
+        rep = run_target(module, args.max_children)
+        reports.append(rep)
+        score = rep.get("score")
+        line = f"{module}: {rep['status']}"
+        if rep["status"] == "ok":
+            line += f", {rep['mutants']} mutants, score {score} %, {rep['counts']}"
+            for name in rep["survivors"]:
+                line += f"\n    survived: {name}  (mutmut show {name}, in {rep['workdir']})"
+        print(line, flush=True)
+    print(
+        json.dumps(
+            {"mutation": [{k: v for k, v in r.items() if k != "survivors"} for r in reports]}
+        )
+    )
+    if args.min_score is not None:
+        low = [r for r in reports if r["status"] == "ok" and (r["score"] or 0.0) < args.min_score]
+        failed = [r for r in reports if r["status"].startswith("mutmut failed")]
+        if low or failed:
+            return 1
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
