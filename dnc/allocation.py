@@ -44,8 +44,11 @@ STATES = (*ACTIVE, INTERRUPTED, *FINAL)
 NOT_STARTED = "not_started"  # pending, transferring, verifying: can still be called off
 STARTING = "starting"  # the worker is pressing cycle start: wait for its outcome
 STARTED = "started"  # cycle start seen taken
-START_FAILED = "start_failed"  # the dispatch failed (before or during the start)
-DISPATCH_PHASES = (NOT_STARTED, STARTING, STARTED, START_FAILED)
+START_FAILED = "start_failed"  # failed while cycle start was pressed: it may have run
+# failed without any cycle start (the transfer failed, or the NC refused the start): no part
+# the machine counts afterwards is this allocation's
+NEVER_STARTED = "never_started"
+DISPATCH_PHASES = (NOT_STARTED, STARTING, STARTED, START_FAILED, NEVER_STARTED)
 
 DEFAULT_LOST_CONTACT_S = 30.0
 
@@ -146,7 +149,7 @@ def step(a: Alloc, look: Look, *, lost_contact_s: float = DEFAULT_LOST_CONTACT_S
         why = f"machine {m} raised an alarm" + (f": {look.alarm}" if look.alarm else "")
     elif not_started or a.dispatch == STARTING:
         return Step(a.state, note="; ".join(look.warnings))
-    elif a.dispatch == START_FAILED and a.state == DISPATCHED:
+    elif a.dispatch == NEVER_STARTED or (a.dispatch == START_FAILED and a.state == DISPATCHED):
         why = f"dispatch to {m} failed"
     elif not ours and look.program:
         why = f"operator changed the program on {m} to {look.program}"
@@ -168,12 +171,19 @@ def settle(a: Alloc, *, rerouted_to: int | None) -> Step:
     return Step(INTERRUPTED)
 
 
-def dispatch_phase(dispatch_state: str | None) -> str:
-    """The dispatch's state (dnc.dispatch / transfer_worker) as an allocation sees it."""
+def dispatch_phase(dispatch_state: str | None, error: str | None = None) -> str:
+    """The dispatch's state (dnc.dispatch / transfer_worker) as an allocation sees it.
+
+    A failed dispatch may have started its cycle only if it failed in the start step
+    (`start:` errors: the host died pressing cycle start, or the start was not seen in
+    time); a transfer that failed, or a start the NC refused (`start refused:`), never ran.
+    """
     if dispatch_state in (None, "pending", "transferring", "verifying"):
         return NOT_STARTED
     if dispatch_state == "starting":
         return STARTING
     if dispatch_state == "done":
         return STARTED
+    if dispatch_state == "failed" and error is not None and not error.startswith("start:"):
+        return NEVER_STARTED
     return START_FAILED

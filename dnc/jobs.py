@@ -257,7 +257,7 @@ class Scheduler:
                         a.parts_at_start,
                         a.status == "running",
                         a.dispatch_state == FAILED,
-                        dispatch=dispatch_phase(a.dispatch_state),
+                        dispatch=dispatch_phase(a.dispatch_state, a.dispatch_error),
                         program=f"O{a.number:04d}" if a.number is not None else None,
                         state=a.status,
                         note=a.note or "",
@@ -534,6 +534,7 @@ _STEPPED = (
         _ALLOCATIONS.c.dispatch_id,
         _ALLOCATIONS.c.note,
         _DISPATCHES.c.state.label("dispatch_state"),
+        _DISPATCHES.c.error.label("dispatch_error"),
         _PROGRAMS.c.number,
     )
     .select_from(

@@ -218,7 +218,10 @@ class TransferWorker:
                 try:
                     baseline = self._starter(job["machine"], job["number"])
                 except Exception as exc:
-                    raise TransferError("start", f"cycle start failed: {exc}") from exc
+                    # The NC (or PLC) said no: nothing ran, and the allocation must never be
+                    # credited with a part the machine counts later (dnc.allocation).
+                    kind = "start refused" if getattr(exc, "refused", False) else "start"
+                    raise TransferError(kind, f"cycle start failed: {exc}") from exc
             else:
                 baseline = None
             done = dict(bytes_sent=sent, verified=verified, error=None)

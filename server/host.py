@@ -215,7 +215,9 @@ class AlarmWatch:
 
 
 class StartRefused(MachineUnavailable):
-    """The NC refused the cycle start; the text carries its reason."""
+    """The NC (or the PLC) refused the cycle start; the text carries its reason."""
+
+    refused = True  # definitive: the transfer worker records the start as never made
 
 
 def make_starter(
@@ -280,7 +282,7 @@ def make_starter(
         except MachineUnavailable as exc:
             panel = link.panel_status()
             if panel.get("CycleStartRefused"):
-                raise MachineUnavailable(f"{machine}: the PLC refused cycle start") from None
+                raise StartRefused(f"{machine}: the PLC refused cycle start") from None
             s = monitor.status(machine)
             raise MachineUnavailable(
                 f"{exc} (machine: {s['mode']} {s['execution']} program {s['program']!r}, "
