@@ -200,13 +200,13 @@ def test_drip_feed_of_a_program_larger_than_memory_executes_on_the_machine():
                 return c.drip_feed(text.splitlines())
 
         box = in_thread(drip)
-        # the DRIP command arms the controller's drip input; then the operator starts
-        assert m.run_until(
-            lambda mm: (
-                mm.controller.policy("DRIP", None) is None and mm.controller._drip is not None
-            ),
-            60.0,
-        )
+        # the DRIP command arms the controller's drip input; then the operator starts. The
+        # client thread connects on the wall clock, so the wait is a wall deadline (machine
+        # time runs far faster in lockstep: 60 s of it passed before a loaded box connected)
+        deadline = time.monotonic() + 60.0
+        while not (m.controller.policy("DRIP", None) is None and m.controller._drip is not None):
+            assert time.monotonic() < deadline, "the DRIP command never armed the drip input"
+            m.step(m.plc_every)
         m.command("cycle_start")
         result = step_while(m, box, 600.0)
         assert result.blocks == len(text.splitlines()) - 2
