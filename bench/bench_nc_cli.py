@@ -39,20 +39,13 @@ LATHE_CONFIG = ROOT / "cnc" / "machines" / "lathe2.yaml"
 
 def cam_files(corpus: Path, n: int) -> list[tuple[Path, str]]:
     """The n largest files whose SOURCES.md origin is CAM, with their kind."""
-    rows = []
-    header: list[str] | None = None
-    for line in (corpus / "SOURCES.md").read_text(encoding="utf-8").splitlines():
-        if not line.startswith("|"):
-            continue
-        cells = [c.strip() for c in line.strip().strip("|").split("|")]
-        if header is None:
-            header = cells
-            continue
-        if set(cells[0]) <= {"-", ":", " "}:
-            continue
-        row = dict(zip(header, cells, strict=False))
-        if row["origin"].startswith("CAM") and (corpus / row["file"]).is_file():
-            rows.append((corpus / row["file"], row["kind"]))
+    from tests.cnc.corpus_report import sources_rows
+
+    rows = [
+        (corpus / row["file"], row["kind"])
+        for row in sources_rows(corpus / "SOURCES.md")
+        if row["origin"].startswith("CAM") and (corpus / row["file"]).is_file()
+    ]
     rows.sort(key=lambda r: r[0].stat().st_size, reverse=True)
     return rows[:n]
 

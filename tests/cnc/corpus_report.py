@@ -69,9 +69,9 @@ class Finding:
     text: str
 
 
-def corpus_kinds(sources_md: Path) -> dict[str, str]:
-    """file -> kind ('mill' | 'lathe') from the SOURCES.md table (`| file | repo | ... | kind |`)."""
-    kinds: dict[str, str] = {}
+def sources_rows(sources_md: Path) -> list[dict[str, str]]:
+    """The rows of the SOURCES.md table (`| file | repo | ... | kind | origin | ...`), by column."""
+    rows: list[dict[str, str]] = []
     header: list[str] | None = None
     for line in sources_md.read_text(encoding="utf-8").splitlines():
         if not line.startswith("|"):
@@ -82,8 +82,13 @@ def corpus_kinds(sources_md: Path) -> dict[str, str]:
             continue
         if set(cells[0]) <= {"-", ":", " "}:
             continue
-        row = dict(zip(header, cells, strict=False))
-        kinds[row["file"]] = row["kind"]
+        rows.append(dict(zip(header, cells, strict=False)))
+    return rows
+
+
+def corpus_kinds(sources_md: Path) -> dict[str, str]:
+    """file -> kind ('mill' | 'lathe') from the SOURCES.md table."""
+    kinds = {row["file"]: row["kind"] for row in sources_rows(sources_md)}
     if not kinds:
         raise ValueError(f"{sources_md}: no table with a file and a kind column")
     return kinds
