@@ -22,6 +22,7 @@ RESET, CAUSE_GONE, SELF = "reset", "cause_gone", "self"
 # NC alarm numbers (3000 series; 1000s are the PLC program's, 2000s the DNC port's).
 ESTOP = 3001
 AXES_DISABLED = 3002
+PLC_STOPPED = 3003  # the PLC left RUN (STOP, or FAULT: its watchdog, a program fault)
 FOLLOWING_ERROR = 3010
 PROGRAM_ERROR = 3020
 HOMING_FAILED = 3030

@@ -191,6 +191,7 @@ class Controller:
         self._fb: AxisFeedback | None = None
         self._plc: dict = {}
         self._plc_prev: dict = {}
+        self._plc_was_ready = False  # PlcReady seen: a later drop is the PLC stopping
         self._plc_src = None
         self._ex = "READY"
         self._plc_out_key = None
@@ -721,7 +722,22 @@ class Controller:
             self._estop = False
             self._event("E-stop released (reset and home to continue)")
         if not plc.get("PlcReady", False):
+            if self._plc_was_ready and not self._alarms.has(al.PLC_STOPPED):
+                # its outputs are off: axis enable, spindle and coolant go with them, so a cut
+                # stops with 3002; this alarm says why (the PLC's own alarm list says more)
+                self._alarms.raise_(
+                    al.PLC_STOPPED,
+                    "PLC not running (STOP or FAULT): its outputs are off; see the PLC's alarms",
+                    self._t,
+                    source="PLC",
+                    rule=al.SELF,
+                    cause="plc_stopped",
+                )
+                self._event("PLC stopped running")
             return  # a PLC that is not running gives no requests (its outputs are 0)
+        self._plc_was_ready = True
+        if self._alarms.has(al.PLC_STOPPED):
+            self._alarms.clear_self("plc_stopped")
         if self._rose("NcReset"):
             self._reset("PLC")
         mode = int(plc.get("ModeSelect", 0))

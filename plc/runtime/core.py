@@ -14,7 +14,8 @@ The core reads no clock of its own: time comes in as `now_ms`; the execution tim
 with the injectable `clock_ns` (a test passes a fake one to make a scan look slow). The
 default is the scan thread's CPU time, not the wall clock: a simulation process that the OS
 deschedules for 100 ms on a loaded host has not overrun its scan, and a lockstep run must not
-trip the watchdog (and so change its outcome) because of what else the host is doing. Late
+trip the watchdog (and so change its outcome) because of what else the host is doing; the
+CPU time the scan thread spends in Python's garbage collector is subtracted too (gc_pause). Late
 starts are the realtime shell's `late_ms` (`stall_periods`).
 """
 
@@ -36,6 +37,7 @@ from plc.ladder.symbols import (
     SLOT_OVERFLOW,
     parse_address,
 )
+from plc.runtime import gc_pause
 from plc.runtime.alarms import (
     ALARM_DIV_ZERO,
     ALARM_IO_FAULT,
@@ -107,6 +109,12 @@ class Runtime:
         self.io = io
         self.retain_store = retain_store
         self.clock_ns = clock_ns
+        # garbage collections are not the program's time on the thread CPU clock (gc_pause);
+        # a test's own clock has no collector to subtract
+        self._gc_ns: Callable[[], int] = _no_gc
+        if clock_ns is time.thread_time_ns:
+            gc_pause.install()
+            self._gc_ns = gc_pause.thread_gc_ns
         self.stats = ScanStats(self.config.stats_window)
         self.mode = self.config.start_mode
         self.scan_count = 0
@@ -142,6 +150,7 @@ class Runtime:
     def scan(self, now_ms: int, late_ms: float = 0.0) -> Snapshot:
         """Run one scan at virtual time `now_ms` and return the published Snapshot."""
         t0 = self.clock_ns()
+        gc0 = self._gc_ns()
         cfg = self.config
         dt = 0 if self._last_ms is None else max(0, now_ms - self._last_ms)
         self._last_ms = now_ms
@@ -182,7 +191,7 @@ class Runtime:
             self._safe_outputs()
         for (area, index), value in self._force_out:
             (v if area == "V" else img.area(area))[index] = value
-        exec_ms = (self.clock_ns() - t0) / 1e6
+        exec_ms = (self.clock_ns() - t0 - (self._gc_ns() - gc0)) / 1e6
         if self.mode is Mode.RUN:
             if exec_ms > cfg.watchdog_limit_ms:
                 self._fault(
@@ -520,6 +529,10 @@ class Runtime:
             "alarms": [str(a) for a in self.alarms.values()],
             "stats": self.stats.as_dict(),
         }
+
+
+def _no_gc() -> int:
+    return 0
 
 
 def _slot_pairs(prev: TagInfo, new: TagInfo):

@@ -209,3 +209,26 @@ def test_nc_reset_clears_the_plc_latched_alarm():
     rig.step(10)
     assert rig.ctl.alarms == ()
     assert rig.outputs.plc["NcResetting"] is False
+
+
+def test_a_plc_that_stops_mid_cut_is_named_as_the_cause_and_clears_when_it_runs_again():
+    """A PLC in FAULT (here its watchdog) switches its outputs off, axis enable with them: the
+    cut stops with 3002 and the NC raises 3003 saying the PLC is not running (not only 'axis
+    drives disabled'); 3003 goes when the PLC runs again."""
+    from plc.runtime import ALARM_WATCHDOG
+
+    rig = _rig()
+    rig.cmd("select_program", number=6000)
+    rig.cmd("cycle_start")
+    rig.until(lambda: rig.outputs.status.path_feed_rate > 1400, 10)
+    assert not any(a.number == 3003 for a in rig.ctl.alarms)
+    rig.plc.rt._fault(ALARM_WATCHDOG, "scan took 250 ms", rig.k)
+    rig.until(lambda: rig.ex == "STOPPED", 2)
+    numbers = {a.number: a for a in rig.ctl.alarms}
+    assert 3003 in numbers and numbers[3003].source == "PLC", rig.ctl.alarms
+    assert "PLC not running" in numbers[3003].text
+    assert 3002 in numbers  # the drives went off during motion: the consequence
+    rig.plc.rt.reset_fault()
+    rig.plc.rt.run()
+    rig.step(20)
+    assert not any(a.number == 3003 for a in rig.ctl.alarms)
