@@ -158,8 +158,12 @@ class MachineLink:
             self._mode(panel, "AUTO", 30.0)
 
     # ------------------------------------------------------------------ simulation face
-    def simulation(self, line: str, timeout_s: float = 10.0) -> str:
-        """One command on the simulation face; returns the text after `OK`, raises on ERR."""
+    def simulation(self, line: str, timeout_s: float = 30.0) -> str:
+        """One command on the simulation face; returns the text after `OK`, raises on ERR.
+
+        The face answers once the machine's thread has taken the command (its own limit is
+        10 s); the client waits three times that, so a loaded host gets the answer, not a
+        socket time-out (seen at load 20: a fault injection refused with 'timed out')."""
         port = self.ports.get("simulation")
         if not port:
             raise MachineUnavailable(
