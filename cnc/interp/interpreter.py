@@ -56,7 +56,14 @@ from cnc.gcode.macro import (
     MacroBlock,
     build_block,
 )
-from cnc.gcode.source import Lines, ProgramLibrary, Pushback, main_lines, skip_leader
+from cnc.gcode.source import (
+    Lines,
+    ProgramLibrary,
+    Pushback,
+    ends_with_m99,
+    main_lines,
+    skip_leader,
+)
 from cnc.interp import codes
 from cnc.interp.codes import fmt_g
 from cnc.interp.context import BlockRun, Classified
@@ -236,6 +243,10 @@ class Interpreter:
         self.units_programmed = False  # a G20/G21 was read (else the power-on unit holds)
         self.macro_budget = macro_budget
         self.subprogram = subprogram
+        # a subprogram checked on its own (no caller): set when a run starts
+        self.checked_alone = False
+        # line of the first feed move that took its caller's feed (none given in the file)
+        self.caller_feed_line: int | None = None
         self.vars = MacroVariables(self, macro_variables, clock, common_variables)
         self._g66: tuple[int, dict[int, float], int] | None = None
         self._mrun = 0  # macro statements since the last command came out
@@ -449,6 +460,9 @@ class Interpreter:
     def _run(self, lines: Iterable[str] | str, recover: bool) -> Iterator[CanonCommand]:
         self._lib.attach(lines, self.file)
         self._ended = False
+        self.checked_alone = self.subprogram is True or (
+            self.subprogram is None and ends_with_m99(self._lib.main_source())
+        )
         frames = self._frames
         frames.clear()
         frames.append(
@@ -986,6 +1000,12 @@ class Interpreter:
     def _feed(self, blk: Block) -> float:
         f = self._f
         if f is None:
+            if self.checked_alone and len(self._frames) == 1:
+                # a subprogram on its own: its caller set the feed (Haas and Fanuc keep F
+                # modal across M98); the move is checked at the machine's top feed
+                if self.caller_feed_line is None:
+                    self.caller_feed_line = blk.line
+                return self.params.max_feed
             raise self._err("feed move without F", blk)
         if self._per_rev:
             rpm = self._rpm_now()
