@@ -23,7 +23,7 @@ from dataclasses import dataclass
 from sqlalchemy import or_, select
 from sqlalchemy.orm import Session, sessionmaker
 
-from cnc.gcode.calls import Call
+from cnc.gcode.calls import Call, program_calls
 from dnc import models as m
 from dnc.db import transaction
 from dnc.errors import DncError
@@ -215,8 +215,8 @@ def _missing(
 class LibraryPrograms(Mapping[int, str]):
     """The library as the NC check's `programs` mapping: a called program's released
     revision, else its newest, read when the check reaches the call. Numbers in `stand_in`
-    (calls the library cannot answer yet) read as an empty subprogram, so the check goes
-    on past them."""
+    (calls the library cannot answer yet), and those a called program calls and the library
+    lacks, read as an empty subprogram, so the check goes on past them."""
 
     def __init__(
         self, sessions: sessionmaker[Session], kind: str, *, stand_in: Iterable[int] = ()
@@ -252,7 +252,10 @@ class LibraryPrograms(Mapping[int, str]):
             )
             if rev is None:  # only obsolete revisions: nothing to call
                 return f"O{number}\nM99\n"
-            return s.get(m.Content, rev.sha256).text
+            text = s.get(m.Content, rev.sha256).text
+        # what it calls in turn and the library lacks reads as empty too (any order of uploads)
+        self._stand_in.update(c.named() for c in self.missing(program_calls(text.splitlines()).calls))
+        return text
 
     def __iter__(self) -> Iterator[int]:
         return iter(sorted(self._held() | self._stand_in))

@@ -1000,9 +1000,9 @@ class Interpreter:
     def _feed(self, blk: Block) -> float:
         f = self._f
         if f is None:
-            if self.checked_alone and len(self._frames) == 1:
-                # a subprogram on its own: its caller set the feed (Haas and Fanuc keep F
-                # modal across M98); the move is checked at the machine's top feed
+            if self.checked_alone:
+                # a subprogram on its own (or a program it calls): its caller set the feed
+                # (F is modal across M98/G65); the move is checked at the machine's top feed
                 if self.caller_feed_line is None:
                     self.caller_feed_line = blk.line
                 return self.params.max_feed
