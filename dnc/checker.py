@@ -3,8 +3,8 @@
 from __future__ import annotations
 
 import dataclasses
-from functools import cache
 from collections.abc import Mapping
+from functools import cache
 from typing import IO, Any
 
 MAX_STORED_ERRORS = 100

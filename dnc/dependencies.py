@@ -245,8 +245,11 @@ class LibraryPrograms(Mapping[int, str]):
             rev = s.scalar(
                 select(m.Revision)
                 .join(m.Program, m.Program.id == m.Revision.program_id)
-                .where(m.Program.number == number, m.Program.machine_kind == self._kind,
-                       m.Revision.status != OBSOLETE)  # fmt: skip
+                .where(
+                    m.Program.number == number,
+                    m.Program.machine_kind == self._kind,
+                    m.Revision.status != OBSOLETE,
+                )  # fmt: skip
                 .order_by((m.Revision.status == RELEASED).desc(), m.Revision.seq.desc())
                 .limit(1)
             )
@@ -254,7 +257,9 @@ class LibraryPrograms(Mapping[int, str]):
                 return f"O{number}\nM99\n"
             text = s.get(m.Content, rev.sha256).text
         # what it calls in turn and the library lacks reads as empty too (any order of uploads)
-        self._stand_in.update(c.named() for c in self.missing(program_calls(text.splitlines()).calls))
+        self._stand_in.update(
+            c.named() for c in self.missing(program_calls(text.splitlines()).calls)
+        )
         return text
 
     def __iter__(self) -> Iterator[int]:

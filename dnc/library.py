@@ -23,8 +23,8 @@ from sqlalchemy import Integer, and_, column, exists, func, literal_column, or_,
 from sqlalchemy.exc import IntegrityError
 from sqlalchemy.orm import Session, sessionmaker
 
-from dnc import models as m
 from cnc.gcode.calls import Call, program_calls
+from dnc import models as m
 from dnc.db import transaction
 from dnc.dependencies import LibraryPrograms, called_by, calls_of, dependencies, record_calls
 from dnc.diff import unified_diff

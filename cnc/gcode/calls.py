@@ -68,13 +68,13 @@ def program_calls(lines: Iterable[str]) -> ProgramCalls:
     found = ProgramCalls()
     every: list[Call] = []
     for lineno, raw in enumerate(lines, 1):
-        m = _O_LINE_TEXT.match(raw)
-        if m:
-            found.defined.add(int(m.group(1)))
-        upper = raw.upper()
-        if "P" not in upper:
-            continue
-        text = _COMMENT.sub(lambda c: " " * len(c.group(0)), upper)
+        if "O" in raw or "o" in raw or ":" in raw:
+            m = _O_LINE_TEXT.match(raw)
+            if m:
+                found.defined.add(int(m.group(1)))
+        if "P" not in raw and "p" not in raw:
+            continue  # most blocks: no P word, no call
+        text = _COMMENT.sub(lambda c: " " * len(c.group(0)), raw.upper())
         code = _CALL.search(text)
         if code is None:
             continue

@@ -109,7 +109,9 @@ def test_dnc_calls_and_send_bring_the_subprograms(tmp_path):
     args = ["--database-url", db]
     folder = tmp_path / "gauge"
     folder.mkdir()
-    (folder / "a-main.nc").write_text("%\nO1001 (GAUGE)\nG21 G90\nG1 X-1 F100\nM98 P1002 L2\nM30\n%\n")
+    (folder / "a-main.nc").write_text(
+        "%\nO1001 (GAUGE)\nG21 G90\nG1 X-1 F100\nM98 P1002 L2\nM30\n%\n"
+    )
     (folder / "b-sub.nc").write_text("%\nO1002 (PASS)\nG91 G1 X-1\nG90\nM99\n%\n")
     runner = CliRunner()
     imported = runner.invoke(app, ["dnc", "import", str(folder), *args])

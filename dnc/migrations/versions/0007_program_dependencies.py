@@ -57,8 +57,14 @@ def _scan_stored_revisions(calls: sa.Table) -> None:
             dict(ids=ids[at : at + 500]),
         ).all()
         batch = [
-            dict(revision_id=revision_id, line=c.line, col=c.col, code=c.code, number=c.number,
-                 packed=c.packed)  # fmt: skip
+            dict(
+                revision_id=revision_id,
+                line=c.line,
+                col=c.col,
+                code=c.code,
+                number=c.number,
+                packed=c.packed,
+            )  # fmt: skip
             for revision_id, text in texts
             for c in program_calls(text.splitlines()).calls
         ]
