@@ -223,21 +223,29 @@ class LibraryPrograms(Mapping[int, str]):
     ) -> None:
         self._sessions, self._kind = sessions, kind
         self._stand_in = set(stand_in)
-        self._numbers: set[int] | None = None
+        self._held: dict[int, bool] = {}  # O number -> the library has it (asked once)
 
-    def _held(self) -> set[int]:
-        if self._numbers is None:
+    def _has(self, number: int) -> bool:
+        """One indexed query per number a call names (a library holds a million programs:
+        they are not all listed for one upload)."""
+        known = self._held.get(number)
+        if known is None:
             with transaction(self._sessions) as s:
-                self._numbers = set(
-                    s.scalars(select(m.Program.number).where(m.Program.machine_kind == self._kind))
+                known = self._held[number] = (
+                    s.scalar(
+                        select(m.Program.id).where(
+                            m.Program.number == number, m.Program.machine_kind == self._kind
+                        )
+                    )
+                    is not None
                 )
-        return self._numbers
+        return known
 
     def __contains__(self, number: object) -> bool:
-        return number in self._held() or number in self._stand_in
+        return isinstance(number, int) and (number in self._stand_in or self._has(number))
 
     def __getitem__(self, number: int) -> str:
-        if number not in self._held():
+        if not self._has(number):
             if number in self._stand_in:
                 return f"O{number}\nM99\n"
             raise KeyError(number)
@@ -249,7 +257,7 @@ class LibraryPrograms(Mapping[int, str]):
                     m.Program.number == number,
                     m.Program.machine_kind == self._kind,
                     m.Revision.status != OBSOLETE,
-                )  # fmt: skip
+                )
                 .order_by((m.Revision.status == RELEASED).desc(), m.Revision.seq.desc())
                 .limit(1)
             )
@@ -257,18 +265,21 @@ class LibraryPrograms(Mapping[int, str]):
                 return f"O{number}\nM99\n"
             text = s.get(m.Content, rev.sha256).text
         # what it calls in turn and the library lacks reads as empty too (any order of uploads)
-        self._stand_in.update(
-            c.named() for c in self.missing(program_calls(text.splitlines()).calls)
-        )
+        self.stand_in_for(program_calls(text.splitlines()).calls)
         return text
 
     def __iter__(self) -> Iterator[int]:
-        return iter(sorted(self._held() | self._stand_in))
+        # the numbers asked about so far: the check only asks `in` and `[]`
+        return iter(sorted({n for n, held in self._held.items() if held} | self._stand_in))
 
     def __len__(self) -> int:
-        return len(self._held() | self._stand_in)
+        return sum(1 for _ in self)
 
     def missing(self, calls: Iterable[Call]) -> list[Call]:
         """The calls the library cannot answer today."""
-        held = self._held()
-        return [c for c in calls if c.resolve(held.__contains__) is None]
+        return [c for c in calls if c.resolve(self._has) is None]
+
+    def stand_in_for(self, calls: Iterable[Call]) -> LibraryPrograms:
+        """Answer the calls the library lacks with an empty subprogram."""
+        self._stand_in.update(c.named() for c in self.missing(calls))
+        return self

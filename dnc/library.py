@@ -620,12 +620,9 @@ class Library:
         if self._checker is None:
             return Checked([], calls)
         extra: dict[str, Any] = {}
-        if getattr(self._checker, "resolves_calls", False):
+        if calls and getattr(self._checker, "resolves_calls", False):
             library = LibraryPrograms(self._sessions, machine_kind)
-            missing = library.missing(calls)
-            extra["programs"] = LibraryPrograms(
-                self._sessions, machine_kind, stand_in=[c.named() for c in missing]
-            )
+            extra["programs"] = library.stand_in_for(calls)
         if isinstance(text, ProgramUpload):
             if getattr(self._checker, "reads_files", False):
                 with text.line_file() as lines:
