@@ -4,6 +4,8 @@ limits; a missing subprogram at the machine is a program alarm naming PS0076 and
 
 from __future__ import annotations
 
+import dataclasses
+
 import pytest
 
 from cnc.canon import MOTION_TYPES
@@ -117,26 +119,44 @@ def chain(code: str, depth: int) -> dict[int, str]:
     return progs
 
 
+# a Fanuc 0i-C, 16i/18i/21i: 4 program levels, 4 macro levels (machine config call_nesting,
+# macro_nesting); the 0i-D/F (the default): 10 and 5
+OLD_FANUC = dataclasses.replace(MILL, call_nesting=4, macro_nesting=4)
+
+
 @pytest.mark.parametrize(
-    ("code", "depth", "alarm"),
+    ("params", "code", "depth", "alarm"),
     [
-        ("M98", MAX_SUB_NESTING, None),
-        ("M98", MAX_SUB_NESTING + 1, "PS0077"),
-        ("G65", MAX_MACRO_NESTING, None),
-        ("G65", MAX_MACRO_NESTING + 1, "PS0122"),
+        (MILL, "M98", MAX_SUB_NESTING, None),
+        (MILL, "M98", MAX_SUB_NESTING + 1, "PS0077"),
+        (MILL, "G65", MAX_MACRO_NESTING, None),
+        (MILL, "G65", MAX_MACRO_NESTING + 1, "PS0122"),
+        (OLD_FANUC, "M98", 4, None),
+        (OLD_FANUC, "M98", 5, "PS0077"),
+        (OLD_FANUC, "G65", 4, None),
+        (OLD_FANUC, "G65", 5, "PS0122"),
     ],
 )
-def test_nesting_limits(code, depth, alarm) -> None:
+def test_nesting_limits(params, code, depth, alarm) -> None:
     progs = chain(code, depth)
-    run = Interpreter(MILL, programs=progs).run(f"{code} P1\nM30\n")
+    run = Interpreter(params, programs=progs).run(f"{code} P1\nM30\n")
     if alarm is None:
         assert len([c for c in run if isinstance(c, MOTION_TYPES)]) == 1
         return
     with pytest.raises(NcError) as ei:
         list(run)
     assert ei.value.message.startswith(alarm)
-    # the call one level too deep: in the deepest program that still runs, its line 2
+    # the call one level too deep: in the deepest program that still runs
     assert (ei.value.file, ei.value.line) == (f"O{depth - 1}", 2)
+
+
+def test_nesting_limits_come_from_the_machine_config() -> None:
+    from cnc.config import load_machine_config
+
+    params = load_machine_config({"base": "mill3", "call_nesting": 4, "macro_nesting": 4}).params
+    assert (params.call_nesting, params.macro_nesting) == (4, 4)
+    with pytest.raises(NcError, match="PS0077 subprogram nesting deeper than 4 levels"):
+        list(Interpreter(params, programs=chain("M98", 5)).run("M98 P1\nM30\n"))
 
 
 def test_recursion_is_stopped_by_the_nesting_limit() -> None:
