@@ -51,7 +51,7 @@ class Dependency:
 def record_calls(s: Session, revision_id: int, calls: Iterable[Call]) -> None:
     for c in calls:
         s.add(m.RevisionCall(revision_id=revision_id, line=c.line, col=c.col, code=c.code,
-                             number=c.number, packed=c.packed))  # fmt: skip
+                             number=c.number, packed=c.packed, short_number=c.short))  # fmt: skip
 
 
 def _calls(s: Session, revision_id: int) -> list[Call]:
@@ -117,7 +117,7 @@ def called_by(s: Session, program: m.Program) -> list[dict]:
         .where(
             m.Program.machine_kind == program.machine_kind,
             m.Revision.status != OBSOLETE,
-            or_(m.RevisionCall.number == n, m.RevisionCall.packed.is_(True)),
+            or_(m.RevisionCall.number == n, m.RevisionCall.short_number == n),
         )
         .order_by(m.Program.number, m.Revision.seq, m.RevisionCall.line)
     ).all()

@@ -260,3 +260,5 @@ class RevisionCall(Base):
     code: Mapped[str] = mapped_column(String(3))  # M98 | G65 | G66
     number: Mapped[int] = mapped_column(Integer, index=True)
     packed: Mapped[bool] = mapped_column(Boolean, default=False)  # M98 Pxxxxnnnn without L
+    # the O number a packed call means when the 8-digit one does not exist (nnnn), else NULL
+    short_number: Mapped[int | None] = mapped_column(Integer, nullable=True, index=True)

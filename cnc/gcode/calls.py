@@ -41,6 +41,12 @@ class Call:
             return (self.number, self.number % 10000)
         return (self.number,)
 
+    @property
+    def short(self) -> int | None:
+        """The 4-digit O number a packed call means when its own number does not exist."""
+        c = self.candidates
+        return c[1] if len(c) > 1 else None
+
     def resolve(self, exists: Callable[[int], bool]) -> int | None:
         """The O number the call reaches given which programs exist, or None (missing)."""
         for n in self.candidates:

@@ -259,3 +259,18 @@ def test_rest_shows_calls_and_callers_and_refuses_a_dispatch_as_problem_json(ses
         callers = api.get(f"/api/programs/{sub['program']['id']}").json()["called_by"]
         assert [(c["number"], c["line"], c["code"]) for c in callers] == [(1001, 6, "M98")]
         assert api.get(f"/api/revisions/{rid}/calls").json() == detail["calls"]
+
+
+def test_a_packed_m98_is_resolved_as_the_interpreter_does(lib):
+    """`M98 P51000` without L: five times O1000, unless an O51000 exists."""
+    sub = upload(lib, 1000, "%\nO1000\nG91 G0 X-1.\nG90\nM99\n%\n")
+    main = upload(lib, 1, "%\nO1\nG21 G90 G0 X-10. Y-10. Z-10.\nM98 P51000\nM30\n%\n")
+    assert main.check_ok, main.check_errors
+    (call,) = lib.calls(main.id)
+    assert (call["number"], call["program_id"]) == (1000, sub.program_id)
+    assert [c["number"] for c in lib.called_by(sub.program_id)] == [1]
+    assert [d.number for d in lib.dependencies(main.id)] == [1000]
+    long = upload(lib, 51000, "%\nO51000\nG91 G0 Y-1.\nG90\nM99\n%\n")
+    assert lib.called_by(sub.program_id) == []
+    assert [c["number"] for c in lib.called_by(long.program_id)] == [1]
+    assert [d.number for d in lib.dependencies(main.id)] == [51000]

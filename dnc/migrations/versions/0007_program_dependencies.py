@@ -4,7 +4,9 @@ One row per call with a literal program number, read off the revision's text at 
 (cnc.gcode.calls): the number as written, where (line, column of the P word), and whether
 it is Fanuc's packed `M98 Pxxxxnnnn` form (repeats and program in one word). Calls are kept
 by O number, not by program id: a subprogram may be uploaded after the program that calls
-it, and a dispatch resolves each number to the released revision of that moment. Revisions
+it, and a dispatch resolves each number to the released revision of that moment.
+`short_number` is the 4-digit O number a packed call means when no 8-digit program of its
+number exists (indexed: which programs call O1000 is two index lookups). Revisions
 stored before this migration are scanned here.
 
 Revision ID: 0007_program_dependencies
@@ -37,9 +39,11 @@ def upgrade() -> None:
         sa.Column("code", sa.String(3), nullable=False),
         sa.Column("number", sa.Integer, nullable=False),
         sa.Column("packed", sa.Boolean, nullable=False, server_default=sa.false()),
+        sa.Column("short_number", sa.Integer, nullable=True),
         sa.PrimaryKeyConstraint("revision_id", "line", "col", name="pk_revision_calls"),
     )
     op.create_index("ix_revision_calls_number", "revision_calls", ["number"])
+    op.create_index("ix_revision_calls_short_number", "revision_calls", ["short_number"])
     _scan_stored_revisions(calls)
 
 
@@ -64,7 +68,8 @@ def _scan_stored_revisions(calls: sa.Table) -> None:
                 code=c.code,
                 number=c.number,
                 packed=c.packed,
-            )  # fmt: skip
+                short_number=c.short,
+            )
             for revision_id, text in texts
             for c in program_calls(text.splitlines()).calls
         ]
@@ -73,5 +78,6 @@ def _scan_stored_revisions(calls: sa.Table) -> None:
 
 
 def downgrade() -> None:
+    op.drop_index("ix_revision_calls_short_number", "revision_calls")
     op.drop_index("ix_revision_calls_number", "revision_calls")
     op.drop_table("revision_calls")
