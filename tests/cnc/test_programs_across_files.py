@@ -238,3 +238,16 @@ def test_a_missing_subprogram_is_a_program_alarm_with_ps0076_at_the_call(machine
     run(machine, 2100)
     assert machine.status.execution == "PROGRAM_COMPLETED", machine.alarms
     assert machine.axes.feedback().actual["X"] == pytest.approx(-13.0)
+
+
+def test_m99_p_returns_from_memory_to_a_sequence_number_of_the_caller(machine) -> None:
+    machine.command("reset")
+    machine.step(5)
+    machine.load_program("O2202\nG91 G0 X-2\nG90\nM99 P50\n")
+    machine.load_program(
+        "O2200\nG90 G0 X-10 Y-10 Z-10\nM98 P2202\nG0 X-99 (skipped)\nN50 G0 Y-3\nM30\n"
+    )
+    run(machine, 2200)
+    assert machine.status.execution == "PROGRAM_COMPLETED", machine.alarms
+    pos = machine.axes.feedback().actual
+    assert (pos["X"], pos["Y"]) == pytest.approx((-12.0, -3.0))
