@@ -170,7 +170,6 @@ def dependencies(s: Session, revision_id: int) -> list[Dependency]:
     kind = root_prog.machine_kind
     order: list[Dependency] = []
     seen = {root_prog.number}
-    done: set[int] = set()
 
     def visit(rev: m.Revision, prog: m.Program) -> None:
         calls = _calls(s, rev.id)
@@ -185,9 +184,7 @@ def dependencies(s: Session, revision_id: int) -> list[Dependency]:
             seen.add(number)
             callee, crev = progs[number], released[progs[number].id]
             visit(crev, callee)
-            if number not in done:
-                done.add(number)
-                order.append(Dependency(number, callee.id, crev.id, crev.sha256))
+            order.append(Dependency(number, callee.id, crev.id, crev.sha256))
 
     visit(root, root_prog)
     return order
