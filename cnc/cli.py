@@ -45,7 +45,8 @@ def check_cmd(
 ) -> None:
     """Check a part program: exit 0 when valid, else one `FILE:LINE:COL: message` per error.
 
-    A program whose last block is M99 is checked as a subprogram (its M99 ends it).
+    A program whose last block is M99 is checked as a subprogram (its M99 ends it, and
+    feed moves before its first F take the caller's feed).
     """
     from cnc.cli_setup import SETUP_ERRORS, fail, machine_setup, units_warning
     from cnc.interp import Interpreter
@@ -85,6 +86,12 @@ def check_cmd(
         errors = interp.check_all(fh)
     for e in errors:
         typer.echo(str(e))
+    if interp.caller_feed_line is not None:
+        typer.echo(
+            f"{file}:{interp.caller_feed_line}:1: warning: checked as a subprogram: feed moves "
+            "before its first F take the caller's feed",
+            err=True,
+        )
     if not interp.units_programmed:
         typer.echo(units_warning(str(file), setup.machine_data.power_on_units), err=True)
     raise typer.Exit(1 if errors else 0)

@@ -342,6 +342,20 @@ class MachineConfig(_Section):
     program_memory_bytes: int = Field(
         262_144, ge=1024, description="Part-program memory capacity, bytes."
     )
+    call_nesting: int = Field(
+        10,
+        ge=1,
+        le=10,
+        description="Program levels a program may call down (M98, G65, G66 together; deeper"
+        " is alarm PS0077): 10 on a Fanuc 0i-D/F, 4 on a 0i-C, 16i/18i/21i.",
+    )
+    macro_nesting: int = Field(
+        5,
+        ge=1,
+        le=5,
+        description="Of those, G65/G66 macro levels (deeper is alarm PS0122): 5 on a Fanuc"
+        " 0i-D/F, 4 on a 0i-C, 16i/18i/21i.",
+    )
     home_sequence: list[list[AxisName]] | None = Field(
         None,
         description="Homing sequence: groups of axes homed together, one group after the"
@@ -396,6 +410,8 @@ class MachineConfig(_Section):
             ipo_cycle_s=self.ipo_cycle_ms / 1000.0,
             second_reference_mm=second,
             max_spindle_rpm=self.spindle.max_rpm,
+            call_nesting=self.call_nesting,
+            macro_nesting=self.macro_nesting,
         )
 
 

@@ -49,6 +49,8 @@ class MachineParams:
     second_reference_mm: tuple[float, ...] | None = None  # G30 point; None = home
     max_spindle_rpm: float | None = None  # the spindle's top speed: the G96 clamp; None = none
     lathe_gcode_system: str = "A"  # Fanuc T G-code system A, B or C (cnc.interp.codes)
+    call_nesting: int = 10  # program levels called (M98, G65, G66): PS0077 beyond
+    macro_nesting: int = 5  # of which G65/G66 macro levels: PS0122 beyond
 
     def axis(self, name: str) -> AxisParams:
         for a in self.axes:

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import dataclasses
+from collections.abc import Mapping
 from functools import cache
 from typing import IO, Any
 
@@ -26,17 +27,27 @@ def _params(machine_kind: str):
     return dataclasses.replace(params, axes=axes)
 
 
-def nc_checker(text: str | IO[str], machine_kind: str) -> list[dict[str, Any]]:
+def nc_checker(
+    text: str | IO[str], machine_kind: str, *, programs: Mapping[int, str] | None = None
+) -> list[dict[str, Any]]:
     """Errors as plain data ({line, col, message}) for storing with the revision. `text`
     may be an open text file (its path as `name`): its lines are read as the check goes,
-    never all at once (a 15 MB program as a list of lines is some 60 MB)."""
+    never all at once (a 15 MB program as a list of lines is some 60 MB).
+
+    `programs` answers the calls (M98 P, G65 P, G66 P) by O number (the library's
+    programs, dnc.dependencies.LibraryPrograms); an error inside a called program names it
+    (`(in O1002)`, its own line and column). A program whose last block is M99 is checked
+    as a subprogram."""
     from cnc.interp import check
 
     lines = text.splitlines() if isinstance(text, str) else text
-    errors = check(lines, _params(machine_kind), file="program")
+    errors = check(lines, _params(machine_kind), file="program", programs=programs)
     return [
-        {"line": e.line, "col": e.col, "message": e.message} for e in errors[:MAX_STORED_ERRORS]
-    ]
+        {"line": e.line, "col": e.col,
+         "message": e.message if e.file == "program" else f"{e.message} (in {e.file})"}
+        for e in errors[:MAX_STORED_ERRORS]
+    ]  # fmt: skip
 
 
 nc_checker.reads_files = True  # type: ignore[attr-defined]  # Library hands it uploads as files
+nc_checker.resolves_calls = True  # type: ignore[attr-defined]  # and the library's programs

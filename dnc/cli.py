@@ -151,9 +151,53 @@ def send(
         typer.echo(f"dispatch {done.id} {state}: {done.error}", err=True)
         raise typer.Exit(1)
     check = "verified" if done.verified else "not verifiable (drip-feed)"
+    deps = lib.dependencies(rev.id)
+    brought = f" with {', '.join(f'O{d.number:04d}' for d in deps)}" if deps else ""
     typer.echo(
-        f"dispatch {done.id}: revision {rev.id} sent to {machine}, {done.bytes_sent} bytes, {check}"
+        f"dispatch {done.id}: revision {rev.id}{brought} sent to {machine}, {done.bytes_sent} "
+        f"bytes, {check}"
     )
+
+
+@dnc_app.command("calls")
+def calls(
+    program: str = typer.Argument(..., help="Program number, O1234 or 1234."),
+    kind: str = typer.Option("mill", help="Machine kind of the program (mill, lathe)."),
+    database_url: str | None = DB_OPTION,
+) -> None:
+    """The programs PROGRAM calls (M98 P, G65 P, G66 P) and the programs that call it.
+
+    Exit 1 when a program it calls, directly or through another, has no released revision
+    (a dispatch would be refused)."""
+    from dnc.dependencies import MissingDependency
+
+    lib = _library(database_url)
+    number = _program_number(program)
+    page = lib.search(number=number, machine_kind=kind, limit=1)
+    if not page.items:
+        typer.echo(f"no O{number:04d} for {kind} machines", err=True)
+        raise typer.Exit(1)
+    prog = page.items[0]
+    current = prog.released_revision_id or prog.latest_revision_id
+    which = "released" if prog.released_revision_id else "newest, not released"
+    typer.echo(f"O{number:04d} {prog.name} (revision id {current}, {which})")
+    for c in lib.calls(current) if current is not None else []:
+        where = (
+            f"released revision id {c['released_revision_id']}"
+            if c["released_revision_id"]
+            else ("not released" if c["program_id"] else "not in the library")
+        )
+        typer.echo(f"  line {c['line']}: {c['code']} calls O{c['number']:04d} ({where})")
+    for c in lib.called_by(prog.id):
+        typer.echo(f"  called by O{c['number']:04d} {c['name']} line {c['line']} ({c['code']}, "
+                   f"revision id {c['revision_id']}, {c['status']})")  # fmt: skip
+    if current is None:
+        return
+    try:
+        lib.dependencies(current)
+    except MissingDependency as exc:
+        typer.echo(f"not dispatchable: {exc.message}", err=True)
+        raise typer.Exit(1) from None
 
 
 @dnc_app.command("receive")

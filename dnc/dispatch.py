@@ -1,6 +1,9 @@
 """Dispatch requests: put a released revision on a machine, exactly once per idempotency key.
 
-A dispatch is recorded before anything is sent. The transfer worker then moves it through
+A dispatch is recorded before anything is sent. A revision that calls other programs
+(M98 P, G65 P, G66 P) brings their released revisions along, sent first
+(dnc.dependencies); a request whose revision calls a program with no released revision is
+refused before anything is recorded. The transfer worker then moves it through
 pending -> transferring -> verifying -> done, or to failed after its retries; every step is
 committed, so a host killed mid-dispatch finds the row where it left it and carries on.
 """
@@ -19,6 +22,7 @@ from sqlalchemy.orm import Session, sessionmaker
 
 from dnc import models as m
 from dnc.db import transaction
+from dnc.dependencies import dependencies
 from dnc.errors import IdempotencyMismatch, InvalidUpload, NotFound, WorkflowError
 from dnc.events import record
 
@@ -210,6 +214,8 @@ class Dispatches:
                     _same_request(existing, digest, key)
                     return dispatch_info(existing), False
                 _check_target(s, revision_id, machine)
+                # every program it calls has a released revision, or nothing is recorded
+                dependencies(s, revision_id)
                 now = self._now()
                 req = DispatchRequest(key, revision_id, machine, mode, start)
                 row = _new_row(req, digest, requested_by, now)

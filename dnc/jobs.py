@@ -12,6 +12,7 @@ from sqlalchemy.orm import Session, sessionmaker
 from dnc import models as m
 from dnc.allocation import DEFAULT_LOST_CONTACT_S, dispatch_phase
 from dnc.db import transaction
+from dnc.dependencies import dependencies
 from dnc.dispatch import FAILED, DispatchRequest, create_dispatches
 from dnc.errors import InvalidUpload, NotFound, WorkflowError
 from dnc.events import record, record_many
@@ -93,6 +94,7 @@ class Jobs:
                 raise WorkflowError(
                     f"revision {revision_id} is {rev.status}; jobs need a released revision"
                 )
+            dependencies(s, revision_id)  # a subprogram not released: refused now, not per part
             kind = s.get(m.Program, rev.program_id).machine_kind
             job = m.Job(
                 revision_id=revision_id,

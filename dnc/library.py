@@ -23,8 +23,10 @@ from sqlalchemy import Integer, and_, column, exists, func, literal_column, or_,
 from sqlalchemy.exc import IntegrityError
 from sqlalchemy.orm import Session, sessionmaker
 
+from cnc.gcode.calls import Call, program_calls
 from dnc import models as m
 from dnc.db import transaction
+from dnc.dependencies import LibraryPrograms, called_by, calls_of, dependencies, record_calls
 from dnc.diff import unified_diff
 from dnc.errors import Conflict, InvalidUpload, NotFound, WorkflowError
 from dnc.events import record
@@ -44,7 +46,14 @@ IMPORT_SUFFIXES = {".nc", ".ngc", ".tap", ".txt", ".iso", ".cnc"}
 DEFAULT_UPLOAD_LIMIT = 16 * 1024 * 1024
 
 Checker = Callable[[str, str], list[dict[str, Any]]]
-"""(text, machine_kind) -> list of {"line", "col", "message"}; empty when the program is valid."""
+"""(text, machine_kind) -> list of {"line", "col", "message"}; empty when the program is valid.
+A checker with `resolves_calls` also takes `programs=` (the library's programs by O number)."""
+
+
+@dataclass(frozen=True, slots=True)
+class Checked:
+    errors: list[dict[str, Any]]
+    calls: list[Call]  # the calls of other programs, stored with the revision
 
 
 @dataclass(frozen=True, slots=True)
@@ -301,6 +310,27 @@ class Library:
         with transaction(self._sessions) as s:
             rev = self._get_revision(s, revision_id)
             return s.get(m.Content, rev.sha256).text
+
+    def calls(self, revision_id: int) -> list[dict]:
+        """The other programs the revision calls (M98 P, G65 P, G66 P), one entry per call:
+        code, number, line, col, and the program and released revision it reaches today
+        (program_id None: the library has no such program)."""
+        with transaction(self._sessions) as s:
+            rev = self._get_revision(s, revision_id)
+            kind = s.get(m.Program, rev.program_id).machine_kind
+            return calls_of(s, revision_id, kind)
+
+    def called_by(self, program_id: int) -> list[dict]:
+        """The programs whose current revision (released, else newest) calls this one."""
+        with transaction(self._sessions) as s:
+            return called_by(s, self._get_program(s, program_id))
+
+    def dependencies(self, revision_id: int) -> list:
+        """The released revisions a dispatch of the revision brings along, deepest first
+        (dnc.dependencies.Dependency); MissingDependency when one has none."""
+        with transaction(self._sessions) as s:
+            self._get_revision(s, revision_id)
+            return dependencies(s, revision_id)
 
     def released_revision(self, number: int, machine_kind: str) -> RevisionInfo:
         """The revision a machine gets when it requests program `number` (remote request)."""
@@ -580,22 +610,32 @@ class Library:
         check_size(len(text.encode("utf-8", "surrogatepass")), limit=self.upload_limit, name=name)
         return normalise_text(text, name=name)
 
-    def _check(self, text: str | ProgramUpload, machine_kind: str) -> list[dict[str, Any]]:
+    def _check(self, text: str | ProgramUpload, machine_kind: str) -> Checked:
+        """The NC check's errors and the calls of other programs (dnc.dependencies)."""
+        if isinstance(text, ProgramUpload):
+            with text.line_file() as lines:
+                calls = program_calls(lines).calls
+        else:
+            calls = program_calls(text.splitlines()).calls
         if self._checker is None:
-            return []
+            return Checked([], calls)
+        extra: dict[str, Any] = {}
+        if calls and getattr(self._checker, "resolves_calls", False):
+            library = LibraryPrograms(self._sessions, machine_kind)
+            extra["programs"] = library.stand_in_for(calls)
         if isinstance(text, ProgramUpload):
             if getattr(self._checker, "reads_files", False):
                 with text.line_file() as lines:
-                    return self._checker(lines, machine_kind)
-            return self._checker(text.text(), machine_kind)
-        return self._checker(text, machine_kind)
+                    return Checked(self._checker(lines, machine_kind, **extra), calls)
+            return Checked(self._checker(text.text(), machine_kind, **extra), calls)
+        return Checked(self._checker(text, machine_kind, **extra), calls)
 
     def _add_revision(
         self,
         s: Session,
         prog: m.Program,
         text: str,
-        check: list[dict[str, Any]],
+        checked: Checked,
         author: str,
         comment: str,
         source: str,
@@ -621,14 +661,15 @@ class Library:
             source=source,
             status=DRAFT,
             created_at=self._now(),
-            check_ok=not check,
-            check_errors=check,
+            check_ok=not checked.errors,
+            check_errors=checked.errors,
         )
         s.add(rev)
         try:
             s.flush()
         except IntegrityError as exc:  # a concurrent revision took the same seq
             raise Conflict(f"program {prog.id} was changed concurrently; retry the upload") from exc
+        record_calls(s, rev.id, checked.calls)
         self._record(
             s,
             author,

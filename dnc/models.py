@@ -245,3 +245,20 @@ class Dispatch(Base):
     requested_by: Mapped[str] = mapped_column(String(128))
     created_at: Mapped[datetime] = mapped_column(Timestamp)
     updated_at: Mapped[datetime] = mapped_column(Timestamp)
+
+
+class RevisionCall(Base):
+    """A call of another program (M98 P, G65 P, G66 P) in a revision, by O number
+    (cnc.gcode.calls; resolved to a released revision when the revision is dispatched)."""
+
+    __tablename__ = "revision_calls"
+    revision_id: Mapped[int] = mapped_column(
+        ForeignKey("revisions.id", ondelete="CASCADE"), primary_key=True
+    )
+    line: Mapped[int] = mapped_column(Integer, primary_key=True)
+    col: Mapped[int] = mapped_column(Integer, primary_key=True)
+    code: Mapped[str] = mapped_column(String(3))  # M98 | G65 | G66
+    number: Mapped[int] = mapped_column(Integer, index=True)
+    packed: Mapped[bool] = mapped_column(Boolean, default=False)  # M98 Pxxxxnnnn without L
+    # the O number a packed call means when the 8-digit one does not exist (nnnn), else NULL
+    short_number: Mapped[int | None] = mapped_column(Integer, nullable=True, index=True)

@@ -26,6 +26,7 @@ from sqlalchemy.orm import Session, sessionmaker
 
 from dnc import models as m
 from dnc.db import transaction
+from dnc.dependencies import Dependency, MissingDependency, dependencies
 from dnc.dispatch import DONE, FAILED, PENDING, TRANSFERRING, VERIFYING, dispatch_info
 from dnc.events import record
 from dnc.transfer import (
@@ -189,12 +190,24 @@ class TransferWorker:
             # cannot carry it, on this attempt or any other
             return self._fail(dispatch_id, job["attempts"], unsendable)
         try:
+            # the programs it calls, as released now (the request checked them; one may
+            # have been made obsolete since): a missing one fails before anything is sent
+            with transaction(self._sessions) as s:
+                deps = dependencies(s, found.revision_id)
+        except MissingDependency as exc:
+            failure = TransferError("dependency", exc.message)
+            return self._fail(dispatch_id, job["attempts"], failure)
+        except Exception as exc:
+            failure = TransferError("read", f"dependencies of revision {found.revision_id}: {exc}")
+            return self._fail(dispatch_id, job["attempts"], failure)
+        try:
             host, port = _address(job["address"], dispatch_id)
             client = self._client(host, port, job["profile"])
             with client:
+                brought = self._bring(client, deps, dispatch_id) if deps else 0
                 if job["mode"] == "drip_feed":
                     result = client.drip_feed(iter_blocks([text]))
-                    sent, verified = result.bytes_sent, None
+                    sent, verified = brought + result.bytes_sent, None
                 else:
                     result = client.send_program(text, number=job["number"])
                     sent = result.bytes_sent
@@ -236,6 +249,37 @@ class TransferWorker:
             return self._fail(dispatch_id, job["attempts"], failure)
 
     # ------------------------------------------------------------------------------ helpers
+
+    def _bring(self, client: DncClient, deps: list[Dependency], dispatch_id: int) -> int:
+        """Load the programs the dispatched one calls, deepest first; one the machine holds
+        already with the same content (DIR's sha256) is not sent again. Returns the bytes
+        sent on the connection so far."""
+        held = {number: sha for number, _, sha in client.directory()}
+        sent: list[int] = []
+        bytes_sent = 0
+        kept: list[int] = []
+        for dep in deps:
+            text = self._text(dep.sha256)
+            if (unsendable := _outside_tape_code(text)) is not None:
+                raise TransferError("encode", f"subprogram O{dep.number:04d}: {unsendable.message}")
+            expected = self._expected_sha(dep.sha256, text)
+            if held.get(dep.number) == expected:
+                kept.append(dep.number)
+                continue
+            result = client.send_program(text, number=dep.number)
+            if result.sha256 != expected:
+                raise TransferError(
+                    "verify",
+                    f"subprogram O{dep.number:04d}: sent {expected[:12]}, machine stored "
+                    f"{result.sha256[:12]}",
+                )
+            sent.append(dep.number)
+            bytes_sent = result.bytes_sent  # counted from the connection's start
+        with transaction(self._sessions) as s:
+            record(s, now=self._now(), actor="transfer-worker", action="dispatch.subprograms",
+                   entity="dispatch", entity_id=dispatch_id, sent=sent, already_there=kept,
+                   revisions=[d.revision_id for d in deps])  # fmt: skip
+        return bytes_sent
 
     def _verify(self, client: DncClient, job: dict, text: str, stored_sha: str) -> bool:
         expected = self._expected_sha(job["sha"], text)

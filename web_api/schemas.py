@@ -135,9 +135,40 @@ class Resource(BaseModel):
     data: dict[str, Any]
 
 
+class ProgramCall(BaseModel):
+    """A call of another program (M98 P, G65 P, G66 P) in a revision, and what it reaches."""
+
+    code: Literal["M98", "G65", "G66"]
+    number: int = Field(description="the O number called")
+    line: int
+    col: int
+    program_id: int | None = Field(description="the program called; null: not in the library")
+    released_revision_id: int | None = Field(
+        description="its released revision, which a dispatch brings along; null: none (a "
+        "dispatch is refused)"
+    )
+
+
+class ProgramCaller(BaseModel):
+    """A program whose current revision (released, else newest) calls this one."""
+
+    program_id: int
+    number: int
+    name: str
+    revision_id: int
+    seq: int
+    status: Literal["draft", "released", "obsolete"]
+    code: Literal["M98", "G65", "G66"]
+    line: int
+
+
 class ProgramDetail(Program):
     revisions: list[Revision]
     resources: list[Resource]
+    calls: list[ProgramCall] = Field(
+        description="the programs the current revision (released, else newest) calls"
+    )
+    called_by: list[ProgramCaller]
 
 
 class ProgramPage(BaseModel):

@@ -156,11 +156,38 @@ def skip_leader(numbered: Lines) -> Lines:
     return itertools.chain(buffered, it)
 
 
+_M99_AT_END = re.compile(r"(?<![A-Z0-9.])M0*99(?![0-9.])")
+_COMMENTS = re.compile(r"\([^)]*\)|;.*")
+TAIL_BYTES = 4096  # the end of a file read to find its last block
+
+
+def ends_with_m99(source: Sequence[str] | str | None) -> bool:
+    """Whether the program's last block (blanks, comments and '%' aside) holds M99: a
+    subprogram file. `source` is the main program's lines or a file path (only its last
+    TAIL_BYTES are read); None (a stream) answers False."""
+    if source is None:
+        return False
+    if isinstance(source, str):
+        with open(source, "rb") as fh:
+            fh.seek(0, os.SEEK_END)
+            fh.seek(max(0, fh.tell() - TAIL_BYTES))
+            lines: Sequence[str] = fh.read().decode("latin-1").splitlines()
+    else:
+        lines = source
+    for raw in reversed(lines):
+        text = _COMMENTS.sub("", raw).strip().upper()
+        if text and not text.startswith("%"):
+            return bool(_M99_AT_END.search(text))
+    return False
+
+
 class ProgramLibrary:
     """Resolves program numbers for M98: in-file O blocks first, then the `programs` mapping."""
 
     def __init__(self, programs: Mapping[int, str | Iterable[str]] | None) -> None:
-        self.programs = dict(programs or {})
+        # kept, not copied: a program memory or a library database answers `in` and `[]`
+        # when a call needs the program, not every program's text up front
+        self.programs: Mapping[int, str | Iterable[str]] = programs if programs is not None else {}
         self.in_file: _SequenceIndex | _FileIndex | None = None
         self.main_file = "<program>"
         self._mapped: dict[int, _SequenceIndex | _FileIndex] = {}

@@ -56,7 +56,14 @@ from cnc.gcode.macro import (
     MacroBlock,
     build_block,
 )
-from cnc.gcode.source import Lines, ProgramLibrary, Pushback, main_lines, skip_leader
+from cnc.gcode.source import (
+    Lines,
+    ProgramLibrary,
+    Pushback,
+    ends_with_m99,
+    main_lines,
+    skip_leader,
+)
 from cnc.interp import codes
 from cnc.interp.codes import fmt_g
 from cnc.interp.context import BlockRun, Classified
@@ -91,10 +98,10 @@ if TYPE_CHECKING:  # cnc.machine_data imports cnc.interp.state: no import at run
 
 INCH = 25.4
 ARC_TOLERANCE_MM = 0.01  # |start radius - end radius| allowed (000_nc_book TV-INT-3)
-MAX_SUB_NESTING = 10  # M98 nesting depth (Fanuc 0i: 10 levels)
+MAX_SUB_NESTING = 10  # call levels at most (Fanuc 0i-D/F: 10; per machine: params.call_nesting)
 MAX_TOOL_OFFSET = 999  # H/D/T offset numbers (= cnc.machine_data.MAX_TOOL_OFFSET)
 EXTENDED_OFFSETS = 48  # G54.1 P1..P48; work offset list index = 6 + P
-MAX_MACRO_NESTING = 5  # G65/G66 macro levels (Fanuc: 5; local variable sets 0..5)
+MAX_MACRO_NESTING = 5  # G65/G66 macro levels at most (Fanuc 0i-D/F: 5; params.macro_nesting)
 MAX_LOOPS = 3  # WHILE/DO nesting (Fanuc: 3, ids 1..3)
 MACRO_BUDGET = 1_000_000  # macro statements in a row without any command: an endless loop
 LOOP_WATCH_AFTER = 10_000  # backward jumps before loops are watched for a repeated state
@@ -236,6 +243,10 @@ class Interpreter:
         self.units_programmed = False  # a G20/G21 was read (else the power-on unit holds)
         self.macro_budget = macro_budget
         self.subprogram = subprogram
+        # a subprogram checked on its own (no caller): set when a run starts
+        self.checked_alone = False
+        # line of the first feed move that took its caller's feed (none given in the file)
+        self.caller_feed_line: int | None = None
         self.vars = MacroVariables(self, macro_variables, clock, common_variables)
         self._g66: tuple[int, dict[int, float], int] | None = None
         self._mrun = 0  # macro statements since the last command came out
@@ -251,6 +262,8 @@ class Interpreter:
         self.arc_tolerance = arc_tolerance
         self.max_blocks = max_blocks
         self._lathe = params.kind == "lathe"
+        self._call_nesting = min(params.call_nesting, MAX_SUB_NESTING)
+        self._macro_nesting = min(params.macro_nesting, MAX_MACRO_NESTING)
         self._diam = self._lathe and params.lathe_diameter_mode
         style = params.decimal_style
         if machine_data is not None and machine_data.decimal_style is not None:
@@ -449,6 +462,9 @@ class Interpreter:
     def _run(self, lines: Iterable[str] | str, recover: bool) -> Iterator[CanonCommand]:
         self._lib.attach(lines, self.file)
         self._ended = False
+        self.checked_alone = self.subprogram is True or (
+            self.subprogram is None and ends_with_m99(self._lib.main_source())
+        )
         frames = self._frames
         frames.clear()
         frames.append(
@@ -986,6 +1002,12 @@ class Interpreter:
     def _feed(self, blk: Block) -> float:
         f = self._f
         if f is None:
+            if self.checked_alone:
+                # a subprogram on its own (or a program it calls): its caller set the feed
+                # (F is modal across M98/G65); the move is checked at the machine's top feed
+                if self.caller_feed_line is None:
+                    self.caller_feed_line = blk.line
+                return self.params.max_feed
             raise self._err("feed move without F", blk)
         if self._per_rev:
             rpm = self._rpm_now()
@@ -1482,10 +1504,11 @@ class Interpreter:
         return opened
 
     def _nesting(self, blk: Block) -> None:
-        if len(self._frames) > MAX_SUB_NESTING:
+        limit = self._call_nesting
+        if len(self._frames) > limit:
             raise MacroAlarm(
                 PS_NESTING,
-                f"subprogram nesting deeper than {MAX_SUB_NESTING} levels (recursion?)",
+                f"subprogram nesting deeper than {limit} levels (recursion?)",
                 blk.line,
                 blk.col("M") if blk.m else blk.col("G"),
                 self._frames[-1].file,
@@ -1628,10 +1651,10 @@ class Interpreter:
     def _push_macro(
         self, number: int, args: dict[int, float], reps: int, blk: Block, modal_call: bool = False
     ) -> None:
-        if self.vars.depth >= MAX_MACRO_NESTING:
+        if self.vars.depth >= self._macro_nesting:
             raise MacroAlarm(
                 PS_MACRO_NESTING,
-                f"macro calls nested deeper than {MAX_MACRO_NESTING} levels (recursion?)",
+                f"macro calls nested deeper than {self._macro_nesting} levels (recursion?)",
                 blk.line,
                 blk.col("G"),
                 self._frames[-1].file,

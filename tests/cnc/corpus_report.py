@@ -3,7 +3,10 @@
 Every file of `../shared/reference/corpus/gcode` (tests/reference.py GCODE_CORPUS; never
 copied into the repository) is checked exactly as a new user would check it:
 `fmscell nc check FILE`, or `fmscell nc check --kind lathe FILE` for the files whose
-SOURCES.md kind is lathe, with no other flag, so the shipped machines' defaults decide.
+SOURCES.md kind is lathe, with no other flag, so the shipped machines' defaults decide;
+a program that calls programs of other files (M98 P / G65 P / G66 P) is checked with
+`--library` its shop's folder (the corpus files from its SOURCES.md repository), and a
+file that ends in M99 is checked by `nc check` in subprogram mode.
 The command line runs in this process (typer's runner) to spare 95 interpreter start-ups;
 its exit code and output are the ones a shell would see.
 
@@ -30,6 +33,7 @@ from __future__ import annotations
 import argparse
 import re
 import sys
+import tempfile
 import time
 from collections.abc import Iterable, Mapping
 from dataclasses import dataclass
@@ -94,9 +98,37 @@ def corpus_kinds(sources_md: Path) -> dict[str, str]:
     return kinds
 
 
-def check_argv(path: Path, kind: str) -> list[str]:
-    """The `nc check` arguments a user gives: no flag beyond `--kind lathe`."""
-    return ["check", "--kind", "lathe", str(path)] if kind == "lathe" else ["check", str(path)]
+def check_argv(path: Path, kind: str, library: Path | None = None) -> list[str]:
+    """The `nc check` arguments a user gives: no flag beyond `--kind lathe`, and
+    `--library FOLDER` for a program that calls programs of other files."""
+    argv = ["check", "--kind", "lathe"] if kind == "lathe" else ["check"]
+    if library is not None:
+        argv += ["--library", str(library)]
+    return [*argv, str(path)]
+
+
+def calls_other_files(path: Path) -> bool:
+    """Whether the program calls (M98 P / G65 P / G66 P) a program not in its own file."""
+    from cnc.gcode.calls import program_calls
+
+    with open(path, encoding="latin-1") as fh:
+        return bool(program_calls(fh).calls)
+
+
+def shop_folders(corpus: Path, into: Path) -> dict[str, Path]:
+    """file -> the folder of its shop's programs: the corpus files from the same repository
+    (SOURCES.md `repository`), linked into one folder each under `into`. A shop's subprograms
+    are found among its own programs; O numbers repeat across shops (O1002, O9001)."""
+    folders: dict[str, Path] = {}
+    for row in sources_rows(corpus / "SOURCES.md"):
+        name, repo = row.get("file", ""), row.get("repository", "")
+        if not (corpus / name).is_file():
+            continue
+        folder = into / re.sub(r"[^A-Za-z0-9_.-]+", "_", repo or "unknown")
+        folder.mkdir(exist_ok=True)
+        (folder / name).symlink_to((corpus / name).resolve())
+        folders[name] = folder
+    return folders
 
 
 def split_output(text: str) -> tuple[list[str], list[str]]:
@@ -107,13 +139,13 @@ def split_output(text: str) -> tuple[list[str], list[str]]:
     return [ln for ln in lines if not _WARNING.search(ln)], warnings
 
 
-def check_file(path: Path, kind: str) -> Result:
+def check_file(path: Path, kind: str, library: Path | None = None) -> Result:
     from typer.testing import CliRunner
 
     from cnc.cli import nc_app
 
     start = time.perf_counter()
-    out = CliRunner().invoke(nc_app, check_argv(path, kind))
+    out = CliRunner().invoke(nc_app, check_argv(path, kind, library))
     seconds = time.perf_counter() - start
     if out.exception is not None and not isinstance(out.exception, SystemExit):
         # A crash of the checker is a failure with its own first error, never a pass.
@@ -125,6 +157,8 @@ def check_file(path: Path, kind: str) -> Result:
     prefix = f"{path}:"
     if first.startswith(prefix):
         first = first[len(prefix) :]
+    elif library is not None and first.startswith(f"{library}/"):
+        first = first[len(f"{library}/") :]  # in a called program: `FILE:LINE:COL: ...`
     passed = out.exit_code == 0
     if not passed and not first:
         first = f"0:0: exit code {out.exit_code} without a message"
@@ -138,7 +172,12 @@ def run_corpus(corpus: Path = GCODE_CORPUS) -> list[Result]:
     unknown = [p.name for p in files if p.name not in kinds]
     if unknown:
         raise ValueError(f"{corpus}/SOURCES.md: no row (kind) for {', '.join(unknown)}")
-    return [check_file(p, kinds[p.name]) for p in files]
+    with tempfile.TemporaryDirectory(prefix="fmscell-corpus-") as tmp:
+        shops = shop_folders(corpus, Path(tmp))
+        return [
+            check_file(p, kinds[p.name], shops[p.name] if calls_other_files(p) else None)
+            for p in files
+        ]
 
 
 def load_baseline(path: Path = BASELINE) -> dict[str, Expected]:

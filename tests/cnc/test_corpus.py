@@ -107,3 +107,31 @@ def test_corpus_against_baseline(capsys):
         + ("\n(notes: " + "; ".join(notes) + ")" if notes else "")
         + "\nregenerate with `make corpus-baseline` when the change is intended"
     )  # fmt: skip
+
+
+def test_a_calling_program_is_checked_with_its_shops_folder_as_library(tmp_path):
+    """O numbers repeat across shops (O1002 is a Haas lathe program of one and a subprogram
+    of another): a program's calls are looked up among its own repository's files."""
+    corpus = tmp_path / "corpus"
+    corpus.mkdir()
+    (corpus / "SOURCES.md").write_text(
+        "| file | repository | kind |\n|---|---|---|\n"
+        "| a-main.nc | shop/a | mill |\n| a-sub.nc | shop/a | mill |\n"
+        "| b-other.nc | shop/b | mill |\n",
+        encoding="utf-8",
+    )
+    (corpus / "a-main.nc").write_text("%\nO1\nG21 G90 G1 X-1 F100\nM98 P1002\nM30\n%\n")
+    (corpus / "a-sub.nc").write_text("%\nO1002\nG91 G1 X-1\nG90\nM99\n%\n")
+    (corpus / "b-other.nc").write_text("%\nO1002\nG0 X-1\nG2 X1\nM30\n%\n")
+    assert cr.calls_other_files(corpus / "a-main.nc")
+    assert not cr.calls_other_files(corpus / "a-sub.nc")
+    shops = cr.shop_folders(corpus, tmp_path)
+    assert shops["a-main.nc"] == shops["a-sub.nc"] != shops["b-other.nc"]
+    assert sorted(p.name for p in shops["a-main.nc"].iterdir()) == ["a-main.nc", "a-sub.nc"]
+    assert cr.check_argv(corpus / "a-main.nc", "mill", shops["a-main.nc"])[1:3] == [
+        "--library",
+        str(shops["a-main.nc"]),
+    ]
+    results = {r.file: r for r in cr.run_corpus(corpus)}
+    assert results["a-main.nc"].passed and results["a-sub.nc"].passed  # the sub: M99 ends it
+    assert not results["b-other.nc"].passed

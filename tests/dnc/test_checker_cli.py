@@ -96,3 +96,42 @@ def test_dnc_send_and_receive_against_a_machine(tmp_path):
         assert back.exit_code == 0 and "revision 1 (released) from mill1" in back.output
     finally:
         m.close()
+
+
+def test_dnc_calls_and_send_bring_the_subprograms(tmp_path):
+    """A folder imported main first (file name order): the main's check goes on past its
+    call; `dnc calls` shows the dependency both ways and a dispatch brings O1002 along."""
+    from dnc.db import make_engine, session_factory
+    from dnc.library import Library
+    from tests.cnc.dnc_helpers import Machine
+
+    db = f"sqlite:///{tmp_path / 'cli.db'}"
+    args = ["--database-url", db]
+    folder = tmp_path / "gauge"
+    folder.mkdir()
+    (folder / "a-main.nc").write_text(
+        "%\nO1001 (GAUGE)\nG21 G90\nG1 X-1 F100\nM98 P1002 L2\nM30\n%\n"
+    )
+    (folder / "b-sub.nc").write_text("%\nO1002 (PASS)\nG91 G1 X-1\nG90\nM99\n%\n")
+    runner = CliRunner()
+    imported = runner.invoke(app, ["dnc", "import", str(folder), *args])
+    assert imported.exit_code == 0 and imported.output.count("(check ok)") == 2, imported.output
+    shown = runner.invoke(app, ["dnc", "calls", "O1001", *args])
+    assert "line 5: M98 calls O1002 (not released)" in shown.output
+    assert shown.exit_code == 1 and "not dispatchable: O1001" in shown.output
+    lib = Library(session_factory(make_engine(db)))
+    for number in (1001, 1002):
+        rev = lib.search(number=number).items[0].latest_revision_id
+        lib.release(rev, approver="a", comment="ok")
+    shown = runner.invoke(app, ["dnc", "calls", "1002", *args])
+    assert shown.exit_code == 0 and "called by O1001 GAUGE line 5 (M98" in shown.output
+    m = Machine(capacity=8192)
+    try:
+        runner.invoke(app, ["dnc", "machine", "mill1", "--kind", "mill", "--dnc",
+                            f"127.0.0.1:{m.port.bound_port}", *args])  # fmt: skip
+        sent = runner.invoke(app, ["dnc", "send", "O1001", "-m", "mill1", *args])
+        assert sent.exit_code == 0, sent.output
+        assert "with O1002 sent to mill1" in sent.output
+        assert [e.number for e in m.memory.directory()] == [1001, 1002]
+    finally:
+        m.close()

@@ -164,3 +164,25 @@ def test_0006_allocation_outcomes_down_and_up_again(tmp_path):
     sched.tick()
     assert [a["status"] for a in jobs.allocations(job.id)] == ["failed", "failed"]
     eng.dispose()
+
+
+def test_0007_program_dependencies_scans_the_revisions_stored_before_it(tmp_path):
+    """0007 reads the calls off every revision already stored; its downgrade drops them."""
+    eng = make_engine(f"sqlite:///{tmp_path / 'd.db'}")
+    migrate(eng)
+    lib = Library(session_factory(eng))
+    _, main = lib.create_program(
+        number=1, name="main", text="%\nO1\nM98 P2 L2\nG65 P9001 A1.\nM30\n%\n"
+    )
+    _, sub = lib.create_program(number=2, name="sub", text="%\nO2\nG0 X0\nM99\n%\n")
+    before = lib.calls(main.id)
+    downgrade(eng, "0006")
+    assert "revision_calls" not in sa.inspect(eng).get_table_names()
+    migrate(eng)
+    assert lib.calls(main.id) == before
+    assert [(c["code"], c["number"], c["line"]) for c in before] == [
+        ("M98", 2, 3),
+        ("G65", 9001, 4),
+    ]
+    assert lib.calls(sub.id) == []
+    eng.dispose()

@@ -26,6 +26,7 @@ OPERATIONS = {
     ("post", "/api/programs/{program_id}/revisions"),
     ("get", "/api/revisions/{revision_id}"),
     ("get", "/api/revisions/{revision_id}/text"),
+    ("get", "/api/revisions/{revision_id}/calls"),
     ("post", "/api/revisions/{revision_id}/release"),
     ("get", "/api/revisions/{a}/diff/{b}"),
     ("post", "/api/dispatches"),

@@ -269,16 +269,21 @@ def list_programs(
 @router.get(
     "/api/programs/{program_id}",
     response_model=ProgramDetail,
-    summary="One program with its revisions and linked tools, fixtures and material",
+    summary="One program with its revisions, linked tools, fixtures and material, the "
+    "programs it calls and the programs that call it",
     responses=problem_doc(404),
 )
 def get_program(program_id: Annotated[DbId, Path()], services: Svc, _: Viewer) -> ProgramDetail:
     lib = services.library
-    program = program_out(lib.get_program(program_id))
+    info = lib.get_program(program_id)
+    program = program_out(info)
+    current = info.released_revision_id or info.latest_revision_id
     return ProgramDetail(
         **program.model_dump(),
         revisions=[revision_out(r) for r in lib.revisions(program_id)],
         resources=lib.resources(program_id),
+        calls=lib.calls(current) if current is not None else [],
+        called_by=lib.called_by(program_id),
     )
 
 

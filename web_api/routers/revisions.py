@@ -11,7 +11,7 @@ from web_api.problems import problem_doc
 from web_api.routers import Services, get_services
 from web_api.routers.auth import Programmer, Viewer
 from web_api.routers.programs import revision_out
-from web_api.schemas import DbId, ReleaseRequest, Revision
+from web_api.schemas import DbId, ProgramCall, ReleaseRequest, Revision
 
 router = APIRouter(tags=["revisions"], responses=problem_doc(400, 401, 403, 404, 422, 503))
 Svc = Annotated[Services, Depends(get_services)]
@@ -21,6 +21,15 @@ RevisionId = Annotated[DbId, Path()]
 @router.get("/api/revisions/{revision_id}", response_model=Revision, summary="One revision")
 def get_revision(revision_id: RevisionId, services: Svc, _: Viewer) -> Revision:
     return revision_out(services.library.get_revision(revision_id))
+
+
+@router.get(
+    "/api/revisions/{revision_id}/calls",
+    response_model=list[ProgramCall],
+    summary="The other programs the revision calls (M98 P, G65 P, G66 P), resolved today",
+)
+def revision_calls(revision_id: RevisionId, services: Svc, _: Viewer) -> list[ProgramCall]:
+    return [ProgramCall(**c) for c in services.library.calls(revision_id)]
 
 
 @router.get(
