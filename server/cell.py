@@ -127,6 +127,7 @@ class Cell:
     # ------------------------------------------------------------------ lifetime
     def start(self, ready_timeout_s: float = 120.0) -> Cell:
         from dnc.db import make_engine, migrate, session_factory
+        from dnc.checker import nc_checker
         from dnc.dispatch import Dispatches
         from dnc.jobs import Jobs, Scheduler
         from dnc.library import Library
@@ -137,7 +138,9 @@ class Cell:
         self.engine = make_engine(self.database_url)
         migrate(self.engine)
         self.sessions = session_factory(self.engine)
-        self.library = Library(self.sessions)
+        # every upload is NC-checked for the machine kind it is for, as `fmscell dnc` does:
+        # a program with errors is stored with them and cannot be released
+        self.library = Library(self.sessions, checker=nc_checker)
         self.dispatches = Dispatches(self.sessions)
         self.jobs = Jobs(self.sessions)
         try:
