@@ -28,6 +28,17 @@ from dnc.db import transaction
 from dnc.diff import unified_diff
 from dnc.errors import Conflict, InvalidUpload, NotFound, WorkflowError
 from dnc.events import record
+from dnc.posting import (
+    GCODE,
+    REVISION_KINDS,
+    MachineConfigs,
+    Posted,
+    check_source,
+    default_machine_configs,
+    derived_info,
+    posted_for,
+    store_derived,
+)
 from dnc.tape import (
     MAX_PROGRAM_NUMBER,
     check_size,
@@ -78,6 +89,8 @@ class RevisionInfo:
     approval_comment: str | None
     check_ok: bool
     check_errors: list[dict[str, Any]] = field(default_factory=list)
+    kind: str = "gcode"  # gcode | apt | cl (dnc/posting.py)
+    post_kinds: list[str] = field(default_factory=list)  # apt | cl: the kinds it is meant for
 
 
 @dataclass(frozen=True, slots=True)
@@ -98,9 +111,11 @@ class Library:
         checker: Checker | None = None,
         upload_limit: int = DEFAULT_UPLOAD_LIMIT,
         now: Callable[[], datetime] = _utcnow,
+        machine_configs: MachineConfigs = default_machine_configs,
     ) -> None:
         self._sessions = sessions
         self._checker = checker
+        self.machine_configs = machine_configs  # for posting APT/CL revisions (dnc/posting.py)
         self.upload_limit = upload_limit
         self._now = now
         # Which side drives a text search on SQLite (see _text_drives_from_index): "auto",
@@ -121,8 +136,11 @@ class Library:
         author: str = "unknown",
         comment: str = "",
         source: str = "upload",
+        kind: str = GCODE,
+        post_kinds: Iterable[str] | None = None,
     ) -> tuple[ProgramInfo, RevisionInfo]:
-        """A new program with its first revision (a draft)."""
+        """A new program with its first revision (a draft). `kind`: gcode, or apt / cl for
+        a source posted at dispatch for the machine kinds in `post_kinds` (dnc/posting.py)."""
         if not 1 <= number <= MAX_PROGRAM_NUMBER:
             raise InvalidUpload(
                 f"program number must be 1..{MAX_PROGRAM_NUMBER} (O number), got {number}"
@@ -130,7 +148,7 @@ class Library:
         if not name.strip():
             raise InvalidUpload("program name must not be empty")
         text = self._decode(text, name)
-        check = self._check(text, machine_kind)
+        kinds, check = self._check_kind(text, kind, machine_kind, post_kinds, name)
         digest = text.sha256 if isinstance(text, ProgramUpload) else None
         text = _stored(text)
         with transaction(self._sessions) as s:
@@ -159,7 +177,9 @@ class Library:
                 raise Conflict(f"program O{number:04d} already exists") from exc
             for tag in sorted({t.strip() for t in tags if t.strip()}):
                 s.add(m.ProgramTag(program_id=prog.id, tag=tag))
-            rev = self._add_revision(s, prog, text, check, author, comment, source, digest)
+            rev = self._add_revision(
+                s, prog, text, check, author, comment, source, digest, kind, kinds
+            )
             self._record(s, author, "program.create", "program", prog.id, number=number, name=name)
             return self._program_info(s, prog), _revision_info(rev)
 
@@ -171,17 +191,21 @@ class Library:
         author: str = "unknown",
         comment: str = "",
         source: str = "upload",
+        kind: str = GCODE,
+        post_kinds: Iterable[str] | None = None,
     ) -> RevisionInfo:
         with transaction(self._sessions) as s:
             prog = self._get_program(s, program_id)
-            kind, name = prog.machine_kind, prog.name
+            machine_kind, name = prog.machine_kind, prog.name
         text = self._decode(text, name)
-        check = self._check(text, kind)
+        kinds, check = self._check_kind(text, kind, machine_kind, post_kinds, name)
         digest = text.sha256 if isinstance(text, ProgramUpload) else None
         text = _stored(text)
         with transaction(self._sessions) as s:
             prog = self._get_program(s, program_id)
-            rev = self._add_revision(s, prog, text, check, author, comment, source, digest)
+            rev = self._add_revision(
+                s, prog, text, check, author, comment, source, digest, kind, kinds
+            )
             return _revision_info(rev)
 
     def receive_from_machine(self, machine: str, text: str | bytes) -> RevisionInfo:
@@ -301,6 +325,46 @@ class Library:
         with transaction(self._sessions) as s:
             rev = self._get_revision(s, revision_id)
             return s.get(m.Content, rev.sha256).text
+
+    def posted_preview(self, revision_id: int, machine: str) -> Posted:
+        """An APT/CL revision posted for a machine as a dispatch would post it, nothing
+        stored (`PostRefused` with the line and why when the post refuses)."""
+        with transaction(self._sessions) as s:
+            rev, mach, posted = posted_for(s, revision_id, machine, self.machine_configs)
+            if posted is None:
+                raise InvalidUpload(
+                    f"revision {revision_id} is G-code: it is sent as it is, not posted",
+                    revision_id=revision_id,
+                )
+            return posted
+
+    def text_for_machine(self, revision_id: int, machine: str, *, actor: str = "dnc") -> str:
+        """What the machine is sent of a revision: G-code as it is; an APT/CL revision
+        posted for the machine, stored as a derived revision (a remote request)."""
+        with transaction(self._sessions) as s:
+            rev, _, posted = posted_for(s, revision_id, machine, self.machine_configs)
+            if posted is None:
+                return s.get(m.Content, rev.sha256).text
+            store_derived(s, rev, posted, actor=actor, now=self._now())
+            return posted.text
+
+    def derived_revisions(self, revision_id: int) -> list[dict]:
+        """The G-code an APT/CL revision was posted to at dispatch, oldest first."""
+        with transaction(self._sessions) as s:
+            self._get_revision(s, revision_id)
+            rows = s.scalars(
+                select(m.DerivedRevision)
+                .where(m.DerivedRevision.source_revision_id == revision_id)
+                .order_by(m.DerivedRevision.id)
+            )
+            return [derived_info(d) for d in rows]
+
+    def derived_text(self, derived_id: int) -> str:
+        with transaction(self._sessions) as s:
+            d = s.get(m.DerivedRevision, derived_id)
+            if d is None:
+                raise NotFound(f"no derived revision with id {derived_id}")
+            return s.get(m.Content, d.sha256).text
 
     def released_revision(self, number: int, machine_kind: str) -> RevisionInfo:
         """The revision a machine gets when it requests program `number` (remote request)."""
@@ -590,6 +654,32 @@ class Library:
             return self._checker(text.text(), machine_kind)
         return self._checker(text, machine_kind)
 
+    def _check_kind(
+        self,
+        text: str | ProgramUpload,
+        kind: str,
+        machine_kind: str,
+        post_kinds: Iterable[str] | None,
+        name: str,
+    ) -> tuple[list[str], list[dict[str, Any]]]:
+        """(kinds a source is meant for, check errors): the NC check for G-code; for APT
+        and CL the processor (malformed: refused) and a trial post per kind."""
+        if kind not in REVISION_KINDS:
+            raise InvalidUpload(
+                f"kind must be one of {', '.join(REVISION_KINDS)}, got {kind!r}", pointer="/kind"
+            )
+        if kind == GCODE:
+            if post_kinds:
+                raise InvalidUpload(
+                    "post_kinds is for APT and CL revisions (kind apt or cl), not G-code",
+                    pointer="/post_kinds",
+                )
+            return [], self._check(text, machine_kind)
+        with transaction(self._sessions) as s:
+            cell = sorted(set(s.scalars(select(m.Machine.kind))))
+        source = text.text() if isinstance(text, ProgramUpload) else text
+        return check_source(source, kind, name, post_kinds, cell or [machine_kind])
+
     def _add_revision(
         self,
         s: Session,
@@ -600,6 +690,8 @@ class Library:
         comment: str,
         source: str,
         digest: str | None = None,
+        kind: str = GCODE,
+        post_kinds: list[str] | None = None,
     ) -> m.Revision:
         # an upload hashed its stored form as it streamed in: no second pass (and copy)
         digest = digest or sha256_of(text)
@@ -623,6 +715,8 @@ class Library:
             created_at=self._now(),
             check_ok=not check,
             check_errors=check,
+            kind=kind,
+            post_kinds=list(post_kinds or []),
         )
         s.add(rev)
         try:
@@ -640,6 +734,7 @@ class Library:
             sha256=digest,
             source=source,
             check_ok=rev.check_ok,
+            kind=kind,
         )
         return rev
 
@@ -742,6 +837,8 @@ def _revision_info(r: m.Revision) -> RevisionInfo:
         r.approval_comment,
         r.check_ok,
         list(r.check_errors or []),
+        r.kind or GCODE,
+        list(r.post_kinds or []),
     )
 
 

@@ -27,7 +27,15 @@ from sqlalchemy.orm import Session, sessionmaker
 from dnc import models as m
 from dnc.db import transaction
 from dnc.dispatch import DONE, FAILED, PENDING, TRANSFERRING, VERIFYING, dispatch_info
+from dnc.errors import DncError
 from dnc.events import record
+from dnc.posting import (
+    SOURCE_KINDS,
+    MachineConfigs,
+    default_machine_configs,
+    posted_for,
+    store_derived,
+)
 from dnc.transfer import (
     CHUNK,
     DncClient,
@@ -80,8 +88,10 @@ class TransferWorker:
         retry: RetryPolicy | None = None,
         now: Callable[[], datetime] | None = None,
         part_counter: Callable[[str], int | None] | None = None,
+        machine_configs: MachineConfigs = default_machine_configs,
     ) -> None:
         self._sessions = sessions
+        self.machine_configs = machine_configs  # posting APT/CL revisions (dnc/posting.py)
         self._client = client_factory
         self._starter = starter
         # The machine's part counter as the host sees it (None: unknown). Read before the
@@ -174,15 +184,23 @@ class TransferWorker:
                 machine=found.machine,
                 address=found.dnc_address or "",
                 profile=dict(found.dnc_profile or {}),
-                sha=found.sha256,
+                sha=found.posted_sha256 or found.sha256,
                 number=found.number,
             )
+        if found.kind in SOURCE_KINDS and found.posted_sha256 is None:
+            # a dispatch the scheduler made for an APT/CL revision: posted now, for this
+            # machine, with the derived revision stored before anything is sent
+            try:
+                job["sha"] = self._post(dispatch_id, found.revision_id, found.machine)
+            except DncError as exc:
+                failure = TransferError("post", exc.message)
+                return self._fail(dispatch_id, job["attempts"], failure)
         try:
             # read after the claim committed: a failure here must still end in a recorded
             # failure or retry, never leave the dispatch in `transferring`
-            text = self._text(found.sha256)
+            text = self._text(job["sha"])
         except Exception as exc:
-            failure = TransferError("read", f"revision text {found.sha256[:12]}: {exc}")
+            failure = TransferError("read", f"revision text {job['sha'][:12]}: {exc}")
             return self._fail(dispatch_id, job["attempts"], failure)
         if (unsendable := _outside_tape_code(text)) is not None:
             # stored before uploads were held to the ISO character set: the 7-bit tape
@@ -236,6 +254,15 @@ class TransferWorker:
             return self._fail(dispatch_id, job["attempts"], failure)
 
     # ------------------------------------------------------------------------------ helpers
+
+    def _post(self, dispatch_id: int, revision_id: int, machine: str) -> str:
+        """Post the dispatch's source for its machine and record the derived revision on
+        the dispatch (one transaction); the sha256 of the posted text."""
+        with transaction(self._sessions) as s:
+            rev, _, posted = posted_for(s, revision_id, machine, self.machine_configs)
+            derived = store_derived(s, rev, posted, actor="transfer-worker", now=self._now())
+            s.execute(update(_D).where(_D.c.id == dispatch_id).values(derived_id=derived.id))
+            return derived.sha256
 
     def _verify(self, client: DncClient, job: dict, text: str, stored_sha: str) -> bool:
         expected = self._expected_sha(job["sha"], text)
@@ -329,6 +356,7 @@ class TransferWorker:
 # Core statements on the tables, compiled once: an ORM-enabled UPDATE goes through the ORM's
 # bulk-update machinery, several times the CPU of the statement itself.
 _D = m.Dispatch.__table__
+_DERIVED = m.DerivedRevision.__table__
 _ATTEMPT = (
     select(
         _D.c.machine,
@@ -338,12 +366,15 @@ _ATTEMPT = (
         m.Machine.__table__.c.dnc_address,
         m.Machine.__table__.c.dnc_profile,
         m.Revision.__table__.c.sha256,
+        m.Revision.__table__.c.kind,
         m.Program.__table__.c.number,
+        _DERIVED.c.sha256.label("posted_sha256"),
     )
     .select_from(_D)
     .join(m.Revision.__table__, m.Revision.__table__.c.id == _D.c.revision_id)
     .join(m.Program.__table__, m.Program.__table__.c.id == m.Revision.__table__.c.program_id)
     .outerjoin(m.Machine.__table__, m.Machine.__table__.c.name == _D.c.machine)
+    .outerjoin(_DERIVED, _DERIVED.c.id == _D.c.derived_id)
     .where(_D.c.id == bindparam("dispatch_id"))
 )
 _CLAIM = (
