@@ -282,22 +282,30 @@ def posted_for(
         return rev, mach, None
     prog = s.get(m.Program, rev.program_id)
     text = s.get(m.Content, rev.sha256).text
-    posted = post_for_machine(
-        text,
-        rev.kind,
-        file=f"revision {rev.id} ({rev.kind})",
-        machine=mach.name,
-        machine_kind=mach.kind,
-        config=configs(mach.name, mach.kind),
-        program_number=prog.number,
+    meant = not rev.post_kinds or mach.kind in rev.post_kinds
+    not_meant = (
+        f"revision {rev.id} is meant for {', '.join(rev.post_kinds)} machines; "
+        f"{mach.name} is a {mach.kind}"
     )
-    if rev.post_kinds and mach.kind not in rev.post_kinds:
-        raise WorkflowError(
-            f"revision {rev.id} is meant for {', '.join(rev.post_kinds)} machines; "
-            f"{mach.name} is a {mach.kind}",
+    try:
+        # posted even when not meant for the kind: the post's own reason (5-axis data to a
+        # 3-axis mill, line 9) says more than the kinds do
+        posted = post_for_machine(
+            text,
+            rev.kind,
+            file=f"revision {rev.id} ({rev.kind})",
             machine=mach.name,
             machine_kind=mach.kind,
+            config=configs(mach.name, mach.kind),
+            program_number=prog.number,
         )
+    except PostRefused as e:
+        if not meant:
+            e.message = f"{e.message}; {not_meant}"
+            e.args = (e.message,)
+        raise
+    if not meant:
+        raise WorkflowError(not_meant, machine=mach.name, machine_kind=mach.kind)
     return rev, mach, posted
 
 
