@@ -666,13 +666,13 @@ class Library:
         and CL the processor (malformed: refused) and a trial post per kind."""
         if kind not in REVISION_KINDS:
             raise InvalidUpload(
-                f"kind must be one of {', '.join(REVISION_KINDS)}, got {kind!r}", pointer="/kind"
+                f"kind must be one of {', '.join(REVISION_KINDS)}, got {kind!r}", pointer="#/kind"
             )
         if kind == GCODE:
             if post_kinds:
                 raise InvalidUpload(
                     "post_kinds is for APT and CL revisions (kind apt or cl), not G-code",
-                    pointer="/post_kinds",
+                    pointer="#/post_kinds",
                 )
             return [], self._check(text, machine_kind)
         with transaction(self._sessions) as s:

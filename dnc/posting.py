@@ -20,6 +20,7 @@ transaction as the dispatch that sends it. The same source posted to the same te
 from __future__ import annotations
 
 import dataclasses
+import re
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass
 from datetime import datetime
@@ -32,7 +33,7 @@ from sqlalchemy.orm import Session
 from dnc import models as m
 from dnc.errors import DncError, InvalidUpload, NotFound, WorkflowError
 from dnc.events import record
-from dnc.tape import count_lines, sha256_of
+from dnc.tape import TapeHeader, count_lines, sha256_of
 
 GCODE, APT, CL = "gcode", "apt", "cl"
 REVISION_KINDS = (GCODE, APT, CL)
@@ -74,7 +75,7 @@ def kind_of_upload(kind: str | None, filename: str | None) -> str:
     if kind:
         if kind not in REVISION_KINDS:
             raise InvalidUpload(
-                f"kind must be one of {', '.join(REVISION_KINDS)}, got {kind!r}", pointer="/kind"
+                f"kind must be one of {', '.join(REVISION_KINDS)}, got {kind!r}", pointer="#/kind"
             )
         return kind
     suffix = PurePath(filename or "").suffix.lower()
@@ -83,6 +84,22 @@ def kind_of_upload(kind: str | None, filename: str | None) -> str:
     if suffix in CL_SUFFIXES:
         return CL
     return GCODE
+
+
+_PARTNO = re.compile(r"^\s*PARTNO\b[ \t,]*(?P<text>.*?)\s*$", re.IGNORECASE | re.MULTILINE)
+_DIGITS_END = re.compile(r"(\d{1,8})$")
+
+
+def partno_header(head: str) -> TapeHeader:
+    """An APT/CL file's number and title, from its PARTNO text (`PARTNO PLATE 2001`: O2001,
+    "PLATE 2001"), as the post numbers the program it writes."""
+    found = _PARTNO.search(head)
+    if found is None:
+        return TapeHeader(None, "")
+    title = found.group("text")
+    digits = _DIGITS_END.search(title)
+    number = int(digits.group(1)) if digits and int(digits.group(1)) > 0 else None
+    return TapeHeader(number, title)
 
 
 def read_source(text: str, kind: str, file: str) -> list:
@@ -99,7 +116,7 @@ def read_source(text: str, kind: str, file: str) -> list:
             file=e.file,
             line=e.line,
             column=e.col,
-            pointer="/text",
+            pointer="#/text",
         ) from None
 
 
@@ -130,7 +147,7 @@ def check_source(
             raise InvalidUpload(
                 f"post_kinds: no post-processor for machine kind {k!r} "
                 f"(known: {', '.join(sorted(POSTS))})",
-                pointer="/post_kinds",
+                pointer="#/post_kinds",
             )
     kinds = kinds or machin_kinds(records) or sorted(set(cell_kinds))
     errors: list[dict[str, Any]] = []

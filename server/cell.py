@@ -137,8 +137,9 @@ class Cell:
         self.engine = make_engine(self.database_url)
         migrate(self.engine)
         self.sessions = session_factory(self.engine)
-        self.library = Library(self.sessions)
-        self.dispatches = Dispatches(self.sessions)
+        # APT/CL revisions are posted with each machine's own configuration (dnc/posting.py)
+        self.library = Library(self.sessions, machine_configs=self._machine_config)
+        self.dispatches = Dispatches(self.sessions, machine_configs=self._machine_config)
         self.jobs = Jobs(self.sessions)
         try:
             self._start_machines(ready_timeout_s)
@@ -171,6 +172,7 @@ class Cell:
                 starter=self._audited(make_starter(self.links, self.monitor)),
                 retry=RetryPolicy(max_attempts=3, base_s=0.5, cap_s=5.0),
                 part_counter=lambda name: self.monitor.status(name)["counters"]["part_count"],
+                machine_configs=self._machine_config,
             )
             self.worker.recover()
             self.alarm_watch = AlarmWatch(self.sessions, self.monitor)
@@ -188,6 +190,10 @@ class Cell:
             raise
         self.started = True
         return self
+
+    def _machine_config(self, name: str, kind: str):
+        """A cell machine's configuration, for posting APT/CL revisions for it."""
+        return self.config.machines.get(name)
 
     def _audited(self, starter):
         """The transfer worker's starter, announcing its select and cycle start so the

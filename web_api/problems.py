@@ -32,6 +32,7 @@ STATUS_OF_KIND = {
     "workflow": 409,
     "database-unavailable": 503,
     "idempotency-key-reuse": 422,
+    "post-refused": 422,
 }
 TITLES = {
     "invalid-upload": "The uploaded program was refused",
@@ -41,6 +42,7 @@ TITLES = {
     "workflow": "The release workflow forbids this step",
     "database-unavailable": "The database is unavailable",
     "idempotency-key-reuse": "Idempotency-Key reused with a different request",
+    "post-refused": "The post-processor refused the program for this machine",
     "validation": "The request is invalid",
     "malformed-json": "The request body is not valid JSON",
     "unauthenticated": "An API key is required",

@@ -122,7 +122,7 @@ def test_a_malformed_source_is_refused_with_line_and_column(lib, sessions, kind,
         lib.create_program(number=5, name="bad", text=text, kind=kind)
     detail = err.value.detail
     assert (detail["line"], detail["column"]) == where, err.value.message
-    assert why in err.value.message and detail["pointer"] == "/text"
+    assert why in err.value.message and detail["pointer"] == "#/text"
     assert count(sessions, m.Program) == count(sessions, m.Revision) == 0  # nothing stored
 
 
