@@ -28,6 +28,7 @@ from dnc.db import transaction
 from dnc.diff import unified_diff
 from dnc.errors import Conflict, InvalidUpload, NotFound, WorkflowError
 from dnc.events import record
+from cam.chain import APT_SUFFIXES, CL_SUFFIXES
 from dnc.posting import (
     GCODE,
     REVISION_KINDS,
@@ -36,6 +37,8 @@ from dnc.posting import (
     check_source,
     default_machine_configs,
     derived_info,
+    kind_of_upload,
+    partno_header,
     posted_for,
     store_derived,
 )
@@ -52,6 +55,7 @@ from dnc.upload import ProgramUpload
 
 DRAFT, RELEASED, OBSOLETE = "draft", "released", "obsolete"
 IMPORT_SUFFIXES = {".nc", ".ngc", ".tap", ".txt", ".iso", ".cnc"}
+_IMPORTED = IMPORT_SUFFIXES | APT_SUFFIXES | CL_SUFFIXES  # APT and CL: sources (dnc/posting.py)
 DEFAULT_UPLOAD_LIMIT = 16 * 1024 * 1024
 
 Checker = Callable[[str, str], list[dict[str, Any]]]
@@ -491,37 +495,50 @@ class Library:
         machine_kind: str = "mill",
         author: str = "import",
         tags: Sequence[str] = (),
+        post_kinds: Sequence[str] = (),
     ) -> list[tuple[Path, RevisionInfo | Exception]]:
         """Import one file or every program file under a directory.
 
         A file whose O number already exists becomes a new revision of that program; each
         file's outcome is reported separately, so one bad file does not stop the rest.
+        APT (`.apt`) and CL files (`.cl` `.cls` ...) are imported as sources posted at
+        dispatch, their number from PARTNO; `post_kinds` names the machine kinds they are for.
         """
         files = (
-            sorted(p for p in path.rglob("*") if p.suffix.lower() in IMPORT_SUFFIXES)
+            sorted(p for p in path.rglob("*") if p.suffix.lower() in _IMPORTED)
             if path.is_dir()
             else [path]
         )
         results: list[tuple[Path, RevisionInfo | Exception]] = []
         for file in files:
             try:
-                results.append((file, self._import_file(file, machine_kind, author, tags)))
+                results.append(
+                    (file, self._import_file(file, machine_kind, author, tags, post_kinds))
+                )
             except (InvalidUpload, Conflict, OSError) as exc:
                 results.append((file, exc))
         return results
 
     def _import_file(
-        self, file: Path, machine_kind: str, author: str, tags: Sequence[str]
+        self,
+        file: Path,
+        machine_kind: str,
+        author: str,
+        tags: Sequence[str],
+        post_kinds: Sequence[str] = (),
     ) -> RevisionInfo:
-        if file.suffix.lower() not in IMPORT_SUFFIXES:
+        if file.suffix.lower() not in _IMPORTED:
             raise InvalidUpload(
-                f"{file}: not a program file (expected one of {sorted(IMPORT_SUFFIXES)})"
+                f"{file}: not a program file (expected one of {sorted(_IMPORTED)})"
             )
         check_size(file.stat().st_size, limit=self.upload_limit, name=str(file))
         text = decode_program(file.read_bytes(), limit=self.upload_limit, name=str(file))
-        header = read_header(text)
+        kind = kind_of_upload(None, file.name)
+        header = read_header(text) if kind == GCODE else partno_header(text)
         if header.number is None:
-            raise InvalidUpload(f"{file}: no O number in the first block; cannot file it")
+            where = "in the first block" if kind == GCODE else "ending its PARTNO text"
+            raise InvalidUpload(f"{file}: no O number {where}; cannot file it")
+        source = dict(kind=kind, post_kinds=list(post_kinds) or None) if kind != GCODE else {}
         with transaction(self._sessions) as s:
             prog_id = s.scalar(
                 select(m.Program.id).where(
@@ -530,7 +547,9 @@ class Library:
             )
         comment = f"imported from {file.name}"
         if prog_id is not None:
-            return self.add_revision(prog_id, text, author=author, comment=comment, source="import")
+            return self.add_revision(
+                prog_id, text, author=author, comment=comment, source="import", **source
+            )
         _, rev = self.create_program(
             number=header.number,
             name=header.title or file.stem,
@@ -540,6 +559,7 @@ class Library:
             author=author,
             comment=comment,
             source="import",
+            **source,
         )
         return rev
 
