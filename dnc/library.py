@@ -23,12 +23,12 @@ from sqlalchemy import Integer, and_, column, exists, func, literal_column, or_,
 from sqlalchemy.exc import IntegrityError
 from sqlalchemy.orm import Session, sessionmaker
 
+from cam.chain import APT_SUFFIXES, CL_SUFFIXES
 from dnc import models as m
 from dnc.db import transaction
 from dnc.diff import unified_diff
 from dnc.errors import Conflict, InvalidUpload, NotFound, WorkflowError
 from dnc.events import record
-from cam.chain import APT_SUFFIXES, CL_SUFFIXES
 from dnc.posting import (
     GCODE,
     REVISION_KINDS,
@@ -528,9 +528,7 @@ class Library:
         post_kinds: Sequence[str] = (),
     ) -> RevisionInfo:
         if file.suffix.lower() not in _IMPORTED:
-            raise InvalidUpload(
-                f"{file}: not a program file (expected one of {sorted(_IMPORTED)})"
-            )
+            raise InvalidUpload(f"{file}: not a program file (expected one of {sorted(_IMPORTED)})")
         check_size(file.stat().st_size, limit=self.upload_limit, name=str(file))
         text = decode_program(file.read_bytes(), limit=self.upload_limit, name=str(file))
         kind = kind_of_upload(None, file.name)

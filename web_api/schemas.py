@@ -70,9 +70,7 @@ class ProgramCreate(_In):
     description: Text = ""
     tags: list[Tag] = Field(default_factory=list, max_length=32)
     comment: Comment = ""
-    kind: RevisionKind | None = Field(
-        default=None, description=KIND_HELP, examples=["apt"]
-    )
+    kind: RevisionKind | None = Field(default=None, description=KIND_HELP, examples=["apt"])
     post_kinds: list[MachineKind] = Field(
         default_factory=list, max_length=16, description=POST_KINDS_HELP, examples=[["mill"]]
     )

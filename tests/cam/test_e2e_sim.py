@@ -79,7 +79,7 @@ def run_seed15(m: Machine, number: int, g54_mm: tuple[float, ...]):
     )
     cycle = m.t - t0
     actual = m.axes.feedback().actual
-    final_in = tuple(round((actual[a] - g) / INCH, 3) for a, g in zip("XYZ", g54_mm))
+    final_in = tuple(round((actual[a] - g) / INCH, 3) for a, g in zip("XYZ", g54_mm, strict=True))
     return final_in, trace, cycle
 
 

@@ -11,7 +11,7 @@ from cam.cl import write_cl
 from cnc.config import builtin_machine
 from dnc import models as m
 from dnc.db import transaction
-from dnc.dispatch import DispatchRequest, Dispatches, create_dispatches
+from dnc.dispatch import Dispatches, DispatchRequest, create_dispatches
 from dnc.errors import InvalidUpload, WorkflowError
 from dnc.library import Library
 from dnc.posting import PostRefused, kind_of_upload
@@ -148,7 +148,9 @@ def test_kind_of_upload_by_field_then_suffix():
 def test_dispatch_posts_into_a_derived_revision_reused_by_hash(lib, sessions):
     rev = released(lib, SEED15.replace("MACHIN/MILL,1", "MACHIN/MILL5"), post_kinds=None)
     assert rev.post_kinds == ["mill5"]
-    src = released(lib, SEED15.replace("MACHIN/MILL,1\n", ""), number=16, post_kinds=["mill", "mill5"])
+    src = released(
+        lib, SEED15.replace("MACHIN/MILL,1\n", ""), number=16, post_kinds=["mill", "mill5"]
+    )
     d = Dispatches(sessions, machine_configs=configs)
     first, _ = d.request(key="a", revision_id=src.id, machine="mill1")
     again, _ = d.request(key="b", revision_id=src.id, machine="mill1")
@@ -174,7 +176,11 @@ def test_dispatch_posts_into_a_derived_revision_reused_by_hash(lib, sessions):
     assert text.splitlines()[1:3] == ["O0016 (TEST1)", "G20 G90 G94"]
     assert "G00 X2. Y3. Z4. B0. C0." in lib.derived_text(mill5["id"])
     assert "B0." not in text
-    posted = [a for a in lib.audit(entity="revision", entity_id=src.id) if a["action"] == "revision.posted"]
+    posted = [
+        a
+        for a in lib.audit(entity="revision", entity_id=src.id)
+        if a["action"] == "revision.posted"
+    ]
     assert [a["detail"]["derived_id"] for a in posted] == sorted(derived)
 
 
@@ -189,7 +195,9 @@ def test_preview_posts_without_storing(lib, sessions):
     with pytest.raises(WorkflowError, match="meant for mill machines; five1 is a mill5"):
         lib.posted_preview(src.id, "five1")  # it would post, but MACHIN/MILL says mill only
     with pytest.raises(InvalidUpload, match="is G-code: it is sent as it is"):
-        lib.posted_preview(released(lib, "%\nO0001\nG0 X0\n%\n", kind="gcode", number=1).id, "mill1")
+        lib.posted_preview(
+            released(lib, "%\nO0001\nG0 X0\n%\n", kind="gcode", number=1).id, "mill1"
+        )
 
 
 def test_five_axis_cl_to_a_three_axis_machine_is_refused_with_its_line(lib, sessions):

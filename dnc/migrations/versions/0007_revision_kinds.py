@@ -63,9 +63,11 @@ def upgrade() -> None:
 
 def downgrade() -> None:
     # 0006 knows only G-code: an APT or CL revision would pass for a G-code program there
-    sources = op.get_bind().execute(
-        sa.text("SELECT count(*) FROM revisions WHERE kind <> 'gcode'")
-    ).scalar()
+    sources = (
+        op.get_bind()
+        .execute(sa.text("SELECT count(*) FROM revisions WHERE kind <> 'gcode'"))
+        .scalar()
+    )
     if sources:
         raise RuntimeError(
             f"{sources} APT/CL revision(s) in the library: 0006 cannot tell them from G-code; "
