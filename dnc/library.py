@@ -31,7 +31,6 @@ from dnc.errors import Conflict, InvalidUpload, NotFound, WorkflowError
 from dnc.events import record
 from dnc.posting import (
     GCODE,
-    REVISION_KINDS,
     MachineConfigs,
     Posted,
     check_source,
@@ -682,10 +681,7 @@ class Library:
     ) -> tuple[list[str], list[dict[str, Any]]]:
         """(kinds a source is meant for, check errors): the NC check for G-code; for APT
         and CL the processor (malformed: refused) and a trial post per kind."""
-        if kind not in REVISION_KINDS:
-            raise InvalidUpload(
-                f"kind must be one of {', '.join(REVISION_KINDS)}, got {kind!r}", pointer="#/kind"
-            )
+        kind = kind_of_upload(kind, None)  # refuses a kind that is none of them
         if kind == GCODE:
             if post_kinds:
                 raise InvalidUpload(
