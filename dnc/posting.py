@@ -177,9 +177,10 @@ def post_for_machine(
     program_number: int,
 ) -> Posted:
     """Post a source for one machine and check the result as the machine will run it."""
+    from cam.machine5 import Mill5Config
     from cam.post import CAM_KINDS, Machine
 
-    if machine_kind in CAM_KINDS and getattr(config, "kinematics", None) is None:
+    if machine_kind in CAM_KINDS and not isinstance(config, Mill5Config):
         config = None  # the post's own description of the kind (cam/machines/), not the NC's
     mach = Machine(machine, machine_kind, config) if config is not None else None
     mach = mach or dataclasses.replace(_stand_in(machine_kind), name=machine)

@@ -129,3 +129,15 @@ def test_post_refusals_are_problems_with_the_source_line(api):
         422,
         "invalid-upload",
     )
+
+
+@SQLITE_ONLY
+def test_an_unknown_kind_is_a_validation_problem(api):
+    r = api.post(
+        "/api/programs",
+        role="programmer",
+        files={"file": ("plate.apt", PLATE.encode(), "text/plain")},
+        data={"kind": "step"},
+    )
+    body = assert_problem(r, 422, "validation")
+    assert body["errors"][0]["pointer"] == "#/kind"

@@ -16,7 +16,7 @@ from pydantic import BaseModel, ValidationError
 from starlette.datastructures import UploadFile
 
 from dnc.errors import InvalidUpload
-from dnc.posting import kind_of_upload, partno_header
+from dnc.posting import REVISION_KINDS, kind_of_upload, partno_header
 from dnc.tape import MAX_PROGRAM_NUMBER, read_header
 from dnc.upload import ProgramUpload
 from web_api.problems import ApiProblem, problem_doc
@@ -138,7 +138,8 @@ async def read_upload(
             if key in values:
                 values[key] = [t.strip() for t in str(values[key]).split(",") if t.strip()]
         if "number" in model.model_fields:
-            kind = kind_of_upload(values.get("kind") or None, upload.filename)
+            given = values.get("kind")  # one that is no kind: the model's validation says so
+            kind = kind_of_upload(given if given in REVISION_KINDS else None, upload.filename)
             _fill_from_header(values, spooled.head, upload.filename, kind)
         try:
             # form fields are text by nature: "1001" is the number 1001 here (lax), while
