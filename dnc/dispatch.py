@@ -19,7 +19,7 @@ from sqlalchemy.orm import Session, sessionmaker
 
 from dnc import models as m
 from dnc.db import transaction
-from dnc.errors import IdempotencyMismatch, InvalidUpload, NotFound, WorkflowError
+from dnc.errors import Conflict, IdempotencyMismatch, InvalidUpload, NotFound, WorkflowError
 from dnc.events import record
 from dnc.posting import (
     SOURCE_KINDS,
@@ -222,13 +222,17 @@ class Dispatches:
         (`PostRefused`, with the line and why) leaves nothing behind.
         """
         _check_request(mode, key)
-        for attempt in (1, 2):
-            try:
-                return self._request(key, revision_id, machine, mode, start, requested_by)
-            except _PostedConcurrently:
-                if attempt == 2:
-                    raise
-        raise AssertionError("unreachable")
+        try:
+            return self._request(key, revision_id, machine, mode, start, requested_by)
+        except _PostedConcurrently:
+            pass  # once more: the derived revision is there now
+        try:
+            return self._request(key, revision_id, machine, mode, start, requested_by)
+        except _PostedConcurrently:
+            raise Conflict(
+                f"dispatch of revision {revision_id} to {machine} collided twice with "
+                "concurrent posts of it; retry with the same Idempotency-Key"
+            ) from None
 
     def _request(
         self, key: str, revision_id: int, machine: str, mode: str, start: bool, requested_by: str

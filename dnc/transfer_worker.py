@@ -192,8 +192,11 @@ class TransferWorker:
             # machine, with the derived revision stored before anything is sent
             try:
                 job["sha"] = self._post(dispatch_id, found.revision_id, found.machine)
-            except DncError as exc:
+            except DncError as exc:  # the post refused: no attempt will do better
                 failure = TransferError("post", exc.message)
+                return self._fail(dispatch_id, job["attempts"], failure)
+            except Exception as exc:  # the database, a concurrent post: the next attempt may pass
+                failure = TransferError("read", f"posting revision {found.revision_id}: {exc}")
                 return self._fail(dispatch_id, job["attempts"], failure)
         try:
             # read after the claim committed: a failure here must still end in a recorded

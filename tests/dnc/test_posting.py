@@ -244,3 +244,44 @@ def test_a_dispatch_the_scheduler_made_is_posted_by_the_worker(lib, sessions):
     failed = Dispatches(sessions).get(bad_id)
     assert failed.derived_id is None and failed.error.startswith("post: ")
     assert ":9:" in failed.error and "cannot be posted to a 3-axis machine" in failed.error
+
+
+def test_concurrent_dispatches_of_one_source_share_its_derived_revision(lib, sessions, monkeypatch):
+    """Two dispatches posting the same source for the same kind at once: both are made, with
+    one derived revision (the second to store it meets the unique key and runs again)."""
+    import threading
+
+    import dnc.dispatch
+
+    src = released(lib, SEED15)
+    both_posted = threading.Barrier(2, timeout=30)
+    real = dnc.dispatch.posted_for
+
+    calls = []
+
+    def post_then_meet(*args):
+        out = real(*args)
+        calls.append(args)
+        if len(calls) <= 2:  # neither stores its derived revision before both have posted
+            both_posted.wait()
+        return out
+
+    monkeypatch.setattr(dnc.dispatch, "posted_for", post_then_meet)
+    d = Dispatches(sessions, machine_configs=configs)
+    made: dict = {}
+
+    def request(key: str, machine: str) -> None:
+        try:
+            made[key] = d.request(key=key, revision_id=src.id, machine=machine)[0]
+        except Exception as exc:  # reported below
+            made[key] = exc
+
+    threads = [threading.Thread(target=request, args=a) for a in (("a", "mill1"), ("b", "mill2"))]
+    for t in threads:
+        t.start()
+    for t in threads:
+        t.join(60)
+    assert all(not isinstance(v, Exception) for v in made.values()), made
+    assert made["a"].derived_id == made["b"].derived_id is not None
+    assert count(sessions, m.DerivedRevision) == 1 and count(sessions, m.Dispatch) == 2
+    assert len(calls) in (2, 3)  # 3: the second to store ran its request again
