@@ -41,21 +41,36 @@ def import_(
     kind: str = typer.Option("mill", help="Machine kind the programs are for (mill, lathe)."),
     tag: list[str] = typer.Option([], help="Tag to put on newly created programs (repeatable)."),
     author: str = typer.Option("import", help="Recorded as the revisions' author."),
+    post_kind: list[str] = typer.Option(
+        [],
+        "--post-kind",
+        help="APT/CL files: a machine kind they are posted for at dispatch (repeatable;"
+        " default: the kind MACHIN/ names, else every kind registered).",
+    ),
     database_url: str | None = DB_OPTION,
 ) -> None:
-    """Import .nc/.ngc/.tap/.txt programs; each file becomes a new program or revision."""
+    """Import .nc/.ngc/.tap/.txt programs, and .apt (APT) and .cl/.cls (CL data) sources
+    posted for each machine at dispatch; each file becomes a new program or revision."""
     from dnc.errors import DncError
 
     lib = _library(database_url)
     failed = 0
-    for file, outcome in lib.import_path(path, machine_kind=kind, author=author, tags=tag):
+    outcomes = lib.import_path(
+        path, machine_kind=kind, author=author, tags=tag, post_kinds=post_kind
+    )
+    for file, outcome in outcomes:
         if isinstance(outcome, Exception):
             failed += 1
             message = outcome.message if isinstance(outcome, DncError) else str(outcome)
             typer.echo(f"{file}: refused: {message}", err=True)
             continue
         check = "check ok" if outcome.check_ok else f"{len(outcome.check_errors)} check error(s)"
+        if outcome.kind != "gcode":
+            check += f"; {outcome.kind}, posted for {', '.join(outcome.post_kinds)}"
         typer.echo(f"{file}: program {outcome.program_id} revision {outcome.seq} ({check})")
+        if outcome.kind != "gcode":  # which kind's trial post failed, and where
+            for err in outcome.check_errors[:5]:
+                typer.echo(f"{file}:{err['line']}:{err['col']}: {err['message']}", err=True)
     raise typer.Exit(1 if failed else 0)
 
 

@@ -23,8 +23,15 @@ from sqlalchemy.orm import Session, sessionmaker
 from dnc import models as m
 from dnc.db import transaction
 from dnc.dependencies import dependencies
-from dnc.errors import IdempotencyMismatch, InvalidUpload, NotFound, WorkflowError
+from dnc.errors import Conflict, IdempotencyMismatch, InvalidUpload, NotFound, WorkflowError
 from dnc.events import record
+from dnc.posting import (
+    SOURCE_KINDS,
+    MachineConfigs,
+    default_machine_configs,
+    posted_for,
+    store_derived,
+)
 
 MODES = ("memory", "drip_feed")
 PENDING, TRANSFERRING, VERIFYING, DONE, FAILED = (
@@ -53,6 +60,7 @@ class DispatchInfo:
     requested_by: str
     created_at: datetime
     updated_at: datetime
+    derived_id: int | None = None  # an APT/CL revision: the G-code posted for the machine
 
 
 def request_hash(revision_id: int, machine: str, mode: str, start: bool) -> str:
@@ -140,14 +148,17 @@ def _new_row(req: DispatchRequest, digest: str, requested_by: str, now: datetime
         requested_by=requested_by,
         created_at=now,
         updated_at=now,
+        derived_id=None,
     )
 
 
-def _check_target(s: Session, revision_id: int, machine: str) -> None:
-    """The revision exists and is released, and the machine is known (one query)."""
+def _check_target(s: Session, revision_id: int, machine: str) -> str:
+    """The revision exists and is released, and the machine is known (one query); returns
+    the revision's kind."""
     found = s.execute(_TARGET, dict(revision_id=revision_id, machine=machine)).one_or_none()
     status = None if found is None else found.status
     _refuse_target(revision_id, status, machine, found is not None and found.machine_id is not None)
+    return found.kind
 
 
 def _check_targets(s: Session, requests: list[DispatchRequest]) -> None:
@@ -185,10 +196,15 @@ def _same_request(existing: m.Dispatch, digest: str, key: str) -> None:
 
 class Dispatches:
     def __init__(
-        self, sessions: sessionmaker[Session], *, now: Callable[[], datetime] | None = None
+        self,
+        sessions: sessionmaker[Session],
+        *,
+        now: Callable[[], datetime] | None = None,
+        machine_configs: MachineConfigs = default_machine_configs,
     ) -> None:
         self._sessions = sessions
         self._now = now or (lambda: datetime.now(UTC))
+        self._machine_configs = machine_configs  # posting APT/CL revisions (dnc/posting.py)
 
     def request(
         self,
@@ -204,8 +220,27 @@ class Dispatches:
 
         Core statements on the tables, no ORM objects: this is the first of the four short
         transactions every dispatch makes, and twenty of them arrive at once.
+
+        An APT/CL revision is posted for the machine here, and the posted G-code stored as a
+        derived revision in the dispatch's own transaction: a post the machine cannot run
+        (`PostRefused`, with the line and why) leaves nothing behind.
         """
         _check_request(mode, key)
+        try:
+            return self._request(key, revision_id, machine, mode, start, requested_by)
+        except _PostedConcurrently:
+            pass  # once more: the derived revision is there now
+        try:
+            return self._request(key, revision_id, machine, mode, start, requested_by)
+        except _PostedConcurrently:
+            raise Conflict(
+                f"dispatch of revision {revision_id} to {machine} collided twice with "
+                "concurrent posts of it; retry with the same Idempotency-Key"
+            ) from None
+
+    def _request(
+        self, key: str, revision_id: int, machine: str, mode: str, start: bool, requested_by: str
+    ) -> tuple[DispatchInfo, bool]:
         digest = request_hash(revision_id, machine, mode, start)
         try:
             with transaction(self._sessions) as s:
@@ -213,12 +248,16 @@ class Dispatches:
                 if existing is not None:
                     _same_request(existing, digest, key)
                     return dispatch_info(existing), False
-                _check_target(s, revision_id, machine)
+                kind = _check_target(s, revision_id, machine)
                 # every program it calls has a released revision, or nothing is recorded
                 dependencies(s, revision_id)
                 now = self._now()
                 req = DispatchRequest(key, revision_id, machine, mode, start)
                 row = _new_row(req, digest, requested_by, now)
+                if kind in SOURCE_KINDS:
+                    rev, _, posted = posted_for(s, revision_id, machine, self._machine_configs)
+                    derived = store_derived(s, rev, posted, actor=requested_by, now=now)
+                    row["derived_id"] = derived.id
                 row["id"] = s.execute(_INSERT, row).scalar_one()
                 info = DispatchInfo(**{k: row[k] for k in DispatchInfo.__slots__})
                 _record_dispatch_event(s, info, requested_by, "dispatch.request", now)
@@ -229,6 +268,8 @@ class Dispatches:
             with transaction(self._sessions) as s:
                 existing = s.execute(_BY_KEY, dict(key=key)).one_or_none()
                 if existing is None:
+                    if _is_source(s, revision_id):
+                        raise _PostedConcurrently from None  # its derived revision: again
                     raise
                 _same_request(existing, digest, key)
                 return dispatch_info(existing), False
@@ -246,6 +287,15 @@ class Dispatches:
             stmt = stmt.where(m.Dispatch.machine == machine)
         with transaction(self._sessions) as s:
             return [dispatch_info(r) for r in s.scalars(stmt)]
+
+
+class _PostedConcurrently(Exception):
+    """A concurrent dispatch stored the derived revision this one was about to: the request
+    runs again and finds it."""
+
+
+def _is_source(s: Session, revision_id: int) -> bool:
+    return s.scalar(_IS_SOURCE, dict(revision_id=revision_id)) in SOURCE_KINDS
 
 
 def _record_dispatch_event(
@@ -276,6 +326,9 @@ _INSERT_MANY = insert(_DISPATCHES).returning(_DISPATCHES.c.id, sort_by_parameter
 _BY_KEYS = select(_DISPATCHES).where(
     _DISPATCHES.c.idempotency_key.in_(bindparam("keys", expanding=True))
 )
+_IS_SOURCE = select(m.Revision.__table__.c.kind).where(
+    m.Revision.__table__.c.id == bindparam("revision_id")
+)
 _REVISION_STATES = select(m.Revision.__table__.c.id, m.Revision.__table__.c.status).where(
     m.Revision.__table__.c.id.in_(bindparam("ids", expanding=True))
 )
@@ -284,6 +337,7 @@ _KNOWN_MACHINES = select(m.Machine.__table__.c.name).where(
 )
 _TARGET = select(
     m.Revision.__table__.c.status,
+    m.Revision.__table__.c.kind,
     select(m.Machine.__table__.c.id)
     .where(m.Machine.__table__.c.name == bindparam("machine"))
     .scalar_subquery()
@@ -308,4 +362,5 @@ def dispatch_info(r: m.Dispatch) -> DispatchInfo:
         r.requested_by,
         r.created_at,
         r.updated_at,
+        r.derived_id,
     )

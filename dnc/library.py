@@ -23,6 +23,7 @@ from sqlalchemy import Integer, and_, column, exists, func, literal_column, or_,
 from sqlalchemy.exc import IntegrityError
 from sqlalchemy.orm import Session, sessionmaker
 
+from cam.chain import APT_SUFFIXES, CL_SUFFIXES
 from cnc.gcode.calls import Call, program_calls
 from dnc import models as m
 from dnc.db import transaction
@@ -30,6 +31,18 @@ from dnc.dependencies import LibraryPrograms, called_by, calls_of, dependencies,
 from dnc.diff import unified_diff
 from dnc.errors import Conflict, InvalidUpload, NotFound, WorkflowError
 from dnc.events import record
+from dnc.posting import (
+    GCODE,
+    MachineConfigs,
+    Posted,
+    check_source,
+    default_machine_configs,
+    derived_info,
+    kind_of_upload,
+    partno_header,
+    posted_for,
+    store_derived,
+)
 from dnc.tape import (
     MAX_PROGRAM_NUMBER,
     check_size,
@@ -43,6 +56,7 @@ from dnc.upload import ProgramUpload
 
 DRAFT, RELEASED, OBSOLETE = "draft", "released", "obsolete"
 IMPORT_SUFFIXES = {".nc", ".ngc", ".tap", ".txt", ".iso", ".cnc"}
+_IMPORTED = IMPORT_SUFFIXES | APT_SUFFIXES | CL_SUFFIXES  # APT and CL: sources (dnc/posting.py)
 DEFAULT_UPLOAD_LIMIT = 16 * 1024 * 1024
 
 Checker = Callable[[str, str], list[dict[str, Any]]]
@@ -87,6 +101,8 @@ class RevisionInfo:
     approval_comment: str | None
     check_ok: bool
     check_errors: list[dict[str, Any]] = field(default_factory=list)
+    kind: str = "gcode"  # gcode | apt | cl (dnc/posting.py)
+    post_kinds: list[str] = field(default_factory=list)  # apt | cl: the kinds it is meant for
 
 
 @dataclass(frozen=True, slots=True)
@@ -107,9 +123,11 @@ class Library:
         checker: Checker | None = None,
         upload_limit: int = DEFAULT_UPLOAD_LIMIT,
         now: Callable[[], datetime] = _utcnow,
+        machine_configs: MachineConfigs = default_machine_configs,
     ) -> None:
         self._sessions = sessions
         self._checker = checker
+        self.machine_configs = machine_configs  # for posting APT/CL revisions (dnc/posting.py)
         self.upload_limit = upload_limit
         self._now = now
         # Which side drives a text search on SQLite (see _text_drives_from_index): "auto",
@@ -130,8 +148,11 @@ class Library:
         author: str = "unknown",
         comment: str = "",
         source: str = "upload",
+        kind: str = GCODE,
+        post_kinds: Iterable[str] | None = None,
     ) -> tuple[ProgramInfo, RevisionInfo]:
-        """A new program with its first revision (a draft)."""
+        """A new program with its first revision (a draft). `kind`: gcode, or apt / cl for
+        a source posted at dispatch for the machine kinds in `post_kinds` (dnc/posting.py)."""
         if not 1 <= number <= MAX_PROGRAM_NUMBER:
             raise InvalidUpload(
                 f"program number must be 1..{MAX_PROGRAM_NUMBER} (O number), got {number}"
@@ -139,7 +160,7 @@ class Library:
         if not name.strip():
             raise InvalidUpload("program name must not be empty")
         text = self._decode(text, name)
-        check = self._check(text, machine_kind)
+        kinds, check = self._check_kind(text, kind, machine_kind, post_kinds, name)
         digest = text.sha256 if isinstance(text, ProgramUpload) else None
         text = _stored(text)
         with transaction(self._sessions) as s:
@@ -168,7 +189,9 @@ class Library:
                 raise Conflict(f"program O{number:04d} already exists") from exc
             for tag in sorted({t.strip() for t in tags if t.strip()}):
                 s.add(m.ProgramTag(program_id=prog.id, tag=tag))
-            rev = self._add_revision(s, prog, text, check, author, comment, source, digest)
+            rev = self._add_revision(
+                s, prog, text, check, author, comment, source, digest, kind, kinds
+            )
             self._record(s, author, "program.create", "program", prog.id, number=number, name=name)
             return self._program_info(s, prog), _revision_info(rev)
 
@@ -180,17 +203,21 @@ class Library:
         author: str = "unknown",
         comment: str = "",
         source: str = "upload",
+        kind: str = GCODE,
+        post_kinds: Iterable[str] | None = None,
     ) -> RevisionInfo:
         with transaction(self._sessions) as s:
             prog = self._get_program(s, program_id)
-            kind, name = prog.machine_kind, prog.name
+            machine_kind, name = prog.machine_kind, prog.name
         text = self._decode(text, name)
-        check = self._check(text, kind)
+        kinds, check = self._check_kind(text, kind, machine_kind, post_kinds, name)
         digest = text.sha256 if isinstance(text, ProgramUpload) else None
         text = _stored(text)
         with transaction(self._sessions) as s:
             prog = self._get_program(s, program_id)
-            rev = self._add_revision(s, prog, text, check, author, comment, source, digest)
+            rev = self._add_revision(
+                s, prog, text, check, author, comment, source, digest, kind, kinds
+            )
             return _revision_info(rev)
 
     def receive_from_machine(self, machine: str, text: str | bytes) -> RevisionInfo:
@@ -332,6 +359,46 @@ class Library:
             self._get_revision(s, revision_id)
             return dependencies(s, revision_id)
 
+    def posted_preview(self, revision_id: int, machine: str) -> Posted:
+        """An APT/CL revision posted for a machine as a dispatch would post it, nothing
+        stored (`PostRefused` with the line and why when the post refuses)."""
+        with transaction(self._sessions) as s:
+            rev, mach, posted = posted_for(s, revision_id, machine, self.machine_configs)
+            if posted is None:
+                raise InvalidUpload(
+                    f"revision {revision_id} is G-code: it is sent as it is, not posted",
+                    revision_id=revision_id,
+                )
+            return posted
+
+    def text_for_machine(self, revision_id: int, machine: str, *, actor: str = "dnc") -> str:
+        """What the machine is sent of a revision: G-code as it is; an APT/CL revision
+        posted for the machine, stored as a derived revision (a remote request)."""
+        with transaction(self._sessions) as s:
+            rev, _, posted = posted_for(s, revision_id, machine, self.machine_configs)
+            if posted is None:
+                return s.get(m.Content, rev.sha256).text
+            store_derived(s, rev, posted, actor=actor, now=self._now())
+            return posted.text
+
+    def derived_revisions(self, revision_id: int) -> list[dict]:
+        """The G-code an APT/CL revision was posted to at dispatch, oldest first."""
+        with transaction(self._sessions) as s:
+            self._get_revision(s, revision_id)
+            rows = s.scalars(
+                select(m.DerivedRevision)
+                .where(m.DerivedRevision.source_revision_id == revision_id)
+                .order_by(m.DerivedRevision.id)
+            )
+            return [derived_info(d) for d in rows]
+
+    def derived_text(self, derived_id: int) -> str:
+        with transaction(self._sessions) as s:
+            d = s.get(m.DerivedRevision, derived_id)
+            if d is None:
+                raise NotFound(f"no derived revision with id {derived_id}")
+            return s.get(m.Content, d.sha256).text
+
     def released_revision(self, number: int, machine_kind: str) -> RevisionInfo:
         """The revision a machine gets when it requests program `number` (remote request)."""
         with transaction(self._sessions) as s:
@@ -457,37 +524,48 @@ class Library:
         machine_kind: str = "mill",
         author: str = "import",
         tags: Sequence[str] = (),
+        post_kinds: Sequence[str] = (),
     ) -> list[tuple[Path, RevisionInfo | Exception]]:
         """Import one file or every program file under a directory.
 
         A file whose O number already exists becomes a new revision of that program; each
         file's outcome is reported separately, so one bad file does not stop the rest.
+        APT (`.apt`) and CL files (`.cl` `.cls` ...) are imported as sources posted at
+        dispatch, their number from PARTNO; `post_kinds` names the machine kinds they are for.
         """
         files = (
-            sorted(p for p in path.rglob("*") if p.suffix.lower() in IMPORT_SUFFIXES)
+            sorted(p for p in path.rglob("*") if p.suffix.lower() in _IMPORTED)
             if path.is_dir()
             else [path]
         )
         results: list[tuple[Path, RevisionInfo | Exception]] = []
         for file in files:
             try:
-                results.append((file, self._import_file(file, machine_kind, author, tags)))
+                results.append(
+                    (file, self._import_file(file, machine_kind, author, tags, post_kinds))
+                )
             except (InvalidUpload, Conflict, OSError) as exc:
                 results.append((file, exc))
         return results
 
     def _import_file(
-        self, file: Path, machine_kind: str, author: str, tags: Sequence[str]
+        self,
+        file: Path,
+        machine_kind: str,
+        author: str,
+        tags: Sequence[str],
+        post_kinds: Sequence[str] = (),
     ) -> RevisionInfo:
-        if file.suffix.lower() not in IMPORT_SUFFIXES:
-            raise InvalidUpload(
-                f"{file}: not a program file (expected one of {sorted(IMPORT_SUFFIXES)})"
-            )
+        if file.suffix.lower() not in _IMPORTED:
+            raise InvalidUpload(f"{file}: not a program file (expected one of {sorted(_IMPORTED)})")
         check_size(file.stat().st_size, limit=self.upload_limit, name=str(file))
         text = decode_program(file.read_bytes(), limit=self.upload_limit, name=str(file))
-        header = read_header(text)
+        kind = kind_of_upload(None, file.name)
+        header = read_header(text) if kind == GCODE else partno_header(text)
         if header.number is None:
-            raise InvalidUpload(f"{file}: no O number in the first block; cannot file it")
+            where = "in the first block" if kind == GCODE else "ending its PARTNO text"
+            raise InvalidUpload(f"{file}: no O number {where}; cannot file it")
+        source = dict(kind=kind, post_kinds=list(post_kinds) or None) if kind != GCODE else {}
         with transaction(self._sessions) as s:
             prog_id = s.scalar(
                 select(m.Program.id).where(
@@ -496,7 +574,9 @@ class Library:
             )
         comment = f"imported from {file.name}"
         if prog_id is not None:
-            return self.add_revision(prog_id, text, author=author, comment=comment, source="import")
+            return self.add_revision(
+                prog_id, text, author=author, comment=comment, source="import", **source
+            )
         _, rev = self.create_program(
             number=header.number,
             name=header.title or file.stem,
@@ -506,6 +586,7 @@ class Library:
             author=author,
             comment=comment,
             source="import",
+            **source,
         )
         return rev
 
@@ -630,6 +711,31 @@ class Library:
             return Checked(self._checker(text.text(), machine_kind, **extra), calls)
         return Checked(self._checker(text, machine_kind, **extra), calls)
 
+    def _check_kind(
+        self,
+        text: str | ProgramUpload,
+        kind: str,
+        machine_kind: str,
+        post_kinds: Iterable[str] | None,
+        name: str,
+    ) -> tuple[list[str], Checked]:
+        """(kinds a source is meant for, check): the NC check for G-code; for APT and CL
+        the processor (malformed: refused) and a trial post per kind (a source calls no
+        other program: its posted G-code has no M98)."""
+        kind = kind_of_upload(kind, None)  # refuses a kind that is none of them
+        if kind == GCODE:
+            if post_kinds:
+                raise InvalidUpload(
+                    "post_kinds is for APT and CL revisions (kind apt or cl), not G-code",
+                    pointer="#/post_kinds",
+                )
+            return [], self._check(text, machine_kind)
+        with transaction(self._sessions) as s:
+            cell = sorted(set(s.scalars(select(m.Machine.kind))))
+        source = text.text() if isinstance(text, ProgramUpload) else text
+        kinds, errors = check_source(source, kind, name, post_kinds, cell or [machine_kind])
+        return kinds, Checked(errors, [])
+
     def _add_revision(
         self,
         s: Session,
@@ -640,6 +746,8 @@ class Library:
         comment: str,
         source: str,
         digest: str | None = None,
+        kind: str = GCODE,
+        post_kinds: list[str] | None = None,
     ) -> m.Revision:
         # an upload hashed its stored form as it streamed in: no second pass (and copy)
         digest = digest or sha256_of(text)
@@ -663,6 +771,8 @@ class Library:
             created_at=self._now(),
             check_ok=not checked.errors,
             check_errors=checked.errors,
+            kind=kind,
+            post_kinds=list(post_kinds or []),
         )
         s.add(rev)
         try:
@@ -681,6 +791,7 @@ class Library:
             sha256=digest,
             source=source,
             check_ok=rev.check_ok,
+            kind=kind,
         )
         return rev
 
@@ -783,6 +894,8 @@ def _revision_info(r: m.Revision) -> RevisionInfo:
         r.approval_comment,
         r.check_ok,
         list(r.check_errors or []),
+        r.kind or GCODE,
+        list(r.post_kinds or []),
     )
 
 

@@ -7,8 +7,9 @@ import re
 import threading
 from collections.abc import Callable, Iterable, Iterator
 
-from dnc.errors import DncError, NotFound
+from dnc.errors import DncError, NotFound, WorkflowError
 from dnc.library import Library, RevisionInfo
+from dnc.posting import PostRefused
 from dnc.transfer import CHUNK, DncClient, TransferError
 
 _SEQUENCE = re.compile(r"^\s*/?\s*N(\d+)", re.I)
@@ -97,7 +98,9 @@ class RemoteRequests:
         kind = self.library.machine(self.machine)["kind"]
         try:
             rev = self.library.released_revision(number, kind)
-        except NotFound as exc:
+            # an APT/CL revision is posted for this machine (dnc/posting.py)
+            text = self.library.text_for_machine(rev.id, self.machine, actor="remote-request")
+        except (NotFound, PostRefused, WorkflowError) as exc:
             self.refused.append((number, exc.message))
             self.library.note_transfer(
                 self.machine, "remote_request.refused", number=number, reason=exc.message
@@ -107,7 +110,7 @@ class RemoteRequests:
         self.library.note_transfer(
             self.machine, "remote_request.served", number=number, revision_id=rev.id
         )
-        return self.library.revision_text(rev.id)
+        return text
 
     def start(self) -> RemoteRequests:
         def run() -> None:

@@ -126,6 +126,36 @@ class Revision(Base):
     approval_comment: Mapped[str | None] = mapped_column(Text, nullable=True)
     check_ok: Mapped[bool] = mapped_column(Boolean, default=False)
     check_errors: Mapped[list[dict[str, Any]]] = mapped_column(JSON, default=list)
+    # gcode: the NC program itself; apt | cl: a source posted for each machine at dispatch
+    kind: Mapped[str] = mapped_column(String(8), default="gcode")
+    # apt | cl: the machine kinds the source is meant for (dnc/posting.py)
+    post_kinds: Mapped[list[str]] = mapped_column(JSON, default=list)
+
+
+class DerivedRevision(Base):
+    """The G-code an APT or CL revision was posted to for one machine kind.
+
+    One row per distinct posted text (sha256) of a source and kind: dispatching the same
+    source to another machine of the same kind finds the row with the same hash again.
+    """
+
+    __tablename__ = "derived_revisions"
+    __table_args__ = (
+        UniqueConstraint(
+            "source_revision_id", "machine_kind", "sha256", name="uq_derived_revisions_post"
+        ),
+    )
+    id: Mapped[int] = mapped_column(Integer, primary_key=True)
+    source_revision_id: Mapped[int] = mapped_column(ForeignKey("revisions.id"), index=True)
+    machine_kind: Mapped[str] = mapped_column(String(32))
+    post_name: Mapped[str] = mapped_column(String(64))
+    post_version: Mapped[str] = mapped_column(String(32))
+    tolerance_mm: Mapped[float | None] = mapped_column(Float, nullable=True)
+    sha256: Mapped[str] = mapped_column(ForeignKey("contents.sha256"))
+    size: Mapped[int] = mapped_column(Integer)
+    lines: Mapped[int] = mapped_column(Integer)
+    machine: Mapped[str] = mapped_column(String(64))  # the machine it was first posted for
+    created_at: Mapped[datetime] = mapped_column(Timestamp)
 
 
 class Resource(Base):
@@ -245,6 +275,8 @@ class Dispatch(Base):
     requested_by: Mapped[str] = mapped_column(String(128))
     created_at: Mapped[datetime] = mapped_column(Timestamp)
     updated_at: Mapped[datetime] = mapped_column(Timestamp)
+    # an APT/CL revision: the G-code posted for this machine, which is what is sent
+    derived_id: Mapped[int | None] = mapped_column(Integer, nullable=True)
 
 
 class RevisionCall(Base):

@@ -28,7 +28,15 @@ from dnc import models as m
 from dnc.db import transaction
 from dnc.dependencies import Dependency, MissingDependency, dependencies
 from dnc.dispatch import DONE, FAILED, PENDING, TRANSFERRING, VERIFYING, dispatch_info
+from dnc.errors import DncError
 from dnc.events import record
+from dnc.posting import (
+    SOURCE_KINDS,
+    MachineConfigs,
+    default_machine_configs,
+    posted_for,
+    store_derived,
+)
 from dnc.transfer import (
     CHUNK,
     DncClient,
@@ -81,8 +89,10 @@ class TransferWorker:
         retry: RetryPolicy | None = None,
         now: Callable[[], datetime] | None = None,
         part_counter: Callable[[str], int | None] | None = None,
+        machine_configs: MachineConfigs = default_machine_configs,
     ) -> None:
         self._sessions = sessions
+        self.machine_configs = machine_configs  # posting APT/CL revisions (dnc/posting.py)
         self._client = client_factory
         self._starter = starter
         # The machine's part counter as the host sees it (None: unknown). Read before the
@@ -175,15 +185,26 @@ class TransferWorker:
                 machine=found.machine,
                 address=found.dnc_address or "",
                 profile=dict(found.dnc_profile or {}),
-                sha=found.sha256,
+                sha=found.posted_sha256 or found.sha256,
                 number=found.number,
             )
+        if found.kind in SOURCE_KINDS and found.posted_sha256 is None:
+            # a dispatch the scheduler made for an APT/CL revision: posted now, for this
+            # machine, with the derived revision stored before anything is sent
+            try:
+                job["sha"] = self._post(dispatch_id, found.revision_id, found.machine)
+            except DncError as exc:  # the post refused: no attempt will do better
+                failure = TransferError("post", exc.message)
+                return self._fail(dispatch_id, job["attempts"], failure)
+            except Exception as exc:  # the database, a concurrent post: the next attempt may pass
+                failure = TransferError("read", f"posting revision {found.revision_id}: {exc}")
+                return self._fail(dispatch_id, job["attempts"], failure)
         try:
             # read after the claim committed: a failure here must still end in a recorded
             # failure or retry, never leave the dispatch in `transferring`
-            text = self._text(found.sha256)
+            text = self._text(job["sha"])
         except Exception as exc:
-            failure = TransferError("read", f"revision text {found.sha256[:12]}: {exc}")
+            failure = TransferError("read", f"revision text {job['sha'][:12]}: {exc}")
             return self._fail(dispatch_id, job["attempts"], failure)
         if (unsendable := _outside_tape_code(text)) is not None:
             # stored before uploads were held to the ISO character set: the 7-bit tape
@@ -280,6 +301,14 @@ class TransferWorker:
                    entity="dispatch", entity_id=dispatch_id, sent=sent, already_there=kept,
                    revisions=[d.revision_id for d in deps])  # fmt: skip
         return bytes_sent
+    def _post(self, dispatch_id: int, revision_id: int, machine: str) -> str:
+        """Post the dispatch's source for its machine and record the derived revision on
+        the dispatch (one transaction); the sha256 of the posted text."""
+        with transaction(self._sessions) as s:
+            rev, _, posted = posted_for(s, revision_id, machine, self.machine_configs)
+            derived = store_derived(s, rev, posted, actor="transfer-worker", now=self._now())
+            s.execute(update(_D).where(_D.c.id == dispatch_id).values(derived_id=derived.id))
+            return derived.sha256
 
     def _verify(self, client: DncClient, job: dict, text: str, stored_sha: str) -> bool:
         expected = self._expected_sha(job["sha"], text)
@@ -373,6 +402,7 @@ class TransferWorker:
 # Core statements on the tables, compiled once: an ORM-enabled UPDATE goes through the ORM's
 # bulk-update machinery, several times the CPU of the statement itself.
 _D = m.Dispatch.__table__
+_DERIVED = m.DerivedRevision.__table__
 _ATTEMPT = (
     select(
         _D.c.machine,
@@ -382,12 +412,15 @@ _ATTEMPT = (
         m.Machine.__table__.c.dnc_address,
         m.Machine.__table__.c.dnc_profile,
         m.Revision.__table__.c.sha256,
+        m.Revision.__table__.c.kind,
         m.Program.__table__.c.number,
+        _DERIVED.c.sha256.label("posted_sha256"),
     )
     .select_from(_D)
     .join(m.Revision.__table__, m.Revision.__table__.c.id == _D.c.revision_id)
     .join(m.Program.__table__, m.Program.__table__.c.id == m.Revision.__table__.c.program_id)
     .outerjoin(m.Machine.__table__, m.Machine.__table__.c.name == _D.c.machine)
+    .outerjoin(_DERIVED, _DERIVED.c.id == _D.c.derived_id)
     .where(_D.c.id == bindparam("dispatch_id"))
 )
 _CLAIM = (

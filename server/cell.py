@@ -126,8 +126,8 @@ class Cell:
 
     # ------------------------------------------------------------------ lifetime
     def start(self, ready_timeout_s: float = 120.0) -> Cell:
-        from dnc.db import make_engine, migrate, session_factory
         from dnc.checker import nc_checker
+        from dnc.db import make_engine, migrate, session_factory
         from dnc.dispatch import Dispatches
         from dnc.jobs import Jobs, Scheduler
         from dnc.library import Library
@@ -139,9 +139,12 @@ class Cell:
         migrate(self.engine)
         self.sessions = session_factory(self.engine)
         # every upload is NC-checked for the machine kind it is for, as `fmscell dnc` does:
-        # a program with errors is stored with them and cannot be released
-        self.library = Library(self.sessions, checker=nc_checker)
-        self.dispatches = Dispatches(self.sessions)
+        # a program with errors is stored with them and cannot be released; APT/CL
+        # revisions are posted with each machine's own configuration (dnc/posting.py)
+        self.library = Library(
+            self.sessions, checker=nc_checker, machine_configs=self._machine_config
+        )
+        self.dispatches = Dispatches(self.sessions, machine_configs=self._machine_config)
         self.jobs = Jobs(self.sessions)
         try:
             self._start_machines(ready_timeout_s)
@@ -174,6 +177,7 @@ class Cell:
                 starter=self._audited(make_starter(self.links, self.monitor)),
                 retry=RetryPolicy(max_attempts=3, base_s=0.5, cap_s=5.0),
                 part_counter=lambda name: self.monitor.status(name)["counters"]["part_count"],
+                machine_configs=self._machine_config,
             )
             self.worker.recover()
             self.alarm_watch = AlarmWatch(self.sessions, self.monitor)
@@ -191,6 +195,10 @@ class Cell:
             raise
         self.started = True
         return self
+
+    def _machine_config(self, name: str, kind: str):
+        """A cell machine's configuration, for posting APT/CL revisions for it."""
+        return self.config.machines.get(name)
 
     def _audited(self, starter):
         """The transfer worker's starter, announcing its select and cycle start so the

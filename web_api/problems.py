@@ -33,6 +33,7 @@ STATUS_OF_KIND = {
     "database-unavailable": 503,
     "idempotency-key-reuse": 422,
     "missing-dependency": 409,
+    "post-refused": 422,
 }
 TITLES = {
     "invalid-upload": "The uploaded program was refused",
@@ -43,6 +44,7 @@ TITLES = {
     "database-unavailable": "The database is unavailable",
     "idempotency-key-reuse": "Idempotency-Key reused with a different request",
     "missing-dependency": "A program it calls has no released revision",
+    "post-refused": "The post-processor refused the program for this machine",
     "validation": "The request is invalid",
     "malformed-json": "The request body is not valid JSON",
     "unauthenticated": "An API key is required",

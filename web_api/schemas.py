@@ -48,6 +48,18 @@ class _In(BaseModel):
     model_config = ConfigDict(extra="forbid", strict=True)
 
 
+RevisionKind = Literal["gcode", "apt", "cl"]
+KIND_HELP = (
+    "gcode (the NC program), apt (APT source) or cl (CL data): apt and cl are posted for "
+    "each machine at dispatch. Left out: by the file name's suffix (.apt; .cl .cls "
+    ".aptsource .cldata .clf), else gcode"
+)
+POST_KINDS_HELP = (
+    "apt/cl: the machine kinds the source is meant for (trial-posted on upload); left out: "
+    "the kind its MACHIN/ statement names, else every kind in the cell"
+)
+
+
 class ProgramCreate(_In):
     """A new program with its first revision (JSON form of the upload)."""
 
@@ -58,11 +70,19 @@ class ProgramCreate(_In):
     description: Text = ""
     tags: list[Tag] = Field(default_factory=list, max_length=32)
     comment: Comment = ""
+    kind: RevisionKind | None = Field(default=None, description=KIND_HELP, examples=["apt"])
+    post_kinds: list[MachineKind] = Field(
+        default_factory=list, max_length=16, description=POST_KINDS_HELP, examples=[["mill"]]
+    )
 
 
 class RevisionCreate(_In):
     text: str = Field(description="the part program (ISO 6983 text)")
     comment: Comment = ""
+    kind: RevisionKind | None = Field(default=None, description=KIND_HELP)
+    post_kinds: list[MachineKind] = Field(
+        default_factory=list, max_length=16, description=POST_KINDS_HELP
+    )
 
 
 class ReleaseRequest(_In):
@@ -89,6 +109,7 @@ class CheckError(BaseModel):
     line: int | None = None
     col: int | None = None
     message: str
+    machine_kind: str | None = None  # an APT/CL revision's trial post for this kind failed
 
 
 class Program(BaseModel):
@@ -120,6 +141,24 @@ class Revision(BaseModel):
     approval_comment: str | None
     check_ok: bool
     check_errors: list[CheckError]
+    kind: RevisionKind = "gcode"
+    post_kinds: list[str] = Field(default_factory=list)
+
+
+class DerivedRevision(BaseModel):
+    """The G-code an APT/CL revision was posted to for a machine kind at dispatch."""
+
+    id: int
+    source_revision_id: int
+    machine_kind: str
+    machine: str = Field(description="the machine it was first posted for")
+    post_name: str
+    post_version: str
+    tolerance_mm: float | None = Field(description="5-axis linearisation tolerance T, mm")
+    sha256: str
+    size: int
+    lines: int
+    created_at: datetime
 
 
 class ProgramCreated(BaseModel):
@@ -191,6 +230,9 @@ class Dispatch(BaseModel):
     requested_by: str
     created_at: datetime
     updated_at: datetime
+    derived_id: int | None = Field(
+        default=None, description="an APT/CL revision: the derived revision (posted G-code) sent"
+    )
 
 
 class DispatchPage(BaseModel):

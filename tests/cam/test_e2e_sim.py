@@ -28,10 +28,7 @@ def _posted() -> str:
 
 def test_seed15_runs_on_the_simulated_mill() -> None:
     text = _posted()
-    lines = text.splitlines()
-    line_of = {t: n for n, t in enumerate(lines, 1)}
     m = Machine(builtin_machine("mill3"), "mill3")
-    trace: list[tuple[float, int, int, bool, bool]] = []
     try:
         number = m.load_program(text)
         m.run_until(lambda mm: mm.axes.feedback().enabled or bool(mm.alarms), 2.0)
@@ -43,37 +40,53 @@ def test_seed15_runs_on_the_simulated_mill() -> None:
         )
         assert not m.alarms
         m.command("mode", mode="AUTO")
-        m.command("select_program", number=number)
-        m.command("cycle_start")
-        t0 = m.t
-
-        def sample(mm) -> bool:
-            row = (
-                mm.status.line,
-                mm.io.state.tool_in_spindle,
-                mm.status.spindle_speed > 900.0,
-                bool(mm.io.output("CoolantPump")),
-            )
-            if not trace or trace[-1][1:] != row:
-                trace.append((round(mm.t - t0, 3), *row))
-            return bool(mm.alarms) or (
-                mm.status.execution in ("PROGRAM_COMPLETED", "READY") and mm.t > t0 + 0.05
-            )
-
-        assert m.run_until(sample, 300.0)
-        assert not m.alarms, m.alarms
-        m.run_until(
-            lambda mm: all(
-                abs(mm.axes.feedback().actual[a] - mm.last_targets[a]) < 0.005 for a in "XYZ"
-            ),
-            1.0,
-        )
-        actual = m.axes.feedback().actual
-        final_in = tuple(round((actual[a] - G54_MM) / INCH, 3) for a in "XYZ")
-        assert final_in == (4.0, 8.0, 6.0)
-        cycle = m.t - t0
+        final_in, trace, cycle = run_seed15(m, number, (G54_MM,) * 3)
     finally:
         m.close()
+    assert final_in == (4.0, 8.0, 6.0)
+    check_seed15_trace(text.splitlines(), trace, cycle)
+
+
+def run_seed15(m: Machine, number: int, g54_mm: tuple[float, ...]):
+    """Run program `number` on a homed machine in AUTO: (final position in inches in the
+    work frame of G54 `g54_mm`, the trace of (t, line, tool, spindle at speed, coolant) at
+    every change, cycle time s)."""
+    trace: list[tuple[float, int, int, bool, bool]] = []
+    m.command("select_program", number=number)
+    m.command("cycle_start")
+    t0 = m.t
+
+    def sample(mm) -> bool:
+        row = (
+            mm.status.line,
+            mm.io.state.tool_in_spindle,
+            mm.status.spindle_speed > 900.0,
+            bool(mm.io.output("CoolantPump")),
+        )
+        if not trace or trace[-1][1:] != row:
+            trace.append((round(mm.t - t0, 3), *row))
+        return bool(mm.alarms) or (
+            mm.status.execution in ("PROGRAM_COMPLETED", "READY") and mm.t > t0 + 0.05
+        )
+
+    assert m.run_until(sample, 300.0)
+    assert not m.alarms, m.alarms
+    m.run_until(
+        lambda mm: all(
+            abs(mm.axes.feedback().actual[a] - mm.last_targets[a]) < 0.005 for a in "XYZ"
+        ),
+        1.0,
+    )
+    cycle = m.t - t0
+    actual = m.axes.feedback().actual
+    final_in = tuple(round((actual[a] - g) / INCH, 3) for a, g in zip("XYZ", g54_mm, strict=True))
+    return final_in, trace, cycle
+
+
+def check_seed15_trace(lines: list[str], trace: list, cycle: float) -> None:
+    """Seed 004 req 15's PLC trace: tool 1, spindle and coolant on before the first motion,
+    coolant off after the last, then the spindle; the cycle no shorter than the feed time."""
+    line_of = {t: n for n, t in enumerate(lines, 1)}
 
     def first(pred) -> int:
         return next(i for i, row in enumerate(trace) if pred(row))

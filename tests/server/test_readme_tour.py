@@ -110,3 +110,98 @@ def test_the_fault_example_shows_its_alarm_where_the_readme_looks(tmp_path):
         assert "<Fault" not in controller
     finally:
         cell.stop()
+
+
+APT_TOUR = TOUR[TOUR.index("The DNC host does the same at dispatch") :]
+
+
+def curl_commands(text: str) -> list[list[str]]:
+    """The section's `curl` commands, continuation lines joined and comments dropped, as
+    argument lists (what the shell would pass; $H and $API left for the caller)."""
+    import shlex
+
+    block = re.search(r"```sh\n(.*?)```", text, re.S).group(1)
+    joined = re.sub(r"\\\n\s*", " ", block)
+    commands = []
+    for line in joined.splitlines():
+        line = line.split("  #", 1)[0].strip()
+        if line.startswith("curl "):
+            commands.append(shlex.split(line))
+    return commands
+
+
+def run_curl(c: TestClient, args: list[str]):
+    """One README curl command through the app: -H, -F file=@, -d, the URL."""
+    headers, files, form, data, url = {}, {}, {}, None, None
+    it = iter(args[1:])
+    for arg in it:
+        if arg == "-H":
+            name, _, value = next(it).partition(": ")
+            if name != "X-API-Key":  # "$H": the client's key
+                headers[name] = value
+        elif arg == "-F":
+            field, _, value = next(it).partition("=")
+            if value.startswith("@"):
+                path = value[1:]
+                files[field] = (Path(path).name, (ROOT / path).read_bytes(), "text/plain")
+            else:
+                form[field] = value
+        elif arg == "-d":
+            data = next(it)
+        elif arg.strip('"').startswith("$API"):
+            url = arg.strip('"').removeprefix("$API")
+    if files:
+        return c.post(url, headers=headers, files=files, data=form)
+    if data is not None:
+        return c.post(url, headers=headers, content=data)
+    return c.get(url, headers=headers)
+
+
+@pytest.mark.timeout(240)
+def test_the_apt_example_posts_one_source_for_both_mills(tmp_path):
+    commands = curl_commands(APT_TOUR)
+    assert len(commands) == 6, commands
+    cell = Cell(
+        default_cell(free_ports=True),
+        clock="fast",
+        database_url=f"sqlite:///{tmp_path}/cell.db",
+        state_dir=tmp_path,
+    ).start()
+    try:
+        key = "tour-admin-key-0123456789"
+        settings = ApiSettings(api_keys=(ApiKey(user="local-admin", role="admin", key=key),))
+        c = TestClient(cell.app(settings), headers={"X-API-Key": key})
+        # the tour's first upload, so that the plate is revision 2 as the README says
+        first = TOUR[TOUR.index("**1. Upload**") :]
+        assert run_curl(c, curl_commands(first)[0]).status_code == 201
+        upload, release, preview, to_mill1, to_mill2, derived = (
+            run_curl(c, args) for args in commands
+        )
+        assert upload.status_code == 201, upload.text
+        program, revision = upload.json()["program"], upload.json()["revision"]
+        assert (program["number"], program["name"]) == (2001, "PLATE 2001")
+        assert (revision["id"], revision["kind"], revision["post_kinds"]) == (2, "apt", ["mill"])
+        assert revision["check_ok"] is True
+        assert release.status_code == 200, release.text
+        assert preview.status_code == 200, preview.text
+        assert preview.text.startswith("%\nO2001 (PLATE 2001)\nG21 G90 G94\nT1 M06\n")
+        assert to_mill1.status_code == to_mill2.status_code == 202, to_mill1.text
+        assert to_mill1.json()["derived_id"] == to_mill2.json()["derived_id"] == 1
+        [row] = derived.json()
+        assert (row["id"], row["source_revision_id"], row["machine_kind"]) == (1, 2, "mill")
+        assert (row["post_name"], row["post_version"], row["tolerance_mm"]) == (
+            "fanuc-mill",
+            "1.0",
+            None,
+        )
+        # both transfers done and verified: each mill holds the posted program
+        for d in (to_mill1.json(), to_mill2.json()):
+            deadline = time.monotonic() + 60
+            while (now := c.get(f"/api/dispatches/{d['id']}").json())["state"] != "done":
+                assert now["state"] != "failed", now["error"]
+                assert time.monotonic() < deadline, now
+                time.sleep(0.05)
+            assert now["verified"] is True
+        assert c.get("/api/derived-revisions/1/text").text == preview.text
+    finally:
+        cell.stop()

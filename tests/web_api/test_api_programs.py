@@ -58,7 +58,9 @@ def test_nc_check_failures_are_stored_with_line_and_column(api):
     body = api.upload(1002, "O1002\nG0 X0\nG1 BAD\nM30\n")
     rev = body["revision"]
     assert rev["check_ok"] is False
-    assert rev["check_errors"] == [{"line": 3, "col": 4, "message": "bad word"}]
+    assert rev["check_errors"] == [
+        {"line": 3, "col": 4, "message": "bad word", "machine_kind": None}
+    ]
 
 
 def test_multipart_file_upload_takes_number_and_name_from_the_tape(api):

@@ -484,3 +484,25 @@ def test_a_viewer_sees_no_fault_panel_and_is_told_which_role_a_release_needs(ses
         expect(page.locator("#notice")).to_contain_text("needs the programmer role")
         page.screenshot(path=str(OUTPUT / "dashboard-viewer.png"), full_page=True)
     assert api.get(f"/api/revisions/{draft}").json()["status"] == "draft"
+
+
+def test_the_program_view_shows_an_apt_source_beside_its_posted_g_code(sessions):
+    plate = (Path(__file__).resolve().parents[2] / "cam" / "examples" / "plate.apt").read_text()
+    api = make_api(sessions, insecure_open=True, machines_provider=MovingMachines())
+    _, rev = api.library.create_program(number=2001, name="plate", text=plate, kind="apt")
+    api.library.release(rev.id, approver="ann", comment="ok")
+    expect = playwright_sync.expect
+    with serve(with_dashboard(api.client.app)) as base, browser_page(base) as page:
+        page.goto(base + "/")
+        expect(page.locator(".tile[data-machine]")).to_have_count(3)
+        page.get_by_role("button", name=f"View O2001 revision {rev.id}").click()
+        view = page.get_by_role("form", name="Program O2001")
+        expect(view.get_by_label("O2001 source text")).to_contain_text("GOLFT/L3,PAST,L1")
+        # posted for a machine of the kind MACHIN/MILL names, the post named under it
+        expect(view.locator("#view-machine")).to_have_value("mill-1")
+        expect(view.get_by_label("O2001 posted text")).to_contain_text("O2001 (PLATE 2001)")
+        expect(view.locator(".post-note")).to_contain_text("fanuc-mill 1.0 for a mill")
+        # the lathe cannot hold the plate's Y moves: the refusal with its APT line
+        view.locator("#view-machine").select_option("lathe-1")
+        expect(view.locator(".post-note")).to_contain_text("no Y axis")
+        page.screenshot(path=str(OUTPUT / "dashboard-program-view.png"), full_page=True)

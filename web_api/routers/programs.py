@@ -16,12 +16,15 @@ from pydantic import BaseModel, ValidationError
 from starlette.datastructures import UploadFile
 
 from dnc.errors import InvalidUpload
+from dnc.posting import REVISION_KINDS, kind_of_upload, partno_header
 from dnc.tape import MAX_PROGRAM_NUMBER, read_header
 from dnc.upload import ProgramUpload
 from web_api.problems import ApiProblem, problem_doc
 from web_api.routers import Services, decode_cursor, get_services, next_link
 from web_api.routers.auth import Programmer, Viewer
 from web_api.schemas import (
+    KIND_HELP,
+    POST_KINDS_HELP,
     DbId,
     MachineKind,
     Name,
@@ -37,7 +40,17 @@ from web_api.schemas import (
 
 router = APIRouter(tags=["programs"], responses=problem_doc(400, 401, 403, 422, 503))
 Svc = Annotated[Services, Depends(get_services)]
-FORM_FIELDS = ("number", "name", "machine_kind", "description", "tags", "comment")
+FORM_FIELDS = (
+    "number",
+    "name",
+    "machine_kind",
+    "description",
+    "tags",
+    "comment",
+    "kind",
+    "post_kinds",
+)
+LIST_FIELDS = ("tags", "post_kinds")  # comma-separated in a form
 
 
 def upload_body(json_model: type[BaseModel], form_fields: dict[str, Any]) -> dict:
@@ -62,6 +75,12 @@ def upload_body(json_model: type[BaseModel], form_fields: dict[str, Any]) -> dic
             },
         }
     }
+
+
+SOURCE_FORM_FIELDS = {
+    "kind": {"type": "string", "enum": ["gcode", "apt", "cl"], "description": KIND_HELP},
+    "post_kinds": {"type": "string", "description": "comma-separated; " + POST_KINDS_HELP},
+}
 
 
 def program_out(info) -> Program:
@@ -115,10 +134,13 @@ async def read_upload(
         values: dict[str, Any] = {
             k: form[k] for k in FORM_FIELDS if k in model.model_fields and k in form
         }
-        if "tags" in values:
-            values["tags"] = [t.strip() for t in str(values["tags"]).split(",") if t.strip()]
+        for key in LIST_FIELDS:
+            if key in values:
+                values[key] = [t.strip() for t in str(values[key]).split(",") if t.strip()]
         if "number" in model.model_fields:
-            _fill_from_header(values, spooled.head, upload.filename)
+            given = values.get("kind")  # one that is no kind: the model's validation says so
+            kind = kind_of_upload(given if given in REVISION_KINDS else None, upload.filename)
+            _fill_from_header(values, spooled.head, upload.filename, kind)
         try:
             # form fields are text by nature: "1001" is the number 1001 here (lax), while
             # a JSON body is strict
@@ -169,9 +191,11 @@ def _closing(text: str | ProgramUpload):
             text.close()
 
 
-def _fill_from_header(values: dict, data: bytes, filename: str | None) -> None:
-    """A file upload may leave number and name out: the tape's O block supplies them."""
-    header = read_header(data[:4096].decode("utf-8", "replace"))
+def _fill_from_header(values: dict, data: bytes, filename: str | None, kind: str) -> None:
+    """A file upload may leave number and name out: the tape's O block supplies them (an
+    APT or CL file's PARTNO: its text, and the number ending it)."""
+    head = data[:4096].decode("utf-8", "replace")
+    header = read_header(head) if kind == "gcode" else partno_header(head)
     if "number" not in values and header.number is not None:
         values["number"] = header.number
     if "name" not in values:
@@ -206,6 +230,7 @@ def _too_large(size: int, services: Services, at_least: bool = False) -> ApiProb
             "description": {"type": "string", "maxLength": 4000},
             "tags": {"type": "string", "description": "comma-separated"},
             "comment": {"type": "string", "maxLength": 2000},
+            **SOURCE_FORM_FIELDS,
         },
     ),
 )
@@ -224,6 +249,8 @@ async def create_program(request: Request, services: Svc, principal: Programmer)
                 tags=fields.tags,
                 author=principal.user,
                 comment=comment,
+                kind=kind_of_upload(fields.kind, filename),
+                post_kinds=fields.post_kinds or None,
             ),
         )
     body = ProgramCreated(program=program_out(program), revision=revision_out(revision))
@@ -293,7 +320,9 @@ def get_program(program_id: Annotated[DbId, Path()], services: Svc, _: Viewer) -
     response_model=Revision,
     summary="Add a revision (a draft, NC-checked) to a program",
     responses=problem_doc(404, 409, 413, 415),
-    openapi_extra=upload_body(RevisionCreate, {"comment": {"type": "string", "maxLength": 2000}}),
+    openapi_extra=upload_body(
+        RevisionCreate, {"comment": {"type": "string", "maxLength": 2000}, **SOURCE_FORM_FIELDS}
+    ),
 )
 async def add_revision(
     program_id: Annotated[DbId, Path()],
@@ -307,7 +336,12 @@ async def add_revision(
         revision = await _heavy(
             text,
             lambda: services.library.add_revision(
-                program_id, text, author=principal.user, comment=comment
+                program_id,
+                text,
+                author=principal.user,
+                comment=comment,
+                kind=kind_of_upload(fields.kind, filename),
+                post_kinds=fields.post_kinds or None,
             ),
         )
     return JSONResponse(

@@ -7,11 +7,19 @@ from typing import Annotated
 from fastapi import APIRouter, Depends, Path, Query
 from fastapi.responses import PlainTextResponse, Response
 
+from dnc.tape import sha256_of
 from web_api.problems import problem_doc
 from web_api.routers import Services, get_services
 from web_api.routers.auth import Programmer, Viewer
 from web_api.routers.programs import revision_out
-from web_api.schemas import DbId, ProgramCall, ReleaseRequest, Revision
+from web_api.schemas import (
+    DbId,
+    DerivedRevision,
+    MachineName,
+    ProgramCall,
+    ReleaseRequest,
+    Revision,
+)
 
 router = APIRouter(tags=["revisions"], responses=problem_doc(400, 401, 403, 404, 422, 503))
 Svc = Annotated[Services, Depends(get_services)]
@@ -86,3 +94,56 @@ def diff(
         ignore_comments=ignore_comments,
     )
     return Response(text, media_type="text/x-diff; charset=utf-8")
+
+
+@router.get(
+    "/api/revisions/{revision_id}/posted",
+    response_class=PlainTextResponse,
+    summary="Preview an APT/CL revision posted for a machine (nothing is stored)",
+    description="The G-code a dispatch of this revision to `machine` would send: posted by "
+    "the post-processor of the machine's kind with its configuration, and checked as the "
+    "machine runs it (travel included). Headers name the post-processor and its version "
+    "(X-Post-Processor), the tolerance T (X-Post-Tolerance-Mm, 5-axis posts) and the "
+    "machine kind; the ETag is the posted text's sha256. A post the machine cannot run is "
+    "a 422 `post-refused` problem with the source's `line`, `column` and the `reason`.",
+    responses={
+        200: {"content": {"text/plain": {"schema": {"type": "string"}}}},
+        **problem_doc(409),
+    },
+)
+def posted_preview(
+    revision_id: RevisionId,
+    services: Svc,
+    _: Viewer,
+    machine: Annotated[MachineName, Query(description="the machine to post for")],
+) -> Response:
+    posted = services.library.posted_preview(revision_id, machine)
+    headers = {
+        "ETag": f'"{posted.sha256}"',
+        "X-Post-Processor": f"{posted.post_name} {posted.post_version}",
+        "X-Machine-Kind": posted.machine_kind,
+        "Content-Disposition": f'inline; filename="rev{revision_id}-{machine}.nc"',
+    }
+    if posted.tolerance_mm is not None:
+        headers["X-Post-Tolerance-Mm"] = repr(posted.tolerance_mm)
+    return PlainTextResponse(posted.text, headers=headers)
+
+
+@router.get(
+    "/api/revisions/{revision_id}/derived",
+    response_model=list[DerivedRevision],
+    summary="The G-code an APT/CL revision was posted to at dispatch, per machine kind",
+)
+def derived(revision_id: RevisionId, services: Svc, _: Viewer) -> list[DerivedRevision]:
+    return [DerivedRevision(**d) for d in services.library.derived_revisions(revision_id)]
+
+
+@router.get(
+    "/api/derived-revisions/{derived_id}/text",
+    response_class=PlainTextResponse,
+    summary="A derived revision's G-code (its ETag is the sha256 of the text)",
+    responses={200: {"content": {"text/plain": {"schema": {"type": "string"}}}}},
+)
+def derived_text(derived_id: Annotated[DbId, Path()], services: Svc, _: Viewer) -> Response:
+    text = services.library.derived_text(derived_id)
+    return PlainTextResponse(text, headers={"ETag": f'"{sha256_of(text)}"'})

@@ -12,6 +12,7 @@ const $ = (sel, root = document) => root.querySelector(sel);
 const state = {
   machines: new Map(), // name -> {el, plot, kind, plane}
   machineNames: [],
+  machineKinds: {}, // name -> kind (the program view picks a machine the source is meant for)
   programs: [],
   programsSignature: "",
   faultTypes: null, // null: fault injection not offered by this cell
@@ -248,6 +249,7 @@ async function pollMachines() {
     const list = await api("/api/machines");
     const machines = items(list);
     state.machineNames = machines.map((m) => m.name);
+    state.machineKinds = Object.fromEntries(machines.map((m) => [m.name, m.kind]));
     $("#machines-empty").hidden = machines.length > 0;
     for (const m of machines) renderMachine(m);
     for (const [name, entry] of state.machines) {
@@ -424,6 +426,16 @@ function programRow(p) {
       }, "Dispatch…"),
     );
   }
+  const shown = p.released_revision_id ?? p.latest_revision_id;
+  if (shown) {
+    actions.append(
+      el("button", {
+        type: "button",
+        "aria-label": `View ${o} revision ${shown}`,
+        onclick: () => openView(p, o, shown),
+      }, "View…"),
+    );
+  }
   return el(
     "tr",
     { "data-program": p.id, "data-number": p.number },
@@ -504,6 +516,58 @@ function openDispatch(p, o) {
     }
   });
   actionRow(p, form);
+}
+
+// The program view: the revision's text; an APT or CL revision beside the G-code it posts
+// to for the machine chosen (GET /api/revisions/{id}/posted, a preview: nothing stored).
+function openView(p, o, revId) {
+  const source = el("pre", { class: "program-text", "aria-label": `${o} source text` });
+  const posted = el("pre", { class: "program-text", "aria-label": `${o} posted text` });
+  const note = el("p", { class: "post-note", role: "status" });
+  const machines = el("select", { name: "machine", id: "view-machine" },
+    ...state.machineNames.map((n) => el("option", { value: n, text: n })));
+  const postedPane = el("figure", { class: "pane", hidden: true },
+    el("figcaption", {}, el("label", { for: "view-machine" }, "Posted for "), machines), posted, note);
+  const sourceCaption = el("figcaption", { text: `Revision ${revId}` });
+  const form = el(
+    "form",
+    { class: "program-view", "aria-label": `Program ${o}` },
+    el("div", { class: "side-by-side" }, el("figure", { class: "pane" }, sourceCaption, source),
+      postedPane),
+    el("button", { type: "button", onclick: () => form.closest("tr").remove() }, "Close"),
+  );
+  form.addEventListener("submit", (ev) => ev.preventDefault());
+  async function post() {
+    const machine = machines.value;
+    posted.textContent = "";
+    note.textContent = `posting for ${machine}…`;
+    try {
+      const r = await api(
+        `/api/revisions/${revId}/posted?machine=${encodeURIComponent(machine)}`,
+        { raw: true, headers: { Accept: "text/plain" } },
+      );
+      posted.textContent = await r.text();
+      const tol = r.headers.get("X-Post-Tolerance-Mm");
+      note.textContent = `${r.headers.get("X-Post-Processor")} for a ${r.headers.get("X-Machine-Kind")}` +
+        (tol ? `, T = ${tol} mm` : "") + " (preview: dispatching stores it as a derived revision)";
+    } catch (err) {
+      const pr = err.problem || {};
+      note.textContent = pr.line ? `line ${pr.line}: ${pr.reason || err.message}` : err.message;
+    }
+  }
+  machines.addEventListener("change", post);
+  actionRow(p, form);
+  attempt(`revision ${revId} of ${o}`, async () => {
+    const rev = await api(`/api/revisions/${revId}`);
+    source.textContent = await api(`/api/revisions/${revId}/text`, { headers: { Accept: "text/plain" } });
+    sourceCaption.textContent = `Revision ${revId} (${rev.kind})`;
+    if (rev.kind === "apt" || rev.kind === "cl") {
+      postedPane.hidden = false;
+      const meant = state.machineNames.find((n) => rev.post_kinds.includes(state.machineKinds[n]));
+      if (meant) machines.value = meant;
+      await post();
+    }
+  });
 }
 
 async function upload(ev) {

@@ -9,7 +9,7 @@ it, and a dispatch resolves each number to the released revision of that moment.
 number exists (indexed: which programs call O1000 is two index lookups). Revisions
 stored before this migration are scanned here.
 
-Revision ID: 0007_program_dependencies
+Revision ID: 0007
 Revises: 0006
 Create Date: 2026-11-26
 """
@@ -17,7 +17,7 @@ Create Date: 2026-11-26
 import sqlalchemy as sa
 from alembic import op
 
-revision = "0007_program_dependencies"
+revision = "0007"
 down_revision = "0006"
 branch_labels = None
 depends_on = None
