@@ -301,6 +301,7 @@ class TransferWorker:
                    entity="dispatch", entity_id=dispatch_id, sent=sent, already_there=kept,
                    revisions=[d.revision_id for d in deps])  # fmt: skip
         return bytes_sent
+
     def _post(self, dispatch_id: int, revision_id: int, machine: str) -> str:
         """Post the dispatch's source for its machine and record the derived revision on
         the dispatch (one transaction); the sha256 of the posted text."""
