@@ -80,6 +80,8 @@ GROUPS = {
     "spindle_mode": "13",
     "work_offset": "14",
     "path_mode": "15",
+    "lookahead": "",
+    "accuracy": "",
     "rotation": "16",
     "polar": "17",
     "mirror": "22",
@@ -145,7 +147,7 @@ class Code:
         return frozenset(self.words.replace("@", _AXES[kind]).replace("%", _CENTRE[kind]))
 
     def needs_for(self, kind: str) -> tuple[str, ...]:
-        letters = _AXES[kind] + _CENTRE[kind] + "FSTDHNPQRL"
+        letters = _AXES[kind] + _CENTRE[kind] + "FSTDHNPQRLE"
         return tuple("".join(c for c in alt if c in letters) for alt in self.needs)
 
 
@@ -271,6 +273,13 @@ CODES: tuple[Code, ...] = (
     _g("G61", "path_mode", Step.PATH_CONTROL, modes.path_mode, doc="exact stop mode"),
     _g("G64", "path_mode", Step.PATH_CONTROL, modes.path_mode, words="P", default=True,
        doc="continuous path, P tolerance"),
+    _g("G103", "lookahead", Step.PATH_CONTROL, modes.lookahead_limit, MILL, words="P",
+       default=True,
+       doc="look-ahead limit (Haas): plan at most P (1..15) blocks ahead; P0 or no P: the"
+           " machine's look-ahead"),
+    _g("G187", "accuracy", Step.PATH_CONTROL, modes.accuracy, MILL, words="PE", default=True,
+       doc="accuracy (Haas): path tolerance E, or P1 rough (4 x default), P2 medium,"
+           " P3 finish (default / 4); alone: the machine's default tolerance"),
     # --- declared and refused ---
     # --- Macro B calls (docs/gcode.md "Fanuc Macro B") ---
     _g("G65", "macro_call", Step.SUBPROGRAM, flow.macro_call, words=_MACRO_ARGS, needs=("P",),

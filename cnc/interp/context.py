@@ -170,6 +170,8 @@ class Context(Protocol):
     _wofs: list[list[float]]
     _g92: list[float]
     _path: int
+    _tol: float
+    _lookahead: int
     _retract: int
     _polar: bool
     _xf: Transform

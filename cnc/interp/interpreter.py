@@ -101,7 +101,7 @@ LOOP_WATCH_AFTER = 10_000  # backward jumps before loops are watched for a repea
 _EPS = 1e-9
 
 # Letters the interpreter understands, per machine kind (others: "unknown address").
-_MILL_WORDS = frozenset("XYZIJKRFSTNPQLHD")
+_MILL_WORDS = frozenset("XYZIJKRFSTNPQLHDE")  # E: Haas G47 plunge feed, G187 tolerance
 _LATHE_WORDS = frozenset("XZUWIKRFSTNPQLHDA")  # A: the Haas G76 tool angle only
 _DIM_LETTERS = frozenset("XYZUVWIJKRQ")
 _AXIS_OF = {"X": 0, "Y": 1, "Z": 2}
@@ -338,6 +338,8 @@ class Interpreter:
         self._wcs = 1
         self._g92 = [0.0, 0.0, 0.0]
         self._path = G64
+        self._tol = self.params.default_path_tolerance  # G64 P / G187 path tolerance, mm
+        self._lookahead = 0  # G103 P look-ahead limit, 0 = the machine's
         self._retract = G98
         self._polar = False
         self._xf = Transform()
