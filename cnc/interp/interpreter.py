@@ -1129,6 +1129,24 @@ class Interpreter:
         feed = self._f
         if feed is None or feed <= 0.0 or self._per_rev:
             feed = self._feed(blk)
+        self._arc_to(e, (c[0], c[1], c[2]), cw, turns, feed, blk, exact)
+
+    def _arc_to(
+        self,
+        e: tuple[float, float, float],
+        c: tuple[float, float, float],
+        cw: bool,
+        turns: int,
+        feed: float,
+        blk: Block,
+        exact: bool,
+    ) -> None:
+        """Arc in the active plane from the current point to program point `e` about the
+        program point `c` (its plane components), through transforms, compensation and
+        offsets like a programmed G2/G3 (the cycles that cut arcs use it too)."""
+        u, v, w = self._pu, self._pv, self._pw
+        s = self._pos
+        tol = self.arc_tolerance
         cw_out = cw
         if self._xf_on:
             xf = self._xf
@@ -1141,7 +1159,7 @@ class Interpreter:
             if xf.handedness(u, v) < 0:
                 cw_out = not cw
         else:
-            et, ct = e, c
+            et, ct = e, list(c)
         comp = self._comp
         if comp is not None and comp.active:
             st = self._xf.apply(s) if self._xf_on else s
