@@ -49,6 +49,9 @@ class MachineParams:
     second_reference_mm: tuple[float, ...] | None = None  # G30 point; None = home
     max_spindle_rpm: float | None = None  # the spindle's top speed: the G96 clamp; None = none
     lathe_gcode_system: str = "A"  # Fanuc T G-code system A, B or C (cnc.interp.codes)
+    # M codes the machine's PLC handles besides the NC's own (its M-code table, plc.m_codes);
+    # None: no table declared, every M code the NC does not know is handed to the PLC
+    plc_m_codes: frozenset[int] | None = None
 
     def axis(self, name: str) -> AxisParams:
         for a in self.axes:

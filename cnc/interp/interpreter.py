@@ -679,6 +679,15 @@ class Interpreter:
         for i, code in enumerate(blk.m):
             row = mtab.get(code)
             if row is None:
+                plc_codes = self.params.plc_m_codes
+                if plc_codes is not None and code not in plc_codes:
+                    raise self._err(
+                        f"M{code} is not an M code of this machine (neither the NC's nor in"
+                        " its PLC's M-code table, plc.m_codes)",
+                        blk,
+                        "M",
+                        i + 1,
+                    )
                 cls.aux.append(code)  # not the kernel's: handed to the PLC
                 continue
             grp = row.group
