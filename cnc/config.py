@@ -242,9 +242,9 @@ class PlcConfig(_Section):
         """The M codes the NC hands to this PLC (None: no table, any code)."""
         if self.m_codes is None:
             return None
-        from plc.m_functions import nc_codes
+        from plc.m_functions import STANDARD_EXTRA
 
-        return nc_codes(self.m_functions)
+        return STANDARD_EXTRA | frozenset(self.m_codes)  # the entries: checked by the loader
 
 
 class CanConfig(_Section):

@@ -116,8 +116,3 @@ def with_m_functions(program: Program, table: tuple[MFunction, ...]) -> Program:
     for i, rung in enumerate(rungs):
         rung.number = i
     return Program(program.name, program.file, program.tags + section.tags, rungs, program.alarms)
-
-
-def nc_codes(table: tuple[MFunction, ...]) -> frozenset[int]:
-    """The M codes the PLC takes besides the NC's own: the table's and the standard ones."""
-    return STANDARD_EXTRA | frozenset(f.code for f in table)
