@@ -189,12 +189,16 @@ class MCodeConfig(_Section):
     """One M function of the PLC's M-code table (`plc.m_codes.<M>`)."""
 
     ms: int = Field(
-        0, ge=0, le=29_000, description="How long the function takes: the PLC gives the finish"
-        " this long after the strobe (at least its 50 ms check delay), ms."
+        0,
+        ge=0,
+        le=29_000,
+        description="How long the function takes: the PLC gives the finish"
+        " this long after the strobe (at least its 50 ms check delay), ms.",
     )
     text: str = Field("", description="What it does, for displays and the docs.")
     sets: str | None = Field(
-        None, description="PLC bit the function switches on (a device: conveyor, air blast).",
+        None,
+        description="PLC bit the function switches on (a device: conveyor, air blast).",
     )
     clears: str | None = Field(None, description="PLC bit the function switches off.")
 
@@ -934,7 +938,7 @@ def _check_machine(name: tuple[Any, ...], m: MachineConfig) -> list[tuple[tuple,
         from plc.m_functions import MTableError
 
         try:
-            m.plc.m_functions
+            _ = m.plc.m_functions  # compiles the table: its errors name the entry
         except MTableError as exc:
             out.append(((*name, "plc", *exc.where.split(".")), exc.message))
     if m.plc.modbus_write_allow:

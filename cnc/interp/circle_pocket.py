@@ -38,8 +38,13 @@ def circle_pocket(ip: Context, run: BlockRun) -> None:
     cw = run.rows["nonmodal"].number == G12
     name = run.rows["nonmodal"].name
     if ip._comp_engaged():
-        raise ip._err(f"{name} with cutter compensation active (the cycle offsets the tool"
-                      " by D itself: G40 first)", blk, "G", run.gcol["nonmodal"])
+        raise ip._err(
+            f"{name} with cutter compensation active (the cycle offsets the tool"
+            " by D itself: G40 first)",
+            blk,
+            "G",
+            run.gcol["nonmodal"],
+        )
     radius = ip._dim(blk, "I")
     if radius <= 0.0:
         raise ip._err(f"{name} I (pocket radius) must be > 0", blk, "I")

@@ -21,8 +21,16 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
-from cnc.interp import auxiliary, circle_pocket, compensation, engraving, flow, modes, motion
-from cnc.interp import offsets
+from cnc.interp import (
+    auxiliary,
+    circle_pocket,
+    compensation,
+    engraving,
+    flow,
+    modes,
+    motion,
+    offsets,
+)
 from cnc.interp import lathe_cycles as lc
 from cnc.interp import transform_codes as xf
 from cnc.interp.context import Step

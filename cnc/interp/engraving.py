@@ -45,8 +45,9 @@ def engrave(ip: Context, run: BlockRun) -> None:
     blk = run.blk
     words = run.words
     if ip._comp_engaged():
-        raise ip._err("G47 with cutter compensation active (G40 first)", blk, "G",
-                      run.gcol["nonmodal"])
+        raise ip._err(
+            "G47 with cutter compensation active (G40 first)", blk, "G", run.gcol["nonmodal"]
+        )
     if ip._plane != G17:
         raise ip._err("G47 engraves in the XY plane (G17)", blk, "G", run.gcol["nonmodal"])
     height = DEFAULT_HEIGHT_MM
@@ -141,8 +142,9 @@ def _text(ip: Context, blk: Block) -> str:
     """The characters to engrave: the comment (P0), the serial number (P1) or chr(P)."""
     p = blk.words["P"]
     if p != int(p) or not (p in (0, 1) or 32 <= p <= 126):
-        raise ip._err("G47 P must be 0 (text), 1 (serial number) or 32..126 (a character)",
-                      blk, "P")
+        raise ip._err(
+            "G47 P must be 0 (text), 1 (serial number) or 32..126 (a character)", blk, "P"
+        )
     p = int(p)
     col0 = 0  # column of the comment's first character (P0)
     if p >= 32:
@@ -159,7 +161,10 @@ def _text(ip: Context, blk: Block) -> str:
             what = "a lower-case letter" if ch.islower() else f"character {ch!r}"
             err = ip._err(
                 f"G47: {what} has no glyph in the engraving font (A-Z, 0-9, space and "
-                f"{_PUNCTUATION})", blk, "P")
+                f"{_PUNCTUATION})",
+                blk,
+                "P",
+            )
             if p == 0:
                 err.col = col0 + i  # at the character in the comment
             raise err
@@ -191,8 +196,12 @@ def _comment(ip: Context, blk: Block) -> tuple[str, int]:
 def _serial(ip: Context, blk: Block, comment: str) -> str:
     fmt = comment.strip()
     if not fmt or not (set(fmt) <= set("#") or fmt.isdigit()):
-        raise ip._err("G47 P1 needs the serial number's format as its comment: (####) for "
-                      "4 digits, or (1234) to start at 1234", blk, "P")
+        raise ip._err(
+            "G47 P1 needs the serial number's format as its comment: (####) for "
+            "4 digits, or (1234) to start at 1234",
+            blk,
+            "P",
+        )
     if fmt.isdigit():
         ip.vars.set(SERIAL_VARIABLE, float(int(fmt)))
     value = ip.vars.get(SERIAL_VARIABLE)

@@ -72,9 +72,13 @@ def test_g12_incremental_z_loops_and_centre_words() -> None:
     assert got == [
         ("T", 0, 0, 1),
         ("T", 4, 2, 1),
-        ("F", 4, 2, -1, 50.0), ("CW", 7, 2, -1, 5.5, 2), ("CW", 7, 2, -1, 4, 2),
+        ("F", 4, 2, -1, 50.0),
+        ("CW", 7, 2, -1, 5.5, 2),
+        ("CW", 7, 2, -1, 4, 2),
         ("CW", 4, 2, -1, 5.5, 2),
-        ("F", 4, 2, -3, 50.0), ("CW", 7, 2, -3, 5.5, 2), ("CW", 7, 2, -3, 4, 2),
+        ("F", 4, 2, -3, 50.0),
+        ("CW", 7, 2, -3, 5.5, 2),
+        ("CW", 7, 2, -3, 4, 2),
         ("CW", 4, 2, -3, 5.5, 2),
     ]
 
@@ -133,21 +137,31 @@ def test_g47_letter_l_at_scale_one() -> None:
 def test_g47_two_characters_and_a_dot() -> None:
     # "-" is (1,3)-(3,3); "." a plunge at (2,0) of the second cell, 6 units on
     assert engrave("-.") == [
-        ("T", 10, 20, 5), ("T", 10, 20, 2),
-        ("T", 11, 23, 2), ("F", 11, 23, -1, 50.0), ("F", 13, 23, -1, 100.0), ("T", 13, 23, 2),
-        ("T", 18, 20, 2), ("F", 18, 20, -1, 50.0), ("T", 18, 20, 2),
+        ("T", 10, 20, 5),
+        ("T", 10, 20, 2),
+        ("T", 11, 23, 2),
+        ("F", 11, 23, -1, 50.0),
+        ("F", 13, 23, -1, 100.0),
+        ("T", 13, 23, 2),
+        ("T", 18, 20, 2),
+        ("F", 18, 20, -1, 50.0),
+        ("T", 18, 20, 2),
     ]
 
 
 def test_g47_arc_in_a_glyph_and_the_angle() -> None:
     # J: (4,6) -> (4,2), then a clockwise half circle about (2,2) to (0,2)
     assert engrave("J", "I0")[2:6] == [
-        ("T", 14, 26, 2), ("F", 14, 26, -1, 50.0), ("F", 14, 22, -1, 100.0),
+        ("T", 14, 26, 2),
+        ("F", 14, 26, -1, 50.0),
+        ("F", 14, 22, -1, 100.0),
         ("CW", 10, 22, -1, 12, 22),
     ]
     # I90: the text runs up; grid (x, y) lands at (10 - y, 20 + x)
     assert engrave("L", "I90")[2:6] == [
-        ("T", 4, 20, 2), ("F", 4, 20, -1, 50.0), ("F", 10, 20, -1, 100.0),
+        ("T", 4, 20, 2),
+        ("F", 4, 20, -1, 50.0),
+        ("F", 10, 20, -1, 100.0),
         ("F", 10, 24, -1, 100.0),
     ]
 
@@ -170,8 +184,11 @@ def test_g47_serial_number_counts_up_in_599() -> None:
     strokes = sum(len(font.GLYPHS[c]) for c in "0041")
     assert strokes == 7
     got = moves(cmds)
-    plunges = [b for a, b in zip(got, got[1:], strict=False) if a[0] == "T" and b[0] == "F"
-               and b[3] == -1 and a[1:3] == b[1:3]]
+    plunges = [
+        b
+        for a, b in zip(got, got[1:], strict=False)
+        if a[0] == "T" and b[0] == "F" and b[3] == -1 and a[1:3] == b[1:3]
+    ]
     assert len(plunges) == strokes
     # the first stroke is the outline of the first "0": it starts at grid (4, 4)
     assert plunges[0][1:3] == (4.0, 4.0)

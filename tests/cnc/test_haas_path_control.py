@@ -47,9 +47,14 @@ def zigzag(n: int, x0: float = 0.0) -> str:
         ("G187 P1 E0.2\n", [(PathMode.CONTINUOUS, 0.2, 0)]),
         ("G187 E0.2\nG187\n", [(PathMode.CONTINUOUS, 0.2, 0), (PathMode.CONTINUOUS, 0.01, 0)]),
         # each command carries the whole state: G103 keeps the G187 tolerance and back
-        ("G187 E0.2\nG103 P2\nG64\n",
-         [(PathMode.CONTINUOUS, 0.2, 0), (PathMode.CONTINUOUS, 0.2, 2),
-          (PathMode.CONTINUOUS, 0.01, 2)]),
+        (
+            "G187 E0.2\nG103 P2\nG64\n",
+            [
+                (PathMode.CONTINUOUS, 0.2, 0),
+                (PathMode.CONTINUOUS, 0.2, 2),
+                (PathMode.CONTINUOUS, 0.01, 2),
+            ],
+        ),
         ("G103 P3\nG61\n", [(PathMode.CONTINUOUS, 0.01, 3), (PathMode.EXACT_STOP, 0.0, 3)]),
     ],
 )

@@ -151,18 +151,35 @@ def test_g88_manual_stop_is_a_program_stop() -> None:
     ("prog", "expected"),
     [
         # R never given: the R level is the initial level Z10 (the feed starts there)
-        ("G98 G81 X5 Y5 Z-4 F100\n",
-         [("T", 5, 5, 10), ("F", 5, 5, -4), ("T", 5, 5, 10)]),
-        ("G99 G81 X5 Y5 Z-4 F100\nX7\n",
-         [("T", 5, 5, 10), ("F", 5, 5, -4), ("T", 5, 5, 10),
-          ("T", 7, 5, 10), ("F", 7, 5, -4), ("T", 7, 5, 10)]),
+        ("G98 G81 X5 Y5 Z-4 F100\n", [("T", 5, 5, 10), ("F", 5, 5, -4), ("T", 5, 5, 10)]),
+        (
+            "G99 G81 X5 Y5 Z-4 F100\nX7\n",
+            [
+                ("T", 5, 5, 10),
+                ("F", 5, 5, -4),
+                ("T", 5, 5, 10),
+                ("T", 7, 5, 10),
+                ("F", 7, 5, -4),
+                ("T", 7, 5, 10),
+            ],
+        ),
         # incremental: Z is measured from the R level = the initial level
-        ("G91 G99 G81 X5 Y5 Z-14 F100\n",
-         [("T", 5, 5, 10), ("F", 5, 5, -4), ("T", 5, 5, 10)]),
+        ("G91 G99 G81 X5 Y5 Z-14 F100\n", [("T", 5, 5, 10), ("F", 5, 5, -4), ("T", 5, 5, 10)]),
         # an R of an earlier cycle stays modal (the last R)
-        ("G99 G81 X1 Y1 Z-4 R2 F100\nG80\nG0 Z20\nG81 X5 Y5 Z-4\n",
-         [("T", 1, 1, 10), ("T", 1, 1, 2), ("F", 1, 1, -4), ("T", 1, 1, 2),
-          ("T", 1, 1, 20), ("T", 5, 5, 20), ("T", 5, 5, 2), ("F", 5, 5, -4), ("T", 5, 5, 2)]),
+        (
+            "G99 G81 X1 Y1 Z-4 R2 F100\nG80\nG0 Z20\nG81 X5 Y5 Z-4\n",
+            [
+                ("T", 1, 1, 10),
+                ("T", 1, 1, 2),
+                ("F", 1, 1, -4),
+                ("T", 1, 1, 2),
+                ("T", 1, 1, 20),
+                ("T", 5, 5, 20),
+                ("T", 5, 5, 2),
+                ("F", 5, 5, -4),
+                ("T", 5, 5, 2),
+            ],
+        ),
     ],
 )
 def test_r_omitted_is_the_initial_level(prog: str, expected: list) -> None:
