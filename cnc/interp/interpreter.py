@@ -1138,12 +1138,12 @@ class Interpreter:
         feed = self._f
         if feed is None or feed <= 0.0 or self._per_rev:
             feed = self._feed(blk)
-        self._arc_to(e, (c[0], c[1], c[2]), cw, turns, feed, blk, exact)
+        self._arc_to(e, c, cw, turns, feed, blk, exact)
 
     def _arc_to(
         self,
         e: tuple[float, float, float],
-        c: tuple[float, float, float],
+        c: tuple[float, float, float] | list[float],
         cw: bool,
         turns: int,
         feed: float,
@@ -1168,10 +1168,11 @@ class Interpreter:
             if xf.handedness(u, v) < 0:
                 cw_out = not cw
         else:
-            et, ct = e, list(c)
+            et, ct = e, c
         comp = self._comp
         if comp is not None and comp.active:
             st = self._xf.apply(s) if self._xf_on else s
+            ct = list(ct)
             ct[w] = st[w]
             self._comp_arc(st, et, ct, cw_out, feed, turns, blk, exact)
             self._pos = e
