@@ -96,11 +96,17 @@ class ArcFeed:
 
 @dataclass(frozen=True, slots=True)
 class SetPathMode:
-    """G61 / G64 [P tolerance mm]."""
+    """G61 / G64 [P tolerance mm], Haas G187 (accuracy) and G103 (look-ahead limit).
+
+    Each one carries the whole path control state for the blocks that follow: the mode, the
+    path tolerance and the look-ahead limit (`lookahead` motion blocks, 0 = the machine's
+    own look-ahead; G103 P1..P15).
+    """
 
     line: int
     mode: PathMode
     tolerance: float = 0.0  # mm; 0 means "as fast as the limits allow"
+    lookahead: int = 0
 
 
 @dataclass(frozen=True, slots=True)

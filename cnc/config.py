@@ -185,6 +185,24 @@ class DrivesConfig(_Section):
         return merged
 
 
+class MCodeConfig(_Section):
+    """One M function of the PLC's M-code table (`plc.m_codes.<M>`)."""
+
+    ms: int = Field(
+        0,
+        ge=0,
+        le=29_000,
+        description="How long the function takes: the PLC gives the finish"
+        " this long after the strobe (at least its 50 ms check delay), ms.",
+    )
+    text: str = Field("", description="What it does, for displays and the docs.")
+    sets: str | None = Field(
+        None,
+        description="PLC bit the function switches on (a device: conveyor, air blast).",
+    )
+    clears: str | None = Field(None, description="PLC bit the function switches off.")
+
+
 class PlcConfig(_Section):
     """The soft-PLC (`plc`)."""
 
@@ -202,11 +220,35 @@ class PlcConfig(_Section):
     debounce_samples: int = Field(
         0, ge=0, le=64, description="Input filter: a change counts after N equal samples (0 off)."
     )
+    m_codes: dict[int, MCodeConfig] | None = Field(
+        None,
+        description="The M-code table: M functions the PLC handles besides the standard"
+        " program's (docs/machine_plc.md), by code; the NC refuses an M code that is neither"
+        " its own nor in this table at its block. null = no table: every M code the NC does"
+        " not know is handed to the PLC.",
+    )
     modbus_write_allow: str = Field(
         "",
         description="Modbus write allow-list (`coil:0-15,hr:1024-1100,%MW0-99`); empty ="
         " read-only.",
     )
+
+    @property
+    def m_functions(self) -> tuple:
+        """The M-code table as `plc.m_functions.MFunction`s (raises MTableError)."""
+        from plc.m_functions import table_from
+
+        entries = {c: e.model_dump() for c, e in (self.m_codes or {}).items()}
+        return table_from(entries)
+
+    @property
+    def nc_m_codes(self) -> frozenset[int] | None:
+        """The M codes the NC hands to this PLC (None: no table, any code)."""
+        if self.m_codes is None:
+            return None
+        from plc.m_functions import STANDARD_EXTRA
+
+        return STANDARD_EXTRA | frozenset(self.m_codes)  # the entries: checked by the loader
 
 
 class CanConfig(_Section):
@@ -412,6 +454,7 @@ class MachineConfig(_Section):
             max_spindle_rpm=self.spindle.max_rpm,
             call_nesting=self.call_nesting,
             macro_nesting=self.macro_nesting,
+            plc_m_codes=self.plc.nc_m_codes,
         )
 
 
@@ -907,6 +950,13 @@ def _check_machine(name: tuple[Any, ...], m: MachineConfig) -> list[tuple[tuple,
     if m.can.bitrate not in CAN_BITRATES:
         rates = ", ".join(str(r) for r in CAN_BITRATES)
         out.append(((*name, "can", "bitrate"), f"must be one of {rates}, got {m.can.bitrate}"))
+    if m.plc.m_codes:
+        from plc.m_functions import MTableError
+
+        try:
+            _ = m.plc.m_functions  # compiles the table: its errors name the entry
+        except MTableError as exc:
+            out.append(((*name, "plc", *exc.where.split(".")), exc.message))
     if m.plc.modbus_write_allow:
         from plc.modbus.allowlist import AllowList, AllowListError
 
@@ -1113,6 +1163,7 @@ def config_reference_markdown() -> str:
         ("machines.<NAME>.drives", DrivesConfig),
         ("machines.<NAME>.drives.axes.<AXIS>", DriveAxisConfig),
         ("machines.<NAME>.plc", PlcConfig),
+        ("machines.<NAME>.plc.m_codes.<M>", MCodeConfig),
         ("machines.<NAME>.can", CanConfig),
         ("machines.<NAME>.ports", PortsConfig),
         ("machines.<NAME>.machine_data", MachineDataConfig),

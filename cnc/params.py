@@ -51,6 +51,9 @@ class MachineParams:
     lathe_gcode_system: str = "A"  # Fanuc T G-code system A, B or C (cnc.interp.codes)
     call_nesting: int = 10  # program levels called (M98, G65, G66): PS0077 beyond
     macro_nesting: int = 5  # of which G65/G66 macro levels: PS0122 beyond
+    # M codes the machine's PLC handles besides the NC's own (its M-code table, plc.m_codes);
+    # None: no table declared, every M code the NC does not know is handed to the PLC
+    plc_m_codes: frozenset[int] | None = None
 
     def axis(self, name: str) -> AxisParams:
         for a in self.axes:

@@ -398,16 +398,39 @@ PROGRAM_PATH = os.path.join(
 )
 
 
-def machine_plc(config=None, params: MachineParams | None = None, program_path: str | None = None):
+def machine_plc(
+    config=None,
+    params: MachineParams | None = None,
+    program_path: str | None = None,
+    m_functions: tuple = (),
+):
     """The standard wiring: the machine-tool program in a `Runtime` with a `MachineIO`.
 
     Returns (runtime, io). Scan it in lockstep with `runtime.scan(now_ms)` (the plant follows
     the same virtual time) or hand the runtime to a `RealtimeRunner`. The NC talks to it
-    through `io.nc` (signal names of `plc.signals`).
+    through `io.nc` (signal names of `plc.signals`). `m_functions`: the machine's M-code
+    table (`plc.m_functions.MFunction`s), compiled into the program at its slot.
     """
     from plc.ladder import load_file
     from plc.runtime import Runtime, RuntimeConfig
 
     io = MachineIO(params)
-    runtime = Runtime(load_file(program_path or PROGRAM_PATH), config or RuntimeConfig(), io=io)
+    path = program_path or PROGRAM_PATH
+    config = config or RuntimeConfig()
+    if m_functions:
+        program = _with_table(path, tuple(m_functions))
+    else:
+        program = load_file(path)
+    runtime = Runtime(program, config, io=io)
     return runtime, io
+
+
+def _with_table(path: str, table: tuple):
+    from plc.ladder import LadderError, compile_program, parse_program
+    from plc.m_functions import with_m_functions
+
+    with open(path, encoding="utf-8") as f:
+        program, sink = parse_program(f.read(), str(path))
+    if sink.has_errors:
+        raise LadderError(sink.sorted())
+    return compile_program(with_m_functions(program, table), sink)

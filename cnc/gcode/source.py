@@ -296,19 +296,21 @@ class Pushback:
     """A line iterator that takes lines back (`push`): a lathe cycle looks at the block after
     it for its contour (N P) and returns the lines when the contour is elsewhere."""
 
-    __slots__ = ("_it", "_back")
+    __slots__ = ("_it", "_back", "last")
 
     def __init__(self, it: Iterable[tuple[int, str]]) -> None:
         self._it = iter(it)
         self._back: list[tuple[int, str]] = []
+        # the line last handed out, comments and all (G47 engraves its block's comment)
+        self.last: tuple[int, str] | None = None
 
     def __iter__(self) -> Pushback:
         return self
 
     def __next__(self) -> tuple[int, str]:
-        if self._back:
-            return self._back.pop()
-        return next(self._it)
+        item = self._back.pop() if self._back else next(self._it)
+        self.last = item
+        return item
 
     def push(self, item: tuple[int, str]) -> None:
         self._back.append(item)

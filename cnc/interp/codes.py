@@ -21,7 +21,16 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
-from cnc.interp import auxiliary, compensation, flow, modes, motion, offsets
+from cnc.interp import (
+    auxiliary,
+    circle_pocket,
+    compensation,
+    engraving,
+    flow,
+    modes,
+    motion,
+    offsets,
+)
 from cnc.interp import lathe_cycles as lc
 from cnc.interp import transform_codes as xf
 from cnc.interp.context import Step
@@ -80,6 +89,8 @@ GROUPS = {
     "spindle_mode": "13",
     "work_offset": "14",
     "path_mode": "15",
+    "lookahead": "",
+    "accuracy": "",
     "rotation": "16",
     "polar": "17",
     "mirror": "22",
@@ -145,7 +156,7 @@ class Code:
         return frozenset(self.words.replace("@", _AXES[kind]).replace("%", _CENTRE[kind]))
 
     def needs_for(self, kind: str) -> tuple[str, ...]:
-        letters = _AXES[kind] + _CENTRE[kind] + "FSTDHNPQRL"
+        letters = _AXES[kind] + _CENTRE[kind] + "FSTDHNPQRLE"
         return tuple("".join(c for c in alt if c in letters) for alt in self.needs)
 
 
@@ -176,6 +187,12 @@ CODES: tuple[Code, ...] = (
        needs=("P",), owns_axes=True,
        doc="data setting into the machine data: L2 P (G54-G59) / L20 P (G54.1 P1-P48) work"
            " offsets, L1/L10-L13 tool length and radius geometry/wear; lathe G10 P X Z R Q"),
+    _g("G12", "nonmodal", Step.NON_MODAL, circle_pocket.circle_pocket, MILL, words="XYZIKQLD",
+       needs=("I",), owns_axes=True,
+       doc="circular pocket CW (Haas): I radius [K finished radius, Q step], L loops, Z"
+           " depth (G91: per loop), D tool offset, X Y centre; lead-in/out half circles"),
+    _g("G13", "nonmodal", Step.NON_MODAL, circle_pocket.circle_pocket, MILL, words="XYZIKQLD",
+       needs=("I",), owns_axes=True, doc="circular pocket CCW (as G12)"),
     _g("G28", "nonmodal", Step.NON_MODAL, offsets.reference_return, words="@", owns_axes=True,
        doc="return to the reference point via the intermediate point"),
     _g("G30", "nonmodal", Step.NON_MODAL, offsets.reference_return, words="@P", owns_axes=True,
@@ -184,6 +201,10 @@ CODES: tuple[Code, ...] = (
        doc="G0/G1 move in machine coordinates"),
     _g("G92", "nonmodal", Step.NON_MODAL, offsets.coordinate_set, MILL, words="XYZS",
        owns_axes=True, doc="coordinate system setting; S: maximum spindle speed for G96"),
+    _g("G47", "nonmodal", Step.NON_MODAL, engraving.engrave, MILL, words="XYZPRIJE",
+       needs=("P", "Z"), owns_axes=True,
+       doc="text engraving (Haas): P0 the comment's text, P1 serial number #599, P32..126 one"
+           " character; X Y start, Z depth, R return plane, I angle, J height, E plunge feed"),
     _g("G50", "nonmodal", Step.NON_MODAL, offsets.coordinate_set, LATHE, words="XZS",
        owns_axes=True, doc="coordinate system setting; S: maximum spindle speed for G96"),
     # --- plane (02) ---
@@ -271,6 +292,13 @@ CODES: tuple[Code, ...] = (
     _g("G61", "path_mode", Step.PATH_CONTROL, modes.path_mode, doc="exact stop mode"),
     _g("G64", "path_mode", Step.PATH_CONTROL, modes.path_mode, words="P", default=True,
        doc="continuous path, P tolerance"),
+    _g("G103", "lookahead", Step.PATH_CONTROL, modes.lookahead_limit, MILL, words="P",
+       default=True,
+       doc="look-ahead limit (Haas): plan at most P (1..15) blocks ahead; P0 or no P: the"
+           " machine's look-ahead"),
+    _g("G187", "accuracy", Step.PATH_CONTROL, modes.accuracy, MILL, words="PE", default=True,
+       doc="accuracy (Haas): path tolerance E, or P1 rough (4 x default), P2 medium,"
+           " P3 finish (default / 4); alone: the machine's default tolerance"),
     # --- declared and refused ---
     # --- Macro B calls (docs/gcode.md "Fanuc Macro B") ---
     _g("G65", "macro_call", Step.SUBPROGRAM, flow.macro_call, words=_MACRO_ARGS, needs=("P",),

@@ -18,6 +18,7 @@ if TYPE_CHECKING:
     from cnc.canon import CanonCommand, SpindleDirection
     from cnc.errors import NcError
     from cnc.interp.codes import Code
+    from cnc.interp.macro import MacroVariables
     from cnc.interp.state import ToolOffset
     from cnc.interp.transform import Transform
     from cnc.params import MachineParams
@@ -170,6 +171,8 @@ class Context(Protocol):
     _wofs: list[list[float]]
     _g92: list[float]
     _path: int
+    _tol: float
+    _lookahead: int
     _retract: int
     _polar: bool
     _xf: Transform
@@ -188,6 +191,8 @@ class Context(Protocol):
     _off: tuple[float, float, float]
     _out: list[CanonCommand]
     _comp: object
+    _frames: list  # the program levels (cnc.interp.interpreter._Frame), innermost last
+    vars: MacroVariables
     _ended: bool
     _switch: bool
 
@@ -207,6 +212,7 @@ class Context(Protocol):
     def _feed(self, blk: Block) -> float: ...
     def _check(self, m: tuple[float, float, float], blk: Block | None, line: int) -> None: ...
     def _line_to(self, p, feed: float | None, blk: Block, exact: bool) -> None: ...
+    def _arc_to(self, e, c, cw: bool, turns: int, feed: float, blk: Block, exact: bool) -> None: ...
     def _motion_block(self, blk: Block, words, exact: bool, explicit: int | None) -> None: ...
     def _prog_from_machine(self) -> tuple[float, float, float]: ...
     def _refresh_offsets(self, resync: bool) -> None: ...

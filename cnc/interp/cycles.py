@@ -29,7 +29,8 @@ _AXIS_NAME = "XYZ"
 
 
 class CycleData:
-    """The modal cycle data: R level, hole bottom, peck Q, dwell P (s), initial level."""
+    """The modal cycle data: R level (None: never programmed, the initial level is used),
+    hole bottom, peck Q, dwell P (s), initial level."""
 
     __slots__ = ("r", "z", "q", "p", "init")
 
@@ -95,10 +96,12 @@ def cycle_block(ip: Context, blk: Block, code: int | None, exact: bool) -> None:
         return
     if cd.z is None:
         raise ip._err(f"canned cycle needs the hole bottom {wn}", blk, "G")
-    if cd.r is None:
-        raise ip._err("canned cycle needs the R level", blk, "G")
     cyc = ip._cycle
-    rr, zz = cd.r, cd.z
+    # R never programmed: the R level is the initial level (Fanuc: R is the distance from
+    # the initial level, 0 when omitted; Haas the same), so the cycle feeds from where the
+    # tool stands. A programmed R stays modal (the last R).
+    rr = cd.r if cd.r is not None else init
+    zz = cd.z
     if cyc != G87 and rr < zz - _EPS:
         raise ip._err(f"R level below the hole bottom {wn}", blk, "R")
     if cyc == G87 and rr > zz + _EPS:

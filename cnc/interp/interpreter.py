@@ -108,7 +108,7 @@ LOOP_WATCH_AFTER = 10_000  # backward jumps before loops are watched for a repea
 _EPS = 1e-9
 
 # Letters the interpreter understands, per machine kind (others: "unknown address").
-_MILL_WORDS = frozenset("XYZIJKRFSTNPQLHD")
+_MILL_WORDS = frozenset("XYZIJKRFSTNPQLHDE")  # E: Haas G47 plunge feed, G187 tolerance
 _LATHE_WORDS = frozenset("XZUWIKRFSTNPQLHDA")  # A: the Haas G76 tool angle only
 _DIM_LETTERS = frozenset("XYZUVWIJKRQ")
 _AXIS_OF = {"X": 0, "Y": 1, "Z": 2}
@@ -351,6 +351,8 @@ class Interpreter:
         self._wcs = 1
         self._g92 = [0.0, 0.0, 0.0]
         self._path = G64
+        self._tol = self.params.default_path_tolerance  # G64 P / G187 path tolerance, mm
+        self._lookahead = 0  # G103 P look-ahead limit, 0 = the machine's
         self._retract = G98
         self._polar = False
         self._xf = Transform()
@@ -693,6 +695,15 @@ class Interpreter:
         for i, code in enumerate(blk.m):
             row = mtab.get(code)
             if row is None:
+                plc_codes = self.params.plc_m_codes
+                if plc_codes is not None and code not in plc_codes:
+                    raise self._err(
+                        f"M{code} is not an M code of this machine (neither the NC's nor in"
+                        " its PLC's M-code table, plc.m_codes)",
+                        blk,
+                        "M",
+                        i + 1,
+                    )
                 cls.aux.append(code)  # not the kernel's: handed to the PLC
                 continue
             grp = row.group
@@ -1149,6 +1160,24 @@ class Interpreter:
         feed = self._f
         if feed is None or feed <= 0.0 or self._per_rev:
             feed = self._feed(blk)
+        self._arc_to(e, c, cw, turns, feed, blk, exact)
+
+    def _arc_to(
+        self,
+        e: tuple[float, float, float],
+        c: tuple[float, float, float] | list[float],
+        cw: bool,
+        turns: int,
+        feed: float,
+        blk: Block,
+        exact: bool,
+    ) -> None:
+        """Arc in the active plane from the current point to program point `e` about the
+        program point `c` (its plane components), through transforms, compensation and
+        offsets like a programmed G2/G3 (the cycles that cut arcs use it too)."""
+        u, v, w = self._pu, self._pv, self._pw
+        s = self._pos
+        tol = self.arc_tolerance
         cw_out = cw
         if self._xf_on:
             xf = self._xf
@@ -1165,6 +1194,7 @@ class Interpreter:
         comp = self._comp
         if comp is not None and comp.active:
             st = self._xf.apply(s) if self._xf_on else s
+            ct = list(ct)
             ct[w] = st[w]
             self._comp_arc(st, et, ct, cw_out, feed, turns, blk, exact)
             self._pos = e

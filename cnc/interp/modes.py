@@ -15,6 +15,10 @@ if TYPE_CHECKING:
     from cnc.interp.context import BlockRun, Context
 
 INCH = 25.4
+MAX_LOOKAHEAD_LIMIT = 15  # G103 P0..P15 (Haas)
+# G187 P1 rough / P2 medium / P3 finish without E: the path tolerance as a multiple of the
+# machine's default (default_path_tolerance, Haas setting 85); E gives it outright
+ACCURACY_FACTORS = {1: 4.0, 2: 1.0, 3: 0.25}
 
 
 def units(ip: Context, run: BlockRun) -> None:
@@ -90,11 +94,51 @@ def path_mode(ip: Context, run: BlockRun) -> None:
     code = run.g["path_mode"]
     ip._path = code
     if code == G61:
-        ip._emit(SetPathMode(run.line, PathMode.EXACT_STOP))
+        _emit_path_control(ip, run)
         return
     tol = ip.params.default_path_tolerance
     if "P" in run.words:
         tol = ip._dim(run.blk, "P")
         if tol < 0:
             raise ip._err("G64 P tolerance must not be negative", run.blk, "P")
-    ip._emit(SetPathMode(run.line, PathMode.CONTINUOUS, tol))
+    ip._tol = tol
+    _emit_path_control(ip, run)
+
+
+def accuracy(ip: Context, run: BlockRun) -> None:
+    """Haas G187 [P1 rough | P2 medium | P3 finish] [E tolerance]: the path tolerance of the
+    blocks that follow (G64 corner blending within it); G187 alone: the machine's default."""
+    blk = run.blk
+    tol = ip.params.default_path_tolerance
+    if "P" in run.words:
+        p = run.words["P"]
+        if p not in ACCURACY_FACTORS:
+            raise ip._err("G187 P must be 1 (rough), 2 (medium) or 3 (finish)", blk, "P")
+        tol *= ACCURACY_FACTORS[int(p)]
+    if "E" in run.words:
+        tol = ip._dim(blk, "E")
+        if tol <= 0.0:
+            raise ip._err("G187 E (corner rounding tolerance) must be > 0", blk, "E")
+    ip._tol = tol
+    _emit_path_control(ip, run)
+
+
+def lookahead_limit(ip: Context, run: BlockRun) -> None:
+    """Haas G103 P0..P15: plan at most P blocks ahead (P0 or no P: the machine's look-ahead)."""
+    n = 0
+    if "P" in run.words:
+        p = run.words["P"]
+        if p != int(p) or not 0 <= p <= MAX_LOOKAHEAD_LIMIT:
+            raise ip._err(
+                f"G103 P (blocks of look-ahead) must be 0..{MAX_LOOKAHEAD_LIMIT}", run.blk, "P"
+            )
+        n = int(p)
+    ip._lookahead = n
+    _emit_path_control(ip, run)
+
+
+def _emit_path_control(ip: Context, run: BlockRun) -> None:
+    if ip._path == G61:
+        ip._emit(SetPathMode(run.line, PathMode.EXACT_STOP, 0.0, ip._lookahead))
+    else:
+        ip._emit(SetPathMode(run.line, PathMode.CONTINUOUS, ip._tol, ip._lookahead))

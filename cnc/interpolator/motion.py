@@ -117,7 +117,7 @@ class Motion:
     fallbacks: int
     run_cycles: int
     _memo: PlanMemo
-    _lookahead: int  # params.lookahead (params is frozen)
+    _lookahead: int  # params.lookahead, or the G103 limit (SetPathMode.lookahead)
 
     def __init__(
         self,
@@ -184,6 +184,11 @@ class Motion:
             self._dirty = True
         elif isinstance(cmd, SetPathMode):
             self.path.set_path_mode(cmd)
+            # G103 P: the blocks after it are planned with at most P blocks ahead (the
+            # blocks already queued stay; no new one is taken until fewer are left)
+            limit = int(cmd.lookahead)
+            full = self.params.lookahead
+            self._lookahead = limit if 0 < limit < full else full
         elif self._s >= self.path.end_s and not self._ahead():
             self._sync_queue.append(cmd)
         else:

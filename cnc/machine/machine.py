@@ -133,6 +133,7 @@ class Machine:
                 debounce_samples=config.plc.debounce_samples,
             ),
             program_path=program,
+            m_functions=config.plc.m_functions,
         )
         # The scan watchdog and scan-time figures take the scan thread's CPU time (the
         # Runtime's default), in lockstep as in realtime: a busy host that deschedules the

@@ -37,7 +37,7 @@ def test_broken_program_lists_every_error() -> None:
     assert lines == [
         f"{path}:4:1: feed move without F",
         f"{path}:5:1: unsupported G code G5",
-        f"{path}:6:8: unknown address E",
+        f"{path}:6:8: E word with no code in this block that uses it",
         f"{path}:7:1: PS0116 #0 is always vacant (read only)",
         f"{path}:8:14: unterminated comment: '(' without ')'",
     ]

@@ -293,6 +293,9 @@ ERRORS = [
     ("drives: {plant: {screw: {lead: .inf}}}",
      "machines.m1.drives.plant.screw.lead: must be a finite number, got inf"),
     ("drives: {plant: [1]}", "machines.m1.drives.plant: must be a mapping, got a list"),
+    ("plc: {m_codes: {3: {ms: 10}}}",
+     "machines.m1.plc.m_codes.3: M3 is handled by the NC or the standard PLC program"),
+    ("plc: {m_codes: {31: {ms: 40000}}}", "machines.m1.plc.m_codes.31.ms: must be <= 29000"),
 ]  # fmt: skip
 
 

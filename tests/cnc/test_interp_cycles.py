@@ -119,8 +119,8 @@ def test_tv_int_12_subprogram_holes_three_tools() -> None:
 def test_cycle_errors() -> None:
     with pytest.raises(NcError, match="hole bottom"):
         run("G81 X1 R2 F100\n")
-    with pytest.raises(NcError, match="needs the R level"):
-        run("G81 X1 Z-2 F100\n")
+    with pytest.raises(NcError, match="G87 back boring needs R below"):
+        run("G0 Z10\nG87 X1 Z-2 Q1 F100\n")  # R omitted: the initial level, above the bore
     with pytest.raises(NcError, match="R level below"):
         run("G0 Z10\nG81 X1 Z2 R-2 F100\n")
     with pytest.raises(NcError, match="Q > 0"):
@@ -145,3 +145,42 @@ def test_cycle_in_other_planes() -> None:
 def test_g88_manual_stop_is_a_program_stop() -> None:
     cmds = run(START + "G88 X1 Y1 Z-1 R1 F10\n")
     assert any(isinstance(c, ProgramStop) for c in cmds)
+
+
+@pytest.mark.parametrize(
+    ("prog", "expected"),
+    [
+        # R never given: the R level is the initial level Z10 (the feed starts there)
+        ("G98 G81 X5 Y5 Z-4 F100\n", [("T", 5, 5, 10), ("F", 5, 5, -4), ("T", 5, 5, 10)]),
+        (
+            "G99 G81 X5 Y5 Z-4 F100\nX7\n",
+            [
+                ("T", 5, 5, 10),
+                ("F", 5, 5, -4),
+                ("T", 5, 5, 10),
+                ("T", 7, 5, 10),
+                ("F", 7, 5, -4),
+                ("T", 7, 5, 10),
+            ],
+        ),
+        # incremental: Z is measured from the R level = the initial level
+        ("G91 G99 G81 X5 Y5 Z-14 F100\n", [("T", 5, 5, 10), ("F", 5, 5, -4), ("T", 5, 5, 10)]),
+        # an R of an earlier cycle stays modal (the last R)
+        (
+            "G99 G81 X1 Y1 Z-4 R2 F100\nG80\nG0 Z20\nG81 X5 Y5 Z-4\n",
+            [
+                ("T", 1, 1, 10),
+                ("T", 1, 1, 2),
+                ("F", 1, 1, -4),
+                ("T", 1, 1, 2),
+                ("T", 1, 1, 20),
+                ("T", 5, 5, 20),
+                ("T", 5, 5, 2),
+                ("F", 5, 5, -4),
+                ("T", 5, 5, 2),
+            ],
+        ),
+    ],
+)
+def test_r_omitted_is_the_initial_level(prog: str, expected: list) -> None:
+    assert path(run(START + prog))[2:] == expected

@@ -17,7 +17,8 @@ LATHE = MachineParams(
 @pytest.mark.parametrize(
     ("prog", "line", "col", "fragment"),
     [
-        ("G0 X1\nG1 E5 F10\n", 2, 4, "unknown address E"),
+        ("G0 X1\nG1 E5 F10\n", 2, 4, "E word with no code in this block that uses it"),
+        ("G0 X1\nG1 V5 F10\n", 2, 4, "unknown address V"),
         ("G0 X1 A5\n", 1, 7, "axis A is not configured"),
         ("G0 G1 X1\n", 1, 4, "modal group 'motion'"),
         ("G90 G91 X1\n", 1, 5, "modal group 'distance'"),
