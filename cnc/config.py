@@ -127,6 +127,26 @@ class AxisConfig(_Section):
     home_mm: float = Field(
         0.0, description="Reference point (G28, homing), machine coordinates, mm."
     )
+    continuous: bool = Field(
+        False,
+        description="Rotary axis (A, B, C) only: endless (no soft limits; positions shown"
+        " modulo 360). A rotary axis reads every figure of its section in degrees: deg,"
+        " deg/min, deg/s², deg/s³.",
+    )
+
+
+class KinematicsConfig(_Section):
+    """Machine kinematics constants (`kinematics`): the `mill5` B45/C table-table machine
+    (002_postprocessor.md §4; the post-processor's cam/machines/mill5.yaml gives the same)."""
+
+    type: Literal["table_table_bc45"] = Field(
+        "table_table_bc45", description="`table_table_bc45`: B inclined 45° carrying C."
+    )
+    d_mm: float = Field(
+        0.0, description="C-table surface to the point where the B axis meets the C axis, mm."
+    )
+    tool_length_mm: float = Field(0.0, description="Z_T of eq. 9, mm.")
+    z_offset_mm: float = Field(0.0, description="z_OwOt of eq. 9, mm.")
 
 
 class SpindleConfig(_Section):
@@ -302,7 +322,11 @@ class MachineDataConfig(_Section):
 class MachineConfig(_Section):
     """One machine (`machines.<NAME>`, or a whole machine file)."""
 
-    kind: str = Field(description="Kinematics: `mill` (axes X Y Z) or `lathe` (axes X Z).")
+    kind: str = Field(
+        description="Kinematics: `mill` (axes X Y Z, optionally followed by rotary axes A, B,"
+        " C: mill4 is X Y Z A), `lathe` (axes X Z) or `mill5` (X Y Z B C: a 45° nutating B"
+        " table carrying the C table)."
+    )
     description: str = Field("", description="Free text for displays.")
     axes: dict[AxisName, AxisConfig] = Field(
         description="Axes by name, in drive order; see the axis keys below."
@@ -348,6 +372,10 @@ class MachineConfig(_Section):
         " other, each axis exactly once (e.g. [[Z], [X, Y]]); null = the kind's default"
         " (mill: Z first, then the others together; lathe: X, then Z).",
     )
+    kinematics: KinematicsConfig | None = Field(
+        None,
+        description="Kinematics constants of a `mill5` (null: the kind's defaults).",
+    )
     spindle: SpindleConfig = Field(
         default_factory=SpindleConfig, description="The spindle section."
     )
@@ -376,6 +404,7 @@ class MachineConfig(_Section):
                 max_accel=a.max_accel,
                 max_jerk=a.max_jerk,
                 home_mm=a.home_mm,
+                continuous=a.continuous,
             )
             for n, a in self.axes.items()
         )
@@ -396,6 +425,11 @@ class MachineConfig(_Section):
             ipo_cycle_s=self.ipo_cycle_ms / 1000.0,
             second_reference_mm=second,
             max_spindle_rpm=self.spindle.max_rpm,
+            kinematics=(
+                (self.kinematics.d_mm, self.kinematics.tool_length_mm, self.kinematics.z_offset_mm)
+                if self.kinematics is not None
+                else None
+            ),
         )
 
 
@@ -837,6 +871,8 @@ def _check_machine(name: tuple[Any, ...], m: MachineConfig) -> list[tuple[tuple,
     """Cross-field rules pydantic's per-field constraints cannot express."""
     out: list[tuple[tuple, str]] = []
     for axis, a in m.axes.items():
+        if a.continuous and axis not in "ABC":
+            out.append(((*name, "axes", axis, "continuous"), "only a rotary axis (A, B, C) is endless"))
         if a.min_mm >= a.max_mm:
             out.append(
                 (
