@@ -33,6 +33,7 @@ from cnc.params import AxisParams, DecimalStyle, MachineParams
 
 __all__ = [
     "BUILTIN_MACHINES",
+    "SHIPPED_MACHINES",
     "MACHINES_DIR",
     "ApiKeyConfig",
     "AuthConfig",
@@ -61,7 +62,9 @@ __all__ = [
 ]
 
 MACHINES_DIR = Path(__file__).resolve().parent / "machines"
-BUILTIN_MACHINES = ("mill3", "lathe2")
+BUILTIN_MACHINES = ("mill3", "lathe2")  # the default cell: one of each
+# every machine file shipped in cnc/machines (a `base:` or `--machine` may name any)
+SHIPPED_MACHINES = (*BUILTIN_MACHINES, "mill4", "mill5")
 CAN_BITRATES = (10_000, 20_000, 50_000, 125_000, 250_000, 500_000, 800_000, 1_000_000)
 IPO_CYCLE_MIN_MS = 0.5
 IPO_CYCLE_MAX_MS = 8.0
@@ -171,6 +174,13 @@ class DriveAxisConfig(_Section):
     """One axis' drive (`drives.axes.<NAME>`)."""
 
     node_id: int = Field(ge=1, le=127, description="CANopen node-ID, 1..127.")
+    line: int = Field(
+        0,
+        ge=0,
+        le=3,
+        description="CAN line of the drive (0 = `can.channel`, k = that channel + `.k`):"
+        " a second line doubles the room for cyclic PDOs (5 axes at a 1 ms IPO cycle).",
+    )
     plant: PlantOverrides = Field(
         default_factory=dict,
         description="Plant overrides for this axis, on top of `drives.plant`.",
@@ -194,6 +204,11 @@ class DrivesConfig(_Section):
         """The node-ID of `axis` (the `index`-th configured axis)."""
         entry = self.axes.get(axis)
         return entry.node_id if entry is not None else index + 1
+
+    def line(self, axis: str) -> int:
+        """The CAN line of `axis` (0 unless configured)."""
+        entry = self.axes.get(axis)
+        return entry.line if entry is not None else 0
 
     def plant_overrides(self, axis: str) -> dict[str, dict[str, Any]]:
         """Merged overrides for one axis: `PlantParams().with_(**overrides)`."""
@@ -680,13 +695,13 @@ def _resolve_bases(node: Node, src_dir: Path, path: tuple[Any, ...], depth: int 
     if not isinstance(v, ScalarNode) or not v.value:
         raise fail("must name a shipped machine or a file")
     ref = v.value
-    if ref in BUILTIN_MACHINES:
+    if ref in SHIPPED_MACHINES:
         target = MACHINES_DIR / f"{ref}.yaml"
     else:
         target = (src_dir / ref).resolve()
         if not target.is_file():
             raise fail(
-                f"no shipped machine or file {ref!r} (shipped: {', '.join(BUILTIN_MACHINES)})"
+                f"no shipped machine or file {ref!r} (shipped: {', '.join(SHIPPED_MACHINES)})"
             )
     base = _read(target)
     problems: list[ConfigProblem] = []
@@ -1107,10 +1122,10 @@ def load_machine_params(
 
 
 def builtin_machine(name: str) -> MachineConfig:
-    """A shipped default machine: `mill3` (3-axis vertical mill, ATC) or `lathe2` (X Z
-    turret lathe)."""
-    if name not in BUILTIN_MACHINES:
-        raise NcError(f"no shipped machine {name!r} (shipped: {', '.join(BUILTIN_MACHINES)})")
+    """A shipped machine: `mill3` (3-axis vertical mill, ATC), `lathe2` (X Z turret
+    lathe), `mill4` (mill3 with a rotary table A) or `mill5` (X Y Z B45 C table-table)."""
+    if name not in SHIPPED_MACHINES:
+        raise NcError(f"no shipped machine {name!r} (shipped: {', '.join(SHIPPED_MACHINES)})")
     return load_machine_config(MACHINES_DIR / f"{name}.yaml")
 
 
