@@ -3,7 +3,9 @@
 Every file of `../shared/reference/corpus/gcode` (tests/reference.py GCODE_CORPUS; never
 copied into the repository) is checked exactly as a new user would check it:
 `fmscell nc check FILE`, or `fmscell nc check --kind lathe FILE` for the files whose
-SOURCES.md kind is lathe, with no other flag, so the shipped machines' defaults decide.
+SOURCES.md kind is lathe, with no other flag, so the shipped machines' defaults decide;
+a baseline entry with `machine: NAME` (the programs with rotary A words: mill4) is checked
+on that shipped machine instead (`fmscell nc check --config NAME FILE`).
 The command line runs in this process (typer's runner) to spare 95 interpreter start-ups;
 its exit code and output are the ones a shell would see.
 
@@ -49,6 +51,7 @@ _WARNING = re.compile(r"(^|:\s)warning\b", re.IGNORECASE)
 class Expected:
     expect: str  # pass | fail | invalid
     note: str = ""  # the first error (fail) or why it is another controller's language (invalid)
+    machine: str = ""  # a shipped machine to check the file on ("": the kind's default)
 
 
 @dataclass(frozen=True)
@@ -94,8 +97,11 @@ def corpus_kinds(sources_md: Path) -> dict[str, str]:
     return kinds
 
 
-def check_argv(path: Path, kind: str) -> list[str]:
-    """The `nc check` arguments a user gives: no flag beyond `--kind lathe`."""
+def check_argv(path: Path, kind: str, machine: str = "") -> list[str]:
+    """The `nc check` arguments a user gives: no flag beyond `--kind lathe` or, for a file
+    that needs another shipped machine, `--config NAME`."""
+    if machine:
+        return ["check", "--config", machine, str(path)]
     return ["check", "--kind", "lathe", str(path)] if kind == "lathe" else ["check", str(path)]
 
 
@@ -107,13 +113,13 @@ def split_output(text: str) -> tuple[list[str], list[str]]:
     return [ln for ln in lines if not _WARNING.search(ln)], warnings
 
 
-def check_file(path: Path, kind: str) -> Result:
+def check_file(path: Path, kind: str, machine: str = "") -> Result:
     from typer.testing import CliRunner
 
     from cnc.cli import nc_app
 
     start = time.perf_counter()
-    out = CliRunner().invoke(nc_app, check_argv(path, kind))
+    out = CliRunner().invoke(nc_app, check_argv(path, kind, machine))
     seconds = time.perf_counter() - start
     if out.exception is not None and not isinstance(out.exception, SystemExit):
         # A crash of the checker is a failure with its own first error, never a pass.
@@ -132,13 +138,19 @@ def check_file(path: Path, kind: str) -> Result:
                   seconds)  # fmt: skip
 
 
-def run_corpus(corpus: Path = GCODE_CORPUS) -> list[Result]:
+def run_corpus(
+    corpus: Path = GCODE_CORPUS, machines: Mapping[str, str] | None = None
+) -> list[Result]:
+    """Check every file; `machines` (file -> shipped machine, default: the baseline's
+    `machine:` entries) picks the machine of the files that need another one."""
+    if machines is None:
+        machines = {n: e.machine for n, e in load_baseline().items() if e.machine}
     kinds = corpus_kinds(corpus / "SOURCES.md")
     files = sorted(p for p in corpus.iterdir() if p.is_file() and p.name != "SOURCES.md")
     unknown = [p.name for p in files if p.name not in kinds]
     if unknown:
         raise ValueError(f"{corpus}/SOURCES.md: no row (kind) for {', '.join(unknown)}")
-    return [check_file(p, kinds[p.name]) for p in files]
+    return [check_file(p, kinds[p.name], machines.get(p.name, "")) for p in files]
 
 
 def load_baseline(path: Path = BASELINE) -> dict[str, Expected]:
@@ -156,15 +168,19 @@ def load_baseline(path: Path = BASELINE) -> dict[str, Expected]:
         if expect != "pass" and not (isinstance(note, str) and note):
             key = "error" if expect == "fail" else "reason"
             raise ValueError(f"{where}/{key} is required for expect: {expect}")
-        out[str(name)] = Expected(expect, note or "")
+        machine = entry.get("machine", "")
+        if not isinstance(machine, str):
+            raise ValueError(f"{where}/machine must be a shipped machine's name")
+        out[str(name)] = Expected(expect, note or "", machine)
     return out
 
 
 def _entry(name: str, expected: Expected) -> str:
+    machine = f", machine: {expected.machine}" if expected.machine else ""
     if expected.expect == "pass":
-        return f"  {name}: {{expect: pass}}"
+        return f"  {name}: {{expect: pass{machine}}}"
     key = "error" if expected.expect == "fail" else "reason"
-    return f"  {name}: {{expect: {expected.expect}, {key}: {_quote(expected.note)}}}"
+    return f"  {name}: {{expect: {expected.expect}, {key}: {_quote(expected.note)}{machine}}}"
 
 
 def _quote(text: str) -> str:
@@ -222,7 +238,7 @@ def table(results: Iterable[Result], baseline: Mapping[str, Expected]) -> str:
 def write_baseline(results: Iterable[Result], old: Mapping[str, Expected], path: Path) -> None:
     """Regenerate from today's results; invalid entries (a judgement, not a result) are kept."""
     lines = [
-        "# Expected result of `fmscell nc check [--kind lathe] FILE` on every corpus file",
+        "# Expected result of `fmscell nc check [--kind lathe | --config MACHINE] FILE` on every corpus file",
         "# (../shared/reference/corpus/gcode). Checked by tests/cnc/test_corpus.py and",
         "# `make corpus`; regenerate with `make corpus-baseline` after a change that moves",
         "# results. pass | fail (error: today's first error) | invalid (reason: another",
@@ -231,12 +247,12 @@ def write_baseline(results: Iterable[Result], old: Mapping[str, Expected], path:
     ]
     for r in results:
         exp = old.get(r.file)
+        machine = exp.machine if exp is not None else ""
         if exp is not None and exp.expect == "invalid":
             lines.append(_entry(r.file, exp))
         else:
-            lines.append(
-                _entry(r.file, Expected("pass") if r.passed else Expected("fail", r.first_error))
-            )
+            got = Expected("pass") if r.passed else Expected("fail", r.first_error)
+            lines.append(_entry(r.file, Expected(got.expect, got.note, machine)))
     tmp = path.with_suffix(".tmp")
     tmp.write_text("\n".join(lines) + "\n", encoding="utf-8")
     tmp.replace(path)
@@ -252,8 +268,8 @@ def main(argv: list[str] | None = None) -> int:
     if not (args.corpus / "SOURCES.md").is_file():
         print(MISSING, file=sys.stderr)
         return 2
-    results = run_corpus(args.corpus)
     old = load_baseline(args.baseline) if args.baseline.is_file() else {}
+    results = run_corpus(args.corpus, {n: e.machine for n, e in old.items() if e.machine})
     if args.write:
         write_baseline(results, old, args.baseline)
         old = load_baseline(args.baseline)
