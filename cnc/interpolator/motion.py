@@ -279,12 +279,15 @@ class Motion:
         return self._pose
 
     def segment_ends(self) -> tuple[Vec, Vec] | None:
-        """Start and end pose (X Y Z and rotary) of the piece under the current
-        position, or None at rest before the first: the straight line it programs."""
+        """Start and end pose (X Y Z and rotary) of the feed piece under the current
+        position: the straight line it programs. None before the first piece and on a
+        rapid (G0 programs no path, only its end point)."""
         segs = self.path.segs
         if self._kp >= len(segs):
             return None
         g = segs[self._kp]
+        if g.rapid:
+            return None
         return g.geom.start + g.rot0, g.geom.end + g.rot1
 
     @property
