@@ -1143,6 +1143,7 @@ def config_reference_markdown() -> str:
     sections: list[tuple[str, type[BaseModel]]] = [
         ("machines.<NAME>", MachineConfig),
         ("machines.<NAME>.axes.<AXIS>", AxisConfig),
+        ("machines.<NAME>.kinematics", KinematicsConfig),
         ("machines.<NAME>.spindle", SpindleConfig),
         ("machines.<NAME>.tool_changer", ToolChangerConfig),
         ("machines.<NAME>.drives", DrivesConfig),
