@@ -77,9 +77,11 @@ def run(points: int, substep: float | None) -> dict:
         m.command("cycle_start")
         t0, w0, c0 = m.t, time.perf_counter(), time.process_time()
         m.run_until(
-            lambda mm: bool(mm.alarms)
-            or mm.status.execution in ("PROGRAM_COMPLETED", "READY")
-            and mm.t > t0 + 0.05,
+            lambda mm: (
+                bool(mm.alarms)
+                or mm.status.execution in ("PROGRAM_COMPLETED", "READY")
+                and mm.t > t0 + 0.05
+            ),
             3600.0,
         )
         wall = time.perf_counter() - w0
@@ -99,7 +101,10 @@ def run(points: int, substep: float | None) -> dict:
             "real_time_factor_cpu": round(machine_s / cpu, 2) if cpu > 0 else None,
             "peak_tool_tip_deviation_mm": round(tip.peak, 6) if tip else None,
             "peak_tool_tip_deviation_actual_mm": round(tip.actual_peak, 6) if tip else None,
-            "bus_load_percent": {"mean": round(load.mean * 100, 1), "peak": round(load.peak * 100, 1)},
+            "bus_load_percent": {
+                "mean": round(load.mean * 100, 1),
+                "peak": round(load.peak * 100, 1),
+            },
         }
     finally:
         m.close()

@@ -887,7 +887,9 @@ def _check_machine(name: tuple[Any, ...], m: MachineConfig) -> list[tuple[tuple,
     out: list[tuple[tuple, str]] = []
     for axis, a in m.axes.items():
         if a.continuous and axis not in "ABC":
-            out.append(((*name, "axes", axis, "continuous"), "only a rotary axis (A, B, C) is endless"))
+            out.append(
+                ((*name, "axes", axis, "continuous"), "only a rotary axis (A, B, C) is endless")
+            )
         if a.min_mm >= a.max_mm:
             out.append(
                 (

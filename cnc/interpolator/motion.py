@@ -142,8 +142,7 @@ class Motion:
             start = (0.0,) * (3 + nrot)
         if len(start) != 3 + nrot:
             raise NcError(
-                f"the planner moves poses of {3 + nrot} axes; got a start pose of"
-                f" {len(start)} axes"
+                f"the planner moves poses of {3 + nrot} axes; got a start pose of {len(start)} axes"
             )
         self._pose = (float(start[0]), float(start[1]), float(start[2]))
         self._rpose = tuple([float(v) for v in start[3:]])

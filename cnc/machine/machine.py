@@ -251,7 +251,11 @@ class Machine:
                 # (not in the cycle homing changed the frame: last cycle's target was in
                 # the old one, up to the whole travel away)
                 rehomed = homed_now.get(axis) != homed_before.get(axis)
-                fe = prev.get(axis, 0.0) - fb.actual.get(axis, 0.0) if fb.enabled and not rehomed else 0.0
+                fe = (
+                    prev.get(axis, 0.0) - fb.actual.get(axis, 0.0)
+                    if fb.enabled and not rehomed
+                    else 0.0
+                )
             if abs(fe) > self.max_following_error[axis]:
                 self.max_following_error[axis] = abs(fe)
         if status.execution != "ACTIVE" or not fb.enabled:

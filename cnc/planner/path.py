@@ -148,7 +148,9 @@ class Segment:
                     q.append(0.0)
                 self.rq = (q[0], q[1], q[2])
                 self.rotating = True
-                self.vphys, self.at, self.jt = rotary_caps(lim, self.rq, self.vphys, self.at, self.jt)
+                self.vphys, self.at, self.jt = rotary_caps(
+                    lim, self.rq, self.vphys, self.at, self.jt
+                )
         else:
             assert isinstance(geom, Arc)
             # the limits at the programmed feed come with the cap: a plan asks for both

@@ -85,7 +85,12 @@ def test_three_axis_machine_keeps_three_axis_poses():
 
 BAD = [
     # program, machine, line:col, words in the message
-    ("G0 X-10\nG0 X-20 A30", MachineParams(), "2:9", "unknown address A (axis A is not configured)"),
+    (
+        "G0 X-10\nG0 X-20 A30",
+        MachineParams(),
+        "2:9",
+        "unknown address A (axis A is not configured)",
+    ),
     ("G0 X-10 B30", MILL4, "1:9", "unknown address B (axis B is not configured)"),
     ("G0 A30\nG0 A800", MILL4, "2:4", "axis A move to 800.0000 deg is beyond the soft limit"),
     ("G91 G0 A700\nA30", MILL4, "2:1", "beyond the soft limit [-720, 720] deg"),
@@ -178,8 +183,10 @@ def rotary_programs(draw):
         if kind != "linear":
             end[3] = draw(angle)
         f = draw(st.sampled_from([600.0, 3000.0, 12000.0]))
-        cmd = StraightTraverse(i + 2, tuple(end)) if kind == "g0" else StraightFeed(
-            i + 2, tuple(end), f
+        cmd = (
+            StraightTraverse(i + 2, tuple(end))
+            if kind == "g0"
+            else StraightFeed(i + 2, tuple(end), f)
         )
         cmds.append(cmd)
         pos = end
