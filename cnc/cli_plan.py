@@ -239,9 +239,7 @@ def plan_cmd(
         interp = Interpreter(params, file=str(file), machine_data=setup.machine_data)
         # X Y Z, then the rotary axes at their reference angle (where the interpreter
         # starts them too)
-        start = tuple(interp.state.machine_position) + tuple(
-            a.home_mm for a in params.rotary_axes
-        )
+        start = tuple(interp.state.machine_position) + tuple(a.home_mm for a in params.rotary_axes)
         names = [a.name for a in params.axes if a.name in AXIS_INDEX]
         out = trace.open("w", encoding="ascii", newline="") if trace else None
         try:
