@@ -530,6 +530,7 @@ class Path:
         after = gb.length if b_final or type(gb) is not Line else 0.0
         gap = ga.length if ga.length > after else after
         cap = junction_cap(self.lim, du, dk, gap, at_max, not big)
+        rot_jump = False
         rl = self.lim.rot
         if rl is not None and (a.rotating or b.rotating):
             qa, qb = a.rq, b.rq
@@ -537,13 +538,13 @@ class Path:
             a.jdur = dr
             if dr[0] != 0.0 or dr[1] != 0.0 or dr[2] != 0.0:
                 big = big or _big3(dr)
-                du0 = du0 or dr[0] or dr[1] or dr[2]  # a jump for `jump` below
+                rot_jump = True
                 rcap = junction_cap(rl, dr, (0.0, 0.0, 0.0), gap, at_max, not big)
                 if rcap < cap:
                     cap = rcap
         if big and a.rapid != b.rapid:
             cap = 0.0  # a corner between a rapid and a feed move is an exact stop
-        jump = bool(du0 or du1 or du2 or dk[0] or dk[1] or dk[2])
+        jump = rot_jump or bool(du0 or du1 or du2 or dk[0] or dk[1] or dk[2])
         a.jcap_end = cap
         a.jcoast = -1.0 if jump and cap > 0.0 else 0.0
         a.jdu = du
