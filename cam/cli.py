@@ -15,7 +15,7 @@ cam_app = typer.Typer(
     help="CAM to machine: APT source -> CL data -> a machine's NC program.", no_args_is_help=True
 )
 
-NOT_CHECKED_5AXIS = "not available: the NC kernel does not accept B and C words yet"
+NOT_CHECKED_5AXIS = "not available: the NC kernel has no machine of this kind"
 
 
 def _fail(msg: str, code: int) -> typer.Exit:
@@ -164,14 +164,22 @@ def post_cmd(
 def _nc_check(path: Path, mach, offsets, source: Path, repost) -> dict:
     """`nc check` of the posted program for the kinds the NC kernel runs; an error's NC line
     is traced back to the CL/APT line that produced it."""
-    if mach.kind not in ("mill", "lathe"):
-        return {"status": NOT_CHECKED_5AXIS, "travel": mach.kind == "mill5", "errors": []}
     from dataclasses import replace
 
     from cnc.interp import check
 
-    params = mach.config.params
-    travel = offsets is not None
+    if mach.kind == "mill5":
+        # the NC's mill5 (cnc/machines/mill5.yaml, the post's geometry and travel): its
+        # G54 is 0, so the post's travel check is the machine's
+        from cnc.config import builtin_machine
+
+        params = builtin_machine("mill5").params
+        travel = True
+    elif mach.kind not in ("mill", "lathe"):
+        return {"status": NOT_CHECKED_5AXIS, "travel": False, "errors": []}
+    else:
+        params = mach.config.params
+        travel = offsets is not None
     if not travel:
         big = 1e9
         params = replace(

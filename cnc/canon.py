@@ -7,9 +7,11 @@ seconds and rpm**. Each command carries `line`, the 1-based source line that pro
 (for subprograms: the line in the file the block came from), so status and errors can point
 back at the program.
 
-Positions are `Pose` tuples (X, Y, Z). A lathe keeps Y at 0 and its kinematics drops it;
-a 5-axis machine will extend Pose with rotary axes (see cnc.kinematics), which is why code
-should index poses by position in the kinematics' axis list rather than assume length 3.
+Positions are `Pose` tuples: X, Y, Z, then the machine's rotary axes in configured order
+(`MachineParams.pose_axes`: mill4 X Y Z A, mill5 X Y Z B C; rotary angles in degrees).
+A machine without rotary axes has 3-component poses; a lathe keeps Y at 0 and its
+kinematics drops it. An arc's centre has the same length as its end (its rotary part is
+the unchanged angles: a rotary axis does not turn in a circle).
 """
 
 from __future__ import annotations

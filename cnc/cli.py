@@ -16,7 +16,10 @@ def check_cmd(
     file: Path = typer.Argument(..., help="part program file (ISO 6983 / Fanuc)"),
     kind: str = typer.Option("mill", help="machine kind: mill (mill3) or lathe (lathe2)"),
     config: Path | None = typer.Option(
-        None, "--config", help="machine YAML (cnc.config); overrides --kind"
+        None,
+        "--config",
+        help="machine YAML (cnc.config) or a shipped machine (mill3, lathe2, mill4, mill5);"
+        " overrides --kind",
     ),
     decimal: str | None = typer.Option(
         None,

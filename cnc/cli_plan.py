@@ -85,7 +85,7 @@ def plan_run(
     blocks = moves = 0
     last_line = None
     feed_len = rapid_len = 0.0
-    pos = tuple(start)
+    pos = tuple(start[:3])  # the X Y Z path (rotary axes: docs/motion.md)
     it = iter(commands)
     pending = next(it, None)
     fed_all = pending is None
@@ -102,11 +102,11 @@ def plan_run(
             last_line = cmd.line
         if isinstance(cmd, MOTION_TYPES):
             moves += 1
-            end = tuple(float(x) for x in cmd.end)
+            end = tuple(float(x) for x in cmd.end[:3])
             if end != pos or getattr(cmd, "center", None) is not None:
                 if hasattr(cmd, "center"):
                     piece = arc_from_canon(
-                        pos, end, cmd.center, cmd.plane.value, cmd.clockwise, cmd.turns
+                        pos, end, cmd.center[:3], cmd.plane.value, cmd.clockwise, cmd.turns
                     )
                 else:
                     piece = Line(pos, end)
@@ -141,7 +141,7 @@ def plan_run(
         else:
             s = motion.step()
             cycles += 1
-            peaks.add(s.pose)
+            peaks.add(s.pose[:3])
             if on_sample is not None:
                 dev.sample(s.pose, motion.block)
                 on_sample(s)
@@ -237,7 +237,9 @@ def plan_cmd(
         except OSError as e:
             raise NcError(f"cannot read program: {e.strerror}", file=str(file)) from e
         interp = Interpreter(params, file=str(file), machine_data=setup.machine_data)
-        start = tuple(interp.state.machine_position)
+        # X Y Z, then the rotary axes at their reference angle (where the interpreter
+        # starts them too)
+        start = tuple(interp.state.machine_position) + tuple(a.home_mm for a in params.rotary_axes)
         names = [a.name for a in params.axes if a.name in AXIS_INDEX]
         out = trace.open("w", encoding="ascii", newline="") if trace else None
         try:

@@ -42,11 +42,13 @@ def machine_setup(
 ) -> Setup:
     """The setup from the command line's options; raises NcError (file:line:col) or
     typer.BadParameter for a bad option."""
-    from cnc.config import builtin_machine, load_machine_config
+    from cnc.config import SHIPPED_MACHINES, builtin_machine, load_machine_config
     from cnc.machine_data import MachineData, apply_files
     from cnc.params import DecimalStyle
 
-    if config is not None:
+    if config is not None and str(config) in SHIPPED_MACHINES and not config.exists():
+        cfg = builtin_machine(str(config))  # `--config mill4`: a shipped machine by name
+    elif config is not None:
         cfg = load_machine_config(config, name)
     else:
         if kind not in KIND_MACHINE:

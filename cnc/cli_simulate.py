@@ -119,6 +119,21 @@ def _result(m, result: str, cycle_time: float, blocks: int) -> dict:
         if load is not None
         else {"mean": 0.0, "peak": 0.0},
         "blocks": blocks,
+        **_tool_tip(m),
+    }
+
+
+def _tool_tip(m) -> dict:
+    """mill5: the program's peak tool-tip deviation from the programmed straight line, of
+    the interpolated joints and of the drives' actual joints (the servo lag added)."""
+    tip = m.status.tool_tip
+    if tip is None:
+        return {}
+    return {
+        "tool_tip": {
+            "peak_deviation_mm": round(tip.peak, 6),
+            "actual_peak_deviation_mm": round(tip.actual_peak, 6),
+        }
     }
 
 
@@ -134,7 +149,7 @@ def _config(machine: str, config_path: Path | None):
 def simulate_cmd(
     file: Path = typer.Argument(..., help="part program file"),
     machine: str = typer.Option(
-        "mill3", "--machine", help="mill3, lathe2 or a machine in --config"
+        "mill3", "--machine", help="mill3, lathe2, mill4, mill5 or a machine in --config"
     ),
     config: Path | None = typer.Option(None, "--config", help="cell or machine YAML"),
     as_json: bool = typer.Option(True, "--json/--no-json", help="print one JSON object"),

@@ -33,6 +33,7 @@ from cnc.params import AxisParams, DecimalStyle, MachineParams
 
 __all__ = [
     "BUILTIN_MACHINES",
+    "SHIPPED_MACHINES",
     "MACHINES_DIR",
     "ApiKeyConfig",
     "AuthConfig",
@@ -61,7 +62,9 @@ __all__ = [
 ]
 
 MACHINES_DIR = Path(__file__).resolve().parent / "machines"
-BUILTIN_MACHINES = ("mill3", "lathe2")
+BUILTIN_MACHINES = ("mill3", "lathe2")  # the default cell: one of each
+# every machine file shipped in cnc/machines (a `base:` or `--machine` may name any)
+SHIPPED_MACHINES = (*BUILTIN_MACHINES, "mill4", "mill5")
 CAN_BITRATES = (10_000, 20_000, 50_000, 125_000, 250_000, 500_000, 800_000, 1_000_000)
 IPO_CYCLE_MIN_MS = 0.5
 IPO_CYCLE_MAX_MS = 8.0
@@ -127,6 +130,26 @@ class AxisConfig(_Section):
     home_mm: float = Field(
         0.0, description="Reference point (G28, homing), machine coordinates, mm."
     )
+    continuous: bool = Field(
+        False,
+        description="Rotary axis (A, B, C) only: endless (no soft limits; positions shown"
+        " modulo 360). A rotary axis reads every figure of its section in degrees: deg,"
+        " deg/min, deg/s², deg/s³.",
+    )
+
+
+class KinematicsConfig(_Section):
+    """Machine kinematics constants (`kinematics`): the `mill5` B45/C table-table machine
+    (002_postprocessor.md §4; the post-processor's cam/machines/mill5.yaml gives the same)."""
+
+    type: Literal["table_table_bc45"] = Field(
+        "table_table_bc45", description="`table_table_bc45`: B inclined 45° carrying C."
+    )
+    d_mm: float = Field(
+        0.0, description="C-table surface to the point where the B axis meets the C axis, mm."
+    )
+    tool_length_mm: float = Field(0.0, description="Z_T of eq. 9, mm.")
+    z_offset_mm: float = Field(0.0, description="z_OwOt of eq. 9, mm.")
 
 
 class SpindleConfig(_Section):
@@ -151,6 +174,13 @@ class DriveAxisConfig(_Section):
     """One axis' drive (`drives.axes.<NAME>`)."""
 
     node_id: int = Field(ge=1, le=127, description="CANopen node-ID, 1..127.")
+    line: int = Field(
+        0,
+        ge=0,
+        le=3,
+        description="CAN line of the drive (0 = `can.channel`, k = that channel + `.k`):"
+        " a second line doubles the room for cyclic PDOs (5 axes at a 1 ms IPO cycle).",
+    )
     plant: PlantOverrides = Field(
         default_factory=dict,
         description="Plant overrides for this axis, on top of `drives.plant`.",
@@ -174,6 +204,11 @@ class DrivesConfig(_Section):
         """The node-ID of `axis` (the `index`-th configured axis)."""
         entry = self.axes.get(axis)
         return entry.node_id if entry is not None else index + 1
+
+    def line(self, axis: str) -> int:
+        """The CAN line of `axis` (0 unless configured)."""
+        entry = self.axes.get(axis)
+        return entry.line if entry is not None else 0
 
     def plant_overrides(self, axis: str) -> dict[str, dict[str, Any]]:
         """Merged overrides for one axis: `PlantParams().with_(**overrides)`."""
@@ -344,7 +379,11 @@ class MachineDataConfig(_Section):
 class MachineConfig(_Section):
     """One machine (`machines.<NAME>`, or a whole machine file)."""
 
-    kind: str = Field(description="Kinematics: `mill` (axes X Y Z) or `lathe` (axes X Z).")
+    kind: str = Field(
+        description="Kinematics: `mill` (axes X Y Z, optionally followed by rotary axes A, B,"
+        " C: mill4 is X Y Z A), `lathe` (axes X Z) or `mill5` (X Y Z B C: a 45° nutating B"
+        " table carrying the C table)."
+    )
     description: str = Field("", description="Free text for displays.")
     axes: dict[AxisName, AxisConfig] = Field(
         description="Axes by name, in drive order; see the axis keys below."
@@ -404,6 +443,10 @@ class MachineConfig(_Section):
         " other, each axis exactly once (e.g. [[Z], [X, Y]]); null = the kind's default"
         " (mill: Z first, then the others together; lathe: X, then Z).",
     )
+    kinematics: KinematicsConfig | None = Field(
+        None,
+        description="Kinematics constants of a `mill5` (null: the kind's defaults).",
+    )
     spindle: SpindleConfig = Field(
         default_factory=SpindleConfig, description="The spindle section."
     )
@@ -432,6 +475,7 @@ class MachineConfig(_Section):
                 max_accel=a.max_accel,
                 max_jerk=a.max_jerk,
                 home_mm=a.home_mm,
+                continuous=a.continuous,
             )
             for n, a in self.axes.items()
         )
@@ -455,6 +499,11 @@ class MachineConfig(_Section):
             call_nesting=self.call_nesting,
             macro_nesting=self.macro_nesting,
             plc_m_codes=self.plc.nc_m_codes,
+            kinematics=(
+                (self.kinematics.d_mm, self.kinematics.tool_length_mm, self.kinematics.z_offset_mm)
+                if self.kinematics is not None
+                else None
+            ),
         )
 
 
@@ -705,13 +754,13 @@ def _resolve_bases(node: Node, src_dir: Path, path: tuple[Any, ...], depth: int 
     if not isinstance(v, ScalarNode) or not v.value:
         raise fail("must name a shipped machine or a file")
     ref = v.value
-    if ref in BUILTIN_MACHINES:
+    if ref in SHIPPED_MACHINES:
         target = MACHINES_DIR / f"{ref}.yaml"
     else:
         target = (src_dir / ref).resolve()
         if not target.is_file():
             raise fail(
-                f"no shipped machine or file {ref!r} (shipped: {', '.join(BUILTIN_MACHINES)})"
+                f"no shipped machine or file {ref!r} (shipped: {', '.join(SHIPPED_MACHINES)})"
             )
     base = _read(target)
     problems: list[ConfigProblem] = []
@@ -896,6 +945,10 @@ def _check_machine(name: tuple[Any, ...], m: MachineConfig) -> list[tuple[tuple,
     """Cross-field rules pydantic's per-field constraints cannot express."""
     out: list[tuple[tuple, str]] = []
     for axis, a in m.axes.items():
+        if a.continuous and axis not in "ABC":
+            out.append(
+                ((*name, "axes", axis, "continuous"), "only a rotary axis (A, B, C) is endless")
+            )
         if a.min_mm >= a.max_mm:
             out.append(
                 (
@@ -1137,10 +1190,10 @@ def load_machine_params(
 
 
 def builtin_machine(name: str) -> MachineConfig:
-    """A shipped default machine: `mill3` (3-axis vertical mill, ATC) or `lathe2` (X Z
-    turret lathe)."""
-    if name not in BUILTIN_MACHINES:
-        raise NcError(f"no shipped machine {name!r} (shipped: {', '.join(BUILTIN_MACHINES)})")
+    """A shipped machine: `mill3` (3-axis vertical mill, ATC), `lathe2` (X Z turret
+    lathe), `mill4` (mill3 with a rotary table A) or `mill5` (X Y Z B45 C table-table)."""
+    if name not in SHIPPED_MACHINES:
+        raise NcError(f"no shipped machine {name!r} (shipped: {', '.join(SHIPPED_MACHINES)})")
     return load_machine_config(MACHINES_DIR / f"{name}.yaml")
 
 
@@ -1158,6 +1211,7 @@ def config_reference_markdown() -> str:
     sections: list[tuple[str, type[BaseModel]]] = [
         ("machines.<NAME>", MachineConfig),
         ("machines.<NAME>.axes.<AXIS>", AxisConfig),
+        ("machines.<NAME>.kinematics", KinematicsConfig),
         ("machines.<NAME>.spindle", SpindleConfig),
         ("machines.<NAME>.tool_changer", ToolChangerConfig),
         ("machines.<NAME>.drives", DrivesConfig),

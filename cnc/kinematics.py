@@ -5,7 +5,9 @@ coordinates, mm); drives move joints. A kinematics object maps between the two, 
 style: small, pluggable, chosen by the machine's `kind` (`kinematics_for(params)`), with
 new kinds added through `register_kinematics`. All functions here are pure.
 
-* `CartesianMill`: joints X Y Z are the pose itself.
+* `CartesianMill`: joints X Y Z (and rotary A/B/C of a 4th-axis table) are the pose itself.
+* `MillBC45`: the `mill5` machine as the NC runs it (pose = joints X Y Z B C, posted
+  programs are in joint coordinates) with the tool tip by forward kinematics.
 * `Lathe`: joints X Z; Y is held at 0. X is the radius in machine coordinates (diameter
   programming is the interpreter's business).
 * `TableTableBC45`: the seam for the 5-axis DMU-70-like machine of 002_postprocessor.md
@@ -31,6 +33,7 @@ __all__ = [
     "FiveAxisJoints",
     "Kinematics",
     "Lathe",
+    "MillBC45",
     "TableTableBC45",
     "bc45_forward",
     "bc45_inverse",
@@ -68,19 +71,24 @@ def _check_len(what: str, values: Sequence[float], n: int, names: str) -> None:
 
 @dataclass(frozen=True, slots=True)
 class CartesianMill:
-    """Three orthogonal linear axes: joint = pose."""
+    """Three orthogonal linear axes, optionally followed by rotary axes (a 4th-axis
+    rotary table A: mill4): joint = pose, the rotary joints in degrees."""
+
+    rotary: tuple[str, ...] = ()
 
     @property
     def axis_names(self) -> tuple[str, ...]:
-        return ("X", "Y", "Z")
+        return ("X", "Y", "Z", *self.rotary)
 
     def to_joints(self, pose: Pose, previous: Sequence[float] | None = None) -> tuple[float, ...]:
-        _check_len("mill pose", pose, 3, "X Y Z")
-        return (float(pose[0]), float(pose[1]), float(pose[2]))
+        names = self.axis_names
+        _check_len("mill pose", pose, len(names), " ".join(names))
+        return tuple(float(v) for v in pose)
 
     def to_pose(self, joints: Sequence[float]) -> Pose:
-        _check_len("mill joints", joints, 3, "X Y Z")
-        return (float(joints[0]), float(joints[1]), float(joints[2]))
+        names = self.axis_names
+        _check_len("mill joints", joints, len(names), " ".join(names))
+        return tuple(float(v) for v in joints)
 
 
 @dataclass(frozen=True, slots=True)
@@ -259,10 +267,51 @@ class TableTableBC45:
         return (*tip, *axis)
 
 
+@dataclass(frozen=True, slots=True)
+class MillBC45:
+    """The NC's view of the `mill5` machine: a program for a table-table machine is
+    written in joint coordinates (the post did the inverse kinematics), so pose = joints
+    (X Y Z B C); `tool_tip` is the forward transform into the workpiece frame, the figure
+    the tool-tip deviation and the dashboard's plot use."""
+
+    d: float = 0.0
+    tool_length: float = 0.0
+    z_offset: float = 0.0
+
+    @property
+    def axis_names(self) -> tuple[str, ...]:
+        return ("X", "Y", "Z", "B", "C")
+
+    def to_joints(self, pose: Pose, previous: Sequence[float] | None = None) -> tuple[float, ...]:
+        _check_len("mill5 pose", pose, 5, "X Y Z B C")
+        return tuple(float(v) for v in pose)
+
+    def to_pose(self, joints: Sequence[float]) -> Pose:
+        _check_len("mill5 joints", joints, 5, "X Y Z B C")
+        return tuple(float(v) for v in joints)
+
+    def tool_tip(self, joints: Sequence[float]) -> tuple[float, float, float]:
+        """The tool tip in the workpiece frame (forward kinematics of X Y Z B C)."""
+        tip, _axis = bc45_forward(
+            joints, self.d, tool_length=self.tool_length, z_offset=self.z_offset
+        )
+        return tip
+
+
+def _mill(params: MachineParams) -> Kinematics:
+    return CartesianMill(tuple(a.name for a in params.rotary_axes))
+
+
+def _mill5(params: MachineParams) -> Kinematics:
+    d, tool_length, z_offset = params.kinematics or (0.0, 0.0, 0.0)
+    return MillBC45(d, tool_length, z_offset)
+
+
 # --- selection by machine kind -----------------------------------------------------------
 
 _FACTORIES: dict[str, Callable[[MachineParams], Kinematics]] = {
-    "mill": lambda _p: CartesianMill(),
+    "mill": _mill,
+    "mill5": _mill5,
     "lathe": lambda _p: Lathe(),
 }
 

@@ -17,6 +17,10 @@ class DecimalStyle(Enum):
     LEAST_INCREMENT = "least_increment"  # Fanuc: X10 = 10 x 0.001 mm = 0.010 mm
 
 
+ROTARY_AXES = ("A", "B", "C")
+LINEAR_POSE_AXES = ("X", "Y", "Z")
+
+
 @dataclass(frozen=True, slots=True)
 class AxisParams:
     name: str
@@ -26,6 +30,13 @@ class AxisParams:
     max_accel: float  # mm/s^2
     max_jerk: float  # mm/s^3
     home_mm: float = 0.0  # G28 reference point, machine coordinates
+    # a rotary axis (A, B, C) reads every figure above in degrees (deg, deg/min, deg/s^2,
+    # deg/s^3); `continuous` makes it an endless axis: no soft limits, display mod 360
+    continuous: bool = False
+
+    @property
+    def rotary(self) -> bool:
+        return self.name in ROTARY_AXES
 
 
 @dataclass(frozen=True, slots=True)
@@ -54,6 +65,18 @@ class MachineParams:
     # M codes the machine's PLC handles besides the NC's own (its M-code table, plc.m_codes);
     # None: no table declared, every M code the NC does not know is handed to the PLC
     plc_m_codes: frozenset[int] | None = None
+    # mill5: (d, tool length, z offset) mm of the B45/C table (cnc.kinematics); None = 0s
+    kinematics: tuple[float, float, float] | None = None
+
+    @property
+    def rotary_axes(self) -> tuple[AxisParams, ...]:
+        """The rotary axes (A, B, C) in configured order: a pose's components after Z."""
+        return tuple(a for a in self.axes if a.name in ROTARY_AXES)
+
+    @property
+    def pose_axes(self) -> tuple[str, ...]:
+        """Names of a canonical pose's components: X Y Z, then the rotary axes."""
+        return LINEAR_POSE_AXES + tuple(a.name for a in self.axes if a.name in ROTARY_AXES)
 
     def axis(self, name: str) -> AxisParams:
         for a in self.axes:

@@ -73,6 +73,18 @@ class CanBusLoad:
 
 
 @dataclass(frozen=True, slots=True)
+class ToolTipStatus:
+    """mill5: the tool tip by forward kinematics of the interpolated joints (workpiece
+    frame, mm) and its deviation from the programmed straight line (cnc.controller.tooltip):
+    now, the running program's peak, and the peak of the drives' actual joints."""
+
+    position: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    deviation: float = 0.0
+    peak: float = 0.0
+    actual_peak: float = 0.0
+
+
+@dataclass(frozen=True, slots=True)
 class MachineStatus:
     """A snapshot of the controller's state. Fields left at their defaults mean "idle"."""
 
@@ -98,6 +110,7 @@ class MachineStatus:
     adaptive_control: str = "OFF"
     unreferenced: tuple[str, ...] = ()  # axes not homed since power-on / losing the reference
     cycle_start_refused: str = ""  # the NC's reason for the last refused cycle start
+    tool_tip: ToolTipStatus | None = None  # mill5 only
 
     def __post_init__(self) -> None:
         # Cheap guards against typos in the trade words; the machine builds one of these

@@ -8,7 +8,7 @@ from functools import cache
 from typing import IO, Any
 
 MAX_STORED_ERRORS = 100
-KIND_TO_MACHINE = {"mill": "mill3", "lathe": "lathe2"}
+KIND_TO_MACHINE = {"mill": "mill3", "lathe": "lathe2", "mill5": "mill5"}
 UNBOUNDED_MM = 1e9
 
 

@@ -553,7 +553,13 @@ def fault_spec(request: dict) -> str:
 
 
 def _base_of(config) -> str:
-    return "lathe2" if config.kind == "lathe" else "mill3"
+    """The shipped machine a cell's machine is rebuilt from (its axes decide: a mill with
+    a rotary table A is a mill4)."""
+    if config.kind == "lathe":
+        return "lathe2"
+    if config.kind == "mill5":
+        return "mill5"
+    return "mill4" if "A" in config.axes else "mill3"
 
 
 def run_cell(

@@ -34,6 +34,24 @@ def _num(text: str) -> float | None:
         return None
 
 
+def _tool_tip(agent, name: str) -> dict | None:
+    """mill5: the tool tip (forward kinematics, workpiece frame) and its deviation from the
+    programmed straight line, now and the program's peak; None on other machines."""
+    if "tip" not in agent.device(name).by_key:
+        return None
+
+    def v(key: str) -> str:
+        return agent.value(name, key)
+
+    tip = v("tip")
+    parts = [_num(p) for p in str(tip).split()]
+    return {
+        "position": parts if len(parts) == 3 and None not in parts else None,
+        "deviation_mm": _num(v("tip_dev")),
+        "peak_deviation_mm": _num(v("tip_dev_peak")),
+    }
+
+
 class MonitoringModel:
     """Each machine's live status, from the MTConnect agent's current values."""
 
@@ -109,6 +127,7 @@ class MonitoringModel:
                 "peak_percent": _num(v("bus_load_peak")),
             },
             "plc": {"scan_time_ms": _num(v("plc_scan"))},
+            "tool_tip": _tool_tip(a, name),
         }
 
     def all(self) -> dict[str, dict]:

@@ -25,13 +25,14 @@ from cnc.controller.contract import (
 )
 from cnc.controller.handshake import Handshake
 from cnc.controller.program import DripLines
+from cnc.controller.tooltip import ToolTipMonitor
 from cnc.errors import NcError
 from cnc.faces.drip import DripBuffer
 from cnc.interp import Interpreter
 from cnc.interpolator import Motion
 from cnc.machine_data import MachineData, MachineDataError, ToolData
 from cnc.program_memory import ProgramMemory, program_number_error
-from cnc.status import AxisStatus, MachineStatus
+from cnc.status import AxisStatus, MachineStatus, ToolTipStatus
 from plc.signals import (
     AXIS_BITS,
     MODE_AUTO,
@@ -162,6 +163,10 @@ class Controller:
         self.cutting_model = cutting_model or CuttingModel()
         self.settings = settings or ControllerSettings()
         self.axes = tuple(config.axes)
+        # a pose's components: X Y Z, then the rotary axes (cnc.params.pose_axes)
+        self._pose_axes = self.params.pose_axes
+        # mill5: the tool tip by forward kinematics and its deviation from the line
+        self._tip = ToolTipMonitor.for_params(self.params)
         self.ipo = config.ipo_cycle_ms / 1000.0
         self.home_sequence = self._home_sequence()
         self.home_order = tuple(a for group in self.home_sequence for a in group)
@@ -650,6 +655,8 @@ class Controller:
 
     def _start(self, run: _Run) -> None:
         self._start_refused = ""
+        if self._tip is not None:
+            self._tip.reset()
         run.motion.set_single_block(self.single_block)
         self._run = run
         self._hold = False
@@ -1084,7 +1091,7 @@ class Controller:
 
     # ================================================================ program run =========
     def _interpreter(self, name: str) -> Interpreter:
-        start = tuple(self._cmd.get(a, 0.0) for a in "XYZ")
+        start = tuple(self._cmd.get(a, 0.0) for a in self._pose_axes)
         return Interpreter(
             self.params,
             programs=_MemoryPrograms(self.memory),
@@ -1099,7 +1106,7 @@ class Controller:
         )
 
     def _motion(self) -> Motion:
-        start = tuple(self._cmd.get(a, 0.0) for a in "XYZ")
+        start = tuple(self._cmd.get(a, 0.0) for a in self._pose_axes)
         return Motion(self.params, start=start, ipo_cycle_s=self.ipo)
 
     def _next_cmd(self, run: _Run):
@@ -1218,9 +1225,12 @@ class Controller:
         if run.sync is not None and not run.stop:
             self._sync_step(run)
         s = run.motion.step()
-        for i, a in enumerate("XYZ"):
+        for i, a in enumerate(self._pose_axes):
             if a in self._cmd:
                 self._cmd[a] = s.pose[i]
+        if self._tip is not None:
+            actual = tuple(self._actual.get(a, 0.0) for a in self._pose_axes)
+            self._tip.sample(s.pose, run.motion, actual)
         self._path_v = s.velocity
         if s.line != run.line:
             run.line = s.line
@@ -1474,7 +1484,14 @@ class Controller:
             adaptive_control=self.acc.state(self._cutting),
             unreferenced=self._unreferenced,
             cycle_start_refused=self._start_refused,
+            tool_tip=self._tool_tip_status(),
         )
+
+    def _tool_tip_status(self) -> ToolTipStatus | None:
+        tip = self._tip
+        if tip is None:
+            return None
+        return ToolTipStatus(tip.tip, tip.deviation, tip.peak, tip.actual_peak)
 
     def _event(self, text: str) -> None:
         self._events.append((self._t, text))

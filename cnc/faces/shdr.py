@@ -65,8 +65,12 @@ def spindle_name(axes: Sequence[str]) -> str:
     return "S" if "C" in axes else "C"
 
 
-def shdr_items(axes: Sequence[str]) -> tuple[ShdrItem, ...]:
-    """The declared table of data items for a machine with these axes, in dump order."""
+def shdr_items(axes: Sequence[str], tool_tip: bool = False) -> tuple[ShdrItem, ...]:
+    """The declared table of data items for a machine with these axes, in dump order.
+
+    `tool_tip` (a mill5): the tool tip by forward kinematics (PATH_POSITION, workpiece
+    frame) and its deviation from the programmed straight line, now and the program's
+    peak (cnc.controller.tooltip)."""
     items = [
         ShdrItem("avail", "EVENT", "AVAILABILITY", "Device"),
         ShdrItem("estop", "EVENT", "EMERGENCY_STOP", "Controller"),
@@ -93,6 +97,14 @@ def shdr_items(axes: Sequence[str]) -> tuple[ShdrItem, ...]:
         ShdrItem("start_refused", "EVENT", "x:CYCLE_START_REFUSED", "Path"),
         ShdrItem(DRIVE_CONDITION, "CONDITION", "ACTUATOR", "Axes"),
     ]
+    if tool_tip:
+        items += [
+            ShdrItem("tip", "SAMPLE", "PATH_POSITION", "Path", "COMMANDED", "MILLIMETER_3D"),
+            ShdrItem("tip_dev", "SAMPLE", "x:TOOL_TIP_DEVIATION", "Path", None, "MILLIMETER"),
+            ShdrItem(
+                "tip_dev_peak", "SAMPLE", "x:TOOL_TIP_DEVIATION", "Path", "MAXIMUM", "MILLIMETER"
+            ),
+        ]
     for name in axes:
         if name in ROTARY_AXES:
             pos = ("ANGLE", "DEGREE")
@@ -152,10 +164,15 @@ def _num(value: float, digits: int) -> str:
 class ShdrFormatter:
     """Pure: MachineStatus -> data-item values -> SHDR lines."""
 
-    def __init__(self, axes: Sequence[str]) -> None:
+    def __init__(
+        self, axes: Sequence[str], *, tool_tip: bool = False, continuous: Sequence[str] = ()
+    ) -> None:
         self.axes = tuple(axes)
         self.spindle = spindle_name(self.axes)
-        self.items = shdr_items(self.axes)
+        self.items = shdr_items(self.axes, tool_tip)
+        self.tool_tip = tool_tip
+        # endless rotary axes are shown modulo 360 (the NC keeps the unwrapped angle)
+        self.continuous = frozenset(continuous)
         self._conditions = tuple(i.key for i in self.items if i.category == "CONDITION")
         self._values = tuple(i.key for i in self.items if i.category != "CONDITION")
 
@@ -201,9 +218,20 @@ class ShdrFormatter:
             axis = status.axes.get(name)
             if axis is None:
                 out[f"{name}act"] = out[f"{name}cmd"] = UNAVAILABLE
+            elif name in self.continuous:
+                out[f"{name}act"] = _num(axis.actual % 360.0, 4)
+                out[f"{name}cmd"] = _num(axis.commanded % 360.0, 4)
             else:
                 out[f"{name}act"] = _num(axis.actual, 4)
                 out[f"{name}cmd"] = _num(axis.commanded, 4)
+        if self.tool_tip:
+            tip = status.tool_tip
+            if tip is None:
+                out["tip"] = out["tip_dev"] = out["tip_dev_peak"] = UNAVAILABLE
+            else:
+                out["tip"] = " ".join(_num(v, 4) for v in tip.position)
+                out["tip_dev"] = _num(tip.deviation, 5)
+                out["tip_dev_peak"] = _num(tip.peak, 5)
         active: dict[str, list[tuple[str, str, str, str, str]]] = {k: [] for k in self._conditions}
         for alarm in status.alarms:
             active[self.condition_key(alarm)].append(_condition_entry(alarm))
@@ -303,10 +331,12 @@ class ShdrAdapter:
         port: int = 0,
         heartbeat_ms: int = DEFAULT_HEARTBEAT_MS,
         send_buffer_limit: int = SEND_BUFFER_LIMIT,
+        tool_tip: bool = False,
+        continuous: Sequence[str] = (),
     ) -> None:
         if heartbeat_ms <= 0:
             raise ValueError(f"SHDR heartbeat must be > 0 ms, got {heartbeat_ms}")
-        self.formatter = ShdrFormatter(axes)
+        self.formatter = ShdrFormatter(axes, tool_tip=tool_tip, continuous=continuous)
         self.host, self.port = host, port
         self.heartbeat_ms = int(heartbeat_ms)
         self.send_buffer_limit = send_buffer_limit

@@ -19,6 +19,7 @@ if TYPE_CHECKING:
     from cnc.errors import NcError
     from cnc.interp.codes import Code
     from cnc.interp.macro import MacroVariables
+    from cnc.interp.rotary import RotaryAxes
     from cnc.interp.state import ToolOffset
     from cnc.interp.transform import Transform
     from cnc.params import MachineParams
@@ -188,6 +189,8 @@ class Context(Protocol):
     _mach: tuple[float, float, float]
     _home: tuple[float, float, float]
     _second_ref: tuple[float, float, float]
+    _second_ref_rot: list[float]
+    _rot: RotaryAxes | None
     _off: tuple[float, float, float]
     _out: list[CanonCommand]
     _comp: object

@@ -88,6 +88,7 @@ from cnc.interp.gnum import (
     M8,
 )
 from cnc.interp.macro import MacroVariables, alarm_number, arguments
+from cnc.interp.rotary import RotaryAxes
 from cnc.interp.state import ModalState, ToolOffset
 from cnc.interp.transform import Transform
 from cnc.params import DecimalStyle, MachineParams
@@ -274,7 +275,9 @@ class Interpreter:
         # fast-path words of a G0/G1 and of a G2/G3 block (others take the checked path)
         self._fast_line = frozenset("XZUWFN" if self._lathe else "XYZFN")
         self._fast_arc = frozenset("XZUWIKRFN" if self._lathe else "XYZIJKRFN")
-        self._codes = kt = codes.for_kind(params.kind, params.lathe_gcode_system)
+        # a mill5 reads the mill's code table (its B/C words are the rotary axes')
+        code_kind = "mill" if params.kind == "mill5" else params.kind
+        self._codes = kt = codes.for_kind(code_kind, params.lathe_gcode_system)
         self._gtab = kt.g
         self._mtab = kt.m
         self._classified: dict[tuple[int, ...], Classified] = {}
@@ -283,6 +286,16 @@ class Interpreter:
             tools = machine_data.tool_offsets()
             work_offsets = dict(enumerate(machine_data.work_offsets))
         self._tools: dict[int, ToolOffset] = dict(tools or {})
+        # rotary axes (A, B, C) of a mill4/mill5: their words and angles (cnc.interp.rotary)
+        self._rot: RotaryAxes | None = None
+        if params.rotary_axes and not self._lathe:
+            self._rot = RotaryAxes(
+                params,
+                tuple(start) if start else None,
+                dict(work_offsets or {}),
+                7 + EXTENDED_OFFSETS,
+            )
+            self._words_ok = self._words_ok | self._rot.letters
         self._tools_known = tools is not None
         self._limits: list[tuple[int, float, float, str]] = []
         home = [0.0, 0.0, 0.0]
@@ -302,6 +315,12 @@ class Interpreter:
         self._second_ref = (
             tuple(params.second_reference_mm[:3]) if params.second_reference_mm else self._home
         )
+        sr = params.second_reference_mm
+        self._second_ref_rot = [
+            float(sr[k]) if sr is not None and k < len(sr) else ax.home_mm
+            for k, ax in enumerate(params.axes)
+            if ax.rotary
+        ]
         self._mach: tuple[float, float, float] = (
             (float(start[0]), float(start[1]), float(start[2])) if start else self._home
         )
@@ -492,6 +511,8 @@ class Interpreter:
                         self._ended = self._switch = True  # an alarm stops the program
                 if out:
                     self._mrun = 0
+                    if self._rot is not None:
+                        self._rot.stamp(out)
                     if len(out) == 1:
                         yield out[0]
                     else:
@@ -530,6 +551,8 @@ class Interpreter:
                 raise
             self._record(err, self.file)
         if out:
+            if self._rot is not None:
+                self._rot.stamp(out)
             yield from out
             out.clear()
         self._ended = self._switch = True
@@ -743,6 +766,9 @@ class Interpreter:
                             )
                         raise self._err(f"unknown address {k}", blk, k)
             used = cls.used
+            rot = self._rot
+            if rot is not None and not words.keys().isdisjoint(rot.letters):
+                used = used | self._rotary_words_ok(blk, cls)
             if cls.modal:
                 # no motion code and no code owning the axis words: the modal motion moves
                 # (or, without G80 in the block, the modal cycle drills)
@@ -762,6 +788,33 @@ class Interpreter:
                         " or ".join(alt) if len(alt) <= 2 else f"{', '.join(alt[:-1])} or {alt[-1]}"
                     )
                     raise self._err(f"{row.name} needs {need}", blk, row.letter, nth)
+
+    def _rotary_words_ok(self, blk: Block, cls: Classified) -> frozenset[str]:
+        """A rotary word moves the table with the block's G0/G1, G53 or G28/G30, or sets
+        its G92 shift; anywhere else it is refused at the word."""
+        assert self._rot is not None
+        nonmodal = cls.rows.get("nonmodal")
+        name = nonmodal.name if nonmodal is not None else None
+        cycle = cls.g.get("cycle", self._cycle if "motion" not in cls.g else G80)
+        motion = cls.g.get("motion", self._motion)
+        ok = name in ("G53", "G28", "G30", "G92") or (
+            name is None and cycle == G80 and motion in (G0, G1) and cls.owner is None
+        )
+        letter = self._rot.words_in(blk)[0]
+        if not ok:
+            raise self._err(
+                f"rotary axis word {letter} moves only with G0/G1, G53 or G28/G30"
+                " (or sets G92): not in a circle or a canned cycle",
+                blk,
+                letter,
+            )
+        if self._comp is not None and self._comp.active:
+            raise self._err(
+                f"rotary axis word {letter} with cutter compensation active (cancel with G40)",
+                blk,
+                letter,
+            )
+        return self._rot.letters
 
     @staticmethod
     def _plan(cls: Classified, mask: int) -> list:
@@ -1041,6 +1094,16 @@ class Interpreter:
             or (self._lathe and ("U" in words or "W" in words))
         )
         mo = self._motion
+        rot = self._rot
+        if rot is not None and mo < G2 and rot.move(self, blk, self._abs) and not has_axis:
+            # a rotary-only block: the table turns, X Y Z stay (stamped on the way out)
+            m = self._mach
+            if mo == G0:
+                self._out.append(StraightTraverse(blk.line, m, exact))
+            else:
+                self._out.append(StraightFeed(blk.line, m, self._feed(blk), exact))
+            self._moved = True
+            return
         if mo >= G2:
             if not has_axis and not (self._ci in words or self._cj in words or "R" in words):
                 if explicit is not None and explicit >= G2:
@@ -1499,6 +1562,8 @@ class Interpreter:
             mx = self.params.max_spindle_rpm
             self._max_rpm = words["S"] if mx is None else min(words["S"], mx)
         named = [letter for letter in "XYZ" if letter in words]
+        if self._rot is not None:
+            self._rot.set_g92(blk, self)
         if not named:
             return
         if self._xf_on:

@@ -58,11 +58,19 @@ def reference_return(ip: Context, run: BlockRun) -> None:
         if "W" in words:
             named.append(2)
     ref = ip._home if code == G28 else ip._second_ref
+    rot = ip._rot
+    rot_named = rot is not None and bool(rot.words_in(blk))
+    if rot_named:
+        # the named rotary axes go straight to their reference angle (no intermediate)
+        assert rot is not None
+        rot.home_named(blk, ip, None if code == G28 else ip._second_ref_rot)
     if named:
         mid = ip._target(blk, words)
         ip._line_to(mid, None, blk, run.exact)
-    else:
+    elif not rot_named:
         named = [0, 1, 2]  # no axis words: every axis goes home directly (LinuxCNC)
+        if rot is not None:
+            rot.mach = list(rot.home) if code == G28 else list(ip._second_ref_rot)
     m = list(ip._mach)
     for i in set(named):
         m[i] = ref[i]
@@ -87,6 +95,8 @@ def machine_move(ip: Context, run: BlockRun) -> None:
     mo = motion if motion is not None else ip._motion
     if mo not in (G0, G1):
         raise ip._err("G53 moves only with G0 or G1", blk, "G")
+    if ip._rot is not None:
+        ip._rot.move(ip, blk, True, machine=True)
     m = list(ip._mach)
     for i, letter in enumerate("XYZ"):
         if letter in blk.words:

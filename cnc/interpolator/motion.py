@@ -118,6 +118,8 @@ class Motion:
     run_cycles: int
     _memo: PlanMemo
     _lookahead: int  # params.lookahead, or the G103 limit (SetPathMode.lookahead)
+    _nrot: int  # rotary axes after X Y Z in a pose (mill4: 1, mill5: 2)
+    _rpose: Vec  # their angles now, degrees
 
     def __init__(
         self,
@@ -134,12 +136,17 @@ class Motion:
         self._lookahead = params.lookahead
         self.ipo = t
         self.lim = AxisLimits.from_params(params, t)
+        nrot = self.lim.nrot
+        self._nrot = nrot
         if start is None:
-            start = (0.0, 0.0, 0.0)
-        if len(start) != 3:
-            raise NcError(f"the planner moves X Y Z poses; got a start pose of {len(start)} axes")
+            start = (0.0,) * (3 + nrot)
+        if len(start) != 3 + nrot:
+            raise NcError(
+                f"the planner moves poses of {3 + nrot} axes; got a start pose of {len(start)} axes"
+            )
         self._pose = (float(start[0]), float(start[1]), float(start[2]))
-        self.path = Path(params, self.lim, self._pose)
+        self._rpose = tuple([float(v) for v in start[3:]])
+        self.path = Path(params, self.lim, start)
         self.single_block = False
         self._feed_ovr = 1.0
         self._rapid_ovr = 1.0
@@ -269,8 +276,23 @@ class Motion:
         )
 
     @property
-    def pose(self) -> Vec3:
+    def pose(self) -> Vec:
+        """The commanded pose: X Y Z, then the rotary axes (if any)."""
+        if self._nrot:
+            return self._pose + self._rpose
         return self._pose
+
+    def segment_ends(self) -> tuple[Vec, Vec] | None:
+        """Start and end pose (X Y Z and rotary) of the feed piece under the current
+        position: the straight line it programs. None before the first piece and on a
+        rapid (G0 programs no path, only its end point)."""
+        segs = self.path.segs
+        if self._kp >= len(segs):
+            return None
+        g = segs[self._kp]
+        if g.rapid:
+            return None
+        return g.geom.start + g.rot0, g.geom.end + g.rot1
 
     @property
     def block(self) -> int:
@@ -292,7 +314,7 @@ class Motion:
         self._cycle += 1
         tnow = self._cycle * self.ipo
         if self._waiting is not None:
-            return Sample(tnow, self._pose, 0.0, self._line)
+            return Sample(tnow, self.pose, 0.0, self._line)
         if self.path.head_sync:
             self._sync_queue.extend(self.path.head_sync)
             self.path.head_sync.clear()
@@ -300,10 +322,10 @@ class Motion:
             cmd = self._sync_queue.pop(0)
             self._waiting = cmd
             self._line = getattr(cmd, "line", self._line)
-            return Sample(tnow, self._pose, 0.0, self._line, cmd)
+            return Sample(tnow, self.pose, 0.0, self._line, cmd)
         self._maybe_replan()
         self._advance(self.ipo)
-        return Sample(tnow, self._pose, self._v, self._line)
+        return Sample(tnow, self.pose, self._v, self._line)
 
     def run(self, limit: int, peaks: Peaks, feeding: bool) -> Sample:
         """`step()` up to `limit` times (at least once), each pose into `peaks`; returns
@@ -612,6 +634,13 @@ class Motion:
             self._last_block = g.block
             # at a piece end take the stored end point: s0 + length - s0 may round short
             self._pose = g.geom.end if s >= g.s1 else g.geom.point(s - g.s0)
+            if self._nrot:
+                r0, r1 = g.rot0, g.rot1
+                if s >= g.s1 or r0 == r1:
+                    self._rpose = r1
+                else:
+                    f = (s - g.s0) / (g.s1 - g.s0)
+                    self._rpose = tuple([a + (b - a) * f for a, b in zip(r0, r1, strict=True)])
             self._line = g.line
         drop = min(kp, kd - 1)
         if drop >= DROP_EVERY:

@@ -101,15 +101,32 @@ class CanopenAxes:
         self.names = tuple(config.axes)
         self.ipo_s = config.ipo_cycle_ms / 1000.0
         channel = config.can.channel or name
-        self.hub = CanHub(config.can.bitrate, mode="lockstep", channel=channel, log=candump)
+        # one lockstep hub per CAN line (`drives.axes.<AXIS>.line`; line 0 is the machine's
+        # channel, line k its channel + ".k"): five axes at a 1 ms SYNC need two lines
+        n_lines = 1 + max((config.drives.line(axis) for axis in config.axes), default=0)
+        self.hubs = [
+            CanHub(
+                config.can.bitrate,
+                mode="lockstep",
+                channel=channel if k == 0 else f"{channel}.{k}",
+                log=candump,
+            )
+            for k in range(n_lines)
+        ]
+        self.hub = self.hubs[0]
         self.drives: dict[str, VirtualDrive] = {}
         axes = []
         for i, (axis, a) in enumerate(config.axes.items()):
             node = config.drives.node_id(axis, i)
+            line = config.drives.line(axis)
             groups = _plant_groups(a, config.drives.plant_overrides(axis))
             kwargs = {"substep": substep} if substep is not None else {}
             self.drives[axis] = VirtualDrive(
-                node, self.hub.endpoint(f"drive-{axis}"), name=f"{name}.{axis}", **kwargs, **groups
+                node,
+                self.hubs[line].endpoint(f"drive-{axis}"),
+                name=f"{name}.{axis}",
+                **kwargs,
+                **groups,
             )
             axes.append(
                 AxisConfig(
@@ -124,10 +141,12 @@ class CanopenAxes:
                     homing_creep_mm_s=5.0,
                     homing_accel_mm_s2=min(a.max_accel, 1000.0),
                     homing_timeout_s=60.0,
+                    line=line,
                 )
             )
         try:
-            self.master_bus = self.hub.endpoint("master")
+            masters = [hub.endpoint("master") for hub in self.hubs]
+            self.master_bus = masters if len(masters) > 1 else masters[0]
             self.following_error_mapped = True
             self.group = AxisGroup(
                 self.master_bus,
@@ -160,8 +179,9 @@ class CanopenAxes:
             # nothing attached behind it
             for vd in self.drives.values():
                 vd.close()
-            for endpoint in list(self.hub.endpoints):
-                endpoint.shutdown()
+            for hub in self.hubs:
+                for endpoint in list(hub.endpoints):
+                    endpoint.shutdown()
             raise
         self.homed = dict.fromkeys(self.names, False)
         self.homing = False
@@ -176,7 +196,10 @@ class CanopenAxes:
 
     @property
     def bus_load(self):
-        return self.hub.load
+        """The load account of the busiest CAN line (by mean load)."""
+        if len(self.hubs) == 1:
+            return self.hub.load
+        return max((hub.load for hub in self.hubs), key=lambda load: load.mean)
 
     def feedback(self) -> AxisFeedback:
         fb = self._fb
@@ -269,9 +292,10 @@ class CanopenAxes:
         self.group.close()
         for vd in self.drives.values():
             vd.close()
-        for endpoint in list(self.hub.endpoints):
-            endpoint.shutdown()
-        self.hub.close()
+        for hub in self.hubs:
+            for endpoint in list(hub.endpoints):
+                endpoint.shutdown()
+            hub.close()
 
 
 def _plant_groups(axis, overrides: Mapping[str, Mapping]) -> dict[str, dict]:
@@ -283,9 +307,12 @@ def _plant_groups(axis, overrides: Mapping[str, Mapping]) -> dict[str, dict]:
     """
     span_m = (axis.max_mm - axis.min_mm) / 1000.0
     dog_m = (axis.home_mm - axis.min_mm) / 1000.0
+    # a rotary axis' plant is the same servo on a worm-geared table: one plant mm is one
+    # table degree; an endless (continuous) one has no limit switches
+    endless = getattr(axis, "continuous", False)
     switches = {
-        "negative_limit": -0.005,
-        "positive_limit": span_m + 0.005,
+        "negative_limit": None if endless else -0.005,
+        "positive_limit": None if endless else span_m + 0.005,
         "home_switch": dog_m,
         "home_switch_active_below": False,
         "initial_position": max(0.0, dog_m - HOME_DOG_BEFORE_M),

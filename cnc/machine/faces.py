@@ -63,7 +63,13 @@ class MachineFaces:
             )
             self.loop.run(self.modbus.start)
         if ports.shdr is not None:
-            self.shdr = ShdrAdapter(list(m.axis_names), host=ports.host, port=ports.shdr)
+            self.shdr = ShdrAdapter(
+                list(m.axis_names),
+                host=ports.host,
+                port=ports.shdr,
+                tool_tip=m.config.kind == "mill5",
+                continuous=[n for n, a in m.config.axes.items() if a.continuous],
+            )
             self.loop.run(self.shdr.start)
             m.shdr = self.shdr
         sim_port = ports.simulation

@@ -152,6 +152,7 @@ class Machine:
         self.status: MachineStatus = getattr(self.controller, "status", None) or MachineStatus()
         self.last_targets: dict[str, float] = {}
         self._prev_targets: dict[str, float] = {}
+        self._prev_homed: dict[str, bool] = {}
         self._nc_sent: dict[str, int | bool] = {}
         self.max_following_error = dict.fromkeys(self.axis_names, 0.0)
         self.max_contour_error = 0.0
@@ -243,10 +244,19 @@ class Machine:
         """Maximum following error per axis; contour error = distance of the actual position
         from the commanded path (the polyline of setpoints) while a program is ACTIVE."""
         prev = self._prev_targets
+        homed_now, homed_before = fb.homed, self._prev_homed
+        self._prev_homed = dict(homed_now)
         for axis in self.axis_names:
             fe = fb.following_error.get(axis)
             if fe is None:  # not on the bus: commanded (sent last cycle) - actual
-                fe = prev.get(axis, 0.0) - fb.actual.get(axis, 0.0) if fb.enabled else 0.0
+                # (not in the cycle homing changed the frame: last cycle's target was in
+                # the old one, up to the whole travel away)
+                rehomed = homed_now.get(axis) != homed_before.get(axis)
+                fe = (
+                    prev.get(axis, 0.0) - fb.actual.get(axis, 0.0)
+                    if fb.enabled and not rehomed
+                    else 0.0
+                )
             if abs(fe) > self.max_following_error[axis]:
                 self.max_following_error[axis] = abs(fe)
         if status.execution != "ACTIVE" or not fb.enabled:

@@ -27,6 +27,7 @@ RHO_ARC_A: Final = 0.96
 RHO_ARC_J: Final = 0.96
 Q_TANGENT: Final = 0.98  # share of the plane jerk for the tangential component on arcs
 POSE_AXES = ("X", "Y", "Z")
+ROTARY_AXES = ("A", "B", "C")
 INF: Final = float("inf")
 
 
@@ -55,6 +56,8 @@ class AxisLimits:
         "jerk_ktt",
         "acc_k",
         "acc_kt",
+        "rot",
+        "nrot",
     )
 
     vel: Vec3
@@ -76,6 +79,11 @@ class AxisLimits:
     jerk_ktt: Vec3
     acc_k: Vec3
     acc_kt: Vec3
+    # the rotary axes (A, B, C) of a mill4/mill5, up to three, as limits of their own in
+    # deg/s, deg/s^2, deg/s^3 (padded with the first one's): a segment's rotary axes run
+    # linearly with the path length s; junctions use the same budget rules per axis
+    rot: AxisLimits | None
+    nrot: int
 
     def __init__(
         self,
@@ -115,6 +123,8 @@ class AxisLimits:
         self.jerk_ktt = (t * t * jk0, t * t * jk1, t * t * jk2)
         self.acc_k = (ak0, ak1, ak2)
         self.acc_kt = (t * ak0, t * ak1, t * ak2)
+        self.rot = None
+        self.nrot = 0
 
     def __repr__(self) -> str:
         return f"AxisLimits(vel={self.vel}, acc={self.acc}, jerk={self.jerk}, ipo={self.ipo})"
@@ -130,13 +140,34 @@ class AxisLimits:
         vel = [a.max_velocity / 60.0 for a in axes]
         acc = [float(a.max_accel) for a in axes]
         jerk = [float(a.max_jerk) for a in axes]
+        out = cls._of(vel, acc, jerk, t)
+        rotary = [a for a in params.axes if a.name in ROTARY_AXES]
+        if rotary:
+            if len(rotary) > 3:
+                raise ValueError("at most three rotary axes (A, B, C)")
+            pad = rotary + [rotary[0]] * (3 - len(rotary))
+            rot = cls._of(
+                [a.max_velocity / 60.0 for a in pad],
+                [float(a.max_accel) for a in pad],
+                [float(a.max_jerk) for a in pad],
+                t,
+            )
+            # a junction's share of the budget depends on how much *path* a 3-cycle window
+            # holds: the path's own figures, not the rotary axes'
+            rot.window, rot.dv3, rot.vtop = out.window, out.dv3, out.vtop
+            out.rot = rot
+            out.nrot = len(rotary)
+        return out
+
+    @classmethod
+    def _of(cls, vel: list[float], acc: list[float], jerk: list[float], t: float) -> AxisLimits:
         return cls(
             vel=(vel[0], vel[1], vel[2]),
             acc=(acc[0], acc[1], acc[2]),
             jerk=(jerk[0], jerk[1], jerk[2]),
             ipo=t,
             window=3.0 * t * sqrt(sum(v * v for v in vel)),
-            dv3=3.0 * t * sqrt(sum(float(a.max_accel) ** 2 for a in axes)),
+            dv3=3.0 * t * sqrt(sum(a**2 for a in acc)),
             vtop=sqrt(sum(v * v for v in vel)),
             acc_c=(
                 acc[0] * (1.0 - RHO_KINK_A),
@@ -190,6 +221,19 @@ def line_limits(lim: AxisLimits, u: Vec3) -> tuple[float, float, float]:
         if x < j:
             j = x
     return v, a, j
+
+
+def rotary_caps(
+    lim: AxisLimits, q: Vec3, v: float, a: float, j: float
+) -> tuple[float, float, float]:
+    """(speed cap, accel, jerk) of a line once its rotary axes, turning q_i degrees per
+    unit of path length, are counted: each rotary axis' limit over |q_i|, as a linear
+    axis' over its direction cosine (joint space: every axis within its own limits)."""
+    r = lim.rot
+    if r is None:
+        return v, a, j
+    rv, ra, rj = line_limits(r, q)
+    return (v if v < rv else rv), (a if a < ra else ra), (j if j < rj else rj)
 
 
 def arc_limits(

@@ -10,7 +10,7 @@ is then an exact stop.
 from __future__ import annotations
 
 from collections.abc import Iterable
-from math import cos, isinf, isnan
+from math import cos, isinf, isnan, sqrt
 from typing import Final
 
 from cnc.canon import ArcFeed, PathMode, SetPathMode, StraightFeed, StraightTraverse
@@ -26,6 +26,7 @@ from cnc.planner.limits import (
     coast_cap,
     junction_cap,
     line_limits,
+    rotary_caps,
 )
 from cnc.planner.native import mypyc_attr
 
@@ -66,6 +67,11 @@ class Segment:
         "lim",
         "rapid",
         "feed_v",
+        "rot0",
+        "rot1",
+        "rq",
+        "rotating",
+        "jdur",
     )
 
     geom: Piece
@@ -96,6 +102,13 @@ class Segment:
     lim: AxisLimits
     rapid: bool  # feed is None (a typed copy for the planner's inner loops)
     feed_v: float  # feed, or 0.0 for a rapid
+    # rotary axes (mill4/mill5): their angles at both ends, linear in s between them
+    # (empty on a machine without rotary axes), and their degrees per unit of s
+    rot0: Vec
+    rot1: Vec
+    rq: Vec3
+    rotating: bool
+    jdur: Vec3  # rotary rate jump at the end junction
 
     def __init__(
         self,
@@ -107,6 +120,8 @@ class Segment:
         lim: AxisLimits,
         exact: bool,
         tolerance: float,
+        rot0: Vec = (),
+        rot1: Vec = (),
     ) -> None:
         self.geom = geom
         self.s0 = 0.0
@@ -118,10 +133,24 @@ class Segment:
         self.rapid = feed is None
         self.feed_v = 0.0 if feed is None else feed
         self.normal_axis = normal_axis
+        self.rot0 = rot0
+        self.rot1 = rot1
+        self.rq = self.jdur = (0.0, 0.0, 0.0)
+        self.rotating = False
         self.lim_v = -1.0
         self.lim_at = self.lim_jt = 0.0
         if isinstance(geom, Line):
             self.vphys, self.at, self.jt = line_limits(lim, geom.u)
+            if rot0 and rot0 != rot1:
+                n = geom.length
+                q = [(b - a) / n for a, b in zip(rot0, rot1, strict=True)]
+                while len(q) < 3:
+                    q.append(0.0)
+                self.rq = (q[0], q[1], q[2])
+                self.rotating = True
+                self.vphys, self.at, self.jt = rotary_caps(
+                    lim, self.rq, self.vphys, self.at, self.jt
+                )
         else:
             assert isinstance(geom, Arc)
             # the limits at the programmed feed come with the cap: a plan asks for both
@@ -177,6 +206,12 @@ class Segment:
                     kj1[2] if kj1[2] >= kj2[2] else kj2[2],
                 )
             self.jcoast = coast_cap(lim, self.jdu, self.jdk, ka1, kj1)
+            rl = lim.rot
+            if rl is not None and _nonzero3(self.jdur):
+                zero = (0.0, 0.0, 0.0)
+                rc = coast_cap(rl, self.jdur, zero, zero, zero)
+                if rc < self.jcoast:
+                    self.jcoast = rc
         return self.jcoast
 
     def vcap(self, feed_ovr: float, rapid_ovr: float) -> float:
@@ -203,6 +238,8 @@ class Path:
     changed_s: float
     base: int
     end_pose: Vec3
+    end_rot: Vec  # the rotary angles at the path end (empty: no rotary axes)
+    nrot: int
     end_s: float
     mode: PathMode
     tolerance: float
@@ -220,9 +257,14 @@ class Path:
         # it (profile.partition_again takes earlier parts of its last cut as they were)
         self.changed_s = INF
         self.base = 0  # executed segments dropped from the front of `segs`
-        if len(start) != 3:
-            raise NcError(f"the planner moves X Y Z poses; got a start pose of {len(start)} axes")
+        if len(start) != 3 + lim.nrot:
+            raise NcError(
+                f"the planner moves poses of {3 + lim.nrot} axes; got a start pose of"
+                f" {len(start)} axes"
+            )
         self.end_pose = (float(start[0]), float(start[1]), float(start[2]))
+        self.nrot = lim.nrot
+        self.end_rot = tuple([float(v) for v in start[3 : 3 + self.nrot]])
         self.end_s = 0.0
         self.mode = PathMode.CONTINUOUS
         self._exact_mode = False
@@ -256,9 +298,20 @@ class Path:
         start = self.end_pose
         raw_end: Iterable[float] = cmd.end  # a tuple, but a list must not be a TypeError
         cmd_end = raw_end if isinstance(raw_end, tuple) else tuple(raw_end)
-        if len(cmd_end) != 3:
-            raise NcError(f"pose has {len(cmd_end)} axes, machine has 3", cmd.line)
+        nrot = self.nrot
+        if len(cmd_end) != 3 + nrot:
+            raise NcError(f"pose has {len(cmd_end)} axes, machine has {3 + nrot}", cmd.line)
         x, y, z = float(cmd_end[0]), float(cmd_end[1]), float(cmd_end[2])
+        rot0 = self.end_rot
+        rot1 = rot0
+        rot_len = 0.0
+        if nrot:
+            rot1 = tuple([float(v) for v in cmd_end[3:]])
+            for a, b in zip(rot0, rot1, strict=True):
+                if not _finite(b):
+                    raise NcError(f"rotary end angle {b} is not finite", cmd.line)
+                rot_len += (b - a) * (b - a)
+            rot_len = sqrt(rot_len)
         end = (x, y, z)
         if not _finite(x) or not _finite(y) or not _finite(z):
             raise NcError(f"end point {end} is not a finite position", cmd.line)
@@ -278,8 +331,13 @@ class Path:
             center = tuple([float(c) for c in cmd.center])
             if not all(_finite(c) for c in center):
                 raise NcError(f"arc centre {center} is not a finite position", cmd.line)
-            if len(center) != 3:
-                raise NcError(f"arc centre has {len(center)} axes, machine has 3", cmd.line)
+            if len(center) != 3 + nrot:
+                raise NcError(
+                    f"arc centre has {len(center)} axes, machine has {3 + nrot}", cmd.line
+                )
+            if rot_len > 0.0:
+                raise NcError("a rotary axis cannot turn in a circular (G2/G3) block", cmd.line)
+            center = center[:3]
             r0 = _plane_dist(start, center, normal)
             r1 = _plane_dist(end, center, normal)
             if r0 <= 1e-9 or r1 <= 1e-9:
@@ -289,10 +347,21 @@ class Path:
         else:  # pragma: no cover - guarded by the caller
             raise TypeError(cmd)
         self.end_pose = end
+        self.end_rot = rot1
+        if rot_len > 0.0 and geom.length <= 1e-12:
+            # a pure rotary move: s runs in degrees along the rotary axes (its F is
+            # deg/min, Fanuc), X Y Z stand; it starts and ends at rest (units of s differ)
+            geom = Line(start, start, (0.0, 0.0, 0.0))
+            geom.length = rot_len
+            exact = True
+            if self._segs:
+                self._segs[-1].exact = True
         if geom.length <= 1e-12:
             return  # a zero-length move does not touch the path
         self.blocks += 1
-        seg = Segment(geom, cmd.line, self.blocks, feed, normal, self.lim, exact, self.tolerance)
+        seg = Segment(
+            geom, cmd.line, self.blocks, feed, normal, self.lim, exact, self.tolerance, rot0, rot1
+        )
         prev = self._segs[-1] if self._segs else None
         if prev is None:
             seg.s0 = self.end_s
@@ -357,7 +426,13 @@ class Path:
             self._finalised(len(self._segs) - 1)
             return  # prev.stop_end stays True: exact stop or sync point
         pg, sg = prev.geom, seg.geom
-        if isinstance(pg, Line) and isinstance(sg, Line) and prev.rapid == seg.rapid:
+        if (
+            isinstance(pg, Line)
+            and isinstance(sg, Line)
+            and prev.rapid == seg.rapid
+            and not prev.rotating
+            and not seg.rotating
+        ):
             # the blend may use what is left of prev (never what the executor has committed
             # to) and of seg: all of it when prev's rest is at most 3/4 of seg (so chains of
             # short lines become chains of arcs with no leftover line between them), else
@@ -372,7 +447,16 @@ class Path:
                     self.max_blend_deviation = dev
                 lim = self.lim
                 bseg = Segment(
-                    arc, prev.line, prev.block, prev.feed, -1, lim, False, prev.tolerance
+                    arc,
+                    prev.line,
+                    prev.block,
+                    prev.feed,
+                    -1,
+                    lim,
+                    False,
+                    prev.tolerance,
+                    prev.rot1,
+                    prev.rot1,
                 )
                 if pg.length - d <= 1e-12 and protect_s <= prev.s0:
                     # the previous line is used up: the blend takes its place
@@ -446,9 +530,21 @@ class Path:
         after = gb.length if b_final or type(gb) is not Line else 0.0
         gap = ga.length if ga.length > after else after
         cap = junction_cap(self.lim, du, dk, gap, at_max, not big)
+        rot_jump = False
+        rl = self.lim.rot
+        if rl is not None and (a.rotating or b.rotating):
+            qa, qb = a.rq, b.rq
+            dr = (qb[0] - qa[0], qb[1] - qa[1], qb[2] - qa[2])
+            a.jdur = dr
+            if dr[0] != 0.0 or dr[1] != 0.0 or dr[2] != 0.0:
+                big = big or _big3(dr)
+                rot_jump = True
+                rcap = junction_cap(rl, dr, (0.0, 0.0, 0.0), gap, at_max, not big)
+                if rcap < cap:
+                    cap = rcap
         if big and a.rapid != b.rapid:
             cap = 0.0  # a corner between a rapid and a feed move is an exact stop
-        jump = bool(du0 or du1 or du2 or dk[0] or dk[1] or dk[2])
+        jump = rot_jump or bool(du0 or du1 or du2 or dk[0] or dk[1] or dk[2])
         a.jcap_end = cap
         a.jcoast = -1.0 if jump and cap > 0.0 else 0.0
         a.jdu = du
@@ -457,6 +553,21 @@ class Path:
         a.jump_end = jump
         a.break_end = big
         a.stop_end = cap <= 0.0
+
+
+def _big3(d: Vec3) -> bool:
+    return (
+        d[0] > KINK_SPAN_BREAK
+        or -d[0] > KINK_SPAN_BREAK
+        or d[1] > KINK_SPAN_BREAK
+        or -d[1] > KINK_SPAN_BREAK
+        or d[2] > KINK_SPAN_BREAK
+        or -d[2] > KINK_SPAN_BREAK
+    )
+
+
+def _nonzero3(d: Vec3) -> bool:
+    return d[0] != 0.0 or d[1] != 0.0 or d[2] != 0.0
 
 
 def _finite(x: float) -> bool:

@@ -135,6 +135,7 @@ def build_device(
     *,
     uuid: str | None = None,
     description: str = "",
+    tool_tip: bool = False,
 ) -> Device:
     """The Device of one machine with these axes."""
     if not _NCNAME.match(name):
@@ -182,7 +183,7 @@ def build_device(
         comp.data_items.append(di)
         device.by_key[item.key] = di
 
-    for item in shdr_items(axes):
+    for item in shdr_items(axes, tool_tip):
         add(item)
     # MTConnect 2.x devices carry the asset events; the agent owns them (no assets yet).
     add(ShdrItem("asset_chg", "EVENT", "ASSET_CHANGED", "Device"))
@@ -194,7 +195,7 @@ def build_device(
 def devices_from_cell(cell) -> list[Device]:
     """One Device per machine of a `cnc.config.CellConfig`, in file order."""
     return [
-        build_device(name, list(m.axes), description=m.description)
+        build_device(name, list(m.axes), description=m.description, tool_tip=m.kind == "mill5")
         for name, m in cell.machines.items()
     ]
 

@@ -442,7 +442,7 @@ def test_cli_post_mill5_json(tmp_path: Path) -> None:
     doc = json.loads(r.stdout)
     assert doc["blocks_in"] == 8 and doc["points_inserted"] == 9 and doc["blocks_out"] == 14
     assert 0 < doc["peak_midpoint_deviation_mm"] <= 0.05 and doc["singular_records"] == []
-    assert doc["tolerance_mm"] == 0.05 and "not available" in doc["nc_check"]
+    assert doc["tolerance_mm"] == 0.05 and doc["nc_check"] == "passed" and doc["travel_checked"]
     assert out.read_text().count("\n") == 18
 
 

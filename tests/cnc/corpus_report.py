@@ -7,6 +7,8 @@ SOURCES.md kind is lathe, with no other flag, so the shipped machines' defaults 
 a program that calls programs of other files (M98 P / G65 P / G66 P) is checked with
 `--library` its shop's folder (the corpus files from its SOURCES.md repository), and a
 file that ends in M99 is checked by `nc check` in subprogram mode.
+a baseline entry with `machine: NAME` (the programs with rotary A words: mill4) is checked
+on that shipped machine instead (`fmscell nc check --config NAME FILE`).
 The command line runs in this process (typer's runner) to spare 95 interpreter start-ups;
 its exit code and output are the ones a shell would see.
 
@@ -53,6 +55,7 @@ _WARNING = re.compile(r"(^|:\s)warning\b", re.IGNORECASE)
 class Expected:
     expect: str  # pass | fail | invalid
     note: str = ""  # the first error (fail) or why it is another controller's language (invalid)
+    machine: str = ""  # a shipped machine to check the file on ("": the kind's default)
 
 
 @dataclass(frozen=True)
@@ -98,10 +101,14 @@ def corpus_kinds(sources_md: Path) -> dict[str, str]:
     return kinds
 
 
-def check_argv(path: Path, kind: str, library: Path | None = None) -> list[str]:
-    """The `nc check` arguments a user gives: no flag beyond `--kind lathe`, and
-    `--library FOLDER` for a program that calls programs of other files."""
-    argv = ["check", "--kind", "lathe"] if kind == "lathe" else ["check"]
+def check_argv(path: Path, kind: str, library: Path | None = None, machine: str = "") -> list[str]:
+    """The `nc check` arguments a user gives: no flag beyond `--kind lathe` or, for a file
+    that needs another shipped machine, `--config NAME`; and `--library FOLDER` for a
+    program that calls programs of other files."""
+    if machine:
+        argv = ["check", "--config", machine]
+    else:
+        argv = ["check", "--kind", "lathe"] if kind == "lathe" else ["check"]
     if library is not None:
         argv += ["--library", str(library)]
     return [*argv, str(path)]
@@ -139,13 +146,13 @@ def split_output(text: str) -> tuple[list[str], list[str]]:
     return [ln for ln in lines if not _WARNING.search(ln)], warnings
 
 
-def check_file(path: Path, kind: str, library: Path | None = None) -> Result:
+def check_file(path: Path, kind: str, library: Path | None = None, machine: str = "") -> Result:
     from typer.testing import CliRunner
 
     from cnc.cli import nc_app
 
     start = time.perf_counter()
-    out = CliRunner().invoke(nc_app, check_argv(path, kind, library))
+    out = CliRunner().invoke(nc_app, check_argv(path, kind, library, machine))
     seconds = time.perf_counter() - start
     if out.exception is not None and not isinstance(out.exception, SystemExit):
         # A crash of the checker is a failure with its own first error, never a pass.
@@ -166,7 +173,13 @@ def check_file(path: Path, kind: str, library: Path | None = None) -> Result:
                   seconds)  # fmt: skip
 
 
-def run_corpus(corpus: Path = GCODE_CORPUS) -> list[Result]:
+def run_corpus(
+    corpus: Path = GCODE_CORPUS, machines: Mapping[str, str] | None = None
+) -> list[Result]:
+    """Check every file; `machines` (file -> shipped machine, default: the baseline's
+    `machine:` entries) picks the machine of the files that need another one."""
+    if machines is None:
+        machines = {n: e.machine for n, e in load_baseline().items() if e.machine}
     kinds = corpus_kinds(corpus / "SOURCES.md")
     files = sorted(p for p in corpus.iterdir() if p.is_file() and p.name != "SOURCES.md")
     unknown = [p.name for p in files if p.name not in kinds]
@@ -175,7 +188,12 @@ def run_corpus(corpus: Path = GCODE_CORPUS) -> list[Result]:
     with tempfile.TemporaryDirectory(prefix="fmscell-corpus-") as tmp:
         shops = shop_folders(corpus, Path(tmp))
         return [
-            check_file(p, kinds[p.name], shops[p.name] if calls_other_files(p) else None)
+            check_file(
+                p,
+                kinds[p.name],
+                shops[p.name] if calls_other_files(p) else None,
+                machines.get(p.name, ""),
+            )
             for p in files
         ]
 
@@ -195,15 +213,19 @@ def load_baseline(path: Path = BASELINE) -> dict[str, Expected]:
         if expect != "pass" and not (isinstance(note, str) and note):
             key = "error" if expect == "fail" else "reason"
             raise ValueError(f"{where}/{key} is required for expect: {expect}")
-        out[str(name)] = Expected(expect, note or "")
+        machine = entry.get("machine", "")
+        if not isinstance(machine, str):
+            raise ValueError(f"{where}/machine must be a shipped machine's name")
+        out[str(name)] = Expected(expect, note or "", machine)
     return out
 
 
 def _entry(name: str, expected: Expected) -> str:
+    machine = f", machine: {expected.machine}" if expected.machine else ""
     if expected.expect == "pass":
-        return f"  {name}: {{expect: pass}}"
+        return f"  {name}: {{expect: pass{machine}}}"
     key = "error" if expected.expect == "fail" else "reason"
-    return f"  {name}: {{expect: {expected.expect}, {key}: {_quote(expected.note)}}}"
+    return f"  {name}: {{expect: {expected.expect}, {key}: {_quote(expected.note)}{machine}}}"
 
 
 def _quote(text: str) -> str:
@@ -261,7 +283,7 @@ def table(results: Iterable[Result], baseline: Mapping[str, Expected]) -> str:
 def write_baseline(results: Iterable[Result], old: Mapping[str, Expected], path: Path) -> None:
     """Regenerate from today's results; invalid entries (a judgement, not a result) are kept."""
     lines = [
-        "# Expected result of `fmscell nc check [--kind lathe] FILE` on every corpus file",
+        "# Expected result of `fmscell nc check [--kind lathe | --config MACHINE] FILE` on every corpus file",
         "# (../shared/reference/corpus/gcode). Checked by tests/cnc/test_corpus.py and",
         "# `make corpus`; regenerate with `make corpus-baseline` after a change that moves",
         "# results. pass | fail (error: today's first error) | invalid (reason: another",
@@ -270,12 +292,12 @@ def write_baseline(results: Iterable[Result], old: Mapping[str, Expected], path:
     ]
     for r in results:
         exp = old.get(r.file)
+        machine = exp.machine if exp is not None else ""
         if exp is not None and exp.expect == "invalid":
             lines.append(_entry(r.file, exp))
         else:
-            lines.append(
-                _entry(r.file, Expected("pass") if r.passed else Expected("fail", r.first_error))
-            )
+            got = Expected("pass") if r.passed else Expected("fail", r.first_error)
+            lines.append(_entry(r.file, Expected(got.expect, got.note, machine)))
     tmp = path.with_suffix(".tmp")
     tmp.write_text("\n".join(lines) + "\n", encoding="utf-8")
     tmp.replace(path)
@@ -291,8 +313,8 @@ def main(argv: list[str] | None = None) -> int:
     if not (args.corpus / "SOURCES.md").is_file():
         print(MISSING, file=sys.stderr)
         return 2
-    results = run_corpus(args.corpus)
     old = load_baseline(args.baseline) if args.baseline.is_file() else {}
+    results = run_corpus(args.corpus, {n: e.machine for n, e in old.items() if e.machine})
     if args.write:
         write_baseline(results, old, args.baseline)
         old = load_baseline(args.baseline)

@@ -135,3 +135,28 @@ def test_a_calling_program_is_checked_with_its_shops_folder_as_library(tmp_path)
     results = {r.file: r for r in cr.run_corpus(corpus)}
     assert results["a-main.nc"].passed and results["a-sub.nc"].passed  # the sub: M99 ends it
     assert not results["b-other.nc"].passed
+
+
+def test_a_baseline_machine_is_kept_by_write_and_picks_the_check_arguments(tmp_path: Path):
+    old = {"rot.nc": E("fail", "9:31: unknown address A", "mill4")}
+    path = tmp_path / "expected.yaml"
+    cr.write_baseline([_r("rot.nc", True)], old, path)
+    assert cr.load_baseline(path) == {"rot.nc": E("pass", "", "mill4")}
+    assert cr.check_argv(Path("rot.nc"), "mill", machine="mill4") == ["check", "--config", "mill4",
+                                                              "rot.nc"]  # fmt: skip
+    assert cr.check_argv(Path("l.nc"), "lathe") == ["check", "--kind", "lathe", "l.nc"]
+
+
+def test_the_rotary_corpus_files_run_on_mill4():
+    if not (GCODE_CORPUS / "SOURCES.md").is_file():
+        pytest.skip(MISSING)
+    rotary = ["kiely-mill-engrave.nc", "norn93-demo.nc", "norn93-peck-pockets.nc",
+              "z64-stdbc-o0010.nc"]  # fmt: skip
+    baseline = cr.load_baseline()
+    assert {baseline[f].machine for f in rotary} == {"mill4"}
+    for f in rotary:
+        # on mill3 each stops at its first A word; on mill4 none does
+        on_mill3 = cr.check_file(GCODE_CORPUS / f, "mill")
+        assert "axis A is not configured" in on_mill3.first_error
+        on_mill4 = cr.check_file(GCODE_CORPUS / f, "mill", "mill4")
+        assert "axis A" not in on_mill4.first_error and "rotary" not in on_mill4.first_error

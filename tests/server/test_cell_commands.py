@@ -184,3 +184,13 @@ def test_run_says_in_one_line_why_the_cell_did_not_start(monkeypatch):
     monkeypatch.setattr(os, "environ", env)
     assert run_cell(echo=said.append) == 1
     assert said == ["cannot start the cell: mill1: no SHDR status within 120 s"]
+
+
+def test_the_cell_file_rebuilds_a_mill4_and_a_mill5_from_their_own_machines(tmp_path):
+    cfg = load_cell_config(
+        {"machines": {"r4": {"base": "mill4", "ports": {"dnc": 0, "modbus": 0, "shdr": 0}},
+                      "r5": {"base": "mill5", "ports": {"dnc": 0, "modbus": 0, "shdr": 0}}}}
+    )  # fmt: skip
+    cell = Cell(cfg, processes=True, state_dir=tmp_path)
+    doc = yaml.safe_load(cell._config_file().read_text())
+    assert {n: m["base"] for n, m in doc["machines"].items()} == {"r4": "mill4", "r5": "mill5"}

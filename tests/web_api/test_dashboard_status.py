@@ -163,3 +163,28 @@ def test_condition_sources():
         ("DRIVE", None),
         ("DRIVE", "Z"),
     ]
+
+
+TIP_RUNNER = """
+const { statusView, tipAxes } = await import(process.argv[1]);
+const cases = JSON.parse(process.argv[2]);
+console.log(JSON.stringify(cases.map((s) => tipAxes(statusView(s)?.tool_tip))));
+"""
+
+
+def test_mill5_status_gives_the_plot_the_tool_tip_and_others_none():
+    with_tip = cell(
+        tool_tip={"position": [1.5, -2.0, 30.0], "deviation_mm": 0.004, "peak_deviation_mm": 0.009}
+    )
+    r = subprocess.run(
+        [NODE, "--input-type=module", "-e", TIP_RUNNER, STATUS_JS.as_uri(),
+         json.dumps([with_tip, cell(tool_tip=None), cell()])],
+        capture_output=True, text=True, timeout=30, check=True,
+    )  # fmt: skip
+    tip, none1, none2 = json.loads(r.stdout)
+    assert tip == {
+        "X": {"actual": 1.5, "commanded": 1.5},
+        "Y": {"actual": -2.0, "commanded": -2.0},
+        "Z": {"actual": 30.0, "commanded": 30.0},
+    }
+    assert none1 is None and none2 is None

@@ -3,7 +3,7 @@
 
 import { ApiError, api, auth, eventsUrl, items, newKey } from "./api.js";
 import { ToolpathPlot, planeOf } from "./plot.js";
-import { busLoad, machineState, statusView } from "./status.js";
+import { busLoad, machineState, statusView, tipAxes } from "./status.js";
 
 const MACHINE_POLL_MS = 200; // 5 Hz: smooth enough for the toolpath plot
 const LIST_REFRESH_MS = 10000; // safety net when the event stream is down
@@ -213,13 +213,21 @@ function renderMachine(m) {
     entry.program = s?.program;
   }
   if (entry.plot) {
-    entry.plot.push(axes);
+    // a 5-axis table-table machine (mill5) plots the tool tip by forward kinematics (the
+    // path on the part), not its raw axes
+    const tip = tipAxes(s?.tool_tip);
+    const shown = tip || axes;
+    entry.plot.push(shown);
     entry.plot.draw();
     const [h, v] = entry.plane;
+    const what = tip ? "tool tip (forward kinematics)" : "actual";
     $(".m-plot", t).setAttribute(
       "aria-label",
-      `Toolpath of ${m.name}, ${h}${v} plane: actual ${h} ${fmt(axes[h]?.actual)}, ${v} ${fmt(axes[v]?.actual)} mm`,
+      `Toolpath of ${m.name}, ${h}${v} plane: ${what} ${h} ${fmt(shown[h]?.actual)}, ${v} ${fmt(shown[v]?.actual)} mm`,
     );
+    $(".m-plane", t).textContent = tip
+      ? `plane ${entry.plane.join("–")} · tool tip, deviation ${fmt(s.tool_tip.deviation, 4)} mm (peak ${fmt(s.tool_tip.peak, 4)})`
+      : `plane ${entry.plane.join("–")}`;
   }
 
   const bl = busLoad(s);

@@ -30,6 +30,9 @@ export function statusView(s) {
     spindle_speed: s.spindle?.speed_rpm,
     spindle_load: s.spindle?.load_percent,
     axes,
+    tool_tip: s.tool_tip
+      ? { position: s.tool_tip.position, deviation: s.tool_tip.deviation_mm, peak: s.tool_tip.peak_deviation_mm }
+      : null,
     alarms: (s.alarms || []).map((a) => {
       const servo = /^(.*)servo$/.exec(a.condition || "");
       return {
@@ -73,3 +76,15 @@ export function busLoad(s) {
   return { mean: Number(b.mean), peak: b.peak ?? null };
 }
 
+
+/** mill5: the tool tip (forward kinematics, workpiece frame) as plot samples {X, Y, Z};
+ * null when the status has none. The tip comes from the interpolated joints: commanded. */
+export function tipAxes(tip) {
+  const p = tip?.position;
+  if (!Array.isArray(p) || p.length !== 3) return null;
+  const out = {};
+  ["X", "Y", "Z"].forEach((a, i) => {
+    out[a] = { actual: p[i], commanded: p[i] };
+  });
+  return out;
+}
