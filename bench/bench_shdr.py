@@ -27,7 +27,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
 from cnc.faces.shdr import ShdrFormatter  # noqa: E402
 from cnc.status import AxisStatus, MachineStatus  # noqa: E402
-from server.mtconnect import Agent, build_device  # noqa: E402
+from mtconnect import Agent, build_device  # noqa: E402
 
 AXES = ("X", "Y", "Z")
 TARGET_FORMAT = 4000

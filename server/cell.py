@@ -132,8 +132,8 @@ class Cell:
         from dnc.jobs import Jobs, Scheduler
         from dnc.library import Library
         from dnc.transfer_worker import RetryPolicy, TransferWorker
-        from server.mtconnect import Agent
-        from server.mtconnect.client import AgentConnections
+        from mtconnect import Agent
+        from mtconnect.client import AgentConnections
 
         self.engine = make_engine(self.database_url)
         migrate(self.engine)

@@ -21,13 +21,11 @@ import time
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from dnc.cell import MachineUnavailable  # re-exported: the faces' refusals, the cell's error
+
 MODE_NUMBERS = {"AUTO": 1, "MDI": 2, "JOG": 3, "REF": 4}
 # `fmscell machine` takes its faces' shared secret from here when its config has none
 SECRET_ENV = "FMSCELL_MACHINE_SECRET"
-
-
-class MachineUnavailable(RuntimeError):
-    """A face of the machine cannot be reached or refused the request (text says which)."""
 
 
 @dataclass

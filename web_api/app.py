@@ -14,6 +14,7 @@ from fastapi import FastAPI
 from fastapi.openapi.utils import get_openapi
 from sqlalchemy.orm import Session, sessionmaker
 
+from dnc.cell import CellControl
 from dnc.dispatch import Dispatches
 from dnc.jobs import Jobs
 from dnc.library import Library
@@ -54,7 +55,7 @@ def create_app(
     machines_provider: MachinesProvider | None = None,
     faults_enabled: bool = False,
     mtconnect_agent: Any | None = None,
-    cell_control: Any | None = None,
+    cell_control: CellControl | None = None,
 ) -> FastAPI:
     """The API over the given services.
 
@@ -115,7 +116,7 @@ def create_app(
         events_router,
     ):
         app.include_router(module.router)
-    # machine commands and fault injection act on the running cell (server.cell.Cell)
+    # machine commands and fault injection act on the running cell (dnc.cell.CellControl)
     from web_api.routers import faults as faults_router
     from web_api.routers import machine_commands as machine_commands_router
     from web_api.routers import machine_data as machine_data_router

@@ -1,4 +1,4 @@
-"""MTConnect REST endpoints over the cell's agent (`server.mtconnect.Agent`).
+"""MTConnect REST endpoints over the cell's agent (`mtconnect.Agent`).
 
 Thin: each route hands the raw query parameters to the agent, which validates them the way
 the reference agent does and returns (status, XML). A request with `interval` streams:
@@ -18,8 +18,8 @@ from fastapi import APIRouter, Request
 from fastapi.concurrency import run_in_threadpool
 from fastapi.responses import Response, StreamingResponse
 
-from server.mtconnect.agent import XML, Agent, RestError, StreamPlan
-from server.mtconnect.printer import EXTENSION_SCHEMA_FILE
+from mtconnect.agent import XML, Agent, RestError, StreamPlan
+from mtconnect.printer import EXTENSION_SCHEMA_FILE
 
 _DOC = {
     "probe": "MTConnectDevices: the device model.",

@@ -12,7 +12,7 @@ from hypothesis import strategies as st
 from cnc.faces.loop_thread import LoopThread
 from cnc.faces.shdr import ShdrAdapter, ShdrFormatter, escape, shdr_items, shdr_timestamp
 from cnc.status import Alarm, AxisStatus, CanBusLoad, MachineStatus
-from server.mtconnect.shdr import parse_line, tokenize
+from mtconnect.shdr import parse_line, tokenize
 
 TS = "2026-11-21T06:00:00.000000Z"
 AXES = ("X", "Y", "Z")

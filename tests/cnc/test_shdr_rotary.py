@@ -31,7 +31,7 @@ def test_mill5_state_reports_tip_and_wraps_the_endless_c():
 
 
 def test_mill5_device_model_has_the_tool_tip_items():
-    from server.mtconnect.model import build_device
+    from mtconnect.model import build_device
 
     dev = build_device("mill5", AXES5, tool_tip=True)
     assert {"tip", "tip_dev", "tip_dev_peak"} <= set(dev.by_key)

@@ -11,9 +11,9 @@ from cnc.config import builtin_machine
 from cnc.faces.shdr import ShdrFormatter
 from cnc.machine import Machine
 from dnc.scheduler import ALARM, IDLE
+from mtconnect.agent import Agent
+from mtconnect.model import build_device
 from server.host import MonitoringModel, StartRefused, make_starter
-from server.mtconnect.agent import Agent
-from server.mtconnect.model import build_device
 from server.supervisor import MachineLink
 
 PROGRAM = "%\nO0100\nG90 G0 X-100 Y-100 Z-20\nM30\n%\n"

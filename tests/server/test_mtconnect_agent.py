@@ -9,8 +9,8 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from server.mtconnect import Agent, CircularBuffer, Observation, build_device
-from server.mtconnect.buffer import Checkpoint
+from mtconnect import Agent, CircularBuffer, Observation, build_device
+from mtconnect.buffer import Checkpoint
 from tests.server.test_mtconnect_support import (
     FakeClock,
     error_code,
@@ -512,7 +512,7 @@ STANDARD_ELEMENTS = {
 def test_streams_structure_matches_the_probe():
     from cnc.faces.shdr import ShdrFormatter
     from cnc.status import Alarm, AxisStatus, MachineStatus
-    from server.mtconnect.model import pascal
+    from mtconnect.model import pascal
 
     a = small_agent()
     f = ShdrFormatter(("X", "Y", "Z"))

@@ -10,7 +10,7 @@ import pytest
 from cnc.faces.loop_thread import LoopThread
 from cnc.faces.shdr import ShdrAdapter
 from cnc.status import Alarm, AxisStatus, MachineStatus
-from server.mtconnect import AdapterConnection, Agent, build_device
+from mtconnect import AdapterConnection, Agent, build_device
 from tests.server.test_mtconnect_support import parse, values
 
 HB_MS = 100
@@ -196,7 +196,7 @@ def test_refused_connection_keeps_device_unavailable_and_retries(agent_loop, age
 
 
 def test_unknown_device_refused_at_construction(agent):
-    from server.mtconnect import RestError
+    from mtconnect import RestError
 
     with pytest.raises(RestError):
         AdapterConnection(agent, "nope", "127.0.0.1", 1)
@@ -209,7 +209,7 @@ def _fields(s: MachineStatus) -> dict:
 def test_agent_connections_for_a_cell(machine_loop):
     """The cell server's shell: one agent, the default cell's machines, real adapters."""
     from cnc.config import default_cell_config
-    from server.mtconnect import AgentConnections
+    from mtconnect import AgentConnections
 
     cell = default_cell_config()
     agent = Agent.from_cell(cell)

@@ -5,7 +5,7 @@ from __future__ import annotations
 import re
 import xml.etree.ElementTree as ET
 
-from server.mtconnect import Agent, build_device
+from mtconnect import Agent, build_device
 
 NS = {
     "Streams": "urn:mtconnect.org:MTConnectStreams:2.5",

@@ -12,7 +12,7 @@ from fastapi.testclient import TestClient
 from cnc.faces.loop_thread import LoopThread
 from cnc.faces.shdr import ShdrAdapter
 from cnc.status import AxisStatus, MachineStatus
-from server.mtconnect import AdapterConnection
+from mtconnect import AdapterConnection
 from tests.server.test_mtconnect_e2e import wait_for
 from tests.server.test_mtconnect_support import error_code, header, parse, small_agent, values
 from web_api.mtconnect import mtconnect_router, stream_parts

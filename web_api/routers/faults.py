@@ -14,6 +14,7 @@ from fastapi import APIRouter, Path, Request
 from fastapi.concurrency import run_in_threadpool
 from pydantic import BaseModel, ConfigDict, Field
 
+from dnc.cell import MachineUnavailable
 from web_api.problems import ApiProblem, problem_doc
 from web_api.routers.auth import Admin, Viewer
 from web_api.routers.machine_commands import cell_of
@@ -86,8 +87,6 @@ async def fault_types(request: Request, _: Viewer) -> list[FaultType]:
 async def inject_fault(
     name: Annotated[MachineName, Path()], body: FaultCreate, request: Request, principal: Admin
 ) -> Fault:
-    from server.supervisor import MachineUnavailable
-
     cell = cell_of(request)
     try:
         fault = await run_in_threadpool(cell.inject, name, body.model_dump())
@@ -130,8 +129,6 @@ async def clear_fault(
     request: Request,
     principal: Admin,
 ) -> Fault:
-    from server.supervisor import MachineUnavailable
-
     cell = cell_of(request)
     try:
         fault = await run_in_threadpool(cell.clear, name, fault_id)

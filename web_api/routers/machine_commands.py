@@ -13,6 +13,7 @@ from fastapi import APIRouter, Path, Request
 from fastapi.concurrency import run_in_threadpool
 from pydantic import BaseModel, ConfigDict, Field, model_validator
 
+from dnc.cell import CellControl, MachineUnavailable
 from dnc.tape import MAX_PROGRAM_NUMBER
 from web_api.problems import ApiProblem, problem_doc
 from web_api.routers.auth import Operator
@@ -49,8 +50,8 @@ class CommandAccepted(BaseModel):
     detail: str
 
 
-def cell_of(request: Request) -> Any:
-    cell = getattr(request.app.state, "cell_control", None)
+def cell_of(request: Request) -> CellControl:
+    cell: CellControl | None = getattr(request.app.state, "cell_control", None)
     if cell is None:
         raise ApiProblem(503, "no-cell", "this API runs without a cell: no machine is connected")
     return cell
@@ -77,8 +78,6 @@ async def machine_command(
         args["mode"] = body.mode
     elif body.command == "estop":
         args["release"] = body.release
-    from server.supervisor import MachineUnavailable
-
     library = request.app.state.services.library
     try:
         detail = await run_in_threadpool(cell.command, name, body.command, **args)

@@ -13,6 +13,7 @@ from typing import Annotated, Any
 from fastapi import APIRouter, Body, Path, Request
 from fastapi.concurrency import run_in_threadpool
 
+from dnc.cell import MachineUnavailable
 from web_api.problems import ApiProblem, problem_doc
 from web_api.routers.auth import Operator, Viewer
 from web_api.routers.machine_commands import cell_of
@@ -28,7 +29,6 @@ async def _at_machine(
     request: Request, name: str, what: str, doc: dict | None, actor: str = ""
 ) -> dict:
     from dnc.errors import Conflict
-    from server.supervisor import MachineUnavailable
 
     cell = cell_of(request)
     try:

@@ -1,9 +1,9 @@
 """The cell's MTConnect agent: device model, circular buffer, SHDR ingest, XML documents."""
 
-from server.mtconnect.agent import Agent, RestError
-from server.mtconnect.buffer import DEFAULT_BUFFER_SIZE, CircularBuffer, Observation
-from server.mtconnect.client import AdapterConnection, AgentConnections, connect_cell
-from server.mtconnect.model import DataItem, Device, build_device, devices_from_cell
+from mtconnect.agent import Agent, RestError
+from mtconnect.buffer import DEFAULT_BUFFER_SIZE, CircularBuffer, Observation
+from mtconnect.client import AdapterConnection, AgentConnections, connect_cell
+from mtconnect.model import DataItem, Device, build_device, devices_from_cell
 
 __all__ = [
     "DEFAULT_BUFFER_SIZE",

@@ -19,7 +19,7 @@ from collections import deque
 from collections.abc import Iterable
 from dataclasses import dataclass
 
-from server.mtconnect.model import DataItem
+from mtconnect.model import DataItem
 
 UNAVAILABLE = "UNAVAILABLE"
 DEFAULT_BUFFER_SIZE = 131_072  # 2**17, the reference agent's BufferSize 17

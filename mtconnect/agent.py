@@ -21,14 +21,14 @@ import xml.etree.ElementTree as ET
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 
-from server.mtconnect.buffer import (
+from mtconnect.buffer import (
     DEFAULT_BUFFER_SIZE,
     DEFAULT_CHECKPOINT_FREQUENCY,
     UNAVAILABLE,
     CircularBuffer,
     Observation,
 )
-from server.mtconnect.model import (
+from mtconnect.model import (
     AGENT_OWNED,
     QUALIFIERS,
     DataItem,
@@ -36,15 +36,15 @@ from server.mtconnect.model import (
     devices_element,
     devices_from_cell,
 )
-from server.mtconnect.path import PathError, select
-from server.mtconnect.printer import (
+from mtconnect.path import PathError, select
+from mtconnect.printer import (
     HeaderInfo,
     print_error,
     print_extension_schema,
     print_probe,
     print_streams,
 )
-from server.mtconnect.shdr import UNAVAILABLE_VALUES, ShdrValue, parse_line
+from mtconnect.shdr import UNAVAILABLE_VALUES, ShdrValue, parse_line
 
 log = logging.getLogger(__name__)
 

@@ -17,7 +17,7 @@ import contextlib
 import logging
 from dataclasses import dataclass
 
-from server.mtconnect.agent import Agent
+from mtconnect.agent import Agent
 
 log = logging.getLogger(__name__)
 

@@ -11,8 +11,8 @@ from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
 from xml.sax.saxutils import escape, quoteattr
 
-from server.mtconnect.buffer import Observation
-from server.mtconnect.model import AGENT_OWNED, Device, devices_element
+from mtconnect.buffer import Observation
+from mtconnect.model import AGENT_OWNED, Device, devices_element
 
 SCHEMA_VERSION = "2.5"
 AGENT_VERSION = "2.5.0.0"

@@ -1,0 +1,63 @@
+"""The running cell as the REST face sees it: a typed contract between `web_api` and `server`.
+
+The routers that act on machines (commands, machine data, fault injection) need a running
+cell; the DNC host's own services (library, dispatches, jobs) do not. `CellControl` is all a
+router may ask of it, and `server.cell.Cell` implements it, so `web_api` depends on this
+module and never imports `server` (docs/architecture.md, tests/test_architecture.py).
+
+It lives in `dnc` because that is the host layer both sides already depend on: the cell's
+machine registry, transfers and jobs are `dnc`'s, the faces behind `CellControl` are
+`server`'s.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from typing import Any, Protocol, runtime_checkable
+
+
+class CellError(RuntimeError):
+    """Base of the running cell's errors (raised by `server`, answered by `web_api`)."""
+
+
+class MachineUnavailable(CellError):
+    """A face of the machine cannot be reached or refused the request (text says which)."""
+
+
+class FaultRecord(Protocol):
+    """An injected fault as the cell keeps it (`as_dict()`: id, machine, type, target, params,
+    spec, state, created_at, cleared_at)."""
+
+    def as_dict(self) -> dict[str, Any]: ...
+
+
+@runtime_checkable
+class CellControl(Protocol):
+    """What the routers may ask of a running cell. Each call may block on a machine's faces:
+    routers run them in a worker thread. `MachineUnavailable` says why a machine refused."""
+
+    def command(self, name: str, command: str, **args: Any) -> str:
+        """A panel or NC command (cycle_start, feed_hold, reset, mode, home, select_program,
+        estop...) through the machine's faces; returns what the machine answered."""
+        ...
+
+    def machine_data(self, name: str, what: str, doc: dict | None = None) -> dict:
+        """The machine's tool table or work offsets (`what`: tools | offsets); with `doc`,
+        replace them (the machine refuses while a program runs)."""
+        ...
+
+    def fault_types(self) -> list[dict]:
+        """The injectable fault kinds: type, target, params, description, detection, recovery."""
+        ...
+
+    def inject(self, name: str, request: dict) -> FaultRecord:
+        """Inject a fault (ValueError: a bad request, MachineUnavailable: refused)."""
+        ...
+
+    def machine_faults(self, name: str) -> Sequence[FaultRecord]:
+        """The faults injected into the machine, active and cleared."""
+        ...
+
+    def clear(self, name: str, fault_id: int) -> FaultRecord:
+        """Clear an injected fault (dnc.errors.NotFound: no such fault on the machine)."""
+        ...
