@@ -3,7 +3,9 @@
 The real app on uvicorn in a child process (127.0.0.1, ephemeral port, real HTTP) over
 SQLite with the host's NC check (`dnc.checker.nc_checker`). Cases, each on a fresh server:
 
-- file_10mb: one 10 MB program as a multipart file (the streamed path, dnc/upload.py);
+- file_1mb .. file_15mb: one program of 1, 5, 10, 15 MB as a multipart file (the streamed
+  path, dnc/upload.py); `file_growth_mb_per_upload_mb`: how the peak grows with the size
+  (0 = flat);
 - file_4x15mb: four 15 MB programs at once, multipart;
 - peer json_10mb / json_4x15mb: the same programs as JSON bodies, the path that still holds
   the body and its text in memory (what every upload did before streaming).
@@ -173,13 +175,18 @@ def main() -> None:
     if args.serve:
         serve(args.serve)
         return
-    ten, fifteen = int(10 * MB * args.scale), int(15 * MB * args.scale)
-    out = {
-        "file_10mb": run_case("file", [ten]),
-        "file_4x15mb": run_case("file", [fifteen] * 4),
-        "peer_json_10mb": run_case("json", [ten]),
-        "peer_json_4x15mb": run_case("json", [fifteen] * 4),
-    }
+    fifteen = int(15 * MB * args.scale)
+    out: dict = {}
+    for mb in (1, 5, 10, 15):
+        out[f"file_{mb}mb"] = run_case("file", [int(mb * MB * args.scale)])
+    out["file_4x15mb"] = run_case("file", [fifteen] * 4)
+    # flat in size: the peak's growth per MB uploaded, from the 1 MB to the 15 MB case
+    small, large = out["file_1mb"], out["file_15mb"]
+    out["file_growth_mb_per_upload_mb"] = round(
+        (large["rss_growth_mb"] - small["rss_growth_mb"]) / max(large["mb"] - small["mb"], 0.1), 2
+    )
+    out["peer_json_10mb"] = run_case("json", [int(10 * MB * args.scale)])
+    out["peer_json_4x15mb"] = run_case("json", [fifteen] * 4)
     out["rss_ratio_4x15mb_file_vs_json"] = round(
         out["file_4x15mb"]["rss_growth_mb"] / max(out["peer_json_4x15mb"]["rss_growth_mb"], 0.1), 3
     )

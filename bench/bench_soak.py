@@ -35,6 +35,7 @@ import contextlib
 import json
 import os
 import random
+import re
 import signal
 import socket
 import subprocess
@@ -134,6 +135,12 @@ PLAN: dict[str, dict] = {
 DETECT_SLACK_S = 1.0  # status stream to the host, REST poll, a loaded box
 DETECT_WAIT_S = 30.0  # give up on a detection after the bound + this
 RECOVER_WAIT_S = 60.0
+
+
+def mtconnect_sequence(c: httpx.Client) -> tuple[float, int]:
+    """(now, the agent's nextSequence): how fast observations fill its buffer."""
+    text = c.get("/mtconnect/current").text
+    return time.monotonic(), int(re.search(r'nextSequence="(\d+)"', text).group(1))
 
 
 def free_port() -> int:
@@ -424,14 +431,17 @@ class Soak:
         return {"stuck": stuck, "counted": done}
 
 
-# --trace: the host runs under tracemalloc (1 frame) and writes, every `trace_every` s, the
-# sites whose traced memory grew most since the first snapshot (after warm-up) to
-# trace.txt in the cell's folder: what a growing RSS is made of, if Python objects.
+# --trace: the host runs under tracemalloc (1 frame, from `trace_every` s after its start)
+# and writes, every `trace_every` s, the sites whose traced memory grew most since the
+# first snapshot to trace.txt in the cell's folder: what a growing RSS is made of, if
+# Python objects.
 TRACE_BOOT = """
 import gc, os, runpy, sys, threading, time, tracemalloc
-tracemalloc.start(int(os.environ.get("SOAK_TRACE_FRAMES", "1")))
 every = float(os.environ["SOAK_TRACE_EVERY"])
 def dump():
+    # started late: the machines' power-on under tracemalloc takes longer than allowed
+    time.sleep(every)
+    tracemalloc.start(int(os.environ.get("SOAK_TRACE_FRAMES", "1")))
     first = None
     skip = [tracemalloc.Filter(False, tracemalloc.__file__)]
     while True:
@@ -500,6 +510,7 @@ def stop_cell(proc: subprocess.Popen) -> int | None:
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n", 1)[0])
     ap.add_argument("--minutes", type=float, default=60.0)
+    ap.add_argument("--short", action="store_true", help="the CI version: --minutes 2")
     ap.add_argument("--fault-every", type=float, default=60.0, help="seconds between faults")
     ap.add_argument("--sse", type=int, default=3, help="SSE clients churning")
     ap.add_argument("--warmup-minutes", type=float, default=None)
@@ -508,6 +519,8 @@ def main() -> int:
         "--trace", type=float, metavar="SECONDS", help="tracemalloc in the host (trace.txt)"
     )
     args = ap.parse_args()
+    if args.short:
+        args.minutes = 2.0
     warmup = args.warmup_minutes
     if warmup is None:
         warmup = min(10.0, args.minutes / 4)
@@ -528,6 +541,7 @@ def main() -> int:
                 if not t["description"].startswith("= ")  # an alias of another kind
             ]
             before = {m: soak.status(c, m)["counters"]["part_count"] for m in ("mill1", "mill2", "lathe1")}
+            seq0 = mtconnect_sequence(c)
             revisions = {
                 "mill": soak.upload_released(c, MILL_PROGRAM, "mill"),
                 "lathe": soak.upload_released(c, LATHE_PROGRAM, "lathe"),
@@ -546,6 +560,7 @@ def main() -> int:
         threads[2].join(timeout=RECOVER_WAIT_S * 2 + 60)  # the fault under way recovers
         with soak.client() as c:
             end = soak.settle(c)
+            seq1 = mtconnect_sequence(c)
             made = {
                 m: soak.status(c, m)["counters"]["part_count"] - before[m]
                 for m in ("mill1", "mill2", "lathe1")
@@ -584,6 +599,7 @@ def main() -> int:
             "warmup_minutes": warmup,
             "rss_samples": len(soak.rss),
             "rss_per_minute_mb": [round(r, 1) for t, r in soak.rss if int(t) % 60 < 5],
+            "mtconnect_observations_per_s": round((seq1[1] - seq0[1]) / (seq1[0] - seq0[0]), 1),
             "sse": soak.sse,
             "requests": soak.requests,
             "faults_injected": len(faults),
