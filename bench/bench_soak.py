@@ -60,18 +60,19 @@ machines:
 
 # A mill part with two tool changes (the tool-changer faults are reached only during one),
 # the spindle and coolant on (spindle and coolant faults), X, Y and Z moving (mill3's G54 is
-# X-300 Y-200 Z-300: these moves stay inside its travel).
+# X-300 Y-200 Z-300: these moves stay inside its travel). At F3000 with reversals the Y drive
+# tripped I2t (0x2350) after a few minutes of back-to-back parts: the feed is gentler.
 MILL_PROGRAM = """%
 O1101 (SOAK MILL PART)
 N10 G21 G90 G17 G94
 N20 T2 M6
 N30 S2000 M3 M8
 N40 G0 X-40 Y-30 Z-10
-N50 G1 Z-50 F3000
+N50 G1 Z-50 F1500
 N60 X-100 Y-60
-N70 X-40 Y-30
-N80 X-100 Y-60
-N90 X-40 Y-30
+N70 X-40 Y-60
+N80 X-40 Y-30
+N90 X-100 Y-30
 N100 G0 Z-20 M9
 N110 M5
 N120 T1 M6
@@ -286,6 +287,8 @@ class Soak:
 
     def fault_loop(self, types: list[str]) -> None:
         machines = ["mill1", "mill2"]
+        if not types:
+            return
         i = 0
         with self.client() as c:
             next_at = time.monotonic() + min(self.args.fault_every, 20.0)
@@ -353,6 +356,29 @@ class Soak:
             r.raise_for_status()
             c.delete(f"/api/machines/{name}/faults/{r.json()['id']}").raise_for_status()
         time.sleep(plan.get("rest", 0))
+        steps: list[str] = []
+
+        def no_fault(s: dict) -> bool:
+            return not any(a["level"] == "FAULT" for a in s["alarms"])
+
+        def ready(s: dict) -> bool:
+            return (
+                s["mode"] == "AUTOMATIC"
+                and s["referenced"]
+                and no_fault(s)
+                and s["execution"] in ("READY", "PROGRAM_COMPLETED", "STOPPED", "ACTIVE")
+            )
+
+        stopped = seen is not None and any(
+            a["level"] == "FAULT" or a["code"] == "3001" for a in self.status(c, name)["alarms"]
+        )
+        if not stopped:
+            # a warning (or nothing): the machine cuts on; the cleared cause is all it takes
+            back = self.wait(c, name, ready, 30.0, every=0.2)
+            out["recovered"] = back is not None
+            out["recovery_s"] = round(time.monotonic() - t_rec, 1)
+            out["steps"] = ["cleared, no RESET (no FAULT-level alarm)"]
+            return out
         last: list = [None, 0.0]
 
         def still(s: dict) -> bool:
@@ -361,38 +387,29 @@ class Soak:
             return time.monotonic() - last[1] >= 1.0 and s["execution"] != "ACTIVE"
 
         self.wait(c, name, still, 30.0, every=0.1)
-        steps = []
-        for command in ("reset", "home"):
-            r = c.post(f"/api/machines/{name}/commands", json={"command": command})
-            self.requests += 1
-            steps.append(f"{command} {r.status_code}")
+
+        def reset_and_home(label: str) -> dict | None:
+            r = c.post(f"/api/machines/{name}/commands", json={"command": "reset"})
+            steps.append(f"{label}reset {r.status_code}")
+            # the drives' fault reset and re-enable take a few cycles after the 202
+            if self.wait(c, name, no_fault, 15.0, every=0.1) is None:
+                st = self.status(c, name)
+                steps.append(
+                    "still FAULT after reset: "
+                    + "; ".join(a["text"][:120] for a in st["alarms"] if a["level"] == "FAULT")
+                )
+            r = c.post(f"/api/machines/{name}/commands", json={"command": "home"}, timeout=120)
+            self.requests += 2
+            steps.append(f"{label}home {r.status_code}")
             if r.status_code >= 300:
-                steps.append(r.text[:200])
-                time.sleep(1.0)
-        back = self.wait(
-            c,
-            name,
-            lambda s: s["mode"] == "AUTOMATIC"
-            and s["referenced"]
-            and not any(a["level"] == "FAULT" for a in s["alarms"])
-            and s["execution"] in ("READY", "PROGRAM_COMPLETED", "STOPPED", "ACTIVE"),
-            RECOVER_WAIT_S,
-            every=0.2,
-        )
-        if back is None and not plan.get("undetectable"):
-            # a second RESET (a drive fault that needed it), then home again
-            for command in ("reset", "home"):
-                r = c.post(f"/api/machines/{name}/commands", json={"command": command})
-                steps.append(f"again {command} {r.status_code}")
-            back = self.wait(
-                c,
-                name,
-                lambda s: s["mode"] == "AUTOMATIC" and s["referenced"] and not s["alarms"],
-                RECOVER_WAIT_S / 2,
-                every=0.2,
-            )
-            out["needed_second_reset"] = back is not None
+                steps.append(r.text[:300])
+            return self.wait(c, name, ready, RECOVER_WAIT_S, every=0.2)
+
+        back = reset_and_home("")
         out["recovered"] = back is not None
+        if back is None and not plan.get("undetectable"):
+            # not by the documented procedure (one RESET): does a second one help?
+            out["recovered_after_second_reset"] = reset_and_home("again ") is not None
         out["recovery_s"] = round(time.monotonic() - t_rec, 1)
         out["steps"] = steps
         if back is None:
@@ -512,6 +529,11 @@ def main() -> int:
     ap.add_argument("--minutes", type=float, default=60.0)
     ap.add_argument("--short", action="store_true", help="the CI version: --minutes 2")
     ap.add_argument("--fault-every", type=float, default=60.0, help="seconds between faults")
+    ap.add_argument(
+        "--faults",
+        type=lambda text: [t for t in text.split(",") if t],
+        help="comma-separated fault types to rotate through (default: all; '' for none)",
+    )
     ap.add_argument("--sse", type=int, default=3, help="SSE clients churning")
     ap.add_argument("--warmup-minutes", type=float, default=None)
     ap.add_argument("--keep", action="store_true", help="keep the cell's folder (log, db)")
@@ -540,6 +562,11 @@ def main() -> int:
                 for t in c.get("/api/fault-types").json()
                 if not t["description"].startswith("= ")  # an alias of another kind
             ]
+            if args.faults is not None:
+                unknown = set(args.faults) - set(types)
+                if unknown:
+                    raise SystemExit(f"--faults: unknown fault types {sorted(unknown)}")
+                types = args.faults
             before = {m: soak.status(c, m)["counters"]["part_count"] for m in ("mill1", "mill2", "lathe1")}
             seq0 = mtconnect_sequence(c)
             revisions = {
