@@ -171,25 +171,29 @@ def main() -> None:
     ap = argparse.ArgumentParser()
     ap.add_argument("--scale", type=float, default=1.0, help="program sizes x this")
     ap.add_argument("--serve", help=argparse.SUPPRESS)
+    ap.add_argument("--cases", help="comma-separated case names (default: all)")
     args = ap.parse_args()
     if args.serve:
         serve(args.serve)
         return
     fifteen = int(15 * MB * args.scale)
-    out: dict = {}
-    for mb in (1, 5, 10, 15):
-        out[f"file_{mb}mb"] = run_case("file", [int(mb * MB * args.scale)])
-    out["file_4x15mb"] = run_case("file", [fifteen] * 4)
-    # flat in size: the peak's growth per MB uploaded, from the 1 MB to the 15 MB case
-    small, large = out["file_1mb"], out["file_15mb"]
-    out["file_growth_mb_per_upload_mb"] = round(
-        (large["rss_growth_mb"] - small["rss_growth_mb"]) / max(large["mb"] - small["mb"], 0.1), 2
-    )
-    out["peer_json_10mb"] = run_case("json", [int(10 * MB * args.scale)])
-    out["peer_json_4x15mb"] = run_case("json", [fifteen] * 4)
-    out["rss_ratio_4x15mb_file_vs_json"] = round(
-        out["file_4x15mb"]["rss_growth_mb"] / max(out["peer_json_4x15mb"]["rss_growth_mb"], 0.1), 3
-    )
+    cases = {f"file_{mb}mb": ("file", [int(mb * MB * args.scale)]) for mb in (1, 5, 10, 15)}
+    cases["file_4x15mb"] = ("file", [fifteen] * 4)
+    cases["peer_json_10mb"] = ("json", [int(10 * MB * args.scale)])
+    cases["peer_json_4x15mb"] = ("json", [fifteen] * 4)
+    wanted = args.cases.split(",") if args.cases else list(cases)
+    out: dict = {name: run_case(*cases[name]) for name in wanted}
+    if "file_1mb" in out and "file_15mb" in out:
+        # flat in size: the peak's growth per MB uploaded, from the 1 MB to the 15 MB case
+        small, large = out["file_1mb"], out["file_15mb"]
+        out["file_growth_mb_per_upload_mb"] = round(
+            (large["rss_growth_mb"] - small["rss_growth_mb"]) / (large["mb"] - small["mb"]), 2
+        )
+    if "file_4x15mb" in out and "peer_json_4x15mb" in out:
+        out["rss_ratio_4x15mb_file_vs_json"] = round(
+            out["file_4x15mb"]["rss_growth_mb"] / max(out["peer_json_4x15mb"]["rss_growth_mb"], 0.1),
+            3,
+        )
     out["scale"] = args.scale
     print(json.dumps(out))
 
