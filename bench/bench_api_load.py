@@ -89,7 +89,9 @@ def main() -> None:
     here = Path(__file__).resolve().parent
     with tempfile.TemporaryDirectory() as tmp:
         port_file = os.path.join(tmp, "port")
-        proc = subprocess.Popen([sys.executable, str(here / "bench_api_upload.py"), "--serve", port_file])
+        proc = subprocess.Popen(
+            [sys.executable, str(here / "bench_api_upload.py"), "--serve", port_file]
+        )
         try:
             deadline = time.monotonic() + 60
             while not (os.path.exists(port_file) and Path(port_file).read_text()):
@@ -104,9 +106,7 @@ def main() -> None:
                 for p in PATHS:  # warm-up: every route once
                     c.get(p.format(id=1))
             cpu0 = cpu_s(proc.pid)
-            latencies, statuses, seconds = asyncio.run(
-                load(base, args.requests, args.concurrency)
-            )
+            latencies, statuses, seconds = asyncio.run(load(base, args.requests, args.concurrency))
             cpu = cpu_s(proc.pid) - cpu0
         finally:
             proc.terminate()

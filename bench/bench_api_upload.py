@@ -191,7 +191,8 @@ def main() -> None:
         )
     if "file_4x15mb" in out and "peer_json_4x15mb" in out:
         out["rss_ratio_4x15mb_file_vs_json"] = round(
-            out["file_4x15mb"]["rss_growth_mb"] / max(out["peer_json_4x15mb"]["rss_growth_mb"], 0.1),
+            out["file_4x15mb"]["rss_growth_mb"]
+            / max(out["peer_json_4x15mb"]["rss_growth_mb"], 0.1),
             3,
         )
     out["scale"] = args.scale

@@ -43,7 +43,6 @@ import sys
 import tempfile
 import threading
 import time
-import uuid
 from pathlib import Path
 
 import httpx
@@ -417,7 +416,9 @@ class Soak:
             out["left_in"] = {
                 k: st[k] for k in ("mode_detail", "execution", "referenced", "cycle_start_refused")
             }
-            out["left_alarms"] = [f"{a['level']} {a['code']} {a['text'][:300]}" for a in st["alarms"]]
+            out["left_alarms"] = [
+                f"{a['level']} {a['code']} {a['text'][:300]}" for a in st["alarms"]
+            ]
         return out
 
     # ------------------------------------------------------------------ the end
@@ -440,7 +441,11 @@ class Soak:
                     for a in d["allocations"]
                     if a["status"] in ("dispatched", "running")
                 ]
-            busy = [m for m in ("mill1", "mill2", "lathe1") if self.status(c, m)["execution"] == "ACTIVE"]
+            busy = [
+                m
+                for m in ("mill1", "mill2", "lathe1")
+                if self.status(c, m)["execution"] == "ACTIVE"
+            ]
             if not stuck and not busy:
                 break
             time.sleep(2.0)
@@ -571,7 +576,9 @@ def main() -> int:
                 if unknown:
                     raise SystemExit(f"--faults: unknown fault types {sorted(unknown)}")
                 types = args.faults
-            before = {m: soak.status(c, m)["counters"]["part_count"] for m in ("mill1", "mill2", "lathe1")}
+            before = {
+                m: soak.status(c, m)["counters"]["part_count"] for m in ("mill1", "mill2", "lathe1")
+            }
             seq0 = mtconnect_sequence(c)
             revisions = {
                 "mill": soak.upload_released(c, MILL_PROGRAM, "mill"),
@@ -583,7 +590,9 @@ def main() -> int:
             threading.Thread(target=soak.rss_loop, daemon=True),
             threading.Thread(target=soak.jobs_loop, args=(revisions,), daemon=True),
             threading.Thread(target=soak.fault_loop, args=(types,), daemon=True),
-        ] + [threading.Thread(target=soak.sse_loop, args=(n,), daemon=True) for n in range(args.sse)]
+        ] + [
+            threading.Thread(target=soak.sse_loop, args=(n,), daemon=True) for n in range(args.sse)
+        ]
         for t in threads:
             t.start()
         soak.stop.wait(args.minutes * 60)
