@@ -8,7 +8,7 @@ STAMP := $(VENV)/.installed
 MYPYC_LISTS := $(wildcard */mypyc.list */*/mypyc.list)
 MYPYC_SOURCES := $(foreach f,$(MYPYC_LISTS),$(addprefix $(dir $(f)),$(shell sed 's/\#.*//' $(f))))
 
-.PHONY: run test bench lint clean corpus corpus-baseline mutation coverage
+.PHONY: run test bench lint clean corpus corpus-baseline mutation coverage soak
 
 # The first build takes minutes (measured 5-16 on a busy 2-core box): say so, and what runs.
 $(STAMP): pyproject.toml setup.py $(MYPYC_LISTS) $(MYPYC_SOURCES)
@@ -75,6 +75,16 @@ coverage: $(STAMP)
 
 bench: $(STAMP)
 	$(PY) bench/run_all.py
+
+# Soaks, kept out of `make test` and `make bench`: bench/bench_soak.py (the default cell for
+# an hour: jobs looping, SSE clients churning, a fault a minute cleared and recovered; parts
+# counted = made, nothing stuck, host RSS growth in MB/h), then every bench/bench_soak_*.py.
+# Each prints ONE JSON object and exits 1 when a check fails; each takes `--short`, its CI
+# version (.ci/run: `make soak SOAK_ARGS=--short`, bench_soak.py then runs 2 minutes).
+SOAK_ARGS ?=
+soak: $(STAMP)
+	$(PY) bench/bench_soak.py $(SOAK_ARGS)
+	for b in bench/bench_soak_*.py; do [ ! -e "$$b" ] || $(PY) "$$b" $(SOAK_ARGS) || exit 1; done
 
 lint: $(STAMP)
 	$(VENV)/bin/ruff check .

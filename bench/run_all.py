@@ -3,6 +3,7 @@
 Benchmarks run one at a time (never in parallel) so that they do not disturb each other's
 figures on a 2-core machine. Output: one JSON object per line, `{"bench": name, ...figures}`;
 a benchmark that fails prints `{"bench": name, "error": ...}` and the run exits non-zero.
+The soaks (bench_soak*.py, an hour or more each) run only when named, or by `make soak`.
 """
 
 from __future__ import annotations
@@ -21,6 +22,8 @@ def main(argv: list[str]) -> int:
         name = script.stem.removeprefix("bench_")
         if wanted and name not in wanted:
             continue
+        if not wanted and name.startswith("soak"):
+            continue  # an hour or more each: `make soak` runs them (or name one here)
         proc = subprocess.run(
             [sys.executable, str(script)], capture_output=True, text=True, cwd=here.parent
         )

@@ -138,3 +138,32 @@ def test_a_character_split_between_chunks_is_named_whole(cut):
     assert "U+20AC" in str(info.value)
     assert (info.value.detail["offset"], info.value.detail["line"]) == (i, 2)
     assert info.value.detail["column"] == 8
+
+
+def test_large_uploads_are_stored_in_turn_on_one_thread():
+    """Every upload over HEAVY_BYTES runs on the one large-upload worker, one after the
+    other: stored on several threads, each thread's malloc arena kept its own peak."""
+    import asyncio
+    import threading
+    import time
+
+    from web_api.routers import programs
+
+    seen: list[tuple[int, float, float]] = []
+
+    def work():
+        start = time.perf_counter()
+        time.sleep(0.02)
+        seen.append((threading.get_ident(), start, time.perf_counter()))
+        return len(seen)
+
+    big, small = "x" * programs.HEAVY_BYTES, "x"
+
+    async def main():
+        return await asyncio.gather(*(programs._heavy(big, work) for _ in range(3)))
+
+    assert sorted(asyncio.run(main())) == [1, 2, 3]
+    assert len({ident for ident, _, _ in seen}) == 1
+    ordered = sorted(seen, key=lambda s: s[1])
+    assert all(a[2] <= b[1] for a, b in zip(ordered, ordered[1:], strict=False))
+    assert asyncio.run(programs._heavy(small, lambda: threading.get_ident())) != seen[0][0]

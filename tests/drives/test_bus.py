@@ -457,3 +457,21 @@ def test_python_can_can_open_the_simulator_by_interface_name(monkeypatch):
     finally:
         network.disconnect()
         drop_hub("cellB")
+
+
+def test_load_account_keeps_recent_windows_only(hub):
+    """A cell runs for hours at a SYNC every 2 ms: the windows kept are bounded (they held
+    some 20 MB per bus at 100 000), while mean and peak still cover the whole run."""
+    master = hub.endpoint()
+    master.send(msg(0x080))
+    master.send(msg(0x181, bytes(8)))  # one fuller window first: the run's peak
+    hub.deliver()
+    hub.advance(0.001)
+    for _ in range(2500):
+        master.send(msg(0x080))
+        hub.deliver()
+        hub.advance(0.001)
+    assert len(hub.load.windows) == 2000
+    assert hub.load.summary()["windows"] == 2000
+    assert hub.load.peak == pytest.approx(177 / 1000)  # from the first window, long gone
+    assert hub.load.total_frames == 2502

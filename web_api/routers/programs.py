@@ -2,9 +2,13 @@
 
 from __future__ import annotations
 
+import asyncio
 import contextlib
+import contextvars
+import ctypes
+import ctypes.util
 import dataclasses
-import threading
+from concurrent.futures import ThreadPoolExecutor
 from pathlib import PurePath
 from typing import Annotated, Any
 
@@ -160,26 +164,44 @@ async def read_upload(
 
 
 UPLOAD_CHUNK = 1 << 20
-#: a program larger than this is NC-checked and stored by at most HEAVY_AT_ONCE requests at
-#: a time: the check of a 15 MB program holds CPU for seconds, and several at once only
-#: share the CPU while each holds its text, so peak memory grew with every concurrent upload
+#: a program larger than this is NC-checked and stored on one worker thread, one at a time:
+#: the check of a 15 MB program holds the CPU for seconds, and several at once would only
+#: share it (one interpreter lock). Storing one costs some 5 bytes of memory per byte of
+#: text for a moment (SQLite's row and the trigram index of the whole text, built in memory),
+#: and glibc keeps what a thread freed in that thread's own arena: stored by whichever pool
+#: thread was free, four 15 MB uploads left four arenas of ~60 MB each (the host's peak grew
+#: by 245 MB, also when they were stored one after the other). One thread reuses one arena,
+#: and the heap is trimmed after each large store.
 HEAVY_BYTES = 1 << 20
-HEAVY_AT_ONCE = 2
-_heavy_slots = threading.BoundedSemaphore(HEAVY_AT_ONCE)
+_heavy_worker = ThreadPoolExecutor(max_workers=1, thread_name_prefix="fmscell-large-upload")
+
+
+def _find_malloc_trim():
+    try:
+        return ctypes.CDLL(ctypes.util.find_library("c") or "libc.so.6").malloc_trim
+    except (OSError, AttributeError):
+        return None  # not glibc (musl, macOS): nothing to trim
+
+
+_malloc_trim = _find_malloc_trim()
 
 
 async def _heavy(text: str | ProgramUpload, work):
-    """Run the library call in the thread pool; a large program waits for a heavy slot
-    (in its worker thread, so no event loop is tied to the slots)."""
+    """Run the library call in the thread pool; a large program on the large-upload worker
+    (in turn), the heap trimmed after it."""
     size = text.size if isinstance(text, ProgramUpload) else len(text)
     if size < HEAVY_BYTES:
         return await run_in_threadpool(work)
 
-    def in_a_slot():
-        with _heavy_slots:
+    def then_trim():
+        try:
             return work()
+        finally:
+            if _malloc_trim is not None:
+                _malloc_trim(0)
 
-    return await run_in_threadpool(in_a_slot)
+    context = contextvars.copy_context()
+    return await asyncio.wrap_future(_heavy_worker.submit(context.run, then_trim))
 
 
 @contextlib.contextmanager
