@@ -277,9 +277,7 @@ class Campaign:
         t0 = time.monotonic()
 
         def done():
-            return all(
-                self.cell.get(f"/api/jobs/{j}")["status"] == "completed" for j in self.jobs
-            )
+            return all(self.cell.get(f"/api/jobs/{j}")["status"] == "completed" for j in self.jobs)
 
         with contextlib.suppress(TimeoutError):
             wait(done, timeout_s, "every job completed", interval_s=0.5)
@@ -438,8 +436,9 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--machine-kills", type=int, default=2)
     p.add_argument("--seed", type=int, default=None, help="default: random, printed")
     p.add_argument("--machines", type=int, default=2)
-    p.add_argument("--backends", default=None, help="sqlite,postgresql (default: sqlite; "
-                   "both with --kills)")
+    p.add_argument(
+        "--backends", default=None, help="sqlite,postgresql (default: sqlite; both with --kills)"
+    )
     args = p.parse_args(argv)
     if args.kills is not None:
         args.host_kills = args.machine_kills = args.kills

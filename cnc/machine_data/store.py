@@ -104,7 +104,5 @@ def load_part_count(path: str | Path) -> int:
         raise NcError(f"/: must be an object, got {type(doc).__name__}", 0, 0, str(path))
     count = doc.get("part_count")
     if isinstance(count, bool) or not isinstance(count, int) or count < 0:
-        raise NcError(
-            f"/part_count: must be an integer >= 0, got {count!r}", 0, 0, str(path)
-        )
+        raise NcError(f"/part_count: must be an integer >= 0, got {count!r}", 0, 0, str(path))
     return count
