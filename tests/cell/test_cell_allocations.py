@@ -182,6 +182,9 @@ def test_a_machine_process_killed_mid_part_loses_its_part_to_another_machine(tmp
         cell.stop()
 
 
+# its bounds (a cell of machine processes started, a part, a restart, the job) add up to more
+# than the module's 180 s on a box at load 30
+@pytest.mark.timeout(600)
 @pytest.mark.parametrize("moment", ["cutting", "part just counted"])
 def test_a_machine_process_killed_and_restarted_frees_its_allocation(tmp_path, moment):
     """Issue 14 item 1: mill1's process is killed and started again on the same ports (the
