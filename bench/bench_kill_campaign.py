@@ -158,6 +158,9 @@ class CellUnderTest:
         if name in self.restarted:
             self.restarted.pop(name).wait(30)
         wait(lambda: not alive(pid), 30, f"{name} (pid {pid}) dead")
+        # seen lost by the host before the restart: else its view of the old connection
+        # could pass for the restarted machine answering
+        wait(lambda: not self.machine_answering(name), 60, f"{name} seen lost", interval_s=0.05)
 
     def start_machine(self, name: str) -> None:
         """The operator's restart of a machine's control, on its configured ports."""
@@ -223,6 +226,7 @@ class CellUnderTest:
             return False
 
     def machine_answering(self, name: str) -> bool:
+        """The host sees the machine answer with its part counter."""
         with contextlib.suppress(httpx.HTTPError):
             s = self.status(name)
             return bool(s["connected"]) and s["counters"]["part_count"] is not None
@@ -329,8 +333,9 @@ def campaign(
                 name = moment["target"]
                 cell.kill_machine(name)
                 cell.start_machine(name)
+                ready = cell.work / f"{name}.machine.json"
                 wait(
-                    lambda n=name: cell.machine_answering(n),
+                    lambda n=name, f=ready: f.exists() and cell.machine_answering(n),
                     180,
                     f"{name} answering after its restart",
                     interval_s=0.1,
