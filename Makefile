@@ -73,6 +73,15 @@ coverage: $(STAMP)
 		| sed 's/^/total: /;s/$$/ %/'
 	$(PY) -m coverage html -q -d build/coverage/html --omit='$(COVERAGE_OMIT)'
 
+# The long kill -9 campaign (docs/recovery.md): 20 host and 20 machine-process kills at seeded
+# random moments of a running cell, on SQLite then PostgreSQL; one JSON object, exit 1 if a
+# part was lost, made twice or stuck. Tens of minutes: kept out of `make test` and `make bench`
+# runs its short version. `make soak-kill KILL_ARGS="--kills 5 --seed 7"`.
+.PHONY: soak-kill
+KILL_ARGS ?= --kills 20
+soak-kill: $(STAMP)
+	$(PY) bench/bench_kill_campaign.py $(KILL_ARGS)
+
 bench: $(STAMP)
 	$(PY) bench/run_all.py
 

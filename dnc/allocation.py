@@ -20,7 +20,9 @@ noted on the allocation.
 The dispatch that carries the program decides what an event means. While the program has not
 been started (`pending`, `transferring`, `verifying`) interrupting also cancels the dispatch,
 so the transfer worker can never start it afterwards. While the worker is pressing cycle
-start (`starting`) nothing interrupts: the start's outcome is awaited. From `started` (or a
+start (`starting`) nothing interrupts: the start's outcome is awaited, except that a part of
+our program counted past the counter read just before the start completes the allocation (the
+start was taken; its worker may have died with its host). From `started` (or a
 start that failed: the machine may still have taken it) the machine's state is the truth.
 """
 
@@ -115,7 +117,13 @@ def step(a: Alloc, look: Look, *, lost_contact_s: float = DEFAULT_LOST_CONTACT_S
             f"part counter of {m} went back from {a.parts_at_start} to {look.part_count}: "
             "the machine's control was restarted"
         )
-    if look.part_count > a.parts_at_start and a.dispatch in (STARTED, START_FAILED):
+    if look.part_count > a.parts_at_start and (
+        a.dispatch in (STARTED, START_FAILED) or (a.dispatch == STARTING and _our_program(a, look))
+    ):
+        # During `starting` the baseline is the counter read just before the start was
+        # claimed, so a part counted past it with our program selected is the start taken.
+        # Waiting for the start's outcome instead would wait on a worker that may be gone (a
+        # host killed pressing cycle start leaves `starting` until the next host recovers).
         extra = look.part_count - a.parts_at_start - 1
         return Step(
             COMPLETED,
@@ -157,6 +165,11 @@ def step(a: Alloc, look: Look, *, lost_contact_s: float = DEFAULT_LOST_CONTACT_S
         # READY with the program gone from selection is what a restarted control shows
         why = f"cycle on {m} ended without a part (reset, abort or restart at the machine)"
     return interrupt(why)
+
+
+def _our_program(a: Alloc, look: Look) -> bool:
+    """The machine reports our program as its own (not merely "not reported")."""
+    return a.program is not None and look.program == a.program
 
 
 def settle(a: Alloc, *, rerouted_to: int | None) -> Step:

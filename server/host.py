@@ -168,14 +168,19 @@ class MonitoringModel:
         for name, link in self.links.items():
             s = self.status(name)
             faults = [a for a in s["alarms"] if a["level"] == "FAULT"]
+            count = s["counters"]["part_count"]
+            # Connected but its part counter not reported yet (the adapter's first lines after
+            # a reconnect, every value UNAVAILABLE until then) is not yet an answer: a counter
+            # read as 0 there would look like a restarted control and cost a counted part.
+            answering = bool(s["connected"]) and count is not None
             out.append(
                 MachineView(
                     name,
                     link.kind,
                     self._state(s),
-                    s["counters"]["part_count"] or 0,
-                    connected=bool(s["connected"]),
-                    offline_s=self.offline_s(name, bool(s["connected"])),
+                    count or 0,
+                    connected=answering,
+                    offline_s=self.offline_s(name, answering),
                     in_cycle=s["execution"] in IN_CYCLE,
                     program=s["program"] or "",
                     estop=s["emergency_stop"] == "TRIGGERED",

@@ -55,7 +55,9 @@ class Machine:
     state_dir: the machine's state directory: its machine data (tools, offsets, kept
         parameters) is loaded from `<state_dir>/<name>.machine-data.json` when the file
         exists (else the configuration's `machine_data` section) and saved there atomically
-        whenever it changed and no program is in cycle, and at close.
+        whenever it changed and no program is in cycle, and at close; its part counter is
+        kept in `<state_dir>/<name>.counters.json`, written at each count before any face
+        reports it.
     machine_data: a cnc.machine_data.MachineData to start with instead of the
         configuration's `machine_data` section (a saved file in state_dir still wins).
     """
@@ -120,6 +122,16 @@ class Machine:
             if self.machine_data_file.exists():
                 md.replace_with(load(self.machine_data_file))
             self.save_machine_data()
+        # The part counter, kept like a control keeps it over a power cycle: a part finished
+        # just before the process died is still counted when it starts again, so the host
+        # credits it once and never has it made a second time.
+        self.counters_file = None
+        self._count_saved = -1
+        if state_dir is not None and hasattr(self.controller, "part_count"):
+            from cnc.machine_data import counters_file, load_part_count
+
+            self.counters_file = counters_file(state_dir, name)
+            self.controller.part_count = self._count_saved = load_part_count(self.counters_file)
         self.axes = (
             IdealAxes(config)
             if ideal
@@ -189,6 +201,9 @@ class Machine:
             self.inject(spec)
         fb = self.axes.feedback()
         out = self.controller.cycle(CycleInputs(self.t, self._plc_in, fb))
+        if self.counters_file is not None and self.controller.part_count != self._count_saved:
+            # on disk before any face shows it: a count the host has seen is never lost
+            self.save_part_count()
         nc, sent = self.io.nc, self._nc_sent
         for name, value in out.plc.items():
             if sent.get(name, _UNSET) != value:  # the signal table check is not free
@@ -223,6 +238,16 @@ class Machine:
 
         save(self.machine_data_file, md)
         self._md_saved = md.revision
+
+    def save_part_count(self) -> None:
+        """Write the part counter to the state directory now (atomically), if it changed."""
+        count = self.controller.part_count
+        if self.counters_file is None or count == self._count_saved:
+            return
+        from cnc.machine_data import save_part_count
+
+        save_part_count(self.counters_file, count)
+        self._count_saved = count
 
     def timestamp(self) -> float:
         """Seconds since the Unix epoch (UTC) for what the machine reports now: the wall

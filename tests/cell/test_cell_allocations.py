@@ -182,16 +182,17 @@ def test_a_machine_process_killed_mid_part_loses_its_part_to_another_machine(tmp
         cell.stop()
 
 
-@pytest.mark.xfail(
-    reason="known limit: the part counter lives only in the machine process, so a part "
-    "finished just before the kill and not yet seen by the host is made again (docs/dnc.md)",
-    strict=False,
-)
-def test_a_machine_process_killed_and_restarted_frees_its_allocation(tmp_path):
-    """Issue 14 item 1: mill1's process is killed while it cuts and started again on the
-    same ports (the operator's restart), well within the contact time-out. The new control
-    is READY with no program and its part counter at 0: the allocation ends, the part is
-    made again, and the job completes with each part made once."""
+# its bounds (a cell of machine processes started, a part, a restart, the job) add up to more
+# than the module's 180 s on a box at load 30
+@pytest.mark.timeout(600)
+@pytest.mark.parametrize("moment", ["cutting", "part just counted"])
+def test_a_machine_process_killed_and_restarted_frees_its_allocation(tmp_path, moment):
+    """Issue 14 item 1: mill1's process is killed and started again on the same ports (the
+    operator's restart), well within the contact time-out; either while it cuts or the
+    moment it has counted a part (on disk, perhaps not yet seen by the host). The new
+    control is READY with no program and its part counter where it was (kept in its state
+    directory): a part cut off is made again elsewhere, a part counted is credited once,
+    and the job completes with each part made once."""
     import json
     import os
     import signal
@@ -237,9 +238,12 @@ def test_a_machine_process_killed_and_restarted_frees_its_allocation(tmp_path):
         rev = upload_released(api, RESTART_PROGRAM)
         job = api("operator").post("/api/jobs", json={"revision_id": rev, "quantity": 3})
         job = job.json()["id"]
-        poll(lambda: status(api, "mill1")["execution"] == "ACTIVE", 90, "mill1 cutting", 0.01)
+        counter = tmp_path / "mill1.counters.json"
+        if moment == "cutting":
+            poll(lambda: status(api, "mill1")["execution"] == "ACTIVE", 90, "mill1 cutting", 0.01)
+        else:  # the counter on disk is written before any face shows it: kill right then
+            poll(counter.exists, 90, "mill1's first part counted", 0.002)
         state_file = tmp_path / "mill1.machine.json"
-        before_kill = status(api, "mill1")["counters"]["part_count"] or 0  # dies with it
         os.kill(json.loads(state_file.read_text())["pid"], signal.SIGKILL)
         poll(lambda: not status(api, "mill1")["connected"], 30, "mill1 seen lost")
         state_file.unlink()
@@ -265,11 +269,15 @@ def test_a_machine_process_killed_and_restarted_frees_its_allocation(tmp_path):
 
         done = poll(completed, 150, "job completed after mill1's restart", interval_s=0.2)
         assert done["done"] == 3
+        assert parts_made(api) == 3  # nothing made twice (mill1 counts on after its restart)
         interrupts = [d for d in done["decisions"] if d["action"] == "interrupt"]
-        assert [d["machine"] for d in interrupts] == ["mill1"], interrupts
-        assert "contact" not in interrupts[0]["reason"]  # the restart, not the time-out
-        assert sorted(a["status"] for a in done["allocations"]).count("rerouted") == 1
-        assert parts_made(api) + before_kill == 3  # nothing made twice
+        # the part cut off by the kill (if the kill found mill1 cutting one), and only it
+        assert [d["machine"] for d in interrupts] in (["mill1"], []), interrupts
+        for d in interrupts:
+            assert "contact" not in d["reason"]  # the restart, not the time-out
+        states = [a["status"] for a in done["allocations"]]
+        assert states.count("rerouted") == len(interrupts), done["allocations"]
+        assert states.count("completed") == 3, done["allocations"]
     finally:
         if restarted is not None:
             restarted.terminate()

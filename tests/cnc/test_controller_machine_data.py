@@ -196,3 +196,75 @@ def test_kept_variables_are_saved_with_the_machine_data_and_checked() -> None:
     with pytest.raises(MachineDataError) as err:
         MachineData.from_dict({"macro_variables": {"500": 1.0, "77": 2.0}})
     assert err.value.pointer == "/macro_variables/77"
+
+
+PART = "%\nO0100\nG90 G0 X-100 Y-100 Z-20\nM30\n%\n"
+
+
+class _CountOnDisk:
+    """An SHDR face that checks, at each publish, that the count it shows is on disk."""
+
+    def __init__(self, path) -> None:
+        self.path, self.published = path, []
+
+    def publish(self, status, timestamp) -> None:
+        kept = json.loads(self.path.read_text())["part_count"] if self.path.exists() else 0
+        assert kept == status.part_count, (kept, status.part_count)
+        self.published.append(status.part_count)
+
+
+def test_machine_keeps_its_part_counter_across_restarts(tmp_path) -> None:
+    """A part counted at M30 is on disk before any face reports it, and a machine started
+    again on the same state directory counts on from there (a process killed just after a
+    part is not made to count it again)."""
+    from cnc.config import builtin_machine
+    from cnc.machine import Machine
+
+    cfg = builtin_machine("mill3")
+    path = tmp_path / "m1.counters.json"
+    m = Machine(cfg, "m1", ideal=True, state_dir=str(tmp_path))
+    try:
+        assert m.controller.part_count == 0 and not path.exists()  # a new machine
+        m.shdr = face = _CountOnDisk(path)
+        m.power_on()
+        m.command("mode", mode="AUTO")
+        number = m.load_program(PART)
+        m.command("select_program", number=number)
+        for part in (1, 2):
+            m.press("PanelCycleStart")
+            assert m.run_until(lambda mm, n=part: mm.controller.part_count == n, 60)
+            m.step(2 * m.plc_every)
+        assert m.controller.part_count == 2 and face.published[-1] == 2
+        assert json.loads(path.read_text()) == {"part_count": 2}
+    finally:
+        m.shdr = None
+        m.close()
+    # as after a kill: nothing but the state directory carried over
+    m2 = Machine(cfg, "m1", ideal=True, state_dir=str(tmp_path))
+    try:
+        assert m2.controller.part_count == 2
+        assert m2.step(1).part_count == 2  # what its faces report from the first cycle on
+    finally:
+        m2.close()
+
+
+@pytest.mark.parametrize(
+    "text,where",
+    [
+        ('{"part_count": -1}', "/part_count: must be an integer >= 0, got -1"),
+        ('{"part_count": 1.5}', "/part_count: must be an integer >= 0, got 1.5"),
+        ('{"part_count": true}', "/part_count: must be an integer >= 0, got True"),
+        ("[3]", "/: must be an object, got list"),
+        ('{"part_count": 3', "1:17: not JSON"),
+    ],
+)
+def test_a_damaged_part_counter_file_stops_the_machine_saying_where(tmp_path, text, where):
+    from cnc.config import builtin_machine
+    from cnc.errors import NcError
+    from cnc.machine import Machine
+
+    (tmp_path / "m1.counters.json").write_text(text)
+    with pytest.raises(NcError) as err:
+        Machine(builtin_machine("mill3"), "m1", ideal=True, state_dir=str(tmp_path))
+    assert str(tmp_path / "m1.counters.json") in str(err.value)
+    assert where in str(err.value)

@@ -108,3 +108,22 @@ def test_a_refused_cycle_start_reports_the_ncs_reason_at_once(cell, monkeypatch)
     assert "machine not homed (X, Y, Z)" in str(err.value)
     # the reason is in the API's status too, until the next select or start
     assert "not homed" in cell.monitor.status("m1")["cycle_start_refused"]
+
+
+def test_a_reconnected_machine_is_not_judged_before_it_reports_its_part_counter(cell):
+    """After a reconnect the agent marks the adapter connected before its first lines: every
+    value is UNAVAILABLE then. A part counter read as 0 there would look like a restarted
+    control to the allocations (a counted part lost): the machine is not yet answering."""
+    m = cell.m
+    m.power_on()
+    cell.publish()
+    (view,) = cell.monitor.views()
+    assert view.connected and view.part_count == 0
+    cell.agent.disconnected("m1")
+    cell.agent.connected("m1")  # the TCP connection is back, no line read yet
+    (view,) = cell.monitor.views()
+    assert not view.connected and view.look().connected is False
+    cell.prev = None  # the adapter sends everything again on a new connection
+    cell.publish()
+    (view,) = cell.monitor.views()
+    assert view.connected and view.part_count == 0
