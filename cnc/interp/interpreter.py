@@ -1115,7 +1115,11 @@ class Interpreter:
                 ch = math.hypot(du, dv)
                 nu, nv = -dv / ch, du / ch
                 off = (cu - mu) * nu + (cv - mv) * nv
+                moved = abs((cu - mu) * du + (cv - mv) * dv) / ch + abs(r1 - r2)
                 cu, cv = mu + off * nu, mv + off * nv
+                if self._comp is not None and self._comp.active:
+                    # the contour is known only this well now: the interference check allows it
+                    self._comp.widen_slack(moved)
         turns = 0
         if "P" in words:
             p = words["P"]
