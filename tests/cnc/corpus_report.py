@@ -3,7 +3,8 @@
 Every file of `../shared/reference/corpus/gcode` (tests/reference.py GCODE_CORPUS; never
 copied into the repository) is checked exactly as a new user would check it:
 `fmscell nc check FILE`, or `fmscell nc check --kind lathe FILE` for the files whose
-SOURCES.md kind is lathe, with no other flag, so the shipped machines' defaults decide.
+SOURCES.md kind is lathe, with no other flag, so the shipped machines' defaults decide;
+unless the baseline gives the file a setup (below), as a setter would make it.
 The command line runs in this process (typer's runner) to spare 95 interpreter start-ups;
 its exit code and output are the ones a shell would see.
 
@@ -14,6 +15,11 @@ entry per file:
     expect: fail,    error: "L:C: ..." today's first error (a known gap, part 2's work)
     expect: invalid, reason: "..."     another controller's language (Okuma, Siemens 840D
                                        native, Marlin, ...): excluded from N passed / M failed
+
+and with any of them `args: [...]` (extra `nc check` options: `--no-soft-limits`,
+`--gcode-system B`, `--units inch`, `--g54 X,Y,Z`, ...) with `setup: "..."`, why the program
+needs them (the machine it was written for, the variables a setter presets): a judgement,
+kept by the regeneration like an invalid reason.
 
 A problem is a file that passed and now fails (a regression), a file marked fail or invalid
 that now passes (the baseline must be updated: the report prints the exact edit), and a
@@ -49,6 +55,8 @@ _WARNING = re.compile(r"(^|:\s)warning\b", re.IGNORECASE)
 class Expected:
     expect: str  # pass | fail | invalid
     note: str = ""  # the first error (fail) or why it is another controller's language (invalid)
+    args: tuple[str, ...] = ()  # extra `nc check` options for this file
+    setup: str = ""  # why it needs them
 
 
 @dataclass(frozen=True)
@@ -94,9 +102,9 @@ def corpus_kinds(sources_md: Path) -> dict[str, str]:
     return kinds
 
 
-def check_argv(path: Path, kind: str) -> list[str]:
-    """The `nc check` arguments a user gives: no flag beyond `--kind lathe`."""
-    return ["check", "--kind", "lathe", str(path)] if kind == "lathe" else ["check", str(path)]
+def check_argv(path: Path, kind: str, args: Iterable[str] = ()) -> list[str]:
+    """The `nc check` arguments a user gives: `--kind lathe` and the file's setup `args`."""
+    return ["check", *(["--kind", "lathe"] if kind == "lathe" else []), *args, str(path)]
 
 
 def split_output(text: str) -> tuple[list[str], list[str]]:
@@ -107,13 +115,13 @@ def split_output(text: str) -> tuple[list[str], list[str]]:
     return [ln for ln in lines if not _WARNING.search(ln)], warnings
 
 
-def check_file(path: Path, kind: str) -> Result:
+def check_file(path: Path, kind: str, args: Iterable[str] = ()) -> Result:
     from typer.testing import CliRunner
 
     from cnc.cli import nc_app
 
     start = time.perf_counter()
-    out = CliRunner().invoke(nc_app, check_argv(path, kind))
+    out = CliRunner().invoke(nc_app, check_argv(path, kind, args))
     seconds = time.perf_counter() - start
     if out.exception is not None and not isinstance(out.exception, SystemExit):
         # A crash of the checker is a failure with its own first error, never a pass.
@@ -132,13 +140,18 @@ def check_file(path: Path, kind: str) -> Result:
                   seconds)  # fmt: skip
 
 
-def run_corpus(corpus: Path = GCODE_CORPUS) -> list[Result]:
+def run_corpus(
+    corpus: Path = GCODE_CORPUS, baseline: Mapping[str, Expected] | None = None
+) -> list[Result]:
+    """Check every corpus file, with the setup `args` its baseline entry gives."""
     kinds = corpus_kinds(corpus / "SOURCES.md")
     files = sorted(p for p in corpus.iterdir() if p.is_file() and p.name != "SOURCES.md")
     unknown = [p.name for p in files if p.name not in kinds]
     if unknown:
         raise ValueError(f"{corpus}/SOURCES.md: no row (kind) for {', '.join(unknown)}")
-    return [check_file(p, kinds[p.name]) for p in files]
+    setups = baseline or {}
+    return [check_file(p, kinds[p.name], setups.get(p.name, Expected("pass")).args)
+            for p in files]  # fmt: skip
 
 
 def load_baseline(path: Path = BASELINE) -> dict[str, Expected]:
@@ -156,15 +169,24 @@ def load_baseline(path: Path = BASELINE) -> dict[str, Expected]:
         if expect != "pass" and not (isinstance(note, str) and note):
             key = "error" if expect == "fail" else "reason"
             raise ValueError(f"{where}/{key} is required for expect: {expect}")
-        out[str(name)] = Expected(expect, note or "")
+        args, setup = entry.get("args", []), entry.get("setup", "")
+        if not (isinstance(args, list) and all(isinstance(a, str) and a for a in args)):
+            raise ValueError(f"{where}/args must be a list of `nc check` options")
+        if args and not (isinstance(setup, str) and setup):
+            raise ValueError(f"{where}/setup is required with args (why the file needs them)")
+        out[str(name)] = Expected(expect, note or "", tuple(args), setup if args else "")
     return out
 
 
 def _entry(name: str, expected: Expected) -> str:
-    if expected.expect == "pass":
-        return f"  {name}: {{expect: pass}}"
-    key = "error" if expected.expect == "fail" else "reason"
-    return f"  {name}: {{expect: {expected.expect}, {key}: {_quote(expected.note)}}}"
+    fields = [f"expect: {expected.expect}"]
+    if expected.expect != "pass":
+        key = "error" if expected.expect == "fail" else "reason"
+        fields.append(f"{key}: {_quote(expected.note)}")
+    if expected.args:
+        fields.append(f"args: [{', '.join(_quote(a) for a in expected.args)}]")
+        fields.append(f"setup: {_quote(expected.setup)}")
+    return f"  {name}: {{{', '.join(fields)}}}"
 
 
 def _quote(text: str) -> str:
@@ -226,7 +248,8 @@ def write_baseline(results: Iterable[Result], old: Mapping[str, Expected], path:
         "# (../shared/reference/corpus/gcode). Checked by tests/cnc/test_corpus.py and",
         "# `make corpus`; regenerate with `make corpus-baseline` after a change that moves",
         "# results. pass | fail (error: today's first error) | invalid (reason: another",
-        "# controller's language; kept by the regeneration, edit by hand).",
+        "# controller's language; kept by the regeneration, edit by hand). args: extra",
+        "# `nc check` options with setup: why the file needs them (kept, edit by hand).",
         "files:",
     ]
     for r in results:
@@ -234,9 +257,10 @@ def write_baseline(results: Iterable[Result], old: Mapping[str, Expected], path:
         if exp is not None and exp.expect == "invalid":
             lines.append(_entry(r.file, exp))
         else:
-            lines.append(
-                _entry(r.file, Expected("pass") if r.passed else Expected("fail", r.first_error))
-            )
+            now = Expected("pass") if r.passed else Expected("fail", r.first_error)
+            if exp is not None:
+                now = Expected(now.expect, now.note, exp.args, exp.setup)
+            lines.append(_entry(r.file, now))
     tmp = path.with_suffix(".tmp")
     tmp.write_text("\n".join(lines) + "\n", encoding="utf-8")
     tmp.replace(path)
@@ -252,8 +276,8 @@ def main(argv: list[str] | None = None) -> int:
     if not (args.corpus / "SOURCES.md").is_file():
         print(MISSING, file=sys.stderr)
         return 2
-    results = run_corpus(args.corpus)
     old = load_baseline(args.baseline) if args.baseline.is_file() else {}
+    results = run_corpus(args.corpus, old)
     if args.write:
         write_baseline(results, old, args.baseline)
         old = load_baseline(args.baseline)

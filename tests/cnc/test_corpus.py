@@ -76,6 +76,23 @@ def test_baseline_round_trips_through_write(tmp_path: Path):
     assert cr.compare(results, cr.load_baseline(path)) == []
 
 
+def test_a_setup_is_kept_by_the_regeneration_and_reaches_the_command_line(tmp_path: Path):
+    old = {"a.nc": E("fail", "1:1: x", ("--no-soft-limits",), "a 2 m gantry"),
+           "b.nc": E("invalid", "Okuma", ("--units", "inch"), "inch")}  # fmt: skip
+    path = tmp_path / "expected.yaml"
+    cr.write_baseline([_r("a.nc", True), _r("b.nc", False, "1:1: $")], old, path)
+    assert cr.load_baseline(path) == {"a.nc": E("pass", "", ("--no-soft-limits",), "a 2 m gantry"),
+                                      "b.nc": old["b.nc"]}  # fmt: skip
+    argv = cr.check_argv(Path("l.nc"), "lathe", ("--gcode-system", "B"))
+    assert argv == ["check", "--kind", "lathe", "--gcode-system", "B", "l.nc"]
+    path.write_text('files:\n  a.nc: {expect: pass, args: ["--units", "inch"]}\n', encoding="utf-8")
+    with pytest.raises(ValueError, match=r"/files/a.nc/setup is required with args"):
+        cr.load_baseline(path)
+    path.write_text("files:\n  a.nc: {expect: pass, args: --units}\n", encoding="utf-8")
+    with pytest.raises(ValueError, match=r"/files/a.nc/args must be a list"):
+        cr.load_baseline(path)
+
+
 def test_bad_baseline_entry_is_refused_with_its_pointer(tmp_path: Path):
     path = tmp_path / "expected.yaml"
     path.write_text("files:\n  a.nc: {expect: fail}\n", encoding="utf-8")
@@ -94,8 +111,8 @@ def test_sources_md_gives_every_corpus_file_a_kind():
 def test_corpus_against_baseline(capsys):
     if not (GCODE_CORPUS / "SOURCES.md").is_file():
         pytest.skip(MISSING)
-    results = cr.run_corpus(GCODE_CORPUS)
     baseline = cr.load_baseline()
+    results = cr.run_corpus(GCODE_CORPUS, baseline)
     findings = cr.compare(results, baseline)
     line = cr.summary(results, baseline)
     with capsys.disabled():

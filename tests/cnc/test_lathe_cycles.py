@@ -508,6 +508,16 @@ def test_system_b_renames_the_cycles_and_frees_g90_g91_g92_g94() -> None:
     assert moves(run(G71_TYPE1.replace("G99", "G95"), params=b), 5) == moves(run(G71_TYPE1), 5)
 
 
+def test_system_b_and_c_thread_with_g33() -> None:
+    # Fanuc T: thread cutting is G32 in system A, G33 in B and C (gcw-tokarka-o1200)
+    a = run("G97 S500 M3\nG99\nG0 X16 Z2\nG32 Z-17 F1.5\nG0 X18\n")
+    for letter in ("B", "C"):
+        other = run("G97 S500 M3\nG95\nG0 X16 Z2\nG33 Z-17 F1.5\nG0 X18\n", params=_system(letter))
+        assert moves(other, 4) == moves(a, 4) == ["G1 X16 Z-17"]
+    with pytest.raises(NcError, match="unsupported G code G33"):
+        run("G33 Z-17 F1.5\n")
+
+
 def test_system_c_moves_the_multiple_cycles_to_g72_g78_and_units_to_g70_g71() -> None:
     c = _system("C")
     prog = (
