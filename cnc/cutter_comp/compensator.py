@@ -40,6 +40,10 @@ class Segment:
     is: "contour" (a programmed element, trimmed or extended), "startup" (the G41/G42
     approach), "cancel" (the G40 departure) or "corner" (an arc inserted around an outside
     corner; it carries the line, column and payload of the element after the corner).
+
+    `rapid` (defaulted) marks a positioning move (G00): it is compensated like any other,
+    and its tool path is checked, but its programmed path is air the tool travels through,
+    never a wall of the part, so the interference check measures no path against it.
     """
 
     kind: Literal["line", "arc"]
@@ -51,6 +55,7 @@ class Segment:
     col: int
     payload: object = None
     role: str = "contour"
+    rapid: bool = False
 
 
 class _Mode(Enum):
@@ -329,6 +334,8 @@ class CutterCompensation:
     def _add_contour(self, seg: Segment, elem: g.OffsetElement) -> None:
         """Register a new programmed contour element and check the held output against it."""
         self._idx += 1
+        if seg.rapid:
+            return  # a positioning move's programmed path is no wall: not in the window
         if seg.kind == "line":
             shape: clash.Element = (seg.start, seg.end)
         else:
@@ -516,7 +523,8 @@ class CutterCompensation:
                 "the compensated element "
                 + ("vanishes" if length > -self._tol else "reverses direction")
                 + f" (offset length {length:.6g}): the element is too short for a tool of "
-                f"radius {self._r:.6g} at its inside corner(s)",
+                f"radius {self._r:.6g} at its inside corner(s) (Fanuc PS0041 interference in "
+                "CRC: a groove or step narrower than the tool)",
             )
         self._tool = pe
         if a.kind == "line":

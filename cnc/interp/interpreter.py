@@ -1250,7 +1250,10 @@ class Interpreter:
         u, v, w = self._pu, self._pv, self._pw
         uv = (t[u], t[v])
         payload = ("move", blk.line, feed, self._comp_w, t[w], self._off, exact, None, 0)
-        seg = self._seg_cls("line", self._comp_uv, uv, None, False, blk.line, blk.col("G"), payload)
+        seg = self._seg_cls(
+            "line", self._comp_uv, uv, None, False, blk.line, blk.col("G"), payload,
+            rapid=feed is None,
+        )  # fmt: skip
         self._comp_uv = uv
         self._comp_w = t[w]
         self._comp_out(self._comp.push(seg))

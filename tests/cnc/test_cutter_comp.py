@@ -713,6 +713,25 @@ def test_widen_slack_accepts_the_callers_own_correction_only():
             assert not refused, moved
 
 
+def test_a_rapid_is_no_wall_but_the_same_feed_move_is():
+    # A roughing zig-zag left under G41 r=1 (as lathe programs leave G42 on): pass 1 (0,0)->
+    # (10,0), up, back, then down across the start of pass 1 to (0,-3) and pass 2. Pass 1's
+    # path starts at (0,1), on the programmed line x=0 of the move down: distance 0 from it.
+    # As a G00 that move is air (no wall); as a G01 it is a wall and pass 1 is refused.
+    def zigzag(down_rapid):
+        segs = [UP, L((0, 0), (10, 0), 2)]
+        segs += [Segment("line", (10, 0), (10, 5), None, False, 3, 1, 3, rapid=True)]
+        segs += [Segment("line", (10, 5), (0, 5), None, False, 4, 1, 4, rapid=True)]
+        segs += [Segment("line", (0, 5), (0, -3), None, False, 5, 1, 5, rapid=down_rapid)]
+        return run("left", 1.0, [*segs, L((0, -3), (10, -3), 6)])
+
+    ends = [o.end for o in zigzag(down_rapid=True)]
+    assert ends == [(0, 1), (9, 1), (9, 4), (1, 4), (1, -2), (10, -2)]
+    with pytest.raises(NcError) as e:
+        zigzag(down_rapid=False)
+    assert e.value.line == 2 and "line 5" in e.value.message and "passes 0 from" in e.value.message
+
+
 def test_closed_pocket_started_at_a_corner_is_a_gouge():
     # Type A start-up at an inside corner puts the tool centre on the neighbouring wall:
     # (0,1) is at distance 0 from the last edge x=0. A real overcut, refused.
