@@ -131,7 +131,7 @@ class CutterCompensation:
         self._prog: Point | None = None  # programmed end of the last pushed segment
         self._scale = 1.0
         # A gouge against the newest contour element waits for the next push: if that is the
-        # cancel move and the element is a lead-out (see _lead_out), it is no wall.
+        # cancel move and the element is a lead-out (_settle_wall_gouge), it is no wall.
         self._wall_gouge: NcError | None = None
         self._newest_leaves_to_tool_side = False
 
@@ -187,8 +187,9 @@ class CutterCompensation:
 
     def widen_slack(self, moved: float) -> None:
         """The caller moved a programmed element by `moved` (an arc centre put on the chord's
-        bisector to make its end radii equal): until the cancel move the interference check
-        does not refuse a path closer than r by less than the largest such correction."""
+        bisector to make its end radii equal): until the next start-up the interference check
+        does not refuse a path closer than r by less than twice the largest such correction
+        (two elements, each moved towards the other)."""
         if moved > self._slack and math.isfinite(moved):
             self._slack = moved
 
@@ -224,7 +225,8 @@ class CutterCompensation:
             self._mode = _Mode.ACTIVE
             return []
 
-        self._settle_wall_gouge()
+        if not zero or mode is _Mode.CANCEL:  # a Z retract before G40 keeps the question open
+            self._settle_wall_gouge()
         self._check_continuity(seg)
         self._prog = seg.end
         if zero:

@@ -683,6 +683,15 @@ def test_a_lead_out_arc_inside_the_bore_is_no_wall():
     )
 
 
+def test_a_z_retract_between_the_lead_out_and_g40_keeps_it_a_lead_out():
+    # lead-out arc, a zero-length segment (G0 Z5: no in-plane motion), then the cancel move
+    segs = [L((0, 0), (2.75, -2.75), 1), A((2.75, -2.75), (5.5, 0), (2.75, 0), True, 2)]
+    segs += [A((5.5, 0), (5.5, 0), (0, 0), True, 3), A((5.5, 0), (2.75, 2.75), (2.75, 0), True, 4)]
+    segs += [L((2.75, 2.75), (2.75, 2.75), 5)]
+    out = run("left", 1.5, segs, cancel=L((2.75, 2.75), (0, 0), 9))
+    assert [o.line for o in out] == [1, 2, 3, 4, 5, 9] and out[4].end == (2.75, 1.25)
+
+
 def test_the_same_arc_followed_by_more_contour_is_a_wall():
     # With one more element before G40 the arc is part of the contour: the circle's path
     # crossing it is a gouge, named at the circle (line 3) against the arc (line 4).
