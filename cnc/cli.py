@@ -45,6 +45,9 @@ def check_cmd(
         "--library",
         help="folder of programs that M98 P / G65 P / G66 P call, found by their O number",
     ),
+    gcode_system: str | None = typer.Option(
+        None, "--gcode-system", help="lathe G-code system A, B or C (default: the machine's)"
+    ),
 ) -> None:
     """Check a part program: exit 0 when valid, else one `FILE:LINE:COL: message` per error.
 
@@ -57,7 +60,7 @@ def check_cmd(
     try:
         setup = machine_setup(
             kind=kind, config=config, tools=tools, offsets=offsets, units=units, g54=g54,
-            decimal=decimal, soft_limits=soft_limits,
+            decimal=decimal, soft_limits=soft_limits, gcode_system=gcode_system,
         )  # fmt: skip
     except SETUP_ERRORS as err:
         raise fail(err) from None

@@ -39,6 +39,7 @@ def machine_setup(
     g54: str = "",
     decimal: str | None = None,
     soft_limits: bool = True,
+    gcode_system: str | None = None,
 ) -> Setup:
     """The setup from the command line's options; raises NcError (file:line:col) or
     typer.BadParameter for a bad option."""
@@ -62,6 +63,14 @@ def machine_setup(
             raise typer.BadParameter(
                 f"must be calculator or least_increment, not {decimal!r}", param_hint="--decimal"
             ) from None
+    if gcode_system is not None:
+        if params.kind != "lathe" or gcode_system not in ("A", "B", "C"):
+            raise typer.BadParameter(
+                f"a lathe's Fanuc G-code system is A, B or C, not {gcode_system!r}"
+                + ("" if params.kind == "lathe" else " (and the machine is not a lathe)"),
+                param_hint="--gcode-system",
+            )
+        params = replace(params, lathe_gcode_system=gcode_system)
     if not soft_limits:
         params = replace(
             params,

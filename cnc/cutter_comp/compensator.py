@@ -40,6 +40,10 @@ class Segment:
     is: "contour" (a programmed element, trimmed or extended), "startup" (the G41/G42
     approach), "cancel" (the G40 departure) or "corner" (an arc inserted around an outside
     corner; it carries the line, column and payload of the element after the corner).
+
+    `rapid` (defaulted) marks a positioning move (G00): it is compensated like any other,
+    and its tool path is checked, but its programmed path is air the tool travels through,
+    never a wall of the part, so the interference check measures no path against it.
     """
 
     kind: Literal["line", "arc"]
@@ -51,6 +55,7 @@ class Segment:
     col: int
     payload: object = None
     role: str = "contour"
+    rapid: bool = False
 
 
 class _Mode(Enum):
@@ -105,6 +110,8 @@ class CutterCompensation:
         if lookahead < 0:
             raise ValueError("lookahead must be >= 0")
         self._file = file
+        # How far the caller moved the programmed contour (widen_slack) since start-up.
+        self._slack = 0.0
         self._lookahead = lookahead
         self._queue: deque[_Staged] = deque()
         # (index, programmed segment, shape) of the last contour elements
@@ -123,6 +130,10 @@ class CutterCompensation:
         self._tool: Point = (0.0, 0.0)  # in-plane position at the end of the emitted path
         self._prog: Point | None = None  # programmed end of the last pushed segment
         self._scale = 1.0
+        # A gouge against the newest contour element waits for the next push: if that is the
+        # cancel move and the element is a lead-out (_settle_wall_gouge), it is no wall.
+        self._wall_gouge: NcError | None = None
+        self._newest_leaves_to_tool_side = False
 
     # --- public API -----------------------------------------------------------------
 
@@ -157,6 +168,8 @@ class CutterCompensation:
             s = -s
         r = abs(radius)
         if self._mode in (_Mode.INACTIVE, _Mode.STARTUP):
+            if self._mode is _Mode.INACTIVE:
+                self._slack = 0.0
             self._side, self._r = s, r
             self._mode = _Mode.STARTUP
             self._scale = max(self._scale, r)
@@ -171,6 +184,14 @@ class CutterCompensation:
             line,
             col,
         )
+
+    def widen_slack(self, moved: float) -> None:
+        """The caller moved a programmed element by `moved` (an arc centre put on the chord's
+        bisector to make its end radii equal): until the next start-up the interference check
+        does not refuse a path closer than r by less than twice the largest such correction
+        (two elements, each moved towards the other)."""
+        if moved > self._slack and math.isfinite(moved):
+            self._slack = moved
 
     def cancel(self) -> None:
         """G40: the next pushed in-plane segment is the cancel move."""
@@ -204,6 +225,8 @@ class CutterCompensation:
             self._mode = _Mode.ACTIVE
             return []
 
+        if not zero or mode is _Mode.CANCEL:  # a Z retract before G40 keeps the question open
+            self._settle_wall_gouge()
         self._check_continuity(seg)
         self._prog = seg.end
         if zero:
@@ -238,6 +261,7 @@ class CutterCompensation:
                 )
             )
             self._stage(out, self._idx)
+            self._settle_wall_gouge()
             self._mode = _Mode.INACTIVE
             self._released = None
             self._tool = seg.end
@@ -258,6 +282,14 @@ class CutterCompensation:
             out, base = self._corner_after_sync(self._released, elem, seg), 1
         else:  # pragma: no cover - ACTIVE always holds or has released an element
             raise self._error("cutter compensation: internal state lost", seg.line, seg.col)
+        self._newest_leaves_to_tool_side = (
+            held is not None
+            and not held.startup
+            and elem.kind == "arc"
+            and self._side * elem.sigma > 0.0  # its centre on the tool side
+            # tangent junction (to the rounding of CAM output)
+            and g.turn_angle(held.elem.tangent_end(), elem.tangent_start()) <= g.LEAD_OUT_TANGENT
+        )
         self._add_contour(seg, elem)
         self._stage(out, self._idx - 1 + base)
         self._held = _Held(seg, elem, startup=False)
@@ -277,6 +309,7 @@ class CutterCompensation:
         perpendicular offset, as before a cancel move, and the tool stays there; the next
         move leaves that point uncompensated. Outside CANCEL it is `flush()`.
         """
+        self._settle_wall_gouge()
         out = self.flush()
         if self._mode is _Mode.CANCEL:
             self._mode = _Mode.INACTIVE
@@ -292,8 +325,10 @@ class CutterCompensation:
         then makes an inside corner with it, that is a gouge (the released element can no
         longer be trimmed) and push() raises.
         """
+        self._settle_wall_gouge()
         if self._held is not None:
             self._stage(self._finish_held(), self._idx)
+        self._settle_wall_gouge()
         return self._release(everything=True)
 
     # --- interference check -------------------------------------------------------------
@@ -301,6 +336,8 @@ class CutterCompensation:
     def _add_contour(self, seg: Segment, elem: g.OffsetElement) -> None:
         """Register a new programmed contour element and check the held output against it."""
         self._idx += 1
+        if seg.rapid:
+            return  # a positioning move's programmed path is no wall: not in the window
         if seg.kind == "line":
             shape: clash.Element = (seg.start, seg.end)
         else:
@@ -311,7 +348,7 @@ class CutterCompensation:
         self._window.append((self._idx, seg, shape, box))
         for staged in self._queue:
             if staged.shape is not None and staged.tag >= self._idx - self._lookahead:
-                self._interfere(staged, seg, shape, box)
+                self._interfere(staged, seg, shape, box, newest=True)
 
     def _stage(self, outs: list[Segment], tag: int) -> None:
         checking = self._lookahead > 0 and self._r > self._tol
@@ -333,24 +370,52 @@ class CutterCompensation:
                 skip = own if seg.role == "contour" else -1
                 for idx, prog, pshape, pbox in self._window:
                     if idx >= own and idx != skip:
-                        self._interfere(staged, prog, pshape, pbox)
+                        self._interfere(staged, prog, pshape, pbox, newest=idx == self._idx)
             self._queue.append(staged)
 
     def _interfere(
-        self, staged: _Staged, prog: Segment, pshape: clash.Element, pbox: clash.Box
+        self,
+        staged: _Staged,
+        prog: Segment,
+        pshape: clash.Element,
+        pbox: clash.Box,
+        newest: bool = False,
     ) -> None:
+        """Refuse a staged path closer than r to a programmed element; against the newest
+        element the refusal waits for the next push (`_settle_wall_gouge`)."""
         assert staged.shape is not None and staged.box is not None
-        limit = self._r - g.INTERFERENCE_TOL_REL * self._scale
+        # two elements may each have been moved by the slack, towards each other
+        limit = self._r - max(g.INTERFERENCE_TOL_REL * self._scale, 2.0 * self._slack)
         if clash.box_gap(staged.box, pbox) >= limit:
             return
         d = clash.distance(staged.shape, pshape)
         if d < limit:
-            raise self._gouge(
+            err = self._gouge(
                 staged.seg,
                 f"the tool path of this block passes {d:.6g} from the programmed contour of "
                 f"line {prog.line}, {self._r - d:.6g} closer than the tool radius "
                 f"{self._r:.6g} (interference check over {self._lookahead} elements)",
             )
+            if not newest:
+                raise err
+            if self._wall_gouge is None:
+                self._wall_gouge = err
+
+    def _settle_wall_gouge(self) -> None:
+        """Raise the gouge held against the newest element unless it was a lead-out.
+
+        A lead-out is the last element before the cancel move that leaves the contour
+        tangentially, curving to the tool side: it runs through the area the tool has just
+        cleared (the inside of a bore after the full circle), so an earlier element's tool
+        path crossing it cuts air. Fanuc's interference check (a direction check on the
+        compensation vectors) does not refuse it either.
+        """
+        err = self._wall_gouge
+        if err is None:
+            return
+        self._wall_gouge = None
+        if not (self._mode is _Mode.CANCEL and self._newest_leaves_to_tool_side):
+            raise err
 
     def _release(self, everything: bool = False) -> list[Segment]:
         """Hand over the segments no later element can still veto."""
@@ -460,7 +525,8 @@ class CutterCompensation:
                 "the compensated element "
                 + ("vanishes" if length > -self._tol else "reverses direction")
                 + f" (offset length {length:.6g}): the element is too short for a tool of "
-                f"radius {self._r:.6g} at its inside corner(s)",
+                f"radius {self._r:.6g} at its inside corner(s) (Fanuc PS0041 interference in "
+                "CRC: a groove or step narrower than the tool)",
             )
         self._tool = pe
         if a.kind == "line":

@@ -28,6 +28,10 @@ CONTINUITY_TOL_REL = 1e-7
 #: than r - INTERFERENCE_TOL_REL * scale. Exact contacts (inside-corner trim points, corner
 #: arcs, the element's own offset) sit at exactly r up to rounding, far inside this margin.
 INTERFERENCE_TOL_REL = 1e-8
+#: A lead-out arc (the last element before the cancel move, curving to the tool side) joins
+#: the contour tangentially when the tangents differ by less than this (radians): CAM output
+#: rounded to 4 decimals of an inch leaves ~4e-4 rad at a small arc.
+LEAD_OUT_TANGENT = 1e-2
 #: Outside line/line corners turning by less than this (radians) are joined at the
 #: intersection of the extended offset lines instead of with a micro-arc. The tool centre
 #: then stands off by r*(1/cos(a/2) - 1) <= 1.25e-9 * r beyond the radius.

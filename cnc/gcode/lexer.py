@@ -217,13 +217,8 @@ def _parse_marked(
 ) -> Block | None:
     blk = MarkedBlock(line, text)
     if body[0] == "%":
-        if body.strip("% \t"):
-            raise NcError(
-                "'%' (tape start/end) must stand alone in its block",
-                line,
-                text.index("%") + 1,
-                file,
-            )
+        # Fanuc reads a tape or file skipping everything between the first '%' and the next
+        # LF (`%O1200(NAME)` from some posts), and nothing after the closing '%'.
         blk.tape = True
         return blk
     if body[0] == "/":

@@ -387,6 +387,7 @@ _LATHE_B = {
     "G90": "mill:G90",  # absolute
     "G91": "mill:G91",  # incremental
     "G92": "lathe:G50",  # coordinate system setting, S maximum spindle speed
+    "G33": "lathe:G32",  # thread cutting
     "G94": "mill:G94",  # feed per minute
     "G95": "mill:G95",  # feed per revolution
     "G98": "mill:G98",  # return to the initial level

@@ -1211,7 +1211,11 @@ class Interpreter:
                 ch = math.hypot(du, dv)
                 nu, nv = -dv / ch, du / ch
                 off = (cu - mu) * nu + (cv - mv) * nv
+                moved = abs((cu - mu) * du + (cv - mv) * dv) / ch + abs(r1 - r2)
                 cu, cv = mu + off * nu, mv + off * nv
+                if self._comp is not None and self._comp.active:
+                    # the contour is known only this well now: the interference check allows it
+                    self._comp.widen_slack(moved)
         turns = 0
         if "P" in words:
             p = words["P"]
@@ -1361,7 +1365,10 @@ class Interpreter:
         u, v, w = self._pu, self._pv, self._pw
         uv = (t[u], t[v])
         payload = ("move", blk.line, feed, self._comp_w, t[w], self._off, exact, None, 0)
-        seg = self._seg_cls("line", self._comp_uv, uv, None, False, blk.line, blk.col("G"), payload)
+        seg = self._seg_cls(
+            "line", self._comp_uv, uv, None, False, blk.line, blk.col("G"), payload,
+            rapid=feed is None,
+        )  # fmt: skip
         self._comp_uv = uv
         self._comp_w = t[w]
         self._comp_out(self._comp.push(seg))

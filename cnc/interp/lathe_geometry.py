@@ -283,8 +283,9 @@ def rough_turning(
     translated by `allowance` (U/2, W). Levels step from x0 towards A' by `depth`; at each
     level the tool feeds along Z from z0 until it meets the (translated) contour, pulls
     off at 45 degrees by `retract` and returns to z0 in rapid. Type II: every span of
-    material at the level is cut (pockets), reached from x0 down the column at the span's
-    start. Last: rapid to A' (translated), the contour at feed, rapid out to x0, then to z0.
+    material is cut (pockets), pocket after pocket (`_pocket_order`), a pocket's pass
+    reached from x0 down the column at the span's start. Last: rapid to A' (translated), the
+    contour at feed, rapid out to x0, then to z0.
     """
     if depth <= 0.0:
         raise CycleGeometryError("depth of cut must be greater than 0", alarm="PS0062")
@@ -301,40 +302,64 @@ def rough_turning(
             f"cycle expands to more than {max_passes} passes (depth of cut too small)",
             alarm="PS0062",
         )
-    prev = x0
+    levels: list[tuple[float, list[tuple[float, float]]]] = []
     for k in range(1, n + 1):
         level = x0 + s * k * depth
         spans = _material_spans(prof, level, s)
-        if not spans:
-            prev = level
-            continue
-        if not type2 or len(spans) == 1:
-            z_end = spans[0][1]
+        if spans:
+            levels.append((level, spans if type2 else spans[:1]))
+    order = _pocket_order(levels)
+    for i, (li, si) in enumerate(order):
+        level, (za, zb) = levels[li][0], levels[li][1][si]
+        if si == 0:  # the span from the contour's start: entered at z0, as in type I
             moves.append(mv(RAPID, (level, z0)))
-            moves.append(mv(FEED, (level, z_end)))
-            moves.append(mv(FEED, (level - s * retract, z_end - zdir * retract)))
-            moves.append(mv(RAPID, (level - s * retract, z0)))
-        else:
-            for i, (za, zb) in enumerate(spans):
-                if i == 0:
-                    moves.append(mv(RAPID, (level, z0)))
-                else:
-                    moves.append(mv(RAPID, (x0, moves[-1][2])))
-                    moves.append(mv(RAPID, (x0, za)))
-                    moves.append(mv(RAPID, (prev, za)))
-                    moves.append(mv(FEED, (level, za)))
-                moves.append(mv(FEED, (level, zb)))
-                moves.append(mv(FEED, (level - s * retract, zb - zdir * retract)))
+        else:  # a pocket: out to x0, along Z, down to the level above (cut), feed in
+            prev = levels[li - 1][0] if li > 0 else x0
             moves.append(mv(RAPID, (x0, moves[-1][2])))
-            moves.append(mv(RAPID, (x0, z0)))
-        prev = level
+            moves.append(mv(RAPID, (x0, za)))
+            moves.append(mv(RAPID, (prev, za)))
+            moves.append(mv(FEED, (level, za)))
+        moves.append(mv(FEED, (level, zb)))
+        moves.append(mv(FEED, (level - s * retract, zb - zdir * retract)))
+        if si == 0 and (i + 1 == len(order) or order[i + 1][1] == 0):
+            moves.append(mv(RAPID, (level - s * retract, z0)))
         if len(moves) > MAX_MOVES:
             raise CycleGeometryError(
                 f"cycle expands to more than {MAX_MOVES} moves (depth of cut too small)",
                 alarm="PS0062",
             )
+    if order and order[-1][1] != 0:  # after the last pocket: out to x0, back to z0
+        moves.append(mv(RAPID, (x0, moves[-1][2])))
+        moves.append(mv(RAPID, (x0, z0)))
     moves.extend(contour_pass(start, prof))
     return moves
+
+
+def _pocket_order(levels: list[tuple[float, list[tuple[float, float]]]]) -> list[tuple[int, int]]:
+    """(level index, span index) of every pass, pocket after pocket.
+
+    A span of material at a level lies inside one span of the level above (the contour is
+    beyond a deeper level only where it is beyond the shallower one), so the spans form a
+    tree. Depth first, children in the contour's order: the region at the contour's start
+    down to A' first, then each pocket from its top level to its bottom before the next,
+    as type II roughing runs (the tool follows the contour from one pocket to the next, as
+    LinuxCNC's G71 does; a Fanuc pocket is likewise finished before the next).
+    """
+    order: list[tuple[int, int]] = []
+
+    def inside(child: tuple[float, float], parent: tuple[float, float]) -> bool:
+        lo, hi = min(parent) - TOL, max(parent) + TOL
+        return lo <= child[0] <= hi and lo <= child[1] <= hi
+
+    stack = [(0, si) for si in reversed(range(len(levels[0][1])))] if levels else []
+    while stack:
+        li, si = stack.pop()
+        order.append((li, si))
+        if li + 1 < len(levels):
+            span = levels[li][1][si]
+            kids = [k for k, sp in enumerate(levels[li + 1][1]) if inside(sp, span)]
+            stack.extend((li + 1, k) for k in reversed(kids))
+    return order
 
 
 def contour_pass(start: Pt, prof: tuple[Seg, ...]) -> list[Move]:

@@ -17,6 +17,7 @@ write. Variable ranges (Fanuc 0i-F, with the Haas NGC extension #10000-#10999):
 | #4001-#4130 | modal information of the block before (read only) | |
 | #5001-#5085 | positions (read only) | |
 | #5201-#5325, #7001-#7945 | work offsets (`_wofs`) | work offset memory |
+| #5401-#5600 | Haas tool feed timers / total tool timers, seconds (read only) | read 0: no tool usage is recorded here |
 
 The persistent store is any `MutableMapping[int, float]` (a plain dict by default): the
 controller passes its machine data so #500-#999 survive a power cycle; a vacant variable
@@ -44,6 +45,7 @@ LOCAL = range(1, 34)
 COMMON = range(100, 500)
 PERSISTENT = range(500, 1000)
 PERSISTENT_EXT = range(10000, 11000)  # Haas NGC extended common variables
+HAAS_TOOL_TIMERS = range(5401, 5601)  # Haas: feed time #5400+T, total time #5500+T (s)
 MAX_ALARM = 200  # #3000 = 0..200: alarm 3000..3200 (Fanuc)
 
 # argument specification I: address -> local variable number
@@ -264,6 +266,8 @@ def _read_system(env: MacroVariables, n: int, col: int) -> float | None:
         return _modal(ip, n)
     if 5001 <= n <= 5105:
         return _position(ip, n, col)
+    if n in HAAS_TOOL_TIMERS:
+        return 0.0  # a tool-life check (IF [#5405 GE 6000] ...) sees fresh tools
     hit = _work_offset_index(n)
     if hit is not None:
         k, ax = hit
@@ -342,7 +346,7 @@ def _write_system(env: MacroVariables, n: int, v: float | None, col: int) -> Non
         if k in (0, ip._wcs):
             ip._refresh_offsets(resync=True)
         return
-    if 4001 <= n <= 4130 or 5001 <= n <= 5105 or 1000 <= n <= 1035:
+    if 4001 <= n <= 4130 or 5001 <= n <= 5105 or 1000 <= n <= 1035 or n in HAAS_TOOL_TIMERS:
         raise _protected(n, col)
     raise _out_of_range(n, col)
 

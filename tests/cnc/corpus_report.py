@@ -4,11 +4,11 @@ Every file of `../shared/reference/corpus/gcode` (tests/reference.py GCODE_CORPU
 copied into the repository) is checked exactly as a new user would check it:
 `fmscell nc check FILE`, or `fmscell nc check --kind lathe FILE` for the files whose
 SOURCES.md kind is lathe, with no other flag, so the shipped machines' defaults decide;
-a program that calls programs of other files (M98 P / G65 P / G66 P) is checked with
-`--library` its shop's folder (the corpus files from its SOURCES.md repository), and a
-file that ends in M99 is checked by `nc check` in subprogram mode.
-a baseline entry with `machine: NAME` (the programs with rotary A words: mill4) is checked
-on that shipped machine instead (`fmscell nc check --config NAME FILE`).
+unless the baseline gives the file a setup (below), as a setter would make it (the
+programs with rotary A words get `--config mill4`, the 4-axis mill); a program that calls
+programs of other files (M98 P / G65 P / G66 P) is checked with `--library` its shop's
+folder (the corpus files from its SOURCES.md repository), and a file that ends in M99 is
+checked by `nc check` in subprogram mode.
 The command line runs in this process (typer's runner) to spare 95 interpreter start-ups;
 its exit code and output are the ones a shell would see.
 
@@ -19,6 +19,11 @@ entry per file:
     expect: fail,    error: "L:C: ..." today's first error (a known gap, part 2's work)
     expect: invalid, reason: "..."     another controller's language (Okuma, Siemens 840D
                                        native, Marlin, ...): excluded from N passed / M failed
+
+and with any of them `args: [...]` (extra `nc check` options: `--no-soft-limits`,
+`--gcode-system B`, `--units inch`, `--g54 X,Y,Z`, ...) with `setup: "..."`, why the program
+needs them (the machine it was written for, the variables a setter presets): a judgement,
+kept by the regeneration like an invalid reason.
 
 A problem is a file that passed and now fails (a regression), a file marked fail or invalid
 that now passes (the baseline must be updated: the report prints the exact edit), and a
@@ -55,7 +60,8 @@ _WARNING = re.compile(r"(^|:\s)warning\b", re.IGNORECASE)
 class Expected:
     expect: str  # pass | fail | invalid
     note: str = ""  # the first error (fail) or why it is another controller's language (invalid)
-    machine: str = ""  # a shipped machine to check the file on ("": the kind's default)
+    args: tuple[str, ...] = ()  # extra `nc check` options for this file
+    setup: str = ""  # why it needs them
 
 
 @dataclass(frozen=True)
@@ -101,17 +107,14 @@ def corpus_kinds(sources_md: Path) -> dict[str, str]:
     return kinds
 
 
-def check_argv(path: Path, kind: str, library: Path | None = None, machine: str = "") -> list[str]:
-    """The `nc check` arguments a user gives: no flag beyond `--kind lathe` or, for a file
-    that needs another shipped machine, `--config NAME`; and `--library FOLDER` for a
-    program that calls programs of other files."""
-    if machine:
-        argv = ["check", "--config", machine]
-    else:
-        argv = ["check", "--kind", "lathe"] if kind == "lathe" else ["check"]
-    if library is not None:
-        argv += ["--library", str(library)]
-    return [*argv, str(path)]
+def check_argv(
+    path: Path, kind: str, args: Iterable[str] = (), library: Path | None = None
+) -> list[str]:
+    """The `nc check` arguments a user gives: `--kind lathe`, the file's setup `args`, and
+    `--library FOLDER` for a program that calls programs of other files."""
+    lathe = ["--kind", "lathe"] if kind == "lathe" else []
+    shop = ["--library", str(library)] if library is not None else []
+    return ["check", *lathe, *args, *shop, str(path)]
 
 
 def calls_other_files(path: Path) -> bool:
@@ -146,13 +149,15 @@ def split_output(text: str) -> tuple[list[str], list[str]]:
     return [ln for ln in lines if not _WARNING.search(ln)], warnings
 
 
-def check_file(path: Path, kind: str, library: Path | None = None, machine: str = "") -> Result:
+def check_file(
+    path: Path, kind: str, args: Iterable[str] = (), library: Path | None = None
+) -> Result:
     from typer.testing import CliRunner
 
     from cnc.cli import nc_app
 
     start = time.perf_counter()
-    out = CliRunner().invoke(nc_app, check_argv(path, kind, library, machine))
+    out = CliRunner().invoke(nc_app, check_argv(path, kind, args, library))
     seconds = time.perf_counter() - start
     if out.exception is not None and not isinstance(out.exception, SystemExit):
         # A crash of the checker is a failure with its own first error, never a pass.
@@ -174,25 +179,23 @@ def check_file(path: Path, kind: str, library: Path | None = None, machine: str 
 
 
 def run_corpus(
-    corpus: Path = GCODE_CORPUS, machines: Mapping[str, str] | None = None
+    corpus: Path = GCODE_CORPUS, baseline: Mapping[str, Expected] | None = None
 ) -> list[Result]:
-    """Check every file; `machines` (file -> shipped machine, default: the baseline's
-    `machine:` entries) picks the machine of the files that need another one."""
-    if machines is None:
-        machines = {n: e.machine for n, e in load_baseline().items() if e.machine}
+    """Check every corpus file, with the setup `args` its baseline entry gives."""
     kinds = corpus_kinds(corpus / "SOURCES.md")
     files = sorted(p for p in corpus.iterdir() if p.is_file() and p.name != "SOURCES.md")
     unknown = [p.name for p in files if p.name not in kinds]
     if unknown:
         raise ValueError(f"{corpus}/SOURCES.md: no row (kind) for {', '.join(unknown)}")
+    setups = baseline or {}
     with tempfile.TemporaryDirectory(prefix="fmscell-corpus-") as tmp:
         shops = shop_folders(corpus, Path(tmp))
         return [
             check_file(
                 p,
                 kinds[p.name],
+                setups.get(p.name, Expected("pass")).args,
                 shops[p.name] if calls_other_files(p) else None,
-                machines.get(p.name, ""),
             )
             for p in files
         ]
@@ -213,19 +216,24 @@ def load_baseline(path: Path = BASELINE) -> dict[str, Expected]:
         if expect != "pass" and not (isinstance(note, str) and note):
             key = "error" if expect == "fail" else "reason"
             raise ValueError(f"{where}/{key} is required for expect: {expect}")
-        machine = entry.get("machine", "")
-        if not isinstance(machine, str):
-            raise ValueError(f"{where}/machine must be a shipped machine's name")
-        out[str(name)] = Expected(expect, note or "", machine)
+        args, setup = entry.get("args", []), entry.get("setup", "")
+        if not (isinstance(args, list) and all(isinstance(a, str) and a for a in args)):
+            raise ValueError(f"{where}/args must be a list of `nc check` options")
+        if args and not (isinstance(setup, str) and setup):
+            raise ValueError(f"{where}/setup is required with args (why the file needs them)")
+        out[str(name)] = Expected(expect, note or "", tuple(args), setup if args else "")
     return out
 
 
 def _entry(name: str, expected: Expected) -> str:
-    machine = f", machine: {expected.machine}" if expected.machine else ""
-    if expected.expect == "pass":
-        return f"  {name}: {{expect: pass{machine}}}"
-    key = "error" if expected.expect == "fail" else "reason"
-    return f"  {name}: {{expect: {expected.expect}, {key}: {_quote(expected.note)}{machine}}}"
+    fields = [f"expect: {expected.expect}"]
+    if expected.expect != "pass":
+        key = "error" if expected.expect == "fail" else "reason"
+        fields.append(f"{key}: {_quote(expected.note)}")
+    if expected.args:
+        fields.append(f"args: [{', '.join(_quote(a) for a in expected.args)}]")
+        fields.append(f"setup: {_quote(expected.setup)}")
+    return f"  {name}: {{{', '.join(fields)}}}"
 
 
 def _quote(text: str) -> str:
@@ -238,7 +246,10 @@ def compare(results: Iterable[Result], baseline: Mapping[str, Expected]) -> list
     for r in results:
         seen.add(r.file)
         exp = baseline.get(r.file)
-        now = _entry(r.file, Expected("pass") if r.passed else Expected("fail", r.first_error))
+        got = Expected("pass") if r.passed else Expected("fail", r.first_error)
+        if exp is not None:
+            got = Expected(got.expect, got.note, exp.args, exp.setup)
+        now = _entry(r.file, got)
         if exp is None:
             findings.append(Finding(r.file, True, f"not in the baseline: add `{now.strip()}`"))
         elif exp.expect == "pass" and not r.passed:
@@ -283,21 +294,23 @@ def table(results: Iterable[Result], baseline: Mapping[str, Expected]) -> str:
 def write_baseline(results: Iterable[Result], old: Mapping[str, Expected], path: Path) -> None:
     """Regenerate from today's results; invalid entries (a judgement, not a result) are kept."""
     lines = [
-        "# Expected result of `fmscell nc check [--kind lathe | --config MACHINE] FILE` on every corpus file",
+        "# Expected result of `fmscell nc check [--kind lathe] [args] FILE` on every corpus file",
         "# (../shared/reference/corpus/gcode). Checked by tests/cnc/test_corpus.py and",
         "# `make corpus`; regenerate with `make corpus-baseline` after a change that moves",
         "# results. pass | fail (error: today's first error) | invalid (reason: another",
-        "# controller's language; kept by the regeneration, edit by hand).",
+        "# controller's language; kept by the regeneration, edit by hand). args: extra",
+        "# `nc check` options with setup: why the file needs them (kept, edit by hand).",
         "files:",
     ]
     for r in results:
         exp = old.get(r.file)
-        machine = exp.machine if exp is not None else ""
         if exp is not None and exp.expect == "invalid":
             lines.append(_entry(r.file, exp))
         else:
-            got = Expected("pass") if r.passed else Expected("fail", r.first_error)
-            lines.append(_entry(r.file, Expected(got.expect, got.note, machine)))
+            now = Expected("pass") if r.passed else Expected("fail", r.first_error)
+            if exp is not None:
+                now = Expected(now.expect, now.note, exp.args, exp.setup)
+            lines.append(_entry(r.file, now))
     tmp = path.with_suffix(".tmp")
     tmp.write_text("\n".join(lines) + "\n", encoding="utf-8")
     tmp.replace(path)
@@ -314,7 +327,7 @@ def main(argv: list[str] | None = None) -> int:
         print(MISSING, file=sys.stderr)
         return 2
     old = load_baseline(args.baseline) if args.baseline.is_file() else {}
-    results = run_corpus(args.corpus, {n: e.machine for n, e in old.items() if e.machine})
+    results = run_corpus(args.corpus, old)
     if args.write:
         write_baseline(results, old, args.baseline)
         old = load_baseline(args.baseline)

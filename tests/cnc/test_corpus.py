@@ -76,6 +76,23 @@ def test_baseline_round_trips_through_write(tmp_path: Path):
     assert cr.compare(results, cr.load_baseline(path)) == []
 
 
+def test_a_setup_is_kept_by_the_regeneration_and_reaches_the_command_line(tmp_path: Path):
+    old = {"a.nc": E("fail", "1:1: x", ("--no-soft-limits",), "a 2 m gantry"),
+           "b.nc": E("invalid", "Okuma", ("--units", "inch"), "inch")}  # fmt: skip
+    path = tmp_path / "expected.yaml"
+    cr.write_baseline([_r("a.nc", True), _r("b.nc", False, "1:1: $")], old, path)
+    assert cr.load_baseline(path) == {"a.nc": E("pass", "", ("--no-soft-limits",), "a 2 m gantry"),
+                                      "b.nc": old["b.nc"]}  # fmt: skip
+    argv = cr.check_argv(Path("l.nc"), "lathe", ("--gcode-system", "B"))
+    assert argv == ["check", "--kind", "lathe", "--gcode-system", "B", "l.nc"]
+    path.write_text('files:\n  a.nc: {expect: pass, args: ["--units", "inch"]}\n', encoding="utf-8")
+    with pytest.raises(ValueError, match=r"/files/a.nc/setup is required with args"):
+        cr.load_baseline(path)
+    path.write_text("files:\n  a.nc: {expect: pass, args: --units}\n", encoding="utf-8")
+    with pytest.raises(ValueError, match=r"/files/a.nc/args must be a list"):
+        cr.load_baseline(path)
+
+
 def test_bad_baseline_entry_is_refused_with_its_pointer(tmp_path: Path):
     path = tmp_path / "expected.yaml"
     path.write_text("files:\n  a.nc: {expect: fail}\n", encoding="utf-8")
@@ -94,8 +111,8 @@ def test_sources_md_gives_every_corpus_file_a_kind():
 def test_corpus_against_baseline(capsys):
     if not (GCODE_CORPUS / "SOURCES.md").is_file():
         pytest.skip(MISSING)
-    results = cr.run_corpus(GCODE_CORPUS)
     baseline = cr.load_baseline()
+    results = cr.run_corpus(GCODE_CORPUS, baseline)
     findings = cr.compare(results, baseline)
     line = cr.summary(results, baseline)
     with capsys.disabled():
@@ -128,7 +145,7 @@ def test_a_calling_program_is_checked_with_its_shops_folder_as_library(tmp_path)
     shops = cr.shop_folders(corpus, tmp_path)
     assert shops["a-main.nc"] == shops["a-sub.nc"] != shops["b-other.nc"]
     assert sorted(p.name for p in shops["a-main.nc"].iterdir()) == ["a-main.nc", "a-sub.nc"]
-    assert cr.check_argv(corpus / "a-main.nc", "mill", shops["a-main.nc"])[1:3] == [
+    assert cr.check_argv(corpus / "a-main.nc", "mill", library=shops["a-main.nc"])[1:3] == [
         "--library",
         str(shops["a-main.nc"]),
     ]
@@ -137,26 +154,16 @@ def test_a_calling_program_is_checked_with_its_shops_folder_as_library(tmp_path)
     assert not results["b-other.nc"].passed
 
 
-def test_a_baseline_machine_is_kept_by_write_and_picks_the_check_arguments(tmp_path: Path):
-    old = {"rot.nc": E("fail", "9:31: unknown address A", "mill4")}
-    path = tmp_path / "expected.yaml"
-    cr.write_baseline([_r("rot.nc", True)], old, path)
-    assert cr.load_baseline(path) == {"rot.nc": E("pass", "", "mill4")}
-    assert cr.check_argv(Path("rot.nc"), "mill", machine="mill4") == ["check", "--config", "mill4",
-                                                              "rot.nc"]  # fmt: skip
-    assert cr.check_argv(Path("l.nc"), "lathe") == ["check", "--kind", "lathe", "l.nc"]
-
-
 def test_the_rotary_corpus_files_run_on_mill4():
     if not (GCODE_CORPUS / "SOURCES.md").is_file():
         pytest.skip(MISSING)
     rotary = ["kiely-mill-engrave.nc", "norn93-demo.nc", "norn93-peck-pockets.nc",
               "z64-stdbc-o0010.nc"]  # fmt: skip
     baseline = cr.load_baseline()
-    assert {baseline[f].machine for f in rotary} == {"mill4"}
+    assert {baseline[f].args for f in rotary} == {("--config", "mill4")}
     for f in rotary:
         # on mill3 each stops at its first A word; on mill4 none does
         on_mill3 = cr.check_file(GCODE_CORPUS / f, "mill")
         assert "axis A is not configured" in on_mill3.first_error
-        on_mill4 = cr.check_file(GCODE_CORPUS / f, "mill", "mill4")
+        on_mill4 = cr.check_file(GCODE_CORPUS / f, "mill", ("--config", "mill4"))
         assert "axis A" not in on_mill4.first_error and "rotary" not in on_mill4.first_error

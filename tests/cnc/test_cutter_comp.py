@@ -651,6 +651,96 @@ def test_interference_check_finds_a_neck_no_single_element_shows():
     assert out[-1].start == (12.0, 0.5) and out[-1].end == (5.0, 0.5)
 
 
+def _bore(lead_out_then=None):
+    """G41 r=1.5 in a bore of radius 5.5 about the origin (a thread-mill pass): start-up to
+    (2.75,-2.75), lead-in arc about (2.75,0) to (5.5,0), the full circle, lead-out arc about
+    (2.75,0) to (2.75,2.75), then `lead_out_then` (more contour) and the cancel to (0,0)."""
+    segs = [L((0, 0), (2.75, -2.75), 1), A((2.75, -2.75), (5.5, 0), (2.75, 0), True, 2)]
+    segs += [A((5.5, 0), (5.5, 0), (0, 0), True, 3), A((5.5, 0), (2.75, 2.75), (2.75, 0), True, 4)]
+    end = (2.75, 2.75)
+    if lead_out_then is not None:
+        segs.append(lead_out_then)
+        end = lead_out_then.end
+    return run("left", 1.5, segs, cancel=L(end, (0, 0), 9))
+
+
+def test_a_lead_out_arc_inside_the_bore_is_no_wall():
+    # The circle's tool path (R 4) crosses the lead-out arc (from R 5.5 down to R 3.89 about
+    # the origin): distance 0, but the lead-out runs in the cleared bore, tangent to the
+    # circle and curving to the tool side, right before G40 (Fanuc runs it: its
+    # interference check compares directions, and none reverses).
+    out = _bore()
+    assert_path(
+        out,
+        [
+            ("line", (0, 0), (2.75, -1.25), None, False, "startup"),
+            ("arc", (2.75, -1.25), (4.0, 0), (2.75, 0), True, "contour"),
+            ("arc", (4.0, 0), (4.0, 0), (0, 0), True, "contour"),
+            ("arc", (4.0, 0), (2.75, 1.25), (2.75, 0), True, "contour"),
+            ("line", (2.75, 1.25), (0, 0), None, False, "cancel"),
+        ],
+        tol=1e-12,
+    )
+
+
+def test_a_z_retract_between_the_lead_out_and_g40_keeps_it_a_lead_out():
+    # lead-out arc, a zero-length segment (G0 Z5: no in-plane motion), then the cancel move
+    segs = [L((0, 0), (2.75, -2.75), 1), A((2.75, -2.75), (5.5, 0), (2.75, 0), True, 2)]
+    segs += [A((5.5, 0), (5.5, 0), (0, 0), True, 3), A((5.5, 0), (2.75, 2.75), (2.75, 0), True, 4)]
+    segs += [L((2.75, 2.75), (2.75, 2.75), 5)]
+    out = run("left", 1.5, segs, cancel=L((2.75, 2.75), (0, 0), 9))
+    assert [o.line for o in out] == [1, 2, 3, 4, 5, 9] and out[4].end == (2.75, 1.25)
+
+
+def test_the_same_arc_followed_by_more_contour_is_a_wall():
+    # With one more element before G40 the arc is part of the contour: the circle's path
+    # crossing it is a gouge, named at the circle (line 3) against the arc (line 4).
+    with pytest.raises(NcError) as e:
+        _bore(lead_out_then=L((2.75, 2.75), (0, 2.75), 5))
+    assert e.value.line == 3 and "line 4" in e.value.message and "passes 0 from" in e.value.message
+
+
+def test_widen_slack_accepts_the_callers_own_correction_only():
+    # Two laps of a circle from (10,0), the second about (0.002,0) (R 9.998): with r = 1 the
+    # first lap's path (R 9 about the origin) passes 9.998 - 9.002 = 0.996 from the second
+    # lap's contour, on the far side. A caller that
+    # moved each element by up to 0.003 (an arc centre put on its bisector) cannot tell that
+    # from rounding (2 x 0.003 >= 0.004); by 0.001 it can.
+    laps = [L((0, 0), (10, 0), 1), A((10, 0), (10, 0), (0, 0), True, 2)]
+    laps += [A((10, 0), (10, 0), (0.002, 0), True, 3)]
+    for moved, refused in ((0.0, True), (0.001, True), (0.003, False)):
+        cc = CutterCompensation()
+        cc.start("left", 1.0)
+        cc.widen_slack(moved)
+        try:
+            for s in laps:
+                cc.push(s)
+            cc.flush()
+        except NcError as e:
+            assert refused and e.line == 2 and "0.996 from" in e.message, (moved, e)
+        else:
+            assert not refused, moved
+
+
+def test_a_rapid_is_no_wall_but_the_same_feed_move_is():
+    # A roughing zig-zag left under G41 r=1 (as lathe programs leave G42 on): pass 1 (0,0)->
+    # (10,0), up, back, then down across the start of pass 1 to (0,-3) and pass 2. Pass 1's
+    # path starts at (0,1), on the programmed line x=0 of the move down: distance 0 from it.
+    # As a G00 that move is air (no wall); as a G01 it is a wall and pass 1 is refused.
+    def zigzag(down_rapid):
+        segs = [UP, L((0, 0), (10, 0), 2)]
+        segs += [Segment("line", (10, 0), (10, 5), None, False, 3, 1, 3, rapid=True)]
+        segs += [Segment("line", (10, 5), (0, 5), None, False, 4, 1, 4, rapid=True)]
+        segs += [Segment("line", (0, 5), (0, -3), None, False, 5, 1, 5, rapid=down_rapid)]
+        return run("left", 1.0, [*segs, L((0, -3), (10, -3), 6)])
+
+    ends = [o.end for o in zigzag(down_rapid=True)]
+    assert ends == [(0, 1), (9, 1), (9, 4), (1, 4), (1, -2), (10, -2)]
+    with pytest.raises(NcError) as e:
+        zigzag(down_rapid=False)
+    assert e.value.line == 2 and "line 5" in e.value.message and "passes 0 from" in e.value.message
+
+
 def test_closed_pocket_started_at_a_corner_is_a_gouge():
     # Type A start-up at an inside corner puts the tool centre on the neighbouring wall:
     # (0,1) is at distance 0 from the last edge x=0. A real overcut, refused.

@@ -55,6 +55,12 @@ def test_least_increment_marks_words_without_point() -> None:
     assert parse_line("X25", 1).nopoint is None  # calculator style: nothing to scale
 
 
+def test_text_after_a_leading_percent_is_skipped_as_fanuc_reads_a_tape() -> None:
+    # Fanuc skips the data between the first '%' and the next LF: O1200 is not read.
+    blk = parse_line("%O1200(TOKARKA)", 1, "p.nc")
+    assert blk is not None and blk.tape and blk.program is None and not blk.words
+
+
 @pytest.mark.parametrize(
     ("text", "col", "fragment"),
     [

@@ -97,3 +97,25 @@ def test_g41_refused_clearly_when_the_compensation_module_is_missing(monkeypatch
     with pytest.raises(NcError, match="cutter radius compensation is not available") as ei:
         run("G0 X0 Y0\nG41 D1 G1 X10 F100\n")
     assert (ei.value.line, ei.value.col) == (2, 1)
+
+
+def test_a_helix_of_rounded_arcs_is_no_gouge() -> None:
+    # Near-full CCW turns (355 deg) of R 12.7 with end points rounded to 3 decimals: the end
+    # radii differ by up to 0.00045, so the interpreter moves each centre onto its chord's
+    # bisector, by about 0.005 for a 1.1 mm chord. Layer after layer the tool path (R 10.2,
+    # r 2.5) then runs ~0.009 closer than r to the next turn's corrected contour: the
+    # interpreter's own correction, allowed (without it this was refused at line 5).
+    prog = (
+        "G17 G21 G90\nG0 X0 Y0\nG1 Z-1 F500\nG41 D3 X12.7 Y0\n"
+        "G3 X12.652 Y-1.107 I-12.7 J0 Z-2\n"
+        "G3 X12.507 Y-2.205 I-12.652 J1.107 Z-3\n"
+        "G3 X12.267 Y-3.287 I-12.507 J2.205 Z-4\n"
+        "G40 G1 X0 Y0\nM30\n"
+    )
+    cmds = list(Interpreter(MILL, tools={3: ToolOffset(radius=2.5)}).run(prog))
+    arcs = [c for c in cmds if isinstance(c, ArcFeed)]
+    assert sorted({a.line for a in arcs}) == [5, 6, 7]
+    # each turn on the offset circle of its own (corrected) centre; a micro corner arc of
+    # radius r where the rounded turns meet slightly off tangent
+    radii = sorted(round(math.dist(a.end[:2], a.center[:2]), 2) for a in arcs)
+    assert set(radii) <= {2.5, 10.2} and radii.count(10.2) == 3

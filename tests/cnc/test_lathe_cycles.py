@@ -163,8 +163,10 @@ def test_g71_type2_pocket() -> None:
     # Level 18 (dia 36): one span to Z-35.
     # Level 15 (dia 30): spans Z2..-10 and -21..-34 (the flanks cross x=15 at t=1/5, 4/5).
     # Level 12 (dia 24): spans Z2..-10 and -24..-31.
-    # A later span: out to x0, along Z to its start, down to the previous level in rapid,
-    # feed to the level, feed along, pull off.
+    # Pocket after pocket (depth first): the region at the start down to level 12, then the
+    # pocket from level 15 to 12. A pocket pass: out to x0, along Z to its start, down to
+    # the level above in rapid, feed to the level, feed along, pull off; after the last
+    # pocket out to x0 and back to z0.
     prog = (
         HEAD
         + "G0 X42 Z2\nG71 U3 R0.5\nG71 P10 Q20 F0.2\n"
@@ -173,15 +175,35 @@ def test_g71_type2_pocket() -> None:
     got = moves(run(prog), 5)
     assert got == [
         "G0 X36 Z2", "G1 X36 Z-35", "G1 X37 Z-34.5", "G0 X37 Z2",
-        "G0 X30 Z2", "G1 X30 Z-10", "G1 X31 Z-9.5",
-        "G0 X42 Z-9.5", "G0 X42 Z-21", "G0 X36 Z-21", "G1 X30 Z-21", "G1 X30 Z-34",
-        "G1 X31 Z-33.5", "G0 X42 Z-33.5", "G0 X42 Z2",
+        "G0 X30 Z2", "G1 X30 Z-10", "G1 X31 Z-9.5", "G0 X31 Z2",
         "G0 X24 Z2", "G1 X24 Z-10", "G1 X25 Z-9.5",
-        "G0 X42 Z-9.5", "G0 X42 Z-24", "G0 X30 Z-24", "G1 X24 Z-24", "G1 X24 Z-31",
+        "G0 X42 Z-9.5", "G0 X42 Z-21", "G0 X36 Z-21", "G1 X30 Z-21", "G1 X30 Z-34",
+        "G1 X31 Z-33.5",
+        "G0 X42 Z-33.5", "G0 X42 Z-24", "G0 X30 Z-24", "G1 X24 Z-24", "G1 X24 Z-31",
         "G1 X25 Z-30.5", "G0 X42 Z-30.5", "G0 X42 Z2",
         "G0 X20 Z2", "G1 X20 Z-10", "G1 X32 Z-10", "G1 X32 Z-20", "G1 X22 Z-25",
         "G1 X22 Z-30", "G1 X32 Z-35", "G1 X42 Z-35", "G0 X42 Z2",
     ]  # fmt: skip
+
+
+def test_type2_cuts_pocket_after_pocket_depth_first() -> None:
+    # levels (radius) with their spans of material in the contour's order: the start region,
+    # a shallow pocket ending at level 15 and a deep one down to level 9.
+    levels = [(18.0, [(2.0, -35.0)]),
+              (15.0, [(2.0, -10.0), (-12.0, -18.0), (-21.0, -34.0)]),
+              (12.0, [(2.0, -10.0), (-24.0, -31.0)]),
+              (9.0, [(2.0, -10.0), (-26.0, -29.0)])]  # fmt: skip
+    assert lg._pocket_order(levels) == [
+        (0, 0),
+        (1, 0),
+        (2, 0),
+        (3, 0),  # the start region down to level 9
+        (1, 1),  # the shallow pocket (one level)
+        (1, 2),
+        (2, 1),
+        (3, 1),  # the deep pocket, top to bottom
+    ]
+    assert lg._pocket_order([]) == []
 
 
 def test_g71_one_block_haas_format_and_the_contour_before_the_cycle() -> None:
@@ -506,6 +528,16 @@ def test_system_b_renames_the_cycles_and_frees_g90_g91_g92_g94() -> None:
     with pytest.raises(NcError, match="unsupported G code G50"):
         run("G50 S1000\n", params=b)
     assert moves(run(G71_TYPE1.replace("G99", "G95"), params=b), 5) == moves(run(G71_TYPE1), 5)
+
+
+def test_system_b_and_c_thread_with_g33() -> None:
+    # Fanuc T: thread cutting is G32 in system A, G33 in B and C (gcw-tokarka-o1200)
+    a = run("G97 S500 M3\nG99\nG0 X16 Z2\nG32 Z-17 F1.5\nG0 X18\n")
+    for letter in ("B", "C"):
+        other = run("G97 S500 M3\nG95\nG0 X16 Z2\nG33 Z-17 F1.5\nG0 X18\n", params=_system(letter))
+        assert moves(other, 4) == moves(a, 4) == ["G1 X16 Z-17"]
+    with pytest.raises(NcError, match="unsupported G code G33"):
+        run("G33 Z-17 F1.5\n")
 
 
 def test_system_c_moves_the_multiple_cycles_to_g72_g78_and_units_to_g70_g71() -> None:

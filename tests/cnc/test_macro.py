@@ -359,6 +359,17 @@ def test_tool_and_work_offset_variables_read_and_write() -> None:
     assert ends(cmds) == [(-100.0, 0.0, 0.0)]  # machine X of work X0 under the new G54
 
 
+def test_haas_tool_timers_read_zero_and_are_read_only() -> None:
+    # Haas #5401-#5500 feed time / #5501-#5600 total time of tool 1..100, seconds: a
+    # tool-life check (gcw-haas: IF [#5405 GE 6000] THEN #3000=15) sees fresh tools.
+    ip, _ = run("#100=#5405\n#101=#5600\nIF [#5405 GE 6000] THEN #3000=15\n")
+    assert (ip.vars.common[100], ip.vars.common[101]) == (0.0, 0.0)
+    with pytest.raises(NcError, match="#5405"):
+        run("#5405=1\n")
+    with pytest.raises(NcError, match="PS0115 variable #5601 does not exist"):
+        run("#100=#5601\n")
+
+
 def test_timers_from_the_injected_clock() -> None:
     now = [100.0]
     prog = "#3001=0\n#3002=1\n#100=#3001\n#101=#3002\n"

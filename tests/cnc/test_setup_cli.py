@@ -76,6 +76,17 @@ def test_bad_units_option() -> None:
     assert res.exit_code == 2 and "--units" in res.stderr
 
 
+def test_gcode_system_option_reads_a_system_b_lathe_program(tmp_path) -> None:
+    p = tmp_path / "b.nc"
+    p.write_text("G21 G90 G95\nG92 S800\nG97 S500 M3\nG0 X18 Z2\nG33 Z-17 F1.5\nG0 X20\nM30\n")
+    assert runner.invoke(nc_app, ["check", "--kind", "lathe", str(p)]).exit_code == 1
+    res = runner.invoke(nc_app, ["check", "--kind", "lathe", "--gcode-system", "B", str(p)])
+    assert res.exit_code == 0, res.output
+    for args in (["--gcode-system", "D", "--kind", "lathe"], ["--gcode-system", "B"]):
+        res = runner.invoke(nc_app, ["check", str(p), *args])
+        assert res.exit_code == 2 and "--gcode-system" in res.output, res.output
+
+
 def test_lathe_uses_lathe2_and_its_tool_offsets(tmp_path) -> None:
     p = tmp_path / "l.nc"
     p.write_text("G21\nT0202\nG0 X50 Z2\nM30\n")
