@@ -172,11 +172,13 @@ class CellFace:
             return
         self.connects += 1
         client.publish(self.status_topic, self._status("ONLINE", "connected"), 1, True)
+        # under the lock, so that a value the reader publishes is never followed by an
+        # older copy of it from here
         with self._lock:
-            again = list(self._retained.items())
-        for topic, payload in again:
-            client.publish(topic, payload, 1, True)
-        self.connected.set()
+            for topic, payload in self._retained.items():
+                client.publish(topic, payload, 1, True)
+            self.published += len(self._retained)
+            self.connected.set()
 
     def _status(self, status: str, reason: str) -> str:
         return json.dumps(
@@ -221,10 +223,10 @@ class CellFace:
                 payload = self._payload(name, item, keys, value)
                 with self._lock:
                     self._retained[topic] = payload
-                if self.connected.is_set():
-                    self.client.publish(topic, payload, 1, True)
-                    self.published += 1
-                    sent += 1
+                    if self.connected.is_set():
+                        self.client.publish(topic, payload, 1, True)
+                        self.published += 1
+                        sent += 1
         return sent
 
     def _payload(self, machine: str, item: str, keys: tuple[str, ...], value: object) -> str:

@@ -135,7 +135,9 @@ class PrivateBroker:
         self.dir = Path(workdir)
         self.conf = self.dir / "mosquitto.conf"
         self.conf.write_text(
-            f"listener {self.port} 127.0.0.1\nallow_anonymous true\npersistence true\n"
+            # `user root`: started by root, mosquitto would otherwise become the user
+            # mosquitto, who cannot write the test's directory (no effect for other users)
+            f"user root\nlistener {self.port} 127.0.0.1\nallow_anonymous true\npersistence true\n"
             f"persistence_location {self.dir}/\nautosave_interval 1\n"
             f"log_dest file {self.dir}/mosquitto.log\n"
         )

@@ -276,8 +276,10 @@ def test_events_survive_a_broker_restart_nothing_lost_nothing_duplicated(tmp_pat
         assert publisher.publish_pending() == 0  # refused while the broker is away
         assert len(outbox_ids()[1]) == 4
 
+        sub.subscribed.clear()
         broker.start()
         assert face.connected.wait(30), broker.log()  # reconnect with backoff
+        assert sub.subscribed.wait(30)  # the consumer is back before the replay
         deadline = 30.0
         import time
 
