@@ -101,11 +101,20 @@ class AckedPublish:
         self._pending: dict[int, object] = {}  # event id -> paho MQTTMessageInfo
 
     def __call__(self, event: Event, topic: str) -> None:
+        import paho.mqtt.client as mqtt
+
         info = self._pending.get(event.id)
         if info is None:
             if not self._client.is_connected():
                 raise ConnectionError(f"MQTT broker not connected; event {event.id} kept")
             info = self._client.publish(topic, event.to_json(), qos=1)
+            if info.rc == mqtt.MQTT_ERR_NO_CONN:
+                # the connection dropped since the check: paho has queued the message and
+                # sends it after the reconnect, but its MQTTMessageInfo would report the
+                # failure for ever; wait for the PUBACK of that queued copy instead
+                info.rc = mqtt.MQTT_ERR_SUCCESS
+            elif info.rc != mqtt.MQTT_ERR_SUCCESS:
+                raise ConnectionError(f"MQTT publish of event {event.id}: rc {info.rc}")
             self._pending[event.id] = info
         info.wait_for_publish(self._timeout)  # type: ignore[attr-defined]
         if not info.is_published():  # type: ignore[attr-defined]
