@@ -30,7 +30,10 @@ def live_state(names=("mill1", "lathe1"), *, bases=None):
     lathe2 for a name starting with "lathe"), each connected, AVAILABLE, AUTOMATIC, READY."""
     from cnc.config import load_cell_config
     from server.host import MonitoringModel
-    from server.mtconnect import Agent
+    try:  # the agent's own package since the seams change on main (issue 17)
+        from mtconnect import Agent
+    except ImportError:
+        from server.mtconnect import Agent
 
     bases = bases or {n: "lathe2" if n.startswith("lathe") else "mill3" for n in names}
     config = load_cell_config(

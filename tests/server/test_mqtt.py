@@ -314,12 +314,13 @@ def test_the_factory_view_lists_two_cells_sharing_a_broker(prefix):
     try:
         assert a.connected.wait(10) and b.connected.wait(10)
         b_state.agent.observe("mill7", "exec", "ACTIVE")
-        view = FactoryView(HOST, PORT, prefix)
-        # retained values arrive right after subscribing; wait until cell2's run is seen
-        deadline_s = 10.0
-        cells = view.collect(0.5)
-        if cells.get("cell2", {}).get("machines", {}).get("mill7", {}).get("execution") != "ACTIVE":
-            cells = view.collect(deadline_s)
+        seen = Subscriber(HOST, PORT, [f"{prefix}/cell2/mill7/execution"])
+        try:
+            seen.wait_for(lambda ms: ms and ms[-1][1]["value"] == "ACTIVE", what="mill7 ACTIVE")
+        finally:
+            seen.close()
+        # what a newcomer hears: the retained values, straight after subscribing
+        cells = FactoryView(HOST, PORT, prefix).collect(1.0)
         assert cells["cell1"]["status"] == cells["cell2"]["status"] == "ONLINE"
         assert set(cells["cell1"]["machines"]) == {"mill1", "lathe1"}
         assert cells["cell2"]["machines"]["mill7"]["execution"] == "ACTIVE"
@@ -344,7 +345,7 @@ def test_the_factory_view_lists_two_cells_sharing_a_broker(prefix):
         a.stop()
         b.stop()
     # the stopped cells' machines read UNAVAILABLE from their last retained values
-    cells = FactoryView(HOST, PORT, prefix).collect(0.5)
+    cells = FactoryView(HOST, PORT, prefix).collect(1.0)
     assert cells["cell1"]["status"] == "OFFLINE"
     assert cells["cell1"]["machines"]["mill1"]["availability"] == "UNAVAILABLE"
 
