@@ -117,13 +117,18 @@ def factory(
     """List every cell and machine publishing to an MQTT broker, with their state."""
     try:
         host, port = parse_broker(mqtt, "--mqtt")
-        cells = FactoryView(host, port, prefix).collect(seconds)
+        view = FactoryView(host, port, prefix)
+        cells = view.collect(seconds)
     except (ValueError, ConnectionError) as exc:
         typer.echo(f"fmscell factory: {exc}", err=True)
         raise typer.Exit(2) from None
     if as_json:
-        typer.echo(json.dumps({"broker": f"{host}:{port}", "prefix": prefix, "cells": cells}))
-    elif cells:
+        doc = {"broker": f"{host}:{port}", "prefix": prefix, "cells": cells, "errors": view.errors}
+        typer.echo(json.dumps(doc))
+        return
+    for error in view.errors:  # a message under the prefix that no cell of ours wrote
+        typer.echo(f"fmscell factory: {error}", err=True)
+    if cells:
         typer.echo(table(cells))
     else:
         typer.echo(f"no cell heard on {host}:{port} under {prefix}/ in {seconds:g} s")

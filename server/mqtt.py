@@ -2,7 +2,7 @@
 cell's birth and death, for a factory of cells sharing one broker (docs/mqtt.md).
 
     <prefix>/<cell>/status                 retained: ONLINE at connect, OFFLINE (last will)
-    <prefix>/<cell>/<machine>/<item>       retained: the item's last value (ITEMS below)
+    <prefix>/<cell>/<machine>/<item>       retained: the item's last value (`_items` below)
     <prefix>/<cell>/events/<entity>/<verb> the outbox's events, QoS 1, not retained
 
 The state comes from the monitoring model (SHDR -> MTConnect agent), as the REST API and

@@ -25,15 +25,24 @@ def broker_answers(host: str = SHARED_BROKER[0], port: int = SHARED_BROKER[1]) -
         return False
 
 
+def _agent_class():
+    """The MTConnect agent: `server.mtconnect` here, its own package `mtconnect` once the
+    seams change of issue 17 is in (a sibling checkout's package must not be taken)."""
+    import importlib
+
+    import server
+
+    here = Path(server.__file__).parent / "mtconnect"
+    return importlib.import_module("server.mtconnect" if here.is_dir() else "mtconnect").Agent
+
+
 def live_state(names=("mill1", "lathe1"), *, bases=None):
     """A MonitoringModel over a real MTConnect agent for machines named `names` (mill3, or
     lathe2 for a name starting with "lathe"), each connected, AVAILABLE, AUTOMATIC, READY."""
     from cnc.config import load_cell_config
     from server.host import MonitoringModel
-    try:  # the agent's own package since the seams change on main (issue 17)
-        from mtconnect import Agent
-    except ImportError:
-        from server.mtconnect import Agent
+
+    Agent = _agent_class()
 
     bases = bases or {n: "lathe2" if n.startswith("lathe") else "mill3" for n in names}
     config = load_cell_config(

@@ -358,3 +358,21 @@ def test_the_factory_view_says_when_no_broker_answers():
     assert got.exit_code == 2 and "fmscell factory: MQTT broker 127.0.0.1:" in got.output
     got = CliRunner().invoke(app, ["factory", "--mqtt", "nowhere"])
     assert got.exit_code == 2 and "--mqtt: 'nowhere' is not HOST:PORT" in got.output
+
+
+def test_the_factory_view_reports_messages_it_cannot_read():
+    from server.factory import FactoryView
+
+    view = FactoryView("127.0.0.1", 1, "plant")
+    view.hear("plant/c1/status", b'{"status":"ONLINE","machines":["m1"]}')
+    view.hear("plant/c1/m1/execution", b"ACTIVE")  # not JSON
+    view.hear("plant/c1/m1/mode", b'["AUTOMATIC"]')  # not an object
+    view.hear("plant/c1/m1/line", b"")  # a cleared retained topic: nothing
+    view.hear("plant/c1/events/job", b'{"value": 1}')  # not a machine
+    assert view.snapshot() == {
+        "c1": {"status": "ONLINE", "since": None, "machines": {"m1": {}}},
+    }
+    assert view.errors == [
+        "plant/c1/m1/execution: payload is not JSON",
+        "plant/c1/m1/mode: payload is not a JSON object",
+    ]
