@@ -376,3 +376,29 @@ def test_the_factory_view_reports_messages_it_cannot_read():
         "plant/c1/m1/execution: payload is not JSON",
         "plant/c1/m1/mode: payload is not a JSON object",
     ]
+
+
+@pytest.mark.skipif(not PrivateBroker.available(), reason="mosquitto is not installed")
+def test_a_cell_started_before_its_broker_connects_when_the_broker_comes(tmp_path):
+    broker = PrivateBroker(tmp_path)  # its port chosen, nothing listening yet
+    monitor = live_state(("mill1",))
+    face = CellFace(_settings("plant", port=broker.port), monitor).start()  # does not raise
+    try:
+        assert not face.connected.wait(0.3)
+        monitor.agent.observe("mill1", "exec", "ACTIVE")  # kept for the birth
+        broker.start()
+        assert face.connected.wait(30), broker.log()  # retried with backoff
+        sub = Subscriber(HOST, broker.port, ["plant/cell1/#"])
+        try:
+            sub.wait_for(
+                lambda ms: (
+                    (sub.last("plant/cell1/mill1/execution") or {}).get("value") == "ACTIVE"
+                    and (sub.last("plant/cell1/status") or {}).get("status") == "ONLINE"
+                ),
+                what="the birth and the state kept while the broker was away",
+            )
+        finally:
+            sub.close()
+    finally:
+        face.stop()
+        broker.stop()
