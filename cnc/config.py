@@ -45,6 +45,7 @@ __all__ = [
     "DriveAxisConfig",
     "DrivesConfig",
     "HostConfig",
+    "MqttConfig",
     "MachineConfig",
     "MachineDataConfig",
     "PlcConfig",
@@ -544,6 +545,42 @@ class TlsConfig(_Section):
     key: str = Field(min_length=1, description="PEM private key file.")
 
 
+# An MQTT broker as HOST:PORT (a name or an IPv4 address; docs/mqtt.md).
+Broker = Annotated[
+    str,
+    StringConstraints(
+        pattern=r"^[A-Za-z0-9_.-]+:([0-9]{1,4}|[1-5][0-9]{4}|6[0-4][0-9]{3}|65[0-4][0-9]{2}|655[0-2][0-9]|6553[0-5])$"
+    ),
+]
+# One MQTT topic level or several (no wildcards, no empty level, no leading/trailing '/').
+TopicPrefix = Annotated[str, StringConstraints(pattern=r"^[A-Za-z0-9_.-]+(/[A-Za-z0-9_.-]+)*$")]
+
+
+class MqttConfig(_Section):
+    """The cell's MQTT face (`host.mqtt`, docs/mqtt.md): live state and events to a broker."""
+
+    broker: Broker = Field(description="The broker, `HOST:PORT` (FMSCELL_MQTT overrides it).")
+    prefix: TopicPrefix = Field(
+        "fmscell", description="First topic level(s), shared by the cells of one factory."
+    )
+    cell_id: Name = Field(
+        "cell", description="This cell's topic level: `<prefix>/<cell_id>/...`; unique per broker."
+    )
+    period_s: float = Field(
+        0.1, gt=0, le=60, description="How often the live state is read and changes published (s)."
+    )
+    position_period_s: float = Field(
+        1.0, gt=0, le=3600, description="Axis positions are published at most this often (s)."
+    )
+    keepalive_s: int = Field(
+        10,
+        ge=2,
+        le=3600,
+        description="MQTT keepalive: a silent cell is declared dead by its"
+        " last will after 1.5 times this (s).",
+    )
+
+
 class HostConfig(_Section):
     """The DNC host and cell server (`host`)."""
 
@@ -568,6 +605,9 @@ class HostConfig(_Section):
         False,
         description="Fault injection: the `/api/...faults` endpoints and each machine's"
         " simulation face (as `fmscell run --faults` or FMSCELL_FAULTS=1); off = 404.",
+    )
+    mqtt: MqttConfig | None = Field(
+        None, description="The MQTT face (see `host.mqtt`); null = off (unless FMSCELL_MQTT)."
     )
 
 
@@ -1226,6 +1266,7 @@ def config_reference_markdown() -> str:
         ("host.auth", AuthConfig),
         ("host.auth.api_keys[]", ApiKeyConfig),
         ("host.tls", TlsConfig),
+        ("host.mqtt", MqttConfig),
     ]
     out: list[str] = []
     for title, model in sections:

@@ -8,6 +8,7 @@ the event id carried in every payload.
 from __future__ import annotations
 
 import json
+import threading
 from collections.abc import Callable
 from dataclasses import dataclass
 from datetime import UTC, datetime
@@ -82,10 +83,50 @@ class OutboxPublisher:
         return delivered
 
 
+class AckedPublish:
+    """QoS 1 publication of outbox events on a paho client, each waited for until PUBACK.
+
+    An event is never handed to paho while the connection is down (paho would queue it and
+    send it after the reconnect while the outbox sends it again), and an event whose PUBACK
+    did not come in time stays with paho, which resends it after a reconnect: the next
+    attempt waits for that message instead of publishing a second one. So each event id is
+    published once per connection until the broker acknowledges it; a broker that dies
+    between receiving an event and acknowledging it may still pass it on twice (QoS 1),
+    which is why payloads carry the event id.
+    """
+
+    def __init__(self, client, timeout_s: float = 5.0) -> None:
+        self._client = client
+        self._timeout = timeout_s
+        self._pending: dict[int, object] = {}  # event id -> paho MQTTMessageInfo
+
+    def __call__(self, event: Event, topic: str) -> None:
+        import paho.mqtt.client as mqtt
+
+        info = self._pending.get(event.id)
+        if info is None:
+            if not self._client.is_connected():
+                raise ConnectionError(f"MQTT broker not connected; event {event.id} kept")
+            info = self._client.publish(topic, event.to_json(), qos=1)
+            if info.rc == mqtt.MQTT_ERR_NO_CONN:
+                # the connection dropped since the check: paho has queued the message and
+                # sends it after the reconnect, but its MQTTMessageInfo would report the
+                # failure for ever; wait for the PUBACK of that queued copy instead
+                info.rc = mqtt.MQTT_ERR_SUCCESS
+            elif info.rc != mqtt.MQTT_ERR_SUCCESS:
+                raise ConnectionError(f"MQTT publish of event {event.id}: rc {info.rc}")
+            self._pending[event.id] = info
+        info.wait_for_publish(self._timeout)  # type: ignore[attr-defined]
+        if not info.is_published():  # type: ignore[attr-defined]
+            raise TimeoutError(f"MQTT broker did not acknowledge event {event.id}")
+        del self._pending[event.id]
+
+
 class MqttSink:
     """Publishes each event with QoS 1 to `[prefix/]topic` and waits for the broker's PUBACK.
 
-    A prefix lets several cells share one broker (`plant/cell7/fmscell/job/...`).
+    A prefix lets several cells share one broker (`plant/cell7/fmscell/job/...`). The cell's
+    own MQTT face (server/mqtt.py) publishes events under its topic tree instead.
     """
 
     def __init__(
@@ -100,17 +141,17 @@ class MqttSink:
         import paho.mqtt.client as mqtt
 
         self._client = mqtt.Client(mqtt.CallbackAPIVersion.VERSION2, client_id=client_id)
-        self._timeout = timeout_s
         self._prefix = prefix.rstrip("/")
+        self._publish = AckedPublish(self._client, timeout_s)
+        up = threading.Event()
+        self._client.on_connect = lambda *_: up.set()
         self._client.connect(host, port, keepalive=30)
         self._client.loop_start()
+        up.wait(timeout_s)  # events before the CONNACK would only be refused and retried
 
     def __call__(self, event: Event) -> None:
         topic = f"{self._prefix}/{event.topic}" if self._prefix else event.topic
-        info = self._client.publish(topic, event.to_json(), qos=1)
-        info.wait_for_publish(self._timeout)
-        if not info.is_published():
-            raise TimeoutError(f"MQTT broker did not acknowledge event {event.id}")
+        self._publish(event, topic)
 
     def close(self) -> None:
         self._client.loop_stop()

@@ -319,14 +319,17 @@ class Cell:
                 time.sleep(0.02)
 
     def _start_publisher(self) -> None:
-        target = os.environ.get("FMSCELL_MQTT")
-        if not target:
-            return
-        from dnc.outbox import MqttSink, OutboxPublisher
+        """The MQTT face (`host.mqtt`, or FMSCELL_MQTT=HOST:PORT) and the outbox publisher
+        that sends it the events (docs/mqtt.md)."""
+        from server.mqtt import CellFace, mqtt_settings
 
-        host, _, port = target.rpartition(":")
-        self.mqtt = MqttSink(host or "127.0.0.1", int(port or 1883), prefix="fmscell")
-        publisher = OutboxPublisher(self.sessions, self.mqtt)
+        settings = mqtt_settings(self.config.host)
+        if settings is None:
+            return
+        from dnc.outbox import OutboxPublisher
+
+        self.mqtt = CellFace(settings, self.monitor).start()
+        publisher = OutboxPublisher(self.sessions, self.mqtt.publish_event)
         self.loops.append(Loop("outbox-publisher", publisher.publish_pending, 0.2).start())
 
     def _start_remote_requests(self) -> None:
@@ -359,7 +362,7 @@ class Cell:
                 m.stop()
         if getattr(self, "mqtt", None) is not None:
             with contextlib.suppress(Exception):
-                self.mqtt.close()
+                self.mqtt.stop()
         if getattr(self, "engine", None) is not None:
             self.engine.dispose()
         self.started = False

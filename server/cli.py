@@ -12,6 +12,7 @@ from cnc.cli_machine import machine as machine_command
 from dnc.cli import dnc_app
 from drives.cli import drives_app
 from plc.cli import plc_app
+from server.factory import factory as factory_command
 
 app = typer.Typer(
     name="fmscell",
@@ -70,6 +71,7 @@ def run(
 
 
 app.command("machine")(machine_command)
+app.command("factory")(factory_command)
 
 
 def main() -> None:

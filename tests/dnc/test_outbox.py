@@ -85,3 +85,36 @@ def test_events_reach_an_mqtt_subscriber(library, sessions):
     finally:
         sub.loop_stop()
         sub.disconnect()
+
+
+class _FakeClient:
+    """A paho client whose connection drops between the check and the publish."""
+
+    def __init__(self) -> None:
+        import paho.mqtt.client as mqtt
+
+        self.published: list[str] = []
+        self.info = mqtt.MQTTMessageInfo(1)
+        self.info.rc = mqtt.MQTT_ERR_NO_CONN  # what paho answers: queued, not sent
+
+    def is_connected(self) -> bool:
+        return True
+
+    def publish(self, topic, payload, qos):
+        self.published.append(topic)
+        return self.info
+
+
+def test_an_event_queued_by_paho_is_waited_for_not_published_twice():
+    from datetime import UTC, datetime
+
+    from dnc.outbox import AckedPublish, Event
+
+    client = _FakeClient()
+    acked = AckedPublish(client, timeout_s=0.05)
+    event = Event(7, datetime.now(UTC), "fmscell/job/create", {})
+    with pytest.raises(TimeoutError, match="event 7"):
+        acked(event, "t")
+    client.info._set_as_published()  # paho's PUBACK of its queued copy, after the reconnect
+    acked(event, "t")
+    assert client.published == ["t"]
