@@ -210,6 +210,8 @@ class Scheduler:
         self.lost_contact_s = lost_contact_s
         self.rule_name = rule.lower()
         self._rule = rule_named(rule)
+        # a setup-aware rule also sees what each machine last ran (one more query a tick)
+        self._setup_aware = bool(getattr(self._rule, "setup_aware", False))
         self._now = now or (lambda: datetime.now(UTC))
 
     def tick(self) -> Decisions:
@@ -234,6 +236,7 @@ class Scheduler:
             # The machines are looked at after the database is read: a dispatch read as
             # done was confirmed running before it was written, so the look that follows
             # shows the cycle, its part or its end, never the moment before the start.
+            last = dict(s.execute(_LAST_PROGRAMS).all()) if self._setup_aware else {}
             machines = self._status()
             decisions = decide(
                 [
@@ -248,6 +251,7 @@ class Scheduler:
                         j.due_at,
                         j.cycle_time_s,
                         j.status == CANCELLED,
+                        _program(j.number),
                     )
                     for j in jobs
                 ],
@@ -260,7 +264,7 @@ class Scheduler:
                         a.status == "running",
                         a.dispatch_state == FAILED,
                         dispatch=dispatch_phase(a.dispatch_state, a.dispatch_error),
-                        program=f"O{a.number:04d}" if a.number is not None else None,
+                        program=_program(a.number),
                         state=a.status,
                         note=a.note or "",
                     )
@@ -271,6 +275,7 @@ class Scheduler:
                 self.rule_name,
                 now,
                 lost_contact_s=self.lost_contact_s,
+                last_programs={machine: _program(n) for machine, n in last.items()},
             )
             _Tick(s, self.rule_name, now, jobs, allocs).apply(decisions)
         return decisions
@@ -515,6 +520,12 @@ _OPEN_JOBS = (
         _JOBS.c.due_at,
         _JOBS.c.cycle_time_s,
         _JOBS.c.status,
+        # a subquery, not a join: FOR UPDATE locks the jobs only, never revisions or programs
+        select(_PROGRAMS.c.number)
+        .join(_REVISIONS, _REVISIONS.c.program_id == _PROGRAMS.c.id)
+        .where(_REVISIONS.c.id == _JOBS.c.revision_id)
+        .scalar_subquery()
+        .label("number"),
     )
     .where(
         _JOBS.c.status.in_(OPEN_STATES)
@@ -546,6 +557,19 @@ _STEPPED = (
     )
     .where(_ALLOCATIONS.c.status.in_(STEPPED_ALLOCATIONS))
     .order_by(_ALLOCATIONS.c.id)
+)
+# The program of each machine's last allocation (what a setup-aware rule takes the machine
+# to hold when it does not report a selected program).
+_LAST_PROGRAMS = (
+    select(_ALLOCATIONS.c.machine, _PROGRAMS.c.number)
+    .select_from(
+        _ALLOCATIONS.join(_DISPATCHES, _DISPATCHES.c.id == _ALLOCATIONS.c.dispatch_id)
+        .join(_REVISIONS, _REVISIONS.c.id == _DISPATCHES.c.revision_id)
+        .join(_PROGRAMS, _PROGRAMS.c.id == _REVISIONS.c.program_id)
+    )
+    .where(
+        _ALLOCATIONS.c.id.in_(select(func.max(_ALLOCATIONS.c.id)).group_by(_ALLOCATIONS.c.machine))
+    )
 )
 _CALL_OFF = (
     update(_DISPATCHES)
@@ -589,6 +613,11 @@ _SET_JOB_STATUS = (
     .where(_JOBS.c.id == bindparam("b_id"))
     .values(status=bindparam("b_status"), updated_at=bindparam("b_updated"))
 )
+
+
+def _program(number: int | None) -> str | None:
+    """The name a machine reports a program by (O1234)."""
+    return f"O{number:04d}" if number is not None else None
 
 
 def job_info(j: m.Job) -> JobInfo:

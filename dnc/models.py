@@ -248,7 +248,7 @@ class Decision(Base):
     __tablename__ = "decisions"
     id: Mapped[int] = mapped_column(Integer, primary_key=True)
     at: Mapped[datetime] = mapped_column(Timestamp, index=True)
-    rule: Mapped[str] = mapped_column(String(16))
+    rule: Mapped[str] = mapped_column(String(64))  # same_program_first then edd
     action: Mapped[str] = mapped_column(String(32))
     job_id: Mapped[int | None] = mapped_column(Integer, nullable=True, index=True)
     machine: Mapped[str | None] = mapped_column(String(64), nullable=True)
