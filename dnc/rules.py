@@ -93,8 +93,9 @@ def critical_ratio(jobs: list[JobView], now: datetime) -> list[Ranked]:
 
 @dataclass(frozen=True, slots=True)
 class SameProgramFirst:
-    """For a free machine, the jobs whose program the machine already holds come first (no
-    transfer, no setup change), then the rest; `then` orders each group (default FIFO).
+    """For a free machine, the jobs whose program the machine already holds come first (its
+    fixture and tools are set up for it), then the rest; `then` orders each group (default
+    FIFO).
 
     A machine that holds no waiting job's program, or whose program is unknown, gets
     exactly `then`'s order. Priority classes still come first."""
@@ -103,7 +104,15 @@ class SameProgramFirst:
     setup_aware: ClassVar[bool] = True
 
     def __call__(self, jobs: list[JobView], now: datetime, held: str | None = None) -> list[Ranked]:
-        ranked = [replace(r, explain=_setup(held, r)) for r in self.then(jobs, now)]
+        # one reason-writer per (setup case, base reason), not one per job: a tick ranks a
+        # thousand jobs and records the reason of the one chosen
+        why: dict[tuple, Callable[[JobView, float], str]] = {}
+        ranked = []
+        for r in self.then(jobs, now):
+            case = (_setup(held, r.job.program), r.explain)
+            if case not in why:
+                why[case] = _prefixed(*case)
+            ranked.append(Ranked(r.job, r.key, why[case]))
         if held is not None:
             # stable: the base rule's order stays within each priority class and each group
             ranked.sort(key=lambda r: (-r.job.priority, r.job.program != held))
@@ -168,12 +177,13 @@ def _order(r: Ranked) -> tuple:
     return (-r.job.priority, r.key, r.job.id)
 
 
-def _setup(held: str | None, r: Ranked) -> Callable[[JobView, float], str]:
+def _setup(held: str | None, program: str | None) -> str:
     if held is None:
-        why = "no program known on the machine"
-    elif r.job.program == held:
-        why = f"same program {held} already on the machine: no setup change"
-    else:
-        why = f"not the program on the machine ({held})"
-    base = r.explain
+        return "no program known on the machine"
+    if program == held:
+        return f"same program {held} already on the machine: no setup change"
+    return f"not the program on the machine ({held})"
+
+
+def _prefixed(why: str, base: Callable[[JobView, float], str]) -> Callable[[JobView, float], str]:
     return lambda j, k: f"{why}; {base(j, k)}"
