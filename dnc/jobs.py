@@ -18,6 +18,7 @@ from dnc.errors import InvalidUpload, NotFound, WorkflowError
 from dnc.events import record, record_many
 from dnc.rules import rule_named
 from dnc.scheduler import (
+    IDLE,
     Allocate,
     AllocationState,
     Complete,
@@ -210,7 +211,7 @@ class Scheduler:
         self.lost_contact_s = lost_contact_s
         self.rule_name = rule.lower()
         self._rule = rule_named(rule)
-        # a setup-aware rule also sees what each machine last ran (one more query a tick)
+        # a setup-aware rule also sees what each free machine last ran (dnc/rules.py)
         self._setup_aware = bool(getattr(self._rule, "setup_aware", False))
         self._now = now or (lambda: datetime.now(UTC))
 
@@ -236,8 +237,8 @@ class Scheduler:
             # The machines are looked at after the database is read: a dispatch read as
             # done was confirmed running before it was written, so the look that follows
             # shows the cycle, its part or its end, never the moment before the start.
-            last = dict(s.execute(_LAST_PROGRAMS).all()) if self._setup_aware else {}
             machines = self._status()
+            last = self._last_programs(s, machines) if self._setup_aware else {}
             decisions = decide(
                 [
                     JobState(
@@ -275,10 +276,20 @@ class Scheduler:
                 self.rule_name,
                 now,
                 lost_contact_s=self.lost_contact_s,
-                last_programs={machine: _program(n) for machine, n in last.items()},
+                last_programs=last,
             )
             _Tick(s, self.rule_name, now, jobs, allocs).apply(decisions)
         return decisions
+
+    def _last_programs(self, s: Session, machines: list[MachineView]) -> dict[str, str]:
+        """What each free machine that reports no program last ran, by the host's history."""
+        out = {}
+        for mach in machines:
+            if mach.state == IDLE and not mach.program:
+                number = s.execute(_LAST_ALLOCATED, {"b_machine": mach.name}).scalar()
+                if number is not None:
+                    out[mach.name] = _program(number)
+        return out
 
 
 class _DispatchMovedOn(Exception):
@@ -558,18 +569,19 @@ _STEPPED = (
     .where(_ALLOCATIONS.c.status.in_(STEPPED_ALLOCATIONS))
     .order_by(_ALLOCATIONS.c.id)
 )
-# The program of each machine's last allocation (what a setup-aware rule takes the machine
-# to hold when it does not report a selected program).
-_LAST_PROGRAMS = (
-    select(_ALLOCATIONS.c.machine, _PROGRAMS.c.number)
+# The program of a machine's last allocation (what a setup-aware rule takes a machine that
+# reports no selected program to hold): an index seek on (machine, id), however long the
+# history.
+_LAST_ALLOCATED = (
+    select(_PROGRAMS.c.number)
     .select_from(
         _ALLOCATIONS.join(_DISPATCHES, _DISPATCHES.c.id == _ALLOCATIONS.c.dispatch_id)
         .join(_REVISIONS, _REVISIONS.c.id == _DISPATCHES.c.revision_id)
         .join(_PROGRAMS, _PROGRAMS.c.id == _REVISIONS.c.program_id)
     )
-    .where(
-        _ALLOCATIONS.c.id.in_(select(func.max(_ALLOCATIONS.c.id)).group_by(_ALLOCATIONS.c.machine))
-    )
+    .where(_ALLOCATIONS.c.machine == bindparam("b_machine"))
+    .order_by(_ALLOCATIONS.c.id.desc())
+    .limit(1)
 )
 _CALL_OFF = (
     update(_DISPATCHES)

@@ -226,6 +226,8 @@ class Allocation(Base):
     """One part of a job on one machine (one program run)."""
 
     __tablename__ = "allocations"
+    # a machine's last allocation (setup-aware dispatch rules) is one index seek
+    __table_args__ = (Index("ix_allocations_machine_id", "machine", "id"),)
     id: Mapped[int] = mapped_column(Integer, primary_key=True)
     job_id: Mapped[int] = mapped_column(ForeignKey("jobs.id"), index=True)
     machine: Mapped[str] = mapped_column(String(64), index=True)
