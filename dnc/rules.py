@@ -7,7 +7,8 @@ within a class; the job id breaks ties, so decisions are deterministic.
 
 A setup-aware rule (`setup_aware = True`) is also told which program the candidate machine
 holds (`held`: its selected program, else the program of its last allocation; None =
-unknown), and is asked once per idle machine instead of once per class of machine.
+unknown); the scheduler asks it once per class of machine and program held, where it asks
+the others once per class of machine.
 A new rule is a function (or, setup-aware, a small class) and one row in `RULES`.
 """
 
