@@ -601,6 +601,13 @@ class HostConfig(_Section):
         description="A machine out of contact this long is taken as lost: its allocation is"
         " interrupted and the part rerouted (seconds).",
     )
+    dispatch_rule: str = Field(
+        "fifo",
+        min_length=1,
+        description="Which waiting job a free machine takes next: `fifo`, `spt`, `edd`, `cr`"
+        " or `same_program_first` (the job whose program the machine already holds, then"
+        " FIFO; `same_program_first then edd` falls back to EDD instead); docs/dnc.md.",
+    )
     faults: bool = Field(
         False,
         description="Fault injection: the `/api/...faults` endpoints and each machine's"
@@ -1151,6 +1158,13 @@ def _check_cell(cell: _CellDocument) -> list[tuple[tuple, str]]:
         if digest in digests:
             out.append((where, f"the same key as api_keys[{digests[digest]}]"))
         digests.setdefault(digest, i)
+    # late, as the plc and drives checks below: the rules are the host's (dnc), not the NC's
+    from dnc.rules import rule_named
+
+    try:
+        rule_named(cell.host.dispatch_rule)
+    except ValueError as exc:
+        out.append((("host", "dispatch_rule"), str(exc)))
     for name, m in cell.machines.items():
         out.extend(_check_machine(("machines", name), m))
         for face in ("dnc", "modbus", "shdr", "simulation"):

@@ -1,4 +1,11 @@
-"""The DNC host's refusals. Each carries a stable `kind` the REST layer maps to a problem type."""
+"""The DNC host's refusals, every one a DncError.
+
+Each class carries a stable `kind`; web_api/problems.py maps each kind to its problem+json
+type and HTTP status, in one table. Refusals raised elsewhere in the package derive from
+these (dependencies.MissingDependency, posting.PostRefused). The machine's side of the DNC
+line answers with its own alarms (cnc.faces.dnc_port.DncAlarm), and a transfer that fails
+on the line is a dnc.transfer.TransferError (kinds of line trouble, retried or not).
+"""
 
 from __future__ import annotations
 
@@ -16,6 +23,18 @@ class DncError(Exception):
 
 class InvalidUpload(DncError):
     kind = "invalid-upload"
+
+
+class UploadTooLarge(InvalidUpload):
+    """Larger than the upload limit (`size`, `limit` in the detail)."""
+
+    kind = "upload-too-large"
+
+
+class InvalidCursor(DncError):
+    """A page cursor that is not one the list gave out (dnc.cursor)."""
+
+    kind = "invalid-cursor"
 
 
 class NotFound(DncError):

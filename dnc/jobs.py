@@ -18,6 +18,7 @@ from dnc.errors import InvalidUpload, NotFound, WorkflowError
 from dnc.events import record, record_many
 from dnc.rules import rule_named
 from dnc.scheduler import (
+    IDLE,
     Allocate,
     AllocationState,
     Complete,
@@ -210,6 +211,8 @@ class Scheduler:
         self.lost_contact_s = lost_contact_s
         self.rule_name = rule.lower()
         self._rule = rule_named(rule)
+        # a setup-aware rule also sees what each free machine last ran (dnc/rules.py)
+        self._setup_aware = bool(getattr(self._rule, "setup_aware", False))
         self._now = now or (lambda: datetime.now(UTC))
 
     def tick(self) -> Decisions:
@@ -235,6 +238,7 @@ class Scheduler:
             # done was confirmed running before it was written, so the look that follows
             # shows the cycle, its part or its end, never the moment before the start.
             machines = self._status()
+            last = self._last_programs(s, machines) if self._setup_aware else {}
             decisions = decide(
                 [
                     JobState(
@@ -248,6 +252,7 @@ class Scheduler:
                         j.due_at,
                         j.cycle_time_s,
                         j.status == CANCELLED,
+                        _program(j.number),
                     )
                     for j in jobs
                 ],
@@ -260,7 +265,7 @@ class Scheduler:
                         a.status == "running",
                         a.dispatch_state == FAILED,
                         dispatch=dispatch_phase(a.dispatch_state, a.dispatch_error),
-                        program=f"O{a.number:04d}" if a.number is not None else None,
+                        program=_program(a.number),
                         state=a.status,
                         note=a.note or "",
                     )
@@ -271,9 +276,20 @@ class Scheduler:
                 self.rule_name,
                 now,
                 lost_contact_s=self.lost_contact_s,
+                last_programs=last,
             )
             _Tick(s, self.rule_name, now, jobs, allocs).apply(decisions)
         return decisions
+
+    def _last_programs(self, s: Session, machines: list[MachineView]) -> dict[str, str]:
+        """What each free machine that reports no program last ran, by the host's history."""
+        out = {}
+        for mach in machines:
+            if mach.state == IDLE and not mach.program:
+                number = s.execute(_LAST_ALLOCATED, {"b_machine": mach.name}).scalar()
+                if number is not None:
+                    out[mach.name] = _program(number)
+        return out
 
 
 class _DispatchMovedOn(Exception):
@@ -515,6 +531,12 @@ _OPEN_JOBS = (
         _JOBS.c.due_at,
         _JOBS.c.cycle_time_s,
         _JOBS.c.status,
+        # a subquery, not a join: FOR UPDATE locks the jobs only, never revisions or programs
+        select(_PROGRAMS.c.number)
+        .join(_REVISIONS, _REVISIONS.c.program_id == _PROGRAMS.c.id)
+        .where(_REVISIONS.c.id == _JOBS.c.revision_id)
+        .scalar_subquery()
+        .label("number"),
     )
     .where(
         _JOBS.c.status.in_(OPEN_STATES)
@@ -546,6 +568,20 @@ _STEPPED = (
     )
     .where(_ALLOCATIONS.c.status.in_(STEPPED_ALLOCATIONS))
     .order_by(_ALLOCATIONS.c.id)
+)
+# The program of a machine's last allocation (what a setup-aware rule takes a machine that
+# reports no selected program to hold): an index seek on (machine, id), however long the
+# history.
+_LAST_ALLOCATED = (
+    select(_PROGRAMS.c.number)
+    .select_from(
+        _ALLOCATIONS.join(_DISPATCHES, _DISPATCHES.c.id == _ALLOCATIONS.c.dispatch_id)
+        .join(_REVISIONS, _REVISIONS.c.id == _DISPATCHES.c.revision_id)
+        .join(_PROGRAMS, _PROGRAMS.c.id == _REVISIONS.c.program_id)
+    )
+    .where(_ALLOCATIONS.c.machine == bindparam("b_machine"))
+    .order_by(_ALLOCATIONS.c.id.desc())
+    .limit(1)
 )
 _CALL_OFF = (
     update(_DISPATCHES)
@@ -589,6 +625,11 @@ _SET_JOB_STATUS = (
     .where(_JOBS.c.id == bindparam("b_id"))
     .values(status=bindparam("b_status"), updated_at=bindparam("b_updated"))
 )
+
+
+def _program(number: int | None) -> str | None:
+    """The name a machine reports a program by (O1234)."""
+    return f"O{number:04d}" if number is not None else None
 
 
 def job_info(j: m.Job) -> JobInfo:

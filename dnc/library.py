@@ -12,7 +12,6 @@ dispatch by program number is never ambiguous.
 
 from __future__ import annotations
 
-import base64
 from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass, field
 from datetime import UTC, datetime
@@ -26,6 +25,7 @@ from sqlalchemy.orm import Session, sessionmaker
 from cam.chain import APT_SUFFIXES, CL_SUFFIXES
 from cnc.gcode.calls import Call, program_calls
 from dnc import models as m
+from dnc.cursor import decode_cursor, encode_cursor
 from dnc.db import transaction
 from dnc.dependencies import LibraryPrograms, called_by, calls_of, dependencies, record_calls
 from dnc.diff import unified_diff
@@ -455,7 +455,7 @@ class Library:
         limit = max(1, min(limit, 500))
         stmt = select(m.Program).order_by(m.Program.id).limit(limit + 1)
         if cursor:
-            stmt = stmt.where(m.Program.id > _decode_cursor(cursor))
+            stmt = stmt.where(m.Program.id > decode_cursor("p", cursor))
         if machine_kind:
             stmt = stmt.where(m.Program.machine_kind == machine_kind)
         if number is not None:
@@ -481,7 +481,7 @@ class Library:
             )
         with transaction(self._sessions) as s:
             if text and _text_drives_from_index(s, text, number, query, self.text_search_from):
-                after = _decode_cursor(cursor) if cursor else 0
+                after = decode_cursor("p", cursor) if cursor else 0
                 ids = _first_programs_with_text(s, text, stmt.whereclause, after, limit + 1)
                 rows = (
                     list(s.scalars(select(m.Program).where(m.Program.id.in_(ids)))) if ids else []
@@ -494,7 +494,7 @@ class Library:
             more = len(rows) > limit
             rows = rows[:limit]
             items = self._program_infos(s, rows)
-        return Page(items, _encode_cursor(rows[-1].id) if more else None)
+        return Page(items, encode_cursor("p", rows[-1].id) if more else None)
 
     def audit(self, *, entity: str | None = None, entity_id: int | None = None) -> list[dict]:
         stmt = select(m.AuditEntry).order_by(m.AuditEntry.id)
@@ -1004,17 +1004,3 @@ def _programs_with_text(s: Session, text: str):
 
 def _escape_like(s: str) -> str:
     return s.replace("\\", "\\\\").replace("%", "\\%").replace("_", "\\_")
-
-
-def _encode_cursor(last_id: int) -> str:
-    return base64.urlsafe_b64encode(f"p{last_id}".encode()).decode().rstrip("=")
-
-
-def _decode_cursor(cursor: str) -> int:
-    try:
-        raw = base64.urlsafe_b64decode(cursor + "=" * (-len(cursor) % 4)).decode()
-        if not raw.startswith("p"):
-            raise ValueError
-        return int(raw[1:])
-    except (ValueError, UnicodeDecodeError):
-        raise InvalidUpload(f"invalid cursor {cursor!r}") from None

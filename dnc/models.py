@@ -226,6 +226,8 @@ class Allocation(Base):
     """One part of a job on one machine (one program run)."""
 
     __tablename__ = "allocations"
+    # a machine's last allocation (setup-aware dispatch rules) is one index seek
+    __table_args__ = (Index("ix_allocations_machine_id", "machine", "id"),)
     id: Mapped[int] = mapped_column(Integer, primary_key=True)
     job_id: Mapped[int] = mapped_column(ForeignKey("jobs.id"), index=True)
     machine: Mapped[str] = mapped_column(String(64), index=True)
@@ -248,7 +250,7 @@ class Decision(Base):
     __tablename__ = "decisions"
     id: Mapped[int] = mapped_column(Integer, primary_key=True)
     at: Mapped[datetime] = mapped_column(Timestamp, index=True)
-    rule: Mapped[str] = mapped_column(String(16))
+    rule: Mapped[str] = mapped_column(String(64))  # same_program_first then edd
     action: Mapped[str] = mapped_column(String(32))
     job_id: Mapped[int | None] = mapped_column(Integer, nullable=True, index=True)
     machine: Mapped[str | None] = mapped_column(String(64), nullable=True)

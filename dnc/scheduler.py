@@ -12,6 +12,7 @@ idle machine and makes rerouting after an alarm exact: only the interrupted part
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import dataclass, field, replace
 from datetime import datetime
 
@@ -77,6 +78,7 @@ class JobState:
     due_at: datetime | None
     cycle_time_s: float
     cancelled: bool = False
+    program: str | None = None  # O1234: the program the job's parts run
 
 
 @dataclass(frozen=True, slots=True)
@@ -170,7 +172,10 @@ def decide(
     now: datetime,
     *,
     lost_contact_s: float = DEFAULT_LOST_CONTACT_S,
+    last_programs: Mapping[str, str] | None = None,
 ) -> Decisions:
+    """`last_programs`: the program of each machine's last allocation, for a setup-aware
+    rule when the machine does not report a selected program."""
     out = Decisions()
     by_name = {m.name: m for m in machines}
     busy_machines: set[str] = set()
@@ -219,21 +224,37 @@ def decide(
         (m for m in machines if m.state == IDLE and m.name not in busy_machines),
         key=lambda m: m.name,
     )
-    # The rule ranks the jobs once per class of machine (kind and groups) per tick; each
-    # idle machine of the class then takes the best-ranked job that still has parts left.
-    rankings: dict[tuple[str, tuple[str, ...]], list] = {}
+    # The rule ranks the jobs once per class of machine (kind and groups) per tick, a
+    # setup-aware rule once per class and program held; each idle machine of the class
+    # then takes the best-ranked job that still has parts left.
+    setup_aware = getattr(rule, "setup_aware", False)
+    rankings: dict[tuple, list] = {}
     by_id = {j.id: j for j in waiting}
     allocated = 0
     for mach in idle:
-        key = (mach.kind, mach.groups)
+        held = (mach.program or (last_programs or {}).get(mach.name)) if setup_aware else None
+        key = (mach.kind, mach.groups, held)
         if key not in rankings:
             eligible = [
-                JobView(j.id, j.priority, j.created_at, j.due_at, remaining(j), j.cycle_time_s)
+                JobView(
+                    j.id,
+                    j.priority,
+                    j.created_at,
+                    j.due_at,
+                    remaining(j),
+                    j.cycle_time_s,
+                    j.program,
+                )
                 for j in waiting
                 if j.machine_kind == mach.kind
                 and (j.machine_group is None or j.machine_group in mach.groups)
             ]
-            rankings[key] = rule(eligible, now) if eligible else []
+            if not eligible:
+                rankings[key] = []
+            elif setup_aware:
+                rankings[key] = rule(eligible, now, held)  # type: ignore[call-arg]
+            else:
+                rankings[key] = rule(eligible, now)
         ranking = rankings[key]
         for rank, best in enumerate(ranking, start=1):
             if remaining(by_id[best.job.id]) <= 0:

@@ -12,7 +12,7 @@ import re
 from dataclasses import dataclass
 
 from cnc.program_memory import MAX_PROGRAM_NUMBER
-from dnc.errors import InvalidUpload
+from dnc.errors import InvalidUpload, UploadTooLarge
 
 __all__ = ["MAX_PROGRAM_NUMBER"]  # the O number range 1..99999999, for the REST schemas
 
@@ -40,7 +40,7 @@ def decode_program(data: bytes, *, limit: int, name: str = "upload") -> str:
 
 def check_size(size: int, *, limit: int, name: str = "upload") -> None:
     if size > limit:
-        raise InvalidUpload(
+        raise UploadTooLarge(
             f"{name}: {size} bytes exceeds the upload limit of {limit} bytes "
             "(configure dnc.max_upload_bytes, or drip-feed the program)",
             size=size,

@@ -97,7 +97,7 @@ class Cell:
         ideal_axes: bool = False,
         config_file: str | Path | None = None,
         tick_s: float | None = None,
-        rule: str = "fifo",
+        rule: str | None = None,
         state_dir: str | Path | None = None,
         attach: bool = False,
     ) -> None:
@@ -113,7 +113,7 @@ class Cell:
         self.config_file = Path(config_file) if config_file else None
         self.state_dir = Path(state_dir) if state_dir else Path.cwd()
         self.tick_s = tick_s if tick_s is not None else (0.05 if clock == "fast" else 0.5)
-        self.rule = rule
+        self.rule = rule or self.config.host.dispatch_rule  # None: the cell file's choice
         self.links: dict[str, MachineLink] = {}
         self.machines: list[Any] = []
         self.loops: list[Loop] = []

@@ -24,9 +24,12 @@ from dnc.errors import DncError
 PROBLEM_JSON = "application/problem+json"
 log = logging.getLogger(__name__)
 
-# The HTTP status of each refusal kind the DNC services raise.
+# The HTTP status of each refusal kind the DNC services raise (dnc.errors: every DncError's
+# `kind` is its problem type); the one place a host refusal becomes a problem.
 STATUS_OF_KIND = {
     "invalid-upload": 422,
+    "upload-too-large": 413,
+    "invalid-cursor": 400,
     "not-found": 404,
     "conflict": 409,
     "workflow": 409,
@@ -38,6 +41,7 @@ STATUS_OF_KIND = {
 TITLES = {
     "invalid-upload": "The uploaded program was refused",
     "upload-too-large": "The upload exceeds the size limit",
+    "invalid-cursor": "Invalid cursor",
     "not-found": "No such resource",
     "conflict": "Conflicts with the stored state",
     "workflow": "The release workflow forbids this step",
@@ -96,6 +100,11 @@ class ApiProblem(Exception):
         super().__init__(detail)
         self.status, self.kind, self.detail = status, kind, detail
         self.headers, self.extra = headers or {}, extra
+
+
+def dnc_status(exc: DncError) -> int:
+    """The HTTP status of a host refusal (400 for a kind the table does not know)."""
+    return STATUS_OF_KIND.get(exc.kind, 400)
 
 
 def problem_response(
@@ -179,11 +188,10 @@ def install_problem_handlers(app: FastAPI, base: str) -> None:
 
     @app.exception_handler(DncError)
     async def _dnc(request: Request, exc: DncError) -> JSONResponse:
-        kind, status = exc.kind, STATUS_OF_KIND.get(exc.kind, 400)
-        if kind == "invalid-upload" and "limit" in exc.detail and "size" in exc.detail:
-            kind, status = "upload-too-large", 413
         extra = {k: v for k, v in exc.detail.items() if k not in ("type", "title", "status")}
-        return problem_response(request.url.path, base, status, kind, exc.message, **extra)
+        return problem_response(
+            request.url.path, base, dnc_status(exc), exc.kind, exc.message, **extra
+        )
 
     @app.exception_handler(ApiProblem)
     async def _api(request: Request, exc: ApiProblem) -> JSONResponse:

@@ -109,7 +109,7 @@ Policy = Callable[[str, int | None], str | None]
 """(operation, program number) -> None to allow, or the reason the machine refuses it."""
 MachineDataAccess = Callable[[str, object | None], object]
 """(what: "tools" | "offsets", None to read or a document to write) -> the data (read) or
-the stored data (write); raises DncError with the machine's refusal or ALARM_BAD_DATA."""
+the stored data (write); raises DncAlarm with the machine's refusal or ALARM_BAD_DATA."""
 
 
 def program_number(lines: list[str]) -> int | None:
@@ -130,7 +130,10 @@ def sha256_text(text: str) -> str:
     return hashlib.sha256(text.encode("utf-8")).hexdigest()
 
 
-class DncError(Exception):
+class DncAlarm(Exception):
+    """The port's refusal: answered `ERR <alarm> <text>` (the host's refusals are
+    dnc.errors.DncError; this is the machine's side of the line)."""
+
     def __init__(self, alarm: int, text: str, *, warning: bool = False) -> None:
         super().__init__(f"{alarm} {text}")
         self.alarm, self.text, self.warning = alarm, text, warning
@@ -219,7 +222,7 @@ class DncPort(TcpFace):
                     await self._dispatch(conn, command, arg, pushback)
                 except TimeoutError:  # idle connection
                     return
-                except DncError as exc:
+                except DncAlarm as exc:
                     self._error(exc)
                     await conn.reply(f"ERR {exc.alarm} {exc.text}")
                     if exc.alarm in FATAL_TO_CONNECTION:
@@ -247,7 +250,7 @@ class DncPort(TcpFace):
             command, arg, _ = await conn.read_command(self.idle_timeout_s)
         except TimeoutError:
             return False
-        except DncError as exc:
+        except DncAlarm as exc:
             command, arg = "", exc.text
         if command is None:
             return False
@@ -281,7 +284,7 @@ class DncPort(TcpFace):
             number = _required_number(arg)
             self._allow("DELETE", number)
             if number not in self.memory:
-                raise DncError(ALARM_NOT_IN_MEMORY, f"program O{number:04d} not in memory")
+                raise DncAlarm(ALARM_NOT_IN_MEMORY, f"program O{number:04d} not in memory")
             self.memory.delete(number)
             await conn.reply(f"OK O{number:04d} deleted")
         elif command == "LISTEN":
@@ -290,12 +293,12 @@ class DncPort(TcpFace):
             # again after the handshake, or on a port without a secret: harmless, answered
             # so a host that always authenticates works with either
             if self._secret is not None and not secret_matches(arg, self._secret):
-                raise DncError(ALARM_AUTH, "authentication failed: wrong secret")
+                raise DncAlarm(ALARM_AUTH, "authentication failed: wrong secret")
             await conn.reply("OK AUTH" if self._secret is not None else "OK AUTH (no secret)")
         elif command in ("TOOLS", "OFFSETS"):
             await self._data(conn, command, arg)
         else:
-            raise DncError(ALARM_UNKNOWN_COMMAND, f"unknown command {command!r}")
+            raise DncAlarm(ALARM_UNKNOWN_COMMAND, f"unknown command {command!r}")
 
     async def _data(self, conn: _Conn, command: str, arg: str) -> None:
         """TOOLS / OFFSETS [PUT <bytes>]: the machine data as JSON (cnc.machine_data's
@@ -306,19 +309,19 @@ class DncPort(TcpFace):
         body = None
         if word.upper() == "PUT":
             if not size_text.strip().isdigit():
-                raise DncError(ALARM_UNKNOWN_COMMAND, f"{command} PUT needs the body size")
+                raise DncAlarm(ALARM_UNKNOWN_COMMAND, f"{command} PUT needs the body size")
             size = int(size_text)
             if size > MACHINE_DATA_MAX:
-                raise DncError(ALARM_UNKNOWN_COMMAND, f"{command} PUT body over {MACHINE_DATA_MAX}")
+                raise DncAlarm(ALARM_UNKNOWN_COMMAND, f"{command} PUT body over {MACHINE_DATA_MAX}")
             raw = await conn.read_exact(size, self.idle_timeout_s)
             try:
                 body = json.loads(raw.decode("ascii"))
             except (UnicodeDecodeError, json.JSONDecodeError) as exc:
-                raise DncError(ALARM_BAD_DATA, f"body is not ASCII JSON: {exc}") from None
+                raise DncAlarm(ALARM_BAD_DATA, f"body is not ASCII JSON: {exc}") from None
         elif arg:
-            raise DncError(ALARM_UNKNOWN_COMMAND, f"{command} takes no argument but PUT <n>")
+            raise DncAlarm(ALARM_UNKNOWN_COMMAND, f"{command} takes no argument but PUT <n>")
         if self._machine_data is None:
-            raise DncError(ALARM_REFUSED, f"{command} refused: this port has no machine data")
+            raise DncAlarm(ALARM_REFUSED, f"{command} refused: this port has no machine data")
         data = self._machine_data(what, body)
         text = json.dumps(data, separators=(",", ":"), ensure_ascii=True)
         await conn.reply(f"DATA {text}")
@@ -328,9 +331,9 @@ class DncPort(TcpFace):
     def _allow(self, op: str, number: int | None) -> None:
         reason = self._policy(op, number)
         if reason:
-            raise DncError(ALARM_REFUSED, f"{op} refused: {reason}")
+            raise DncAlarm(ALARM_REFUSED, f"{op} refused: {reason}")
 
-    def _error(self, exc: DncError) -> None:
+    def _error(self, exc: DncAlarm) -> None:
         self.stats.errors[exc.alarm] = self.stats.errors.get(exc.alarm, 0) + 1
         if exc.warning:
             self._on_warning(exc.alarm, exc.text)
@@ -358,17 +361,17 @@ class DncPort(TcpFace):
                     if pending is not None:
                         await pending
                 elif ev.kind == "parity_error":
-                    raise DncError(
+                    raise DncAlarm(
                         ALARM_PARITY, f"parity error at byte {ev.offset}; program rejected"
                     )
                 elif ev.kind == "eight_bit":
-                    raise DncError(
+                    raise DncAlarm(
                         ALARM_EIGHT_BIT,
                         f"8-bit byte 0x{ev.code:02X} at byte {ev.offset} (line {ev.line}) on a "
                         "7-bit port without parity; program rejected",
                     )
                 elif ev.kind == "overlong":
-                    raise DncError(
+                    raise DncAlarm(
                         ALARM_BLOCK_TOO_LONG,
                         f"block longer than {self.max_block} characters at byte {ev.offset}",
                     )
@@ -378,14 +381,14 @@ class DncPort(TcpFace):
             try:
                 data = await conn.read_raw(self.idle_timeout_s)
             except TimeoutError:
-                raise DncError(
+                raise DncAlarm(
                     ALARM_TIMEOUT, f"no data for {self.idle_timeout_s:g} s; transfer abandoned"
                 ) from None
             except ConnectionError:  # reset by the sender: cut off as much as a hang-up
                 data = b""
             if not data:
                 what = "closing %" if decoder.started else "tape start %"
-                raise DncError(
+                raise DncAlarm(
                     ALARM_CUT_OFF, f"transfer cut off before the {what} at byte {decoder.offset}"
                 )
 
@@ -395,7 +398,7 @@ class DncPort(TcpFace):
 
         def fits() -> None:
             if size > self.memory.capacity:
-                raise DncError(
+                raise DncAlarm(
                     ALARM_MEMORY_FULL,
                     f"program exceeds the program memory of {self.memory.capacity} bytes; "
                     "use drip-feed (DRIP) for programs larger than memory",
@@ -415,32 +418,32 @@ class DncPort(TcpFace):
 
         try:
             await self._receive_tape(conn, pushback, keep, keep_all)
-        except DncError as exc:
+        except DncAlarm as exc:
             if exc.alarm not in (ALARM_CUT_OFF, ALARM_TIMEOUT):
                 raise
             # Nothing of a load is stored before its closing %, so memory is as it was and
             # the machine is fit to run: a message, not an alarm that needs a reset.
-            raise DncError(
+            raise DncAlarm(
                 exc.alarm, f"{exc.text}; program discarded, memory unchanged", warning=True
             ) from None
         number = number or program_number(lines)
         if number is None:
-            raise DncError(ALARM_NO_NUMBER, "no program number: the first block needs an O word")
+            raise DncAlarm(ALARM_NO_NUMBER, "no program number: the first block needs an O word")
         why = program_number_error(number)
         if why is not None:
-            raise DncError(ALARM_NO_NUMBER, why)
+            raise DncAlarm(ALARM_NO_NUMBER, why)
         self._allow("READ", number)
         text = stored_text(lines)
         try:
             entry = self.memory.store(number, text)
         except MemoryFull as exc:
-            raise DncError(ALARM_MEMORY_FULL, str(exc)) from None
+            raise DncAlarm(ALARM_MEMORY_FULL, str(exc)) from None
         self.stats.programs_received += 1
         await conn.reply(f"OK O{number:04d} {entry.size} {entry.sha256}")
 
     async def _drip_feed(self, conn: _Conn, pushback: bytes) -> None:
         if self._drip is None:
-            raise DncError(ALARM_REFUSED, "DRIP refused: this machine has no drip-feed (BTR) input")
+            raise DncAlarm(ALARM_REFUSED, "DRIP refused: this machine has no drip-feed (BTR) input")
         self._allow("DRIP", None)
         buffer = self._drip()
         count = 0
@@ -455,7 +458,7 @@ class DncPort(TcpFace):
             try:
                 buffer.put(block)
             except OverflowError:
-                raise DncError(
+                raise DncAlarm(
                     ALARM_BLOCK_TOO_LONG,
                     f"block of {len(block)} characters exceeds the drip-feed buffer",
                 ) from None
@@ -463,7 +466,7 @@ class DncPort(TcpFace):
 
         try:
             await self._receive_tape(conn, pushback, feed)
-        except DncError as exc:
+        except DncAlarm as exc:
             buffer.abort(exc.text)
             raise
         buffer.end()
@@ -475,10 +478,10 @@ class DncPort(TcpFace):
         try:
             text = self.memory.get(number)
         except KeyError:
-            raise DncError(ALARM_NOT_IN_MEMORY, f"program O{number:04d} not in memory") from None
+            raise DncAlarm(ALARM_NOT_IN_MEMORY, f"program O{number:04d} not in memory") from None
         if not text.isascii():  # loaded by another way than the tape: say so, do not drop
             at = next(i for i, ch in enumerate(text) if ord(ch) > 0x7F)
-            raise DncError(
+            raise DncAlarm(
                 ALARM_EIGHT_BIT,
                 f"program O{number:04d} holds {text[at]!r} (U+{ord(text[at]):04X}) on line "
                 f"{text.count(chr(10), 0, at) + 1}, outside the 7-bit tape code; cannot punch",
@@ -512,7 +515,7 @@ class DncPort(TcpFace):
                     return
                 try:
                     await self._dispatch(conn, command, arg, pushback)
-                except DncError as exc:
+                except DncAlarm as exc:
                     self._error(exc)
                     await conn.reply(f"ERR {exc.alarm} {exc.text}")
                     if exc.alarm in FATAL_TO_CONNECTION:
@@ -551,17 +554,17 @@ class _Conn:
             try:
                 data = await self.read_raw(timeout)
             except TimeoutError:
-                raise DncError(
+                raise DncAlarm(
                     ALARM_TIMEOUT, f"no data for {timeout:g} s after {len(buf)} of {size} bytes"
                 ) from None
             if not data:
-                raise DncError(ALARM_CUT_OFF, f"body cut off after {len(buf)} of {size} bytes")
+                raise DncAlarm(ALARM_CUT_OFF, f"body cut off after {len(buf)} of {size} bytes")
             buf += data
         self.unread(buf[size:])
         body = buf[:size]
         if self.parity:
             if parity_error_at(body) is not None:
-                raise DncError(ALARM_PARITY, "parity error in the body")
+                raise DncAlarm(ALARM_PARITY, "parity error in the body")
             body = strip_parity(body)
         return body
 
@@ -580,10 +583,10 @@ class _Conn:
             nl = plain.find(b"\n", len(plain) - len(lead))
             if nl < 0:
                 if len(lead) > _COMMAND_MAX:
-                    raise DncError(ALARM_UNKNOWN_COMMAND, "command line too long")
+                    raise DncAlarm(ALARM_UNKNOWN_COMMAND, "command line too long")
                 continue
             if self.parity and parity_error_at(buf[: nl + 1]) is not None:
-                raise DncError(ALARM_PARITY, "parity error in command line")
+                raise DncAlarm(ALARM_PARITY, "parity error in command line")
             line = plain[len(plain) - len(lead) : nl].decode("ascii", "replace").strip()
             self.unread(buf[nl + 1 :])
             if not line:
@@ -628,13 +631,13 @@ class _Conn:
         start = time.monotonic()
         while not buffer.below_low_water():
             if buffer.aborted:
-                raise DncError(ALARM_CUT_OFF, f"drip-feed ended by the machine: {buffer.aborted}")
+                raise DncAlarm(ALARM_CUT_OFF, f"drip-feed ended by the machine: {buffer.aborted}")
             try:
                 async with asyncio.timeout(0.002):
                     data = await self.reader.read(4096)
             except TimeoutError:
                 if time.monotonic() - start > timeout:
-                    raise DncError(ALARM_TIMEOUT, "the NC took no block for too long") from None
+                    raise DncAlarm(ALARM_TIMEOUT, "the NC took no block for too long") from None
                 continue
             if not data:
                 break
@@ -642,7 +645,7 @@ class _Conn:
             if time.monotonic() - start > XOFF_GRACE_S:
                 late += len(data)
             if late > slack or len(extra) > IN_FLIGHT_MAX:
-                raise DncError(
+                raise DncAlarm(
                     ALARM_OVERRUN,
                     f"overrun: {late or len(extra)} bytes received after XOFF "
                     "(the sender ignores XOFF)",
@@ -668,7 +671,7 @@ class _Conn:
                     try:
                         await asyncio.wait_for(may_send.wait(), 5.0)
                     except TimeoutError:
-                        raise DncError(
+                        raise DncAlarm(
                             ALARM_TIMEOUT, "the receiver stayed in XOFF for 5 s"
                         ) from None
                 if watcher.done() and watcher.exception() is None and watcher.result():
@@ -708,15 +711,15 @@ class _Conn:
 def _number(arg: str) -> int:
     m = _NUMBER_ARG.match(arg.strip())
     if not m:
-        raise DncError(ALARM_NO_NUMBER, f"not a program number: {arg!r} (expected Onnnn)")
+        raise DncAlarm(ALARM_NO_NUMBER, f"not a program number: {arg!r} (expected Onnnn)")
     number = int(m.group(1))
     why = program_number_error(number)
     if why is not None:
-        raise DncError(ALARM_NO_NUMBER, why)
+        raise DncAlarm(ALARM_NO_NUMBER, why)
     return number
 
 
 def _required_number(arg: str) -> int:
     if not arg:
-        raise DncError(ALARM_NO_NUMBER, "this command needs a program number (Onnnn)")
+        raise DncAlarm(ALARM_NO_NUMBER, "this command needs a program number (Onnnn)")
     return _number(arg)

@@ -8,7 +8,8 @@ import pytest
 from sqlalchemy import func, select, text
 
 from dnc import models as m
-from dnc.errors import Conflict, InvalidUpload, NotFound, WorkflowError
+from dnc.cursor import encode_cursor
+from dnc.errors import Conflict, InvalidCursor, InvalidUpload, NotFound, WorkflowError
 from dnc.tape import sha256_of
 
 PROG = "%\nO1000 (BRACKET)\nN10 G0 X0 Y0\nN20 G1 X10 F100\nN30 M30\n%\n"
@@ -119,8 +120,10 @@ def test_search_by_name_number_tag_and_text_with_cursor(library):
     third = library.search(limit=3, cursor=second.next_cursor)
     assert [p.number for p in first.items + second.items + third.items] == list(range(1, 8))
     assert third.next_cursor is None
-    with pytest.raises(InvalidUpload, match="invalid cursor"):
+    with pytest.raises(InvalidCursor, match="is not a cursor this list gave out"):
         library.search(cursor="!!")
+    with pytest.raises(InvalidCursor):  # a cursor of another list (jobs)
+        library.search(cursor=encode_cursor("j", first.items[-1].id))
 
 
 def test_search_treats_like_wildcards_literally(library):

@@ -17,11 +17,12 @@ from sqlalchemy import text
 
 from dnc.db import make_engine, migrate, session_factory
 from dnc.dispatch import Dispatches
+from dnc.errors import InvalidCursor
 from dnc.jobs import Jobs
 from dnc.library import Library
 from tests.dnc.conftest import BACKENDS, TABLES, fake_checker, pg_url  # noqa: F401
 from web_api.app import create_app
-from web_api.problems import ApiProblem
+from web_api.problems import dnc_status
 from web_api.routers import decode_cursor, encode_cursor
 from web_api.settings import ApiSettings, Role
 
@@ -188,6 +189,6 @@ def test_unknown_setting_is_refused_by_name():
 def test_cursor_round_trip_and_foreign_cursors():
     assert decode_cursor("j", encode_cursor("j", 42)) == 42
     for foreign in ("garbage!", encode_cursor("d", 42), encode_cursor("j", 2**40), "é"):
-        with pytest.raises(ApiProblem) as exc:
+        with pytest.raises(InvalidCursor) as exc:
             decode_cursor("j", foreign)
-        assert exc.value.status == 400 and exc.value.kind == "invalid-cursor"
+        assert dnc_status(exc.value) == 400 and exc.value.kind == "invalid-cursor"

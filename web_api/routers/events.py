@@ -33,7 +33,7 @@ from starlette.responses import StreamingResponse
 from dnc.errors import DncError
 from dnc.outbox import events_after
 from web_api.event_hub import HubClosed, PollingStream, Stream
-from web_api.problems import ApiProblem, problem_doc
+from web_api.problems import ApiProblem, dnc_status, problem_doc
 from web_api.routers import Services, get_services
 from web_api.routers.auth import Viewer, websocket_principal
 from web_api.settings import ApiSettings, Role
@@ -179,8 +179,11 @@ async def events_ws(websocket: WebSocket, after: int = 0) -> None:
         return
     try:
         stream = await open_stream(websocket.app, max(0, min(after, 2**63 - 1)))
-    except (ApiProblem, DncError) as exc:
-        await refuse(503, getattr(exc, "kind", "database-unavailable"), str(exc), 1011)
+    except ApiProblem as exc:
+        await refuse(503, exc.kind, str(exc), 1011)
+        return
+    except DncError as exc:
+        await refuse(dnc_status(exc), exc.kind, str(exc), 1011)
         return
 
     async def send_events(done: anyio.CancelScope) -> None:
