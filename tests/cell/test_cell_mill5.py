@@ -122,6 +122,7 @@ def test_cl_posted_for_mill5_runs_in_the_cell_within_t_plus_the_servo_lag(make_c
     # IPO samples' distance from the exact midpoint and the posted figures' rounding)
     tip = status["tool_tip"]
     assert 0.0 < tip["peak_deviation_mm"] <= T * 1.05, tip
+    assert tip["position"] is not None and len(tip["position"]) == 3  # the tip, FK
     # the drives' actual joints: T plus what their lag can move the tip
     machine = cell.links["five1"].local
     following = dict(machine.max_following_error)
