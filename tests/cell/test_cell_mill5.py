@@ -12,7 +12,7 @@ import math
 import pytest
 
 from cnc.config import load_cell_config
-from tests.cell.conftest import idem, poll
+from tests.cell.conftest import idem, poll, upload_released
 
 pytestmark = pytest.mark.timeout(240)  # ~1 min on a quiet box (pure Python); margin for load
 
@@ -36,6 +36,16 @@ GOTO/100,40,-100,0,0.6,0.8
 FINI
 """
 TILTED_LINE = 8  # the first GOTO whose tool axis a 3-axis mill cannot hold
+
+
+ROTARY_GCODE = """%
+O4001 (ROTARY)
+G21 G90 G54
+G00 X0 Y0 Z20 A0
+G01 A90 F3600
+M30
+%
+"""
 
 
 def _cell_config():
@@ -88,6 +98,20 @@ def test_cl_posted_for_mill5_runs_in_the_cell_within_t_plus_the_servo_lag(make_c
     assert refused["type"].endswith("post-refused")
     assert refused["line"] == TILTED_LINE and refused["machine"] == "mill1"
     assert "cannot be posted to a 3-axis machine" in refused["reason"]
+    assert api("viewer").get("/api/dispatches").json()["items"] == []
+    # G-code for a mill with a rotary table passes the upload check for kind mill (a mill4
+    # may run it); mill1, a mill3, refuses it at dispatch with the line of the A word
+    rotary = upload_released(api, ROTARY_GCODE, number=4001, kind="mill")
+    r = api("operator").post(
+        "/api/dispatches",
+        json={"revision_id": rotary, "machine": "mill1", "mode": "memory", "start": True},
+        headers=idem(),
+    )
+    assert r.status_code == 422, r.text
+    refused = r.json()
+    assert refused["type"].endswith("not-for-machine") and refused["axes"] == ["X", "Y", "Z"]
+    assert (refused["line"], refused["column"]) == (4, 15), refused
+    assert "axis A is not configured" in refused["reason"]
     assert api("viewer").get("/api/dispatches").json()["items"] == []
 
     r = api("operator").post(
