@@ -84,3 +84,28 @@ def test_a_dispatch_to_a_mill_without_the_a_axis_is_refused_with_line_and_reason
         rev = _released(lib, text, number)
         assert d.request(key=f"p{number}", revision_id=rev, machine="mill1")[1] is True
     assert _dispatches(sessions) == 5
+
+
+def test_a_scheduler_made_dispatch_to_a_mill_without_the_a_axis_fails_before_sending(
+    lib, sessions
+):
+    from dnc.dispatch import DispatchRequest, create_dispatches
+    from dnc.transfer_worker import TransferWorker
+
+    rotary = _released(lib, ROTARY, 40)
+    with transaction(sessions) as s:
+        [(bad, _), (ok, _)] = create_dispatches(
+            s,
+            [DispatchRequest("j1", rotary, "mill1"), DispatchRequest("j2", rotary, "rot1")],
+            requested_by="scheduler",
+            now=lib._now(),
+        )
+    worker = TransferWorker(sessions, machine_configs=lib.machine_configs)
+    assert worker.run(bad) == "failed"
+    failed = Dispatches(sessions).get(bad)
+    assert failed.bytes_sent == 0 and failed.attempts == 1
+    assert failed.error.startswith("check: line 4, column 15: unknown address A")
+    assert "mill1 has axes X Y Z" in failed.error
+    # rot1 has an A: the attempt goes on to the line (no DNC address here: connect fails)
+    worker.run(ok)
+    assert Dispatches(sessions).get(ok).error.startswith("connect")
