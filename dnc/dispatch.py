@@ -297,7 +297,6 @@ class Dispatches:
         with transaction(self._sessions) as s:
             return [dispatch_info(r) for r in s.scalars(stmt)]
 
-
     def _check_for_machine(self, revision_id: int, machine: str) -> None:
         """A G-code revision passed the upload check for its kind, whose machines may have
         more axes than this one (dnc.checker): checked here with the machine's own

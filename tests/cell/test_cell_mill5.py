@@ -36,6 +36,7 @@ GOTO/100,40,-100,0,0.6,0.8
 FINI
 """
 TILTED_LINE = 8  # the first GOTO whose tool axis a 3-axis mill cannot hold
+CL_TIPS = [(20, 0, -100), (20, 0, -155), (100, 0, -150), (100, 40, -150), (100, 40, -100)]
 
 
 ROTARY_GCODE = """%
@@ -150,8 +151,7 @@ def test_cl_posted_for_mill5_runs_in_the_cell_within_t_plus_the_servo_lag(make_c
     # the drives' actual joints: T plus what their lag can move the tip
     machine = cell.links["five1"].local
     following = dict(machine.max_following_error)
-    reach = max(math.dist((0.0, 0.0, 0.0), (x, y, z)) for x, y, z in
-                [(20, 0, -100), (20, 0, -155), (100, 0, -150), (100, 40, -150), (100, 40, -100)])
+    reach = max(math.dist((0.0, 0.0, 0.0), tip) for tip in CL_TIPS)
     lag = servo_lag_share_mm(following, reach + 100.0)  # d = 100 mm
     actual_peak = machine.status.tool_tip.actual_peak
     assert 0.0 < actual_peak <= T * 1.05 + lag, (actual_peak, lag, following)

@@ -86,9 +86,7 @@ def test_a_dispatch_to_a_mill_without_the_a_axis_is_refused_with_line_and_reason
     assert _dispatches(sessions) == 5
 
 
-def test_a_scheduler_made_dispatch_to_a_mill_without_the_a_axis_fails_before_sending(
-    lib, sessions
-):
+def test_a_scheduler_made_dispatch_to_a_mill_without_the_a_axis_fails_before_sending(lib, sessions):
     from dnc.dispatch import DispatchRequest, create_dispatches
     from dnc.transfer_worker import TransferWorker
 

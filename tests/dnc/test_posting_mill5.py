@@ -85,9 +85,7 @@ def test_beyond_the_machines_own_rotary_limit_is_refused_with_the_cl_line(lib, s
     assert count(sessions, m.Dispatch) == count(sessions, m.DerivedRevision) == 0
 
 
-def test_beyond_the_linear_travel_with_the_machines_setup_is_refused_by_the_nc_check(
-    lib, sessions
-):
+def test_beyond_the_linear_travel_with_the_machines_setup_is_refused_by_the_nc_check(lib, sessions):
     """five3's EXT shift lifts every work offset by 450 mm: the first move's joint Z162.5
     is Z612.5 in machine coordinates, past Z's 600. The post cannot see it (it knows G54); the NC kernel's check
     of the posted program with the machine's setup does, and names the CL line."""
