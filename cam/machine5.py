@@ -103,3 +103,52 @@ def load_mill5(source: str | Path | dict[str, Any]) -> Mill5Config:
         first = e.errors()[0]
         where = ".".join(str(p) for p in first["loc"]) or "(top)"
         raise CamError(f"{where}: {first['msg']}", 0, 0, name) from None
+
+
+def from_nc_config(nc: Any, post: Mill5Config | None = None) -> Mill5Config:
+    """The post's view of an NC machine of kind mill5 (a `cnc.config.MachineConfig`): its
+    kinematics constants and axis limits (C endless when the NC's C is continuous), so a
+    cell's machine is posted with its own figures; the post section (T, decimals, feed
+    mode) and the IK branch, which the NC's file does not carry, from `post` (default: the
+    shipped cam/machines/mill5.yaml).
+
+    The posted program runs in G54 (the NC's power-on work offset), so the linear travel
+    the post may use is the machine's soft limits less the G54 offset of its factory setup;
+    the NC kernel's check of the posted program (dnc/posting.py) judges it with the
+    machine's whole setup."""
+    base = post if post is not None else load_mill5(MILL5_FILE)
+    if nc.kind != "mill5" or nc.kinematics is None:
+        raise CamError(f"a mill5 post needs a mill5 machine, not a {nc.kind}", 0, 0, "<machine>")
+    missing = [a for a in "XYZBC" if a not in nc.axes]
+    if missing:
+        raise CamError(f"a mill5 has axes X Y Z B C; missing {' '.join(missing)}", 0, 0, "")
+
+    def rotary(name: str) -> dict[str, Any]:
+        a = nc.axes[name]
+        return {"continuous": True} if a.continuous else {"min": a.min_mm, "max": a.max_mm}
+
+    k = nc.kinematics
+    md = nc.machine_data
+    g54 = list(md.work_offsets.get("G54", ())) if md is not None else []
+    shift = dict(zip("XYZ", [*g54, 0.0, 0.0, 0.0][:3], strict=True))
+    return Mill5Config.model_validate(
+        {
+            "kind": "mill5",
+            "description": nc.description,
+            "kinematics": {
+                "d_mm": k.d_mm,
+                "tool_length_mm": k.tool_length_mm,
+                "z_offset_mm": k.z_offset_mm,
+                "branch": base.kinematics.branch,
+            },
+            "axes": {
+                **{
+                    a: {"min": nc.axes[a].min_mm - shift[a], "max": nc.axes[a].max_mm - shift[a]}
+                    for a in "XYZ"
+                },
+                "B": rotary("B"),
+                "C": rotary("C"),
+            },
+            "post": base.post.model_dump(),
+        }
+    )

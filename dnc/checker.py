@@ -1,22 +1,35 @@
-"""The NC check run on every upload: the NC kernel's own checker, per machine kind."""
+"""The NC check run on every upload: the NC kernel's own checker, per machine kind.
+
+A kind's machines may differ in their axes (a cell's mills: mill3's X Y Z, mill4's X Y Z
+and rotary table A), so an upload is checked with the axes of every shipped machine of
+its kind (the widest: mill4 for `mill`); a dispatch then checks the program against the
+machine it goes to (`machine_check`), and a program with an A word sent to a mill without
+one is refused there with its line and why.
+"""
 
 from __future__ import annotations
 
 import dataclasses
+import re
 from collections.abc import Mapping
 from functools import cache
 from typing import IO, Any
 
 MAX_STORED_ERRORS = 100
-KIND_TO_MACHINE = {"mill": "mill3", "lathe": "lathe2", "mill5": "mill5"}
 UNBOUNDED_MM = 1e9
 
 
 @cache
 def _params(machine_kind: str):
-    from cnc.config import builtin_machine
+    from cnc.config import SHIPPED_MACHINES, builtin_machine
 
-    params = builtin_machine(KIND_TO_MACHINE.get(machine_kind, "mill3")).params
+    shipped = [builtin_machine(n) for n in SHIPPED_MACHINES]
+    of_kind = [c for c in shipped if c.kind == machine_kind] or [builtin_machine("mill3")]
+    widest = max(of_kind, key=lambda c: len(c.axes))  # mill4 for mill: X Y Z and A
+    return _unbounded(widest.params)
+
+
+def _unbounded(params):
     # The host does not know the machines' work offsets (G54..G59 are set at the machine),
     # so soft limits in machine coordinates cannot be judged here; the machine checks them
     # when the program is loaded. Everything else (syntax, modal groups, arcs, F, cutter
@@ -25,6 +38,28 @@ def _params(machine_kind: str):
         dataclasses.replace(a, min_mm=-UNBOUNDED_MM, max_mm=UNBOUNDED_MM) for a in params.axes
     )
     return dataclasses.replace(params, axes=axes)
+
+
+def kind_axes(machine_kind: str) -> tuple[str, ...]:
+    """The axes an upload for the kind may program (those of its widest shipped machine)."""
+    return tuple(a.name for a in _params(machine_kind).axes)
+
+
+def machine_check(
+    text: str, machine_kind: str, config: Any, *, programs: Mapping[int, str] | None = None
+) -> list[dict[str, Any]]:
+    """Errors of a G-code program of `machine_kind` (it passed the upload check) on one
+    machine of the kind, `config` its `cnc.config.MachineConfig`: the NC check with the
+    machine's own axes, run only when the machine lacks an axis the kind has and the text
+    names that axis' address at all (a mill3 and an A word); [] otherwise."""
+    missing = [a for a in kind_axes(machine_kind) if a not in config.axes]
+    if not missing or not re.search(f"[{''.join(missing)}]\\s*[-+.\\d#\\[]", text, re.IGNORECASE):
+        return []
+    from cnc.interp import check
+
+    errors = check(text.splitlines(), _unbounded(config.params), file="program",
+                   programs=programs)  # fmt: skip
+    return _as_data(errors)
 
 
 def nc_checker(
@@ -41,7 +76,10 @@ def nc_checker(
     from cnc.interp import check
 
     lines = text.splitlines() if isinstance(text, str) else text
-    errors = check(lines, _params(machine_kind), file="program", programs=programs)
+    return _as_data(check(lines, _params(machine_kind), file="program", programs=programs))
+
+
+def _as_data(errors) -> list[dict[str, Any]]:
     return [
         {"line": e.line, "col": e.col,
          "message": e.message if e.file == "program" else f"{e.message} (in {e.file})"}

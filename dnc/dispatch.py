@@ -23,7 +23,14 @@ from sqlalchemy.orm import Session, sessionmaker
 from dnc import models as m
 from dnc.db import transaction
 from dnc.dependencies import dependencies
-from dnc.errors import Conflict, IdempotencyMismatch, InvalidUpload, NotFound, WorkflowError
+from dnc.errors import (
+    Conflict,
+    IdempotencyMismatch,
+    InvalidUpload,
+    NotForMachine,
+    NotFound,
+    WorkflowError,
+)
 from dnc.events import record
 from dnc.posting import (
     SOURCE_KINDS,
@@ -223,9 +230,11 @@ class Dispatches:
 
         An APT/CL revision is posted for the machine here, and the posted G-code stored as a
         derived revision in the dispatch's own transaction: a post the machine cannot run
-        (`PostRefused`, with the line and why) leaves nothing behind.
+        (`PostRefused`, with the line and why) leaves nothing behind. A G-code revision is
+        checked against the machine's own axes (`NotForMachine`: a mill3 sent an A word).
         """
         _check_request(mode, key)
+        self._check_for_machine(revision_id, machine)
         try:
             return self._request(key, revision_id, machine, mode, start, requested_by)
         except _PostedConcurrently:
@@ -287,6 +296,38 @@ class Dispatches:
             stmt = stmt.where(m.Dispatch.machine == machine)
         with transaction(self._sessions) as s:
             return [dispatch_info(r) for r in s.scalars(stmt)]
+
+    def _check_for_machine(self, revision_id: int, machine: str) -> None:
+        """A G-code revision passed the upload check for its kind, whose machines may have
+        more axes than this one (dnc.checker): checked here with the machine's own
+        configuration when the host has it, refused with the first error's line."""
+        from dnc.checker import machine_check
+        from dnc.dependencies import LibraryPrograms
+        from dnc.posting import GCODE
+
+        with transaction(self._sessions) as s:
+            rev = s.get(m.Revision, revision_id)
+            mach = s.scalar(select(m.Machine).where(m.Machine.name == machine))
+            if rev is None or mach is None or rev.kind != GCODE:
+                return  # an unknown target is refused by the request; a source is posted
+            config = self._machine_configs(mach.name, mach.kind)
+            if config is None:
+                return
+            kind = s.get(m.Program, rev.program_id).machine_kind
+            text = s.get(m.Content, rev.sha256).text
+        errors = machine_check(text, kind, config, programs=LibraryPrograms(self._sessions, kind))
+        if errors:
+            e = errors[0]
+            axes = " ".join(config.axes)
+            raise NotForMachine(
+                f"revision {revision_id} line {e['line']}, column {e['col']}: {e['message']} "
+                f"({machine} is a {mach.kind} with axes {axes})",
+                line=e["line"],
+                column=e["col"],
+                reason=e["message"],
+                machine=machine,
+                axes=list(config.axes),
+            )
 
 
 class _PostedConcurrently(Exception):

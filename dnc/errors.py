@@ -59,3 +59,10 @@ class IdempotencyMismatch(DncError):
     """The same Idempotency-Key was used before with a different request body."""
 
     kind = "idempotency-key-reuse"
+
+
+class NotForMachine(DncError):
+    """A released program the machine it is dispatched to cannot run (an axis it lacks):
+    the program's line, column and why."""
+
+    kind = "not-for-machine"

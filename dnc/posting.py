@@ -176,19 +176,36 @@ def post_for_machine(
     config: Any,
     program_number: int,
 ) -> Posted:
-    """Post a source for one machine and check the result as the machine will run it."""
-    from cam.machine5 import Mill5Config
+    """Post a source for one machine and check the result as the machine will run it.
+
+    A kind whose post has its own machine description (mill5, `cam.post.CAM_KINDS`) given
+    the NC's configuration of the machine: the post's description is made from it
+    (`cam.machine5.from_nc_config`: the machine's kinematics and travel), and the NC
+    kernel checks the posted program with it."""
+    from cam.errors import CamError
+    from cam.machine5 import Mill5Config, from_nc_config
     from cam.post import CAM_KINDS, Machine
 
-    if machine_kind in CAM_KINDS and not isinstance(config, Mill5Config):
-        config = None  # the post's own description of the kind (cam/machines/), not the NC's
+    nc_config = None
+    if machine_kind in CAM_KINDS and config is not None and not isinstance(config, Mill5Config):
+        nc_config = config
+        try:
+            config = from_nc_config(config)
+        except CamError as e:
+            raise PostRefused(
+                f"{machine}: {e.message} (posting for {machine}, a {machine_kind})",
+                machine=machine,
+                machine_kind=machine_kind,
+            ) from None
     mach = Machine(machine, machine_kind, config) if config is not None else None
     mach = mach or dataclasses.replace(_stand_in(machine_kind), name=machine)
     records = read_source(text, kind, file)
-    return _post(records, mach, program_number, file, travel=True)
+    return _post(records, mach, program_number, file, travel=True, nc_config=nc_config)
 
 
-def _post(records: list, mach, program_number: int | None, file: str, *, travel=False) -> Posted:
+def _post(
+    records: list, mach, program_number: int | None, file: str, *, travel=False, nc_config=None
+) -> Posted:
     from cam.errors import CamError
     from cam.post import PostOptions, post
 
@@ -198,8 +215,9 @@ def _post(records: list, mach, program_number: int | None, file: str, *, travel=
     except CamError as e:
         raise _refused(mach, e.file, e.line, e.col, e.message) from None
     text = "".join(b.text + "\n" for b in blocks)
-    if mach.kind in ("mill", "lathe"):
-        _nc_check(text, blocks, mach, file, travel)
+    nc_config = nc_config or _nc_machine(mach)
+    if nc_config is not None:
+        _nc_check(text, blocks, mach, nc_config, file, travel)
     return Posted(
         text=text,
         sha256=sha256_of(text),
@@ -212,14 +230,24 @@ def _post(records: list, mach, program_number: int | None, file: str, *, travel=
     )
 
 
-def _nc_check(text: str, blocks: list, mach, file: str, travel: bool) -> None:
-    """The posted program through the NC kernel's check for this machine: with its axis
-    travel and work offsets at dispatch (`travel`), syntax and modal rules only for a trial
-    post (the kind's machines may differ in travel and offsets). The first error points
-    back at the CL/APT line that made the block."""
+def _nc_machine(mach):
+    """The NC kernel's configuration to check a post for `mach` with: the machine's own
+    for the NC-described kinds (mill, lathe), the kind's shipped NC machine for a kind the
+    post describes itself (mill5: cnc/machines/mill5.yaml), None when the NC has none."""
+    from cnc.config import SHIPPED_MACHINES, builtin_machine
+
+    if mach.kind in ("mill", "lathe"):
+        return mach.config
+    return builtin_machine(mach.kind) if mach.kind in SHIPPED_MACHINES else None
+
+
+def _nc_check(text: str, blocks: list, mach, cfg, file: str, travel: bool) -> None:
+    """The posted program through the NC kernel's check for this machine (`cfg`, its NC
+    configuration): with its axis travel and work offsets at dispatch (`travel`), syntax
+    and modal rules only for a trial post (the kind's machines may differ in travel and
+    offsets). The first error points back at the CL/APT line that made the block."""
     from cnc.interp import check
 
-    cfg = mach.config
     params = cfg.params
     data = cfg.machine_data.initial() if travel and cfg.machine_data is not None else None
     if not travel:

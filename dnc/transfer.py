@@ -42,7 +42,8 @@ class TransferError(Exception):
     (the host could not read the revision's text from its database) | encode (the text has
     a character the 7-bit tape cannot carry) | dependency (a program it calls has no released
     revision: nothing sent) | post (an APT/CL revision the post-processor refuses for the
-    machine) | internal (an unexpected error in an attempt)."""
+    machine) | check (G-code naming an axis the machine does not have: nothing sent) |
+    internal (an unexpected error in an attempt)."""
 
     def __init__(self, kind: str, message: str, *, alarm: int | None = None, sent: int = 0):
         super().__init__(message)

@@ -31,6 +31,7 @@ from dnc.dispatch import DONE, FAILED, PENDING, TRANSFERRING, VERIFYING, dispatc
 from dnc.errors import DncError
 from dnc.events import record
 from dnc.posting import (
+    GCODE,
     SOURCE_KINDS,
     MachineConfigs,
     default_machine_configs,
@@ -210,6 +211,10 @@ class TransferWorker:
             # stored before uploads were held to the ISO character set: the 7-bit tape
             # cannot carry it, on this attempt or any other
             return self._fail(dispatch_id, job["attempts"], unsendable)
+        if found.kind == GCODE and (refusal := self._not_for_machine(found, text)) is not None:
+            # a dispatch the scheduler made to a machine without an axis the program names
+            # (a mill3 given a mill4's A words): refused before anything is sent
+            return self._fail(dispatch_id, job["attempts"], refusal)
         try:
             # the programs it calls, as released now (the request checked them; one may
             # have been made obsolete since): a missing one fails before anything is sent
@@ -301,6 +306,27 @@ class TransferWorker:
                    entity="dispatch", entity_id=dispatch_id, sent=sent, already_there=kept,
                    revisions=[d.revision_id for d in deps])  # fmt: skip
         return bytes_sent
+
+    def _not_for_machine(self, found, text: str) -> TransferError | None:
+        """The machine check of a G-code revision (dnc.checker.machine_check) as a
+        failure of kind `check`; None when it passes or the host lacks the machine's
+        configuration."""
+        from dnc.checker import machine_check
+        from dnc.dependencies import LibraryPrograms
+
+        config = self.machine_configs(found.machine, found.machine_kind)
+        if config is None:
+            return None
+        kind = found.program_kind
+        errors = machine_check(text, kind, config, programs=LibraryPrograms(self._sessions, kind))
+        if not errors:
+            return None
+        e = errors[0]
+        return TransferError(
+            "check",
+            f"line {e['line']}, column {e['col']}: {e['message']} "
+            f"({found.machine} has axes {' '.join(config.axes)})",
+        )
 
     def _post(self, dispatch_id: int, revision_id: int, machine: str) -> str:
         """Post the dispatch's source for its machine and record the derived revision on
@@ -415,6 +441,8 @@ _ATTEMPT = (
         m.Revision.__table__.c.sha256,
         m.Revision.__table__.c.kind,
         m.Program.__table__.c.number,
+        m.Program.__table__.c.machine_kind.label("program_kind"),
+        m.Machine.__table__.c.kind.label("machine_kind"),
         _DERIVED.c.sha256.label("posted_sha256"),
     )
     .select_from(_D)

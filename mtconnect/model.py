@@ -49,6 +49,10 @@ class DataItem:
         if value == "UNAVAILABLE":
             return True
         if self.category == "SAMPLE":
+            if self.units is not None and self.units.endswith("_3D"):
+                # a three-space sample (PATH_POSITION): 'X Y Z', ThreeSpaceValueType
+                parts = value.split()
+                return len(parts) == 3 and all(_XS_FLOAT.match(p) for p in parts)
             return _XS_FLOAT.match(value) is not None
         kind = EVENT_VALUES.get(self.type)
         if kind is None:

@@ -37,6 +37,7 @@ STATUS_OF_KIND = {
     "idempotency-key-reuse": 422,
     "missing-dependency": 409,
     "post-refused": 422,
+    "not-for-machine": 422,
 }
 TITLES = {
     "invalid-upload": "The uploaded program was refused",
@@ -49,6 +50,7 @@ TITLES = {
     "idempotency-key-reuse": "Idempotency-Key reused with a different request",
     "missing-dependency": "A program it calls has no released revision",
     "post-refused": "The post-processor refused the program for this machine",
+    "not-for-machine": "The machine cannot run the program (an axis it does not have)",
     "validation": "The request is invalid",
     "malformed-json": "The request body is not valid JSON",
     "unauthenticated": "An API key is required",

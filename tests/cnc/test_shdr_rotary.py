@@ -36,3 +36,8 @@ def test_mill5_device_model_has_the_tool_tip_items():
     dev = build_device("mill5", AXES5, tool_tip=True)
     assert {"tip", "tip_dev", "tip_dev_peak"} <= set(dev.by_key)
     assert "tip" not in build_device("mill4", ("X", "Y", "Z", "A")).by_key
+    tip = dev.by_key["tip"]
+    # a three-space sample: 'X Y Z' (ThreeSpaceValueType), exactly three xs:float
+    assert tip.accepts("1.5000 -2.0000 30.2500") and tip.accepts("UNAVAILABLE")
+    assert not tip.accepts("1.5 -2.0") and not tip.accepts("1.5 -2.0 x")
+    assert not tip.accepts("1.5 -2.0 3 4") and not dev.by_key["tip_dev"].accepts("1 2 3")
