@@ -98,7 +98,8 @@ CYCLE_S = {"mill": 20.0, "lathe": 10.0}
 # or a spec that stands for the cause being gone (a cooled winding).
 PLAN: dict[str, dict] = {
     "load_force": {"target": "drive:Y", "params": {"newtons": 1800}, "bound": 3.5, "rest": 4},
-    "blocked": {"target": "drive:Y", "bound": 0.05},
+    # a jam shows only when the axis moves: the bound runs from its next move (a cycle away)
+    "blocked": {"target": "drive:Y", "bound": 0.06, "at_next_move": True},
     "encoder_break": {"target": "drive:X", "bound": 0.01},
     "encoder_jump": {"target": "drive:X", "bound": 0.01},
     "inverter_fault": {"target": "drive:X", "bound": 0.01},
@@ -126,6 +127,8 @@ PLAN: dict[str, dict] = {
     "babble": {"target": "bus:Z", "bound": 0.012},
     "power_cycle": {"target": "drive:Z", "bound": 0.01},
     "estop_button": {"target": "plc", "bound": 0.02},
+    # feed hold while the door is open; closing it is not enough: CYCLE START resumes
+    "door_open": {"target": "plc", "bound": 0.02, "resume": True},
     # reached only during a tool change: the bound runs from the next M6 (at most a cycle)
     "carousel_jam": {"target": "plc", "bound": 5.1, "at_tool_change": True},
     "changer_jam": {"target": "plc", "bound": 5.1, "at_tool_change": True},
@@ -319,7 +322,7 @@ class Soak:
         fault_id, t_inject = r.json()["id"], time.monotonic()
         bound = plan.get("bound")
         wait_s = (bound or 0) + DETECT_WAIT_S
-        if plan.get("at_tool_change"):
+        if plan.get("at_tool_change") or plan.get("at_next_move"):
             wait_s += CYCLE_S["mill"] * 2
         if plan.get("undetectable"):
             wait_s = 10.0  # watched a while to show it stays silent
@@ -338,8 +341,8 @@ class Soak:
             out["verdict"] = "not detected"
         elif bound is None:
             out["verdict"] = "detected (no documented bound)"
-        elif plan.get("at_tool_change"):
-            # from the injection: the next tool change is at most a cycle away
+        elif plan.get("at_tool_change") or plan.get("at_next_move"):
+            # from the injection: the next tool change (move) is at most a cycle away
             ok = detected <= bound + CYCLE_S["mill"] * 2 + DETECT_SLACK_S
             out["verdict"] = "within bound" if ok else "late"
         else:
@@ -371,12 +374,17 @@ class Soak:
         stopped = seen is not None and any(
             a["level"] == "FAULT" or a["code"] == "3001" for a in self.status(c, name)["alarms"]
         )
-        if not stopped:
+        if not stopped or plan.get("resume"):
             # a warning (or nothing): the machine cuts on; the cleared cause is all it takes
+            steps = ["cleared, no RESET (no FAULT-level alarm)"]
+            if plan.get("resume"):
+                # a door stop: the feed hold stays once the door is closed, until CYCLE START
+                r = c.post(f"/api/machines/{name}/commands", json={"command": "cycle_start"})
+                steps = [f"cleared (door closed), cycle start {r.status_code}, no RESET"]
             back = self.wait(c, name, ready, 30.0, every=0.2)
             out["recovered"] = back is not None
             out["recovery_s"] = round(time.monotonic() - t_rec, 1)
-            out["steps"] = ["cleared, no RESET (no FAULT-level alarm)"]
+            out["steps"] = steps
             return out
         last: list = [None, 0.0]
 

@@ -136,7 +136,10 @@ FAULT_KINDS: dict[str, FaultKind] = {k.name: k for k in _KINDS}
 DETECTION: dict[str, str] = {
     "load_force": "above the drive's peak force: NC following error (3010) within 50 ms; "
     "a force the drive holds near its peak current: I2t 0x2350 within ~3 s",
-    "blocked": "NC following error (3010) within 50 ms of moving; at a standstill not at all",
+    "blocked": "NC following error (3010) once the demand runs the NC's 1 mm limit past the "
+    "jammed slide: within 50 ms on a moving axis, within 60 ms of the next move of a standing "
+    "axis (a rapid from standstill); a standing axis is not detected until it is commanded to "
+    "move",
     "encoder_break": "EMCY 0x7305 within 1 sub-step (< 10 ms at the NC)",
     "encoder_jump": "EMCY 0x7305 within 1 sub-step (< 10 ms at the NC)",
     "inverter_fault": "EMCY 0x2310 within 1 sub-step (< 10 ms at the NC)",
@@ -171,7 +174,9 @@ DETECTION: dict[str, str] = {
 #: What brings the machine back (docs/recovery.md): after the cause is gone, one RESET (the
 #: fault reset edge 0x6040 bit 7, the master restarts a rebooted drive), then home.
 RECOVERY: dict[str, str] = {
-    "load_force": "remove the force; after I2t let the motor rest ~3 s; RESET; home",
+    "load_force": "remove the force; after I2t let the motor rest ~3 s; RESET; home (a force "
+    "that outlasted the stop has pushed the unbraked table onto its hard stop, 20 mm past the "
+    "limit switch: homing moves it off)",
     "blocked": "free the slide; RESET; home",
     "encoder_break": "repair the encoder cable; RESET; home (the position is lost)",
     "encoder_jump": "RESET; home (the position is lost)",

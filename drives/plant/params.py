@@ -118,6 +118,10 @@ class SwitchParams:
     # False: active for x >= edge, a "positive home switch" (methods 3, 4, 19, 20)
     home_switch_active_below: bool = True
     initial_position: float = 0.200  # m, table position at power-on
+    # the mechanical end of travel (hard stop), this far beyond each limit switch: a table
+    # pushed on with the power stage off (an external force, no holding brake) stops there
+    # instead of running off the screw
+    end_stop_overtravel: float = 0.020  # m
 
 
 @dataclass(frozen=True, slots=True)

@@ -64,6 +64,10 @@ class Plant:
         self._has_pos, self._pos = sw.positive_limit is not None, sw.positive_limit or 0.0
         self._has_home, self._home = sw.home_switch is not None, sw.home_switch or 0.0
         self._home_below = sw.home_switch_active_below
+        # the hard stops (none modelled on a side without a limit switch)
+        over = sw.end_stop_overtravel
+        self._stop_lo: float = self._neg - over if self._has_neg else -math.inf
+        self._stop_hi: float = self._pos + over if self._has_pos else math.inf
         self.speed_limit = m.max_speed_rpm * _TWO_PI / 60.0  # rad/s, the drive's 0x6080
         self._i2t_limit = (m.peak_current**2 - m.rated_current**2) * p.thermal.i2t_peak_time
         # injections
@@ -322,6 +326,16 @@ class Plant:
                 self.table_x = nut + half
         else:
             self.table_x = nut
+        # The hard stop: an inelastic impact, table, screw and motor stop at it. (`follow_ramp`
+        # needs no check: it hands over at the limit switch before the stop, and the drive
+        # lets no demand move further into an active limit switch.)
+        tx = self.table_x
+        if tx > self._stop_hi or tx < self._stop_lo:
+            edge = self._stop_hi if tx > self._stop_hi else self._stop_lo
+            theta += (edge - tx) / mpr
+            self.theta = theta
+            self.omega = 0.0
+            self.table_x = edge
 
         # --- encoder read at the end of the sub-step; speed from the count difference
         counts = math.floor(theta / rpc) + self.encoder_offset

@@ -7,7 +7,7 @@ import math
 import pytest
 
 from drives.cia402 import Drive402, State
-from drives.plant import POSITION, VELOCITY, Plant, PlantParams
+from drives.plant import OFF, POSITION, VELOCITY, Plant, PlantParams
 
 T = 0.002  # IPO cycle
 
@@ -198,3 +198,19 @@ def test_quick_stop_in_csp_ends_at_standstill_shortly_after_the_ramp(substep, se
     for _ in range(20):
         d.advance(T)
     assert abs(d.read_object(0x6064, 0) - stopped_at) <= 2  # at standstill when disabled
+
+
+def test_a_table_pushed_with_the_power_stage_off_stops_on_its_hard_stop():
+    """No holding brake: a lasting force back-drives the screw; the table runs to the hard
+    stop past the limit switch and rests there (it used to run metres off the screw)."""
+    for force in (1800.0, -1800.0):
+        p = Plant()
+        p.load_force = force
+        for _ in range(8000 * 3):  # 3 s of 125 us sub-steps
+            p.step(125e-6, OFF)
+        sw = p.params.switches
+        end = sw.positive_limit if force > 0 else sw.negative_limit
+        end += sw.end_stop_overtravel if force > 0 else -sw.end_stop_overtravel
+        assert p.table_x == pytest.approx(end)
+        assert p.omega == 0.0
+        assert p.switch_inputs() & (2 if force > 0 else 1)  # on the limit switch
