@@ -145,6 +145,8 @@ def _pyproject(module: str, tests: list[str]) -> str:
         # the tree's files other than .py (EDS, ladder programs) are copied with the packages;
         # the reference material is reached through FMSCELL_SHARED, never copied
         "use_git_change_detection = false",
+        # tests that hold the docs against the code (the G-code tables) read docs/ (linked)
+        'also_copy = ["docs"]',
         "",
     ]
     return "\n".join(lines)
@@ -159,6 +161,7 @@ def _prepare(module: str, tests: list[str]) -> Path:
     for name in PACKAGES:
         shutil.copytree(ROOT / name, work / name, ignore=skip)
     (work / "tests").symlink_to(ROOT / "tests", target_is_directory=True)
+    (work / "docs").symlink_to(ROOT / "docs", target_is_directory=True)
     (work / "pyproject.toml").write_text(_pyproject(module, tests))
     return work
 

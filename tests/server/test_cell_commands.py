@@ -316,3 +316,48 @@ def test_stopping_the_cell_cancels_pending_fault_timers(fault_cell):
     fault_cell.stop()
     assert all(not t.is_alive() or t.finished.is_set() for t in fault_cell._timers)
     assert fault.state == "active" and fault_cell.started is False
+
+
+class _Monitor:
+    """The host's status view of m1 as SHDR brings it (mode as MTConnect names it)."""
+
+    def __init__(self, mode: str) -> None:
+        self.mode = mode
+
+    def status(self, name: str) -> dict:
+        return {"mode": self.mode}
+
+
+def test_home_goes_ref_home_all_auto_and_answers_once_the_host_sees_auto(cell):
+    cell.monitor = _Monitor("AUTOMATIC")
+    assert cell.command("m1", "home") == (
+        "homed on the Modbus remote panel: mode REF, home all in the homing sequence,"
+        " every axis referenced, AUTO"
+    )
+    assert cell.panel.requests == [("mode", 4), ("home_all",), ("mode", 1)]
+
+
+def test_home_refused_while_a_program_is_active_or_ending_short(cell):
+    cell.monitor = _Monitor("AUTOMATIC")
+    cell.panel.in_cycle = True
+    with pytest.raises(MachineUnavailable, match=r"^m1: home refused: a program is active$"):
+        cell.command("m1", "home")
+    cell.panel.in_cycle, cell.panel.homing = False, "partial"
+    with pytest.raises(MachineUnavailable, match=r"^m1: homing ended with only X referenced"):
+        cell.command("m1", "home")
+    assert ("mode", 1) not in cell.panel.requests  # not put back in AUTO unreferenced
+
+
+def test_a_machine_process_secret_is_kept_owner_only_for_the_next_host(tmp_path):
+    cell = Cell(default_cell(free_ports=True), processes=True, state_dir=tmp_path)
+    mcfg = cell.config.machines["mill1"]
+    made = cell._secret("mill1", mcfg, persist=True)
+    kept = tmp_path / "mill1.machine.secret"
+    assert len(made) >= 16 and kept.read_text() == made + "\n"
+    assert kept.stat().st_mode & 0o777 == 0o600
+    assert cell._secret("mill1", mcfg, persist=True) == made  # the adopting host's
+    kept.write_text("short\n")  # not a secret this host made: a new one replaces it
+    again = cell._secret("mill1", mcfg, persist=True)
+    assert again not in (made, "short") and kept.read_text() == again + "\n"
+    fresh = cell._secret("mill1", mcfg, persist=False)
+    assert fresh not in (made, again) and kept.read_text() == again + "\n"
