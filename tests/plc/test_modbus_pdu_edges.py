@@ -339,7 +339,9 @@ def test_register_values_outside_int_are_sent_as_their_16_bits():
     snap = small_snapshot()
     odd = type(snap)(snap.scan, snap.ix, snap.qx, snap.mx, (40000, 65535, -1, 0) + snap.iw[4:],
                      snap.qw, snap.mw)  # fmt: skip
-    assert small_handler().handle(req(4, 0, 4), odd)[0] == b"\x04\x08\x9c\x40\xff\xff\xff\xff\x00\x00"
+    assert (
+        small_handler().handle(req(4, 0, 4), odd)[0] == b"\x04\x08\x9c\x40\xff\xff\xff\xff\x00\x00"
+    )
     broken = type(snap)(snap.scan, snap.ix, snap.qx, snap.mx, (None,) * 8, snap.qw, snap.mw)
     assert small_handler().handle(req(4, 0, 1), broken) == (b"\x84\x04", None)
 
