@@ -46,7 +46,7 @@ WORK = Path(
 # falls through to an installed copy of fmscell outside the mutants/ tree.
 PACKAGES = ("drives", "plc", "cnc", "dnc", "server", "web_api")
 
-# module -> test files (globs) that form its bounded selection
+# module -> test files (globs) that form its bounded selection; "-<node id>" deselects a test
 TARGETS: dict[str, tuple[str, ...]] = {
     "drives/cia402/statemachine.py": (
         "tests/drives/test_cia402_statemachine*.py",
@@ -56,6 +56,9 @@ TARGETS: dict[str, tuple[str, ...]] = {
         "tests/plc/test_modbus_core.py",
         "tests/plc/test_modbus_frames.py",
         "tests/plc/test_modbus_pdu*.py",
+        # a server backpressure test, not a PDU one: 40 000 requests through mutmut's
+        # instrumented handler outlast the face's stop time-out
+        "-tests/plc/test_modbus_frames.py::test_client_that_never_reads_does_not_block_others",
     ),
     "dnc/rules.py": ("tests/dnc/test_rules*.py",),
     # the table of every state x machine event (the cell and model tests run a scheduler on
@@ -117,6 +120,9 @@ def _slug(module: str) -> str:
 def _selection(globs: tuple[str, ...]) -> list[str]:
     files: list[str] = []
     for pattern in globs:
+        if pattern.startswith("-"):
+            files += ["--deselect", pattern[1:]]
+            continue
         files += sorted(str(p.relative_to(ROOT)) for p in ROOT.glob(pattern))
     return files
 
