@@ -234,6 +234,7 @@ SMALL_CASES = [
     ("fc05-0001", req(5, 3, 0x0001), b"\x85\x03", None),
     ("fc05-ff01", req(5, 3, 0xFF01), b"\x85\x03", None),
     ("fc05-unmapped", req(5, 32, 0xFF00), b"\x85\x02", None),
+    ("fc05-last-coil", req(5, 31, 0xFF00), req(5, 31, 0xFF00), (Write("MX", 15, (1,)),)),
     # FC06 write single register: IEC INT, the listed value range
     ("fc06-minus-one", req(6, 2, 0xFFFF), req(6, 2, 0xFFFF), (Write("QW", 2, (-1,)),)),
     ("fc06-mw", req(6, 9, 7), req(6, 9, 7), (Write("MW", 1, (7,)),)),
@@ -357,3 +358,8 @@ def test_identity_objects_are_ascii_and_at_most_64_bytes():
     assert objects[0] == b"M?ller" + b"x" * 58 and len(objects[0]) == 64
     assert objects[5] == b"?"
     assert objects[1] == b"FMSCELL-SOFTPLC"
+
+
+def test_fc43_of_a_handler_without_an_identity_names_fmscell():
+    response, _ = small_handler().handle(b"\x2b\x0e\x04\x00", small_snapshot())
+    assert response == b"\x2b\x0e\x04\x82\x00\x00\x01\x00\x07fmscell"
