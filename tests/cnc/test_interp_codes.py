@@ -236,3 +236,49 @@ def test_block_delete_switch() -> None:
     prog = "G0 X1\n/G0 X2\n/1 G0 X3\n"
     assert len(run(prog)) == 3
     assert len(run(prog, block_delete=True)) == 1
+
+
+# G53 and G28/G30 word by word (mutation survivors in cnc/interp/offsets.py)
+# fmt: off
+MACHINE_MOVES = [
+    ("G53 G1 feeds at the modal F", "G1 X0 F100\nG53 G1 X5 Y6 Z-7\n", [F(2, (5.0, 6.0, -7.0), 100.0)]),
+    ("G53 takes the modal motion", "G1 X1 F100\nG53 X5\n", [F(2, (5.0, 0.0, 0.0), 100.0)]),
+    ("G53 G1 stays modal", "G0 X1\nG53 G1 X5 F80\nX2\n", [F(3, (2.0, 0.0, 0.0), 80.0)]),
+    ("G53 G0 is modal G0 too", "G1 X1 F100\nG53 G0 Z5\nX2\n", [T(3, (2.0, 0.0, 5.0))]),
+    ("G53 moves only the named axes", "G0 X1 Y2 Z3\nG53 G0 Y-6\n", [T(2, (1.0, -6.0, 3.0))]),
+    ("G28 without axis words goes home directly", "G0 X10 Y10 Z10\nG28\n", [T(2, (0.0, 0.0, 0.0))]),
+    ("G28 X: only X goes home", "G0 X10 Y10 Z10\nG28 X4\n", [T(2, (4.0, 10.0, 10.0)), T(2, (0.0, 10.0, 10.0))]),
+    ("G28 Y: only Y goes home", "G0 X10 Y10 Z10\nG28 Y4\n", [T(2, (10.0, 4.0, 10.0)), T(2, (10.0, 0.0, 10.0))]),
+]
+# fmt: on
+
+
+@pytest.mark.parametrize(
+    ("prog", "last"), [c[1:] for c in MACHINE_MOVES], ids=[c[0] for c in MACHINE_MOVES]
+)
+def test_machine_moves_and_reference_returns(prog, last) -> None:
+    cmds = run(prog)
+    assert cmds[-len(last) :] == last
+
+
+def test_g30_p2_is_the_second_reference_and_p1_the_first() -> None:
+    params = MachineParams(axes=BIG, second_reference_mm=(-5.0, -6.0, -7.0))
+    assert run("G0 X10 Y10 Z10\nG30 P2 Z15\n", params=params)[-1] == T(2, (10.0, 10.0, -7.0))
+    assert run("G0 X10 Y10 Z10\nG30 P1 Z15\n", params=params)[-1] == T(2, (10.0, 10.0, -7.0))
+    with pytest.raises(NcError, match="G30 P3/P4"):
+        run("G30 P4 Z1\n", params=params)
+
+
+def test_g53_refusals() -> None:
+    with pytest.raises(NcError, match="G53 moves only with G0 or G1"):
+        run("G53 G2 X1 Y0 I1 F10\n")
+    with pytest.raises(NcError, match="G53 moves only with G0 or G1"):
+        run("G3 X1 Y1 R1 F10\nG53 X1\n")
+    with pytest.raises(NcError, match="G53 needs absolute mode"):
+        run("G91\nG53 G0 X1\n")
+
+
+@pytest.mark.parametrize("p", ["0", "49", "1.5"])
+def test_g54_1_outside_p1_to_p48_is_refused(p: str) -> None:
+    with pytest.raises(NcError, match=rf"G54.1 P{p}: extended work offsets are P1..P48"):
+        run(f"G54.1 P{p}\n")

@@ -16,6 +16,7 @@ from dnc.allocation import (
     FAILED,
     FINAL,
     INTERRUPTED,
+    NEVER_STARTED,
     NOT_STARTED,
     REROUTED,
     RUNNING,
@@ -64,6 +65,8 @@ TABLE = [
     ("feed hold with alarm is still the cycle", alloc(), look(alarm="x", **CUTTING), RUNNING, 0, False, ""),
     ("waiting for transfer", alloc(DISPATCHED, NOT_STARTED), look(), DISPATCHED, 0, False, ""),
     ("another program ends before our start", alloc(DISPATCHED, NOT_STARTED), look(program="O2", **CUTTING), DISPATCHED, 0, False, ""),
+    ("our program still cutting an earlier part", alloc(DISPATCHED, NOT_STARTED), look(**CUTTING), DISPATCHED, 0, False, ""),
+    ("machine reports no program while cutting", alloc(), look(program=None, **CUTTING), RUNNING, 0, False, ""),
     ("the start under way", alloc(DISPATCHED, STARTING), look(), DISPATCHED, 0, False, ""),
     # -- reset of a cutting machine: READY, idle, no part
     ("reset", alloc(), look(), INTERRUPTED, 0, False, "ended without a part"),
@@ -183,6 +186,55 @@ def test_every_event_leads_to_an_end(state, phase, open_):
 )
 def test_dispatch_phase(state, phase):
     assert dispatch_phase(state) == phase
+
+
+@pytest.mark.parametrize(
+    "error, phase",
+    [
+        # the start step failed: the host died pressing cycle start, or running was not seen
+        ("start: cycle start failed: running not seen", START_FAILED),
+        (None, START_FAILED),  # no reason recorded: the machine may have taken the start
+        ("start refused: cycle start failed: axes not referenced", NEVER_STARTED),
+        ("transfer: connection reset by peer", NEVER_STARTED),
+        ("verify: sha256 differs", NEVER_STARTED),
+    ],
+)
+def test_failed_dispatch_phase_from_its_error(error, phase):
+    assert dispatch_phase("failed", error) == phase
+    # an error left over from an earlier attempt does not change a live dispatch's phase
+    assert dispatch_phase("done", error) == STARTED
+    assert dispatch_phase("transferring", error) == NOT_STARTED
+
+
+# (allocation, look, reason, note) word for word: what the operator reads on the allocation
+# fmt: off
+WORDING = [
+    (alloc(), look(part_count=AT + 1),
+     "part counter of mill1 advanced to 6", ""),
+    (alloc(), look(part_count=AT + 3),
+     "part counter of mill1 advanced to 8", "2 more part(s) counted by mill1 belong to no allocation"),
+    (alloc(), look(part_count=0, program=""),
+     "part counter of mill1 went back from 5 to 0: the machine's control was restarted", ""),
+    (alloc(DISPATCHED, NOT_STARTED, job_open=False), look(),
+     "job cancelled before its program was started", ""),
+    (alloc(), look(alarm=""),
+     "machine mill1 raised an alarm", ""),
+    (alloc(), look(alarm="servo FAULT 2101"),
+     "machine mill1 raised an alarm: servo FAULT 2101", ""),
+    (alloc(), look(alarm="", **CUTTING),
+     "", "alarm while cutting on: FAULT"),
+    (alloc(DISPATCHED, NOT_STARTED), look(warnings=("lube low", "door open")),
+     "", "lube low; door open"),
+    (alloc(DISPATCHED, STARTING), look(),
+     "", ""),
+]
+# fmt: on
+
+
+@pytest.mark.parametrize("a, seen, reason, note", WORDING)
+def test_reason_and_note_wording(a, seen, reason, note):
+    got = step(a, seen)
+    assert (got.reason, got.note) == (reason, note)
 
 
 # -- random event sequences against the pure core ---------------------------------------------

@@ -67,8 +67,15 @@ def test_reasons_name_the_rule_and_figures():
 
 def test_unknown_rule_is_refused():
     assert rule_named("EDD") is edd
-    with pytest.raises(ValueError, match="unknown dispatch rule 'lifo'; known rules: fifo"):
+    with pytest.raises(ValueError) as refused:
         rule_named("lifo")
+    assert str(refused.value) == "unknown dispatch rule 'lifo'; known rules: fifo, spt, edd, cr"
+
+
+def test_edd_reason_names_the_due_date():
+    ranked = edd(JOBS, T0)
+    assert ranked[0].reason == "EDD: due 2026-11-21T08:20:00+00:00"
+    assert ranked[-1].reason == "EDD: due never"
 
 
 def job(id, qty=4, done=0, kind="mill", group=None, cancelled=False, created=0):

@@ -11,12 +11,13 @@ from __future__ import annotations
 
 import contextlib
 import os
+import time
 
 import pytest
 import yaml
 
 from cnc.config import load_cell_config
-from server.cell import Cell, default_cell, run_cell
+from server.cell import Cell, default_cell, fault_spec, run_cell
 from server.cycle_audit import HostRequests
 from server.supervisor import MachineLink, MachineUnavailable
 from tests.server.test_supervisor import ScriptedPanel, SimFace, free_port
@@ -194,3 +195,179 @@ def test_the_cell_file_rebuilds_a_mill4_and_a_mill5_from_their_own_machines(tmp_
     cell = Cell(cfg, processes=True, state_dir=tmp_path)
     doc = yaml.safe_load(cell._config_file().read_text())
     assert {n: m["base"] for n, m in doc["machines"].items()} == {"r4": "mill4", "r5": "mill5"}
+
+
+# ------------------------------------------------------------------ faults
+@pytest.mark.parametrize(
+    ("request_", "spec"),
+    [
+        ({"type": "door_open", "target": "plc"}, "plc:door_open"),
+        ({"type": "door_open", "target": "PLC", "params": {}}, "plc:door_open"),
+        ({"type": "bus_off", "target": "bus:x"}, "bus:bus_off:X"),
+        ({"type": "drop", "target": "BUS:y", "params": {"count": 3}}, "bus:drop:Y:count=3"),
+        ({"type": "encoder_break", "target": "drive:z"}, "drive:Z:encoder_break"),
+        ({"type": "load_force", "target": "x", "params": {"newtons": 500, "ramp_s": 2}},
+         "drive:X:load_force:newtons=500,ramp_s=2"),
+    ],
+)  # fmt: skip
+def test_fault_spec_of_an_api_request(request_, spec):
+    assert fault_spec(request_) == spec
+
+
+@pytest.mark.parametrize(
+    ("request_", "why"),
+    [
+        ({"type": "door_open", "target": "plc", "params": {"s": 1}}, "plc faults take no params"),
+        ({"type": "blocked"}, "target must be plc, drive:<AXIS>, <AXIS> or bus:<AXIS>"),
+        ({"type": "blocked", "target": "drive:"}, "target must be plc, drive:<AXIS>"),
+    ],
+)
+def test_fault_spec_refuses_a_request_that_names_no_target(request_, why):
+    with pytest.raises(ValueError) as refused:
+        fault_spec(request_)
+    assert str(refused.value).startswith(why)
+
+
+def test_fault_types_list_drive_bus_and_plc_faults_with_their_aliases():
+    types = {t["type"]: t for t in Cell(default_cell(free_ports=True)).fault_types()}
+    assert types["encoder_break"]["target"] == "drive:<AXIS>"
+    assert types["encoder_break"]["detection"] and types["encoder_break"]["recovery"]
+    assert types["bus_off"]["target"] == "bus:<AXIS>"
+    assert {p["name"] for p in types["load_force"]["params"]} == {"newtons"}
+    assert types["encoder"] == {
+        "type": "encoder", "target": "drive:<AXIS>", "params": [], "description": "= encoder_break"
+    }  # fmt: skip
+    assert types["door_open"]["target"] == "plc" and types["door_open"]["params"] == []
+    assert types["estop"]["description"] == "= estop_button"
+
+
+@pytest.fixture
+def fault_cell(cell):
+    """The cell whose m1 simulation face takes these fault and clear commands."""
+    face = SimFace(
+        None,
+        {
+            "FAULT drive:X:encoder_break": "OK",
+            "FAULT drive:Y:encoder_break@2.5s": "OK",
+            "CLEAR drive:X:encoder_break@0": "OK",
+            "CLEAR drive:Y:encoder_break@0": "OK",
+            "FAULT plc:door_open": "ERR 2010 PLC faults are off on this machine",
+        },
+    )
+    cell.links["m1"].ports["simulation"] = face.port
+    cell.face = face
+    yield cell
+    cell.stop()
+    face.close()
+
+
+def test_inject_and_clear_go_to_the_simulation_face_once(fault_cell):
+    cell = fault_cell
+    fault = cell.inject("m1", {"type": "encoder_break", "target": "X"})
+    later = cell.inject("m1", {"type": "encoder_break", "target": "drive:Y", "at": 2.5})
+    assert (fault.id, later.id) == (1, 2)
+    assert [f.spec for f in cell.machine_faults("m1")] == [
+        "drive:X:encoder_break",
+        "drive:Y:encoder_break@2.5s",
+    ]
+    assert fault.as_dict()["state"] == "active" and fault.as_dict()["target"] == "X"
+    assert cell.clear("m1", 2) is later and later.state == "cleared" and later.cleared_at
+    cell.clear("m1", 2)  # cleared already: nothing is sent again
+    assert cell.face.seen == [
+        "FAULT drive:X:encoder_break",
+        "FAULT drive:Y:encoder_break@2.5s",
+        "CLEAR drive:Y:encoder_break@0",
+    ]
+    assert fault.state == "active"
+
+
+def test_a_fault_the_machine_refuses_is_not_recorded(fault_cell):
+    with pytest.raises(MachineUnavailable, match=r"^m1: 2010 PLC faults are off on this machine$"):
+        fault_cell.inject("m1", {"type": "door_open", "target": "plc"})
+    assert fault_cell.machine_faults("m1") == []
+
+
+def test_a_bad_fault_is_refused_before_the_machine_hears_of_it(fault_cell):
+    from dnc.errors import NotFound
+
+    with pytest.raises(ValueError):
+        fault_cell.inject("m1", {"type": "no_such_fault", "target": "X"})
+    with pytest.raises(ValueError):
+        fault_cell.inject("m1", {"type": "encoder_break", "target": "Q"})  # m1 has no Q axis
+    with pytest.raises(NotFound, match="unknown machine 'm9'"):
+        fault_cell.inject("m9", {"type": "encoder_break", "target": "X"})
+    with pytest.raises(NotFound, match="unknown machine 'm9'"):
+        fault_cell.machine_faults("m9")
+    assert fault_cell.face.seen == []
+
+
+def test_clearing_a_fault_that_is_not_there_or_on_another_machine(fault_cell):
+    from dnc.errors import NotFound
+
+    fault_cell.inject("m1", {"type": "encoder_break", "target": "X"})
+    with pytest.raises(NotFound, match=r"^no fault 7 on machine 'm1'$"):
+        fault_cell.clear("m1", 7)
+    with pytest.raises(NotFound, match=r"^no fault 1 on machine 'm2'$"):
+        fault_cell.clear("m2", 1)
+
+
+def test_a_fault_with_a_duration_clears_itself(fault_cell):
+    fault = fault_cell.inject("m1", {"type": "encoder_break", "target": "X", "duration": 0.05})
+    # the cell's own timer (wall clock): generous deadline for a loaded box
+    deadline = time.monotonic() + 60.0
+    while fault.state != "cleared" and time.monotonic() < deadline:
+        time.sleep(0.01)
+    assert fault.state == "cleared"
+    assert fault_cell.face.seen == ["FAULT drive:X:encoder_break", "CLEAR drive:X:encoder_break@0"]
+
+
+def test_stopping_the_cell_cancels_pending_fault_timers(fault_cell):
+    fault = fault_cell.inject("m1", {"type": "encoder_break", "target": "X", "duration": 3600})
+    fault_cell.stop()
+    assert all(not t.is_alive() or t.finished.is_set() for t in fault_cell._timers)
+    assert fault.state == "active" and fault_cell.started is False
+
+
+class _Monitor:
+    """The host's status view of m1 as SHDR brings it (mode as MTConnect names it)."""
+
+    def __init__(self, mode: str) -> None:
+        self.mode = mode
+
+    def status(self, name: str) -> dict:
+        return {"mode": self.mode}
+
+
+def test_home_goes_ref_home_all_auto_and_answers_once_the_host_sees_auto(cell):
+    cell.monitor = _Monitor("AUTOMATIC")
+    assert cell.command("m1", "home") == (
+        "homed on the Modbus remote panel: mode REF, home all in the homing sequence,"
+        " every axis referenced, AUTO"
+    )
+    assert cell.panel.requests == [("mode", 4), ("home_all",), ("mode", 1)]
+
+
+def test_home_refused_while_a_program_is_active_or_ending_short(cell):
+    cell.monitor = _Monitor("AUTOMATIC")
+    cell.panel.in_cycle = True
+    with pytest.raises(MachineUnavailable, match=r"^m1: home refused: a program is active$"):
+        cell.command("m1", "home")
+    cell.panel.in_cycle, cell.panel.homing = False, "partial"
+    with pytest.raises(MachineUnavailable, match=r"^m1: homing ended with only X referenced"):
+        cell.command("m1", "home")
+    assert ("mode", 1) not in cell.panel.requests  # not put back in AUTO unreferenced
+
+
+def test_a_machine_process_secret_is_kept_owner_only_for_the_next_host(tmp_path):
+    cell = Cell(default_cell(free_ports=True), processes=True, state_dir=tmp_path)
+    mcfg = cell.config.machines["mill1"]
+    made = cell._secret("mill1", mcfg, persist=True)
+    kept = tmp_path / "mill1.machine.secret"
+    assert len(made) >= 16 and kept.read_text() == made + "\n"
+    assert kept.stat().st_mode & 0o777 == 0o600
+    assert cell._secret("mill1", mcfg, persist=True) == made  # the adopting host's
+    kept.write_text("short\n")  # not a secret this host made: a new one replaces it
+    again = cell._secret("mill1", mcfg, persist=True)
+    assert again not in (made, "short") and kept.read_text() == again + "\n"
+    fresh = cell._secret("mill1", mcfg, persist=False)
+    assert fresh not in (made, again) and kept.read_text() == again + "\n"
