@@ -41,6 +41,17 @@ class Case:
 CASES = [
     Case("drive:X:encoder_break", al.DRIVE_FAULT, 0x7305, 0.01),
     Case("drive:X:encoder_jump", al.DRIVE_FAULT, 0x7305, 0.01),
+    # noise above half the plausibility step (the default 32 768 counts): 0x7305; medium
+    # noise saturates the velocity loop and the axis lags behind the NC (following error).
+    # The noisy positions never stand still: the source goes first (cleared at detection)
+    Case("drive:X:encoder_noise", al.DRIVE_FAULT, 0x7305, 0.01, clear_at_detection=True),
+    Case(
+        "drive:Y:encoder_noise:counts=2000",
+        al.FOLLOWING_ERROR,
+        None,
+        1.0,
+        clear_at_detection=True,
+    ),
     Case("drive:X:inverter_fault", al.DRIVE_FAULT, 0x2310, 0.01),
     Case("drive:X:supply_loss", al.DRIVE_FAULT, 0x3130, 0.03),
     Case("drive:X:mains_voltage:volts=480", al.DRIVE_FAULT, 0x3210, 0.01),
