@@ -14,21 +14,17 @@ import re
 from collections.abc import Callable
 
 from drives.cia402.faults import spec
-from drives.fault_registry import FAULT_KINDS, FaultKind, FaultParam
+from drives.fault_registry import FAULT_KINDS, FaultKind, FaultParam, number
 
 DOCS = ("docs/drives.md", "docs/cia402.md", "docs/recovery.md")
-
-
-def _number(v: float) -> str:
-    return f"{v:g}" if abs(v) < 1e6 or not float(v).is_integer() else f"{int(v)}"
 
 
 def _param(p: FaultParam) -> str:
     facts = [p.unit] if p.unit else []
     if p.default is not None:
-        facts.append(f"default {_number(p.default)}")
+        facts.append(f"default {number(p.default)}")
     if not (math.isinf(p.low) and math.isinf(p.high)):
-        facts.append(f"{_number(p.low)}..{_number(p.high)}")
+        facts.append(f"{number(p.low)}..{number(p.high)}")
     return f"`{p.name}` ({', '.join(facts)})" if facts else f"`{p.name}`"
 
 

@@ -93,10 +93,16 @@ class FaultKind:
                 raise ValueError(f"fault {self.name}: {p.name} must be a number, got {value!r}")
             if math.isnan(value) or not (p.low <= value <= p.high):
                 raise ValueError(
-                    f"fault {self.name}: {p.name} = {value:g} outside {p.low:g}..{p.high:g} {p.unit}"
+                    f"fault {self.name}: {p.name} = {number(value)} outside "
+                    f"{number(p.low)}..{number(p.high)} {p.unit}"
                 )
             out[p.name] = float(value)
         return out
+
+
+def number(v: float) -> str:
+    """A parameter value as people write it: 1048576, not 1.04858e+06; 0.01, -inf."""
+    return str(int(v)) if math.isfinite(v) and float(v).is_integer() else f"{v:g}"
 
 
 # ---------------------------------------------------------------------------- drive handlers
