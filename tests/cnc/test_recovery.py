@@ -291,8 +291,22 @@ def test_tool_changer_faults_are_reached_by_a_program_that_changes_tools(fault, 
         m.close()
 
 
+def test_small_encoder_noise_is_not_detected_and_the_program_runs_to_its_end() -> None:
+    """15 um of noise (docs/recovery.md, encoder_noise): no monitor sees it."""
+    m, number = _power_on()
+    try:
+        m.command("select_program", number=number)
+        m.command("cycle_start")
+        m.step(250)
+        m.inject("drive:X:encoder_noise:counts=1500")
+        assert m.run_until(lambda m: m.status.execution != "ACTIVE", 30.0)
+        assert m.status.execution == "PROGRAM_COMPLETED" and not m.alarms, m.alarms
+    finally:
+        m.close()
+
+
 def test_the_table_covers_every_drive_and_bus_fault_kind():
-    """Every kind of `drives.faults` is in the recovery table, except backlash, which no
+    """Every kind of the fault registry is in the recovery table, except backlash, which no
     drive can detect in a semi-closed loop (its DETECTION text says so)."""
     from cnc.machine import parse_fault_spec
     from drives.faults import DETECTION, FAULT_KINDS
