@@ -49,8 +49,7 @@ def _table(head: tuple[str, ...], rows: list[tuple[str, ...]]) -> str:
 def render_kinds() -> str:
     """docs/drives.md: every kind, its target, parameters, codes and what the master sees."""
     rows = [
-        (f"`{k.name}`", k.target, _params(k), _codes(k), k.expect)
-        for k in FAULT_KINDS.values()
+        (f"`{k.name}`", k.target, _params(k), _codes(k), k.expect) for k in FAULT_KINDS.values()
     ]
     return _table(("kind", "target", "params", "EMCY (0x1001)", "the master sees"), rows)
 

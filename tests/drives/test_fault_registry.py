@@ -9,7 +9,7 @@ from pathlib import Path
 
 import pytest
 
-from cnc.machine.faults import parse_fault_spec, valid_specs
+from cnc.machine.faults import valid_specs
 from drives import fault_docgen
 from drives.cia402 import FAULTS, INJECT_KINDS, Drive402, State
 from drives.fault_registry import _KINDS, DRIVE_FAULTS, FAULT_KINDS, _checked
@@ -21,7 +21,7 @@ T = 0.002
 
 
 def test_every_list_of_kinds_is_the_registry():
-    assert INJECT_KINDS == tuple(k for k, row in FAULT_KINDS.items() if row.target == "drive")
+    assert tuple(k for k, row in FAULT_KINDS.items() if row.target == "drive") == INJECT_KINDS
     assert set(DETECTION) == set(RECOVERY) == set(FAULT_KINDS)
     assert [row["type"] for row in fault_types()] == list(FAULT_KINDS)
     assert [row["kind"] for row in describe()] == list(FAULT_KINDS)
@@ -61,9 +61,7 @@ def test_the_rest_list_is_json_numbers_only():
         {"name": "counts", "unit": "increments", "default": 32768.0, "min": 0.0, "max": 2.0**20}
     ]
     load = next(r for r in fault_types() if r["type"] == "load_force")
-    assert all(
-        v is None or math.isfinite(v) for p in load["params"] for v in (p["min"], p["max"])
-    )
+    assert all(v is None or math.isfinite(v) for p in load["params"] for v in (p["min"], p["max"]))
 
 
 @pytest.mark.parametrize("doc", fault_docgen.DOCS)
