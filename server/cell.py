@@ -465,23 +465,10 @@ class Cell:
     # ------------------------------------------------------------------ faults
     def fault_types(self) -> list[dict]:
         from cnc.machine.faults import DRIVE_ALIASES, PLC_ALIASES
-        from drives.faults import DETECTION, FAULT_KINDS, RECOVERY
+        from drives.faults import fault_types
         from plc.machine_io import FAULTS
 
-        out = []
-        for name, kind in FAULT_KINDS.items():
-            out.append(
-                {
-                    "type": name,
-                    "target": "bus:<AXIS>" if kind.target == "bus" else "drive:<AXIS>",
-                    "params": [
-                        {"name": p.name, "unit": p.unit, "default": p.default} for p in kind.params
-                    ],
-                    "description": getattr(kind, "description", "") or "",
-                    "detection": DETECTION.get(name, ""),
-                    "recovery": RECOVERY.get(name, ""),
-                }
-            )
+        out = fault_types()
         for alias, (kind, _) in DRIVE_ALIASES.items():
             out.append(
                 {"type": alias, "target": "drive:<AXIS>", "params": [], "description": f"= {kind}"}

@@ -11,9 +11,9 @@ Grammar (one spec, no spaces)::
 `drive:Z:mains_voltage:volts=250@1s`, `bus:bus_off:X@3s`, `bus:drop:Y:count=0@2s`,
 `plc:door_open@2s`, `plc:estop@4s`, `plc:air_pressure_loss@1s`.
 
-Drive and bus kinds are those of `drives.faults.FAULT_KINDS` plus the aliases below; plc
-kinds are those of `plc.machine_io.FAULTS` plus `estop` (= `estop_button`). Parsing is pure;
-`FaultSchedule` hands out the specs that are due at a machine time.
+Drive and bus kinds are the rows of `drives.fault_registry.FAULT_KINDS` plus the aliases
+below; plc kinds are those of `plc.machine_io.FAULTS` plus `estop` (= `estop_button`).
+Parsing is pure; `FaultSchedule` hands out the specs that are due at a machine time.
 """
 
 from __future__ import annotations
@@ -56,7 +56,8 @@ class FaultSpec:
 
 
 def _drive_kinds() -> dict:
-    from drives.faults import FAULT_KINDS
+    # imported on first use: `cnc` does not load the drive package until a fault names one
+    from drives.fault_registry import FAULT_KINDS
 
     return FAULT_KINDS
 

@@ -54,6 +54,7 @@ from drives.cia402.statemachine import (
     Stop,
 )
 from drives.cia402.statemachine import step as sm_step
+from drives.fault_registry import DRIVE_FAULTS, FaultKind
 from drives.plant import OFF, POSITION, VELOCITY, Plant, PlantParams
 from drives.plant.plant import FOLLOWING_ERROR
 
@@ -410,66 +411,25 @@ class Drive402:
 
     # ------------------------------------------------------------------ fault injection
     def inject(self, kind: str, **params: float) -> None:
-        """Inject a physical fault; kinds are listed in `drives.cia402.faults.INJECT_KINDS`."""
-        p = self.plant
-
-        def need(name: str) -> float:
-            if name not in params:
-                raise ValueError(f"inject({kind!r}) needs {name}=<number>")
-            return float(params[name])
-
-        if kind == "load_force":
-            p.load_force = need("newtons")
-        elif kind == "blocked":
-            p.blocked = True
-        elif kind == "encoder_break":
-            p.encoder_broken = True
-        elif kind == "encoder_jump":
-            p.encoder_offset += int(params.get("counts", 1 << 18))
-        elif kind == "inverter_fault":
-            p.inverter_fault = True
-        elif kind == "supply_loss":
-            p.supply_on = False
-        elif kind == "mains_voltage":
-            p.mains_voltage = need("volts")
-        elif kind == "chopper_failure":
-            p.chopper_failed = True
-        elif kind == "ambient_temperature":
-            p.ambient = need("celsius")
-        elif kind == "winding_temperature":
-            p.winding_temp = need("celsius")
-        elif kind == "backlash":
-            p.backlash = need("metres")
-        else:
-            raise ValueError(f"unknown fault kind {kind!r}; known: {', '.join(F.INJECT_KINDS)}")
+        """Inject a physical fault: a row of `drives.fault_registry` whose target is "drive"
+        (ValueError names an unknown kind or a bad parameter)."""
+        row = self._fault_kind(kind)
+        handler = row.on_plant
+        assert handler is not None  # every drive row has one (checked by the registry)
+        handler(self.plant, row.values(params))
 
     def clear_injection(self, kind: str) -> None:
         """Remove an injected fault (the drive still needs a fault reset if it tripped)."""
-        p, d = self.plant, self.params
-        if kind == "load_force":
-            p.load_force = 0.0
-        elif kind == "blocked":
-            p.blocked = False
-        elif kind == "encoder_break":
-            p.encoder_broken = False
-        elif kind == "encoder_jump":
-            pass  # the count offset stays: an incremental encoder does not recover it
-        elif kind == "inverter_fault":
-            p.inverter_fault = False
-        elif kind == "supply_loss":
-            p.supply_on = True
-        elif kind == "mains_voltage":
-            p.mains_voltage = d.dc_link.mains_voltage
-        elif kind == "chopper_failure":
-            p.chopper_failed = False
-        elif kind == "ambient_temperature":
-            p.ambient = d.thermal.ambient
-        elif kind == "winding_temperature":
-            pass  # it cools down through the thermal model
-        elif kind == "backlash":
-            p.backlash = d.screw.backlash
-        else:
-            raise ValueError(f"unknown fault kind {kind!r}; known: {', '.join(F.INJECT_KINDS)}")
+        handler = self._fault_kind(kind).off_plant
+        assert handler is not None
+        handler(self.plant)
+
+    @staticmethod
+    def _fault_kind(kind: str) -> FaultKind:
+        row = DRIVE_FAULTS.get(kind)
+        if row is None:
+            raise ValueError(f"unknown fault kind {kind!r}; known: {', '.join(DRIVE_FAULTS)}")
+        return row
 
     # ------------------------------------------------------------------ observation
     @property
@@ -605,7 +565,7 @@ class Drive402:
         if code == 0x2310:
             return p.inverter_fault
         if code == 0x7305:
-            return p.encoder_broken
+            return p.encoder_broken or p.encoder_noise > 0.0
         if code == 0x3130:
             return not p.supply_on
         if code == 0x3220:

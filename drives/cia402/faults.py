@@ -7,6 +7,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+from drives.fault_registry import DRIVE_FAULTS
+
 # 0x1001 error register bits (CiA 301).
 ER_GENERIC = 0x01
 ER_CURRENT = 0x02
@@ -156,17 +158,5 @@ def spec(code: int) -> FaultSpec:
     return FaultSpec(code, f"error 0x{code:04X}", reg, False, "")
 
 
-# Kinds accepted by Drive402.inject(); see docs/cia402.md.
-INJECT_KINDS = (
-    "load_force",  # newtons=float: external force on the table (cutting force, collision)
-    "blocked",  # mechanical jam: the table cannot move (→ 0x7121 or 0x8611)
-    "encoder_break",  # encoder signal lost (→ 0x7305)
-    "encoder_jump",  # counts=int: the count jumps once (→ 0x7305 by plausibility)
-    "inverter_fault",  # a shorted power switch: full link voltage (→ 0x2310)
-    "supply_loss",  # mains removed (→ 0x3130, link decays → 0x3220)
-    "mains_voltage",  # volts=float: mains level (sag → 0x3220, swell → 0x3210)
-    "chopper_failure",  # brake chopper open: braking energy charges the link (→ 0x3210)
-    "ambient_temperature",  # celsius=float: cabinet temperature (→ 0x4310 sooner)
-    "winding_temperature",  # celsius=float: set the winding temperature now (→ 0x4310)
-    "backlash",  # metres=float: the nut preload is lost, a dead band appears
-)
+#: Kinds accepted by Drive402.inject(): the "drive" rows of drives.fault_registry.
+INJECT_KINDS = tuple(DRIVE_FAULTS)

@@ -40,6 +40,7 @@ ENCODER: Final = 0x7305
 FOLLOWING_ERROR: Final = 0x8611  # the drive's monitor, run inside `follow_ramp`
 
 _TWO_PI: Final = 2.0 * math.pi
+_NOISE_SEED: Final = 2463534242  # xorshift32: the same noise on every run (lockstep tests)
 
 
 class Plant:
@@ -78,6 +79,8 @@ class Plant:
         self.mains_voltage = p.dc_link.mains_voltage
         self.inverter_fault = False
         self.encoder_broken = False
+        self.encoder_noise = 0.0  # counts: each reading is off by up to ± this (0: clean)
+        self._noise_state = _NOISE_SEED
         self.ambient = p.thermal.ambient
         self.backlash = p.screw.backlash
         self.theta = 0.0
@@ -110,6 +113,24 @@ class Plant:
         self.blocked_for = 0.0
         self.current_limited = False
         self.velocity_limited = False
+
+    def set_encoder_noise(self, amplitude: float) -> None:
+        """Noise on the encoder signal: each reading off by up to ±amplitude counts (0: off).
+
+        The noise is on the reading only (interpolated sin/cos signals disturbed by a motor
+        cable): the count does not drift, so clearing it leaves the position intact.
+        """
+        self.encoder_noise = amplitude
+        self._noise_state = _NOISE_SEED
+
+    def _noise_counts(self) -> int:
+        """One reading's noise: uniform in ±encoder_noise counts (xorshift32)."""
+        x = self._noise_state
+        x ^= (x << 13) & 0xFFFFFFFF
+        x ^= x >> 17
+        x ^= (x << 5) & 0xFFFFFFFF
+        self._noise_state = x
+        return round((x * (2.0 / 4294967295.0) - 1.0) * self.encoder_noise)
 
     # -- geometry -----------------------------------------------------------------------
     def nut_x(self, theta: float | None = None) -> float:
@@ -339,6 +360,8 @@ class Plant:
 
         # --- encoder read at the end of the sub-step; speed from the count difference
         counts = math.floor(theta / rpc) + self.encoder_offset
+        if self.encoder_noise > 0.0:
+            counts += self._noise_counts()
         dc = counts - self._prev_counts
         jump = max_counts_per_s * h + 2
         if dc > jump or -dc > jump:
@@ -428,9 +451,9 @@ class Plant:
         inputs (`switch_inputs` bits). It stops after the first sub-step that ends with a
         fault or changed inputs. Returns (sub-steps done, fault or 0, inputs, demand
         position, demand velocity, ramp time, following-error timer); 0 sub-steps when an
-        injected inverter or encoder fault needs the general `step`.
+        injected inverter or encoder fault (or encoder noise) needs the general `step`.
         """
-        if self.encoder_broken or self.inverter_fault or n <= 0:
+        if self.encoder_broken or self.inverter_fault or self.encoder_noise > 0.0 or n <= 0:
             return 0, 0, inputs, pos, 0.0, seg_t, fe_timer
         (
             res,

@@ -35,6 +35,10 @@ def test_fault_in_one_mill_reroutes_its_part_and_the_alarm_is_visible_everywhere
     _, api = make_cell(faults=True)
     types = api("viewer").get("/api/fault-types").json()
     assert {"overcurrent", "encoder_break", "air_pressure_loss"} <= {t["type"] for t in types}
+    # every drive fault kind comes from drives.fault_registry, the newest row included
+    noise = next(t for t in types if t["type"] == "encoder_noise")
+    assert noise["target"] == "drive:<AXIS>" and noise["emcy"] == ["0x7305"]
+    assert noise["recovery_class"] == "encoder" and noise["params"][0]["max"] == 2**20
     rev = upload_released(api, STOPPING_PROGRAM, number=1002)
     job = api("operator").post("/api/jobs", json={"revision_id": rev, "quantity": 2}).json()["id"]
     poll(lambda: status(api, "mill1")["execution"] == "PROGRAM_STOPPED", 60, "mill1 at M0")

@@ -94,6 +94,16 @@ def test_drive_encoder_fault_on_canopen_drives(tmp_path):
     assert (alarm["source"], alarm["axis"]) == ("DRIVE", "X")
 
 
+def test_encoder_noise_from_the_fault_registry_is_a_drive_encoder_fault(tmp_path):
+    prog = tmp_path / "square.nc"
+    prog.write_text(SQUARE)
+    code, out, _ = run(str(prog), "--fault", "drive:X:encoder_noise:counts=40000@3s")
+    assert code == 1
+    alarm = json.loads(out)["alarms"][0]
+    assert (alarm["source"], alarm["axis"]) == ("DRIVE", "X")
+    assert "0x7305" in alarm["text"]
+
+
 def test_unknown_fault_spec_is_a_usage_error_listing_the_valid_specs():
     code, out, err = run(str(PROGRAMS / "pocket_mill.nc"), "--fault", "drive:X:meltdown@1s")
     assert code == 2 and out == ""

@@ -27,14 +27,22 @@ class FaultParam(BaseModel):
     name: str
     unit: str | None = None
     default: float | None = None
+    min: float | None = None  # None: unbounded (or a PLC fault / alias without a range)
+    max: float | None = None
 
 
 class FaultType(BaseModel):
+    """One injectable kind; drive, bus and node kinds as drives.fault_registry states them."""
+
     type: str
     target: str
     params: list[FaultParam]
     description: str = ""
+    expect: str = ""  # what the master sees
+    emcy: list[str] = []  # the drive's EMCY / 0x603F codes, "0x7305"
+    error_register: int | None = None  # the 0x1001 bits those codes set
     detection: str = ""  # what reports it and within which bound, or why nothing does
+    recovery_class: str = ""  # the row of docs/recovery.md's procedure table
     recovery: str = ""  # what brings the machine back (docs/recovery.md)
 
 
