@@ -241,6 +241,18 @@ class PortsConfig(_Section):
     simulation: Port | None = Field(
         None, description="Simulation/fault-injection face; null = off (the default)."
     )
+    opcua: Port | None = Field(
+        None,
+        description="OPC UA server (OPC 40501 MachineTool, docs/opcua.md); null = off (the"
+        " default for a machine file; the built-in cell serves mill1 on 4841, lathe1 4842,"
+        " mill2 4843).",
+    )
+    opcua_security: Literal["none", "Basic256Sha256"] = Field(
+        "none",
+        description="OPC UA endpoint security: none (anonymous, read-only) or Basic256Sha256"
+        " sign-and-encrypt with a generated self-signed certificate, trusted client"
+        " certificates only, user name + password mapped to the cell's roles.",
+    )
     secret: Secret | None = Field(
         None,
         description="Shared secret of the DNC port and the simulation face: a client's first"
@@ -994,7 +1006,7 @@ def _check_cell(cell: _CellDocument) -> list[tuple[tuple, str]]:
         digests.setdefault(digest, i)
     for name, m in cell.machines.items():
         out.extend(_check_machine(("machines", name), m))
-        for face in ("dnc", "modbus", "shdr", "simulation"):
+        for face in ("dnc", "modbus", "shdr", "simulation", "opcua"):
             port = getattr(m.ports, face)
             if not port:
                 continue  # 0 = any free port, None = face off

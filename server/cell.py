@@ -41,9 +41,9 @@ CLOCKS = ("realtime", "fast")
 
 
 DEFAULT_PORTS = {
-    "mill1": {"dnc": 7001, "modbus": 5021, "shdr": 7878},
-    "mill2": {"dnc": 7003, "modbus": 5023, "shdr": 7880},
-    "lathe1": {"dnc": 7002, "modbus": 5022, "shdr": 7879},
+    "mill1": {"dnc": 7001, "modbus": 5021, "shdr": 7878, "opcua": 4841},
+    "mill2": {"dnc": 7003, "modbus": 5023, "shdr": 7880, "opcua": 4843},
+    "lathe1": {"dnc": 7002, "modbus": 5022, "shdr": 7879, "opcua": 4842},
 }
 
 
@@ -237,7 +237,7 @@ class Cell:
             # machines run elsewhere (their own services): connect to the configured faces
             for name, mcfg in self.config.machines.items():
                 p = mcfg.ports
-                ports = {"dnc": p.dnc, "modbus": p.modbus, "shdr": p.shdr}
+                ports = {"dnc": p.dnc, "modbus": p.modbus, "shdr": p.shdr, "opcua": p.opcua}
                 ports["simulation"] = p.simulation if self.faults_enabled else None
                 self.links[name] = MachineLink(
                     name,
@@ -365,10 +365,19 @@ class Cell:
             jobs=self.jobs,
             sessions=self.sessions,
             machines_provider=self.monitor.all,
+            opcua_addresses=self.opcua_addresses,
             faults_enabled=self.faults_enabled,
             mtconnect_agent=self.agent,
             cell_control=self,
         )
+
+    def opcua_addresses(self) -> dict[str, str]:
+        """Each machine's OPC UA endpoint (machines whose OPC UA face is off are absent)."""
+        return {
+            name: f"opc.tcp://{link.host}:{link.ports['opcua']}"
+            for name, link in self.links.items()
+            if link.ports.get("opcua")
+        }
 
     # ------------------------------------------------------------------ commands
     def link(self, name: str) -> MachineLink:

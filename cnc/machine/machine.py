@@ -157,6 +157,7 @@ class Machine:
         self._path: deque = deque(maxlen=512)
         self._alarm_keys: set = set()
         self.shdr = None  # set by the faces
+        self.opcua = None  # set by the faces
         self.faces = None
 
     # ------------------------------------------------------------------ the lockstep loop
@@ -205,8 +206,12 @@ class Machine:
         if self.trace is not None:
             self.trace.row(self.t, self.last_targets, fb.actual, status.line)
         self._watch_alarms(status)
-        if self.cycle % self.shdr_every == 0 and self.shdr is not None:
-            self.shdr.publish(self.full_status(), self.timestamp())
+        if self.cycle % self.shdr_every == 0 and (self.shdr is not None or self.opcua is not None):
+            full, ts = self.full_status(), self.timestamp()
+            if self.shdr is not None:
+                self.shdr.publish(full, ts)
+            if self.opcua is not None:
+                self.opcua.publish(full, ts)  # a reference store: never waits on a client
         if self.machine_data_file is not None and self.cycle % self.plc_every == 0:
             md = self.controller.machine_data
             if md.revision != self._md_saved and not self.controller.in_cycle:

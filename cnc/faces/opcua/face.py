@@ -301,7 +301,7 @@ class OpcUaFace:
         for i, (lamp, lamp_color) in enumerate(STACK_LAMPS):
             el = b.child_object(sl, f"{p}.{lamp}", (m.FMSCELL, lamp), m.STACK_ELEMENT_LIGHT.node,
                                 ref=49)  # HasOrderedComponent
-            b.value(el, f"{p}.{lamp}.NumberInList", (m.UA, "NumberInList"), m.BYTE, i, prop=True)
+            b.value(el, f"{p}.{lamp}.NumberInList", (m.UA, "NumberInList"), m.UINTEGER, i, prop=True)
             b.value(el, f"{p}.{lamp}.SignalOn", (m.IA, "SignalOn"), m.BOOLEAN, False, prop=True)
             b.value(el, f"{p}.{lamp}.SignalColor", (m.IA, "SignalColor"), m.SIGNAL_COLOR.node,
                     color(lamp_color))

@@ -42,6 +42,7 @@ ORDERED_LIST = (UA, 23518)
 ANALOG_UNIT_RANGE = (UA, 17570)
 BOOLEAN, BYTE, UINT16, UINT32, DOUBLE, STRING = (UA, 1), (UA, 3), (UA, 5), (UA, 7), (UA, 11), (UA, 12)
 LOCALIZED_TEXT = (UA, 21)
+UINTEGER = (UA, 28)  # abstract: any unsigned integer
 
 HAS_COMPONENT, HAS_PROPERTY, HAS_ADD_IN = 47, 46, 17604
 MANDATORY, OPTIONAL = 78, 80
@@ -202,7 +203,7 @@ STACK_ELEMENT = ObjectTypeDecl(
     "StackElementType",
     BASE_OBJECT,
     (
-        _v(IA, "NumberInList", 6015, BYTE, True, prop=True, name_ns=UA),
+        _v(IA, "NumberInList", 6015, UINTEGER, True, prop=True, name_ns=UA),
         _v(IA, "SignalOn", 6013, BOOLEAN, False, prop=True),
     ),
     abstract=True,

@@ -25,6 +25,7 @@ PERCENT = ua.EUInformation(
 VARIANT_OF = {
     m.BOOLEAN: ua.VariantType.Boolean,
     m.BYTE: ua.VariantType.Byte,
+    m.UINTEGER: ua.VariantType.UInt16,
     m.UINT16: ua.VariantType.UInt16,
     m.UINT32: ua.VariantType.UInt32,
     m.DOUBLE: ua.VariantType.Double,
