@@ -62,6 +62,7 @@ class AlarmBook:
                     self.space.machine_ns,
                 )
                 cond = Condition(key, alarm, node)
+                self._add_condition_node(cond)
                 self.conditions[key] = cond
                 await self._emit(cond, when)
         for key, cond in list(self.conditions.items()):
@@ -69,7 +70,32 @@ class AlarmBook:
                 cond.active = False  # cleared: the machine was reset
                 await self._emit(cond, when)
                 if cond.acked:
-                    del self.conditions[key]
+                    self._forget(key)
+
+    def _add_condition_node(self, cond: Condition) -> None:
+        """The condition's node (its ConditionId; Acknowledge is called on it), referenced
+        from Messages with HasCondition, as Part 9 shows condition instances."""
+        if cond.node in self.server.iserver.aspace:
+            return  # raised again while still retained
+        item = ua.AddNodesItem()
+        item.RequestedNewNodeId = cond.node
+        item.BrowseName = ua.QualifiedName(cond.node.Identifier, self.space.machine_ns)
+        item.NodeClass = ua.NodeClass.Object
+        item.ParentNodeId = ua.NodeId(f"{self.machine}.Notification.Messages", self.space.machine_ns)
+        item.ReferenceTypeId = ua.NodeId(ua.ObjectIds.HasCondition)
+        item.TypeDefinition = ua.NodeId(ua.ObjectIds.AlarmConditionType)
+        attrs = ua.ObjectAttributes()
+        attrs.DisplayName = ua.LocalizedText(f"{cond.alarm.source} {cond.alarm.number}")
+        item.NodeAttributes = attrs
+        self.server.iserver.node_mgt_service.add_nodes([item])[0].StatusCode.check()
+
+    def _forget(self, key: tuple) -> None:
+        cond = self.conditions.pop(key)
+        if any(c.node == cond.node for c in self.conditions.values()):
+            return
+        self.server.iserver.node_mgt_service.delete_nodes(
+            [ua.DeleteNodesItem(NodeId=cond.node, DeleteTargetReferences=True)]
+        )
 
     async def _emit(self, cond: Condition, when: _dt.datetime) -> None:
         ids = []
@@ -107,7 +133,7 @@ class AlarmBook:
                 cond.acked = True
                 await self._emit(cond, _dt.datetime.now(_dt.UTC))
                 if not cond.active:
-                    del self.conditions[key]
+                    self._forget(key)
                 return []
         return ua.StatusCode(ua.StatusCodes.BadEventIdUnknown)
 
