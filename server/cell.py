@@ -47,17 +47,23 @@ DEFAULT_PORTS = {
 }
 
 
-def default_cell(*, free_ports: bool = False):
+def default_cell(*, free_ports: bool = False, opcua: bool | None = None):
     """The built-in cell of `fmscell run`: two identical 3-axis mills and one lathe, built
     from the shipped machines (mill3 twice, lathe2), faces on fixed loopback ports (so a
     restarted host finds machines that kept running) or, with `free_ports`, on any free
-    port (tests)."""
+    port (tests). `opcua`: the OPC UA faces on or off; None = on with the fixed ports, off
+    with free ports (an OPC UA server takes seconds to start on a loaded box, and most
+    tests of the cell do not read it)."""
     from cnc.config import load_cell_config
 
+    if opcua is None:
+        opcua = not free_ports
     bases = {"mill1": "mill3", "mill2": "mill3", "lathe1": "lathe2"}
     machines = {}
     for name, base in bases.items():
-        ports = dict.fromkeys(DEFAULT_PORTS[name], 0) if free_ports else DEFAULT_PORTS[name]
+        ports = dict.fromkeys(DEFAULT_PORTS[name], 0) if free_ports else dict(DEFAULT_PORTS[name])
+        if not opcua:
+            ports["opcua"] = None
         machines[name] = {"base": base, "ports": {"host": "127.0.0.1", **ports}}
     return load_cell_config({"machines": machines})
 
