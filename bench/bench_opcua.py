@@ -118,8 +118,12 @@ def main() -> None:
         keys = sorted(face.space.variables)
         live = [k for k in keys if k.endswith("ActualPosition")]
         # the analog items' EURange / EngineeringUnits properties make up the 50
-        props = [f"{k}.{p}" for k in keys if k.endswith("Override")
-                 for p in ("EURange", "EngineeringUnits")]
+        props = [
+            f"{k}.{p}"
+            for k in keys
+            if k.endswith("Override")
+            for p in ("EURange", "EngineeringUnits")
+        ]
         rest = [k for k in keys if k not in live] + props
         chosen = (live + rest)[:ITEMS]
         targets.append((face.address, [(f"urn:fmscell:machine:{face.machine}", k) for k in chosen]))
@@ -169,25 +173,29 @@ def main() -> None:
     notifications = sum(r[1] for r in results)
     p95 = lat[int(0.95 * (len(lat) - 1))] * 1000 if lat else None
     cpu_pct = 100.0 * cpu / wall / args.machines
-    print(json.dumps({
-        "bench": "opcua",
-        "machines": args.machines,
-        "clients": args.clients,
-        "items_per_machine": items_per_machine,
-        "publishing_interval_ms": PUBLISH_MS,
-        "seconds": round(wall, 2),
-        "startup_s": round(startup_s, 2),
-        "notifications": notifications,
-        "latency_samples": len(lat),
-        "latency_p50_ms": round(statistics.median(lat) * 1000, 1) if lat else None,
-        "latency_p95_ms": round(p95, 1) if p95 is not None else None,
-        "latency_max_ms": round(lat[-1] * 1000, 1) if lat else None,
-        "target_p95_ms": TARGET_P95_MS,
-        "server_cpu_per_machine_pct": round(cpu_pct, 2),
-        "target_cpu_per_machine_pct": TARGET_CPU_PCT,
-        "server_samples_per_machine": round(statistics.mean(f.samples for f in faces), 1),
-        "peer": None,
-    }))
+    print(
+        json.dumps(
+            {
+                "bench": "opcua",
+                "machines": args.machines,
+                "clients": args.clients,
+                "items_per_machine": items_per_machine,
+                "publishing_interval_ms": PUBLISH_MS,
+                "seconds": round(wall, 2),
+                "startup_s": round(startup_s, 2),
+                "notifications": notifications,
+                "latency_samples": len(lat),
+                "latency_p50_ms": round(statistics.median(lat) * 1000, 1) if lat else None,
+                "latency_p95_ms": round(p95, 1) if p95 is not None else None,
+                "latency_max_ms": round(lat[-1] * 1000, 1) if lat else None,
+                "target_p95_ms": TARGET_P95_MS,
+                "server_cpu_per_machine_pct": round(cpu_pct, 2),
+                "target_cpu_per_machine_pct": TARGET_CPU_PCT,
+                "server_samples_per_machine": round(statistics.mean(f.samples for f in faces), 1),
+                "peer": None,
+            }
+        )
+    )
 
 
 if __name__ == "__main__":

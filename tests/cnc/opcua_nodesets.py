@@ -20,9 +20,16 @@ FILES = (
     "Opc.Ua.IA.NodeSet2.xml",
     "Opc.Ua.MachineTool.NodeSet2.xml",
 )
-REF_NAMES = {"HasComponent": 47, "HasProperty": 46, "HasAddIn": 17604, "HasSubtype": 45,
-             "HasTypeDefinition": 40, "HasModellingRule": 37, "HasOrderedComponent": 49,
-             "HasInterface": 17603}
+REF_NAMES = {
+    "HasComponent": 47,
+    "HasProperty": 46,
+    "HasAddIn": 17604,
+    "HasSubtype": 45,
+    "HasTypeDefinition": 40,
+    "HasModellingRule": 37,
+    "HasOrderedComponent": 49,
+    "HasInterface": 17603,
+}
 
 
 @dataclass(frozen=True)
@@ -71,12 +78,13 @@ def nodes() -> dict[tuple[str, int], Node]:
                 for r in el.find("u:References", NS)
             )
             definition = el.find("u:Definition", NS)
-            fields = tuple(
-                (f.get("Name"), int(f.get("Value", "0"))) for f in (definition or [])
-            )
+            fields = tuple((f.get("Name"), int(f.get("Value", "0"))) for f in (definition or []))
             dt = el.get("DataType")
             out[ref(el.get("NodeId"))] = Node(
-                ref(el.get("NodeId")), el.tag.split("}")[1], name, refs,
+                ref(el.get("NodeId")),
+                el.tag.split("}")[1],
+                name,
+                refs,
                 ref(dt) if dt and dt.startswith(("ns=", "i=")) or dt in aliases else None,
                 fields,
             )

@@ -18,7 +18,7 @@ from cnc.status import MachineStatus
 
 ROOT = Path(__file__).resolve().parents[2]
 README = (ROOT / "README.md").read_text()
-SECTION = README[README.index("## Browse a machine with an OPC UA client"):]
+SECTION = README[README.index("## Browse a machine with an OPC UA client") :]
 SECTION = SECTION[: SECTION.index("\n## ", 3)]
 BIN = Path(sys.executable).parent
 
@@ -51,8 +51,13 @@ def test_the_readme_browses_and_reads_a_machine(face):
     assert {"uals", "uaread", "uasubscribe"} <= set(cmds)
     listing = run(cmds["uals"], face, 120)
     assert listing.returncode == 0, listing.stderr
-    for name in ("2:Identification", "5:Monitoring", "5:Production", "5:Notification",
-                 "5:Equipment"):
+    for name in (
+        "2:Identification",
+        "5:Monitoring",
+        "5:Production",
+        "5:Notification",
+        "5:Equipment",
+    ):
         assert name in listing.stdout, listing.stdout
     # the state the README shows is the one published (ACTIVE = 0 Active)
     for _ in range(100):

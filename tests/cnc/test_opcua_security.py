@@ -37,20 +37,29 @@ def client_cert(folder: Path, name: str, *, expired: bool = False) -> tuple[Path
             .serial_number(x509.random_serial_number())
             .not_valid_before(now - dt.timedelta(days=30))
             .not_valid_after(now - dt.timedelta(days=1))
-            .add_extension(x509.SubjectAlternativeName(
-                [x509.UniformResourceIdentifier(CLIENT_URI)]), critical=False)
+            .add_extension(
+                x509.SubjectAlternativeName([x509.UniformResourceIdentifier(CLIENT_URI)]),
+                critical=False,
+            )
             .sign(key, hashes.SHA256())
         )
     else:
         cert = generate_self_signed_app_certificate(
-            key, name, {"commonName": name}, [x509.UniformResourceIdentifier(CLIENT_URI)],
+            key,
+            name,
+            {"commonName": name},
+            [x509.UniformResourceIdentifier(CLIENT_URI)],
             extended=[ExtendedKeyUsageOID.CLIENT_AUTH],
         )
     cert_path, key_path = folder / f"{name}.der", folder / f"{name}.pem"
     cert_path.write_bytes(cert.public_bytes(serialization.Encoding.DER))
-    key_path.write_bytes(key.private_bytes(serialization.Encoding.PEM,
-                                           serialization.PrivateFormat.TraditionalOpenSSL,
-                                           serialization.NoEncryption()))
+    key_path.write_bytes(
+        key.private_bytes(
+            serialization.Encoding.PEM,
+            serialization.PrivateFormat.TraditionalOpenSSL,
+            serialization.NoEncryption(),
+        )
+    )
     return cert_path, key_path
 
 
@@ -65,9 +74,9 @@ def secured(tmp_path_factory):
     (trusted / "stale.der").write_bytes(stale[0].read_bytes())
     stranger = client_cert(base, "stranger")
     face = OpcUaFace(
-        "mill1", ("X", "Y", "Z"),
-        security=Security(base / "server", trusted,
-                          authenticate=lambda u, p: USERS.get((u, p))),
+        "mill1",
+        ("X", "Y", "Z"),
+        security=Security(base / "server", trusted, authenticate=lambda u, p: USERS.get((u, p))),
     )
     loop = asyncio.new_event_loop()
     loop.run_until_complete(face.start())
@@ -79,8 +88,12 @@ def secured(tmp_path_factory):
 async def session(face, cert, user=None, password=None) -> Client:
     client = Client(face.address, timeout=15)
     client.application_uri = CLIENT_URI
-    await client.set_security(SecurityPolicyBasic256Sha256, str(cert[0]), str(cert[1]),
-                              mode=ua.MessageSecurityMode.SignAndEncrypt)
+    await client.set_security(
+        SecurityPolicyBasic256Sha256,
+        str(cert[0]),
+        str(cert[1]),
+        mode=ua.MessageSecurityMode.SignAndEncrypt,
+    )
     if user:
         client.set_user(user)
         client.set_password(password)
@@ -118,8 +131,9 @@ def test_a_viewer_reads_but_only_an_operator_acknowledges_an_alarm(secured):
             seen = Events()
             sub = await ops.create_subscription(100, seen)
             await sub.subscribe_events(ops.nodes.server, ua.ObjectIds.AlarmConditionType)
-            face.publish(MachineStatus(alarms=(Alarm(1012, "Following error X", axis="X"),)),
-                         time.time())
+            face.publish(
+                MachineStatus(alarms=(Alarm(1012, "Following error X", axis="X"),)), time.time()
+            )
             await until(lambda: seen.events, "the alarm event")
             event = seen.events[-1]
             ack = ua.NodeId(ua.ObjectIds.AcknowledgeableConditionType_Acknowledge)
@@ -127,12 +141,19 @@ def test_a_viewer_reads_but_only_an_operator_acknowledges_an_alarm(secured):
             with pytest.raises(ua.uaerrors.BadUserAccessDenied):
                 await viewer.get_node(event.NodeId).call_method(ack, *args)
             await ops.get_node(event.NodeId).call_method(ack, *args)
-            await until(lambda: getattr(seen.events[-1], "AckedState", None) is not None
-                        and seen.events[-1].AckedState.Text == "Acknowledged", "acknowledged")
+            await until(
+                lambda: (
+                    getattr(seen.events[-1], "AckedState", None) is not None
+                    and seen.events[-1].AckedState.Text == "Acknowledged"
+                ),
+                "acknowledged",
+            )
             with pytest.raises(ua.uaerrors.BadConditionBranchAlreadyAcked):
                 await ops.get_node(event.NodeId).call_method(
-                    ack, ua.Variant(seen.events[-1].EventId, ua.VariantType.ByteString),
-                    ua.LocalizedText("again"))
+                    ack,
+                    ua.Variant(seen.events[-1].EventId, ua.VariantType.ByteString),
+                    ua.LocalizedText("again"),
+                )
         finally:
             await ops.disconnect()
             await viewer.disconnect()
@@ -166,6 +187,7 @@ def test_no_unencrypted_endpoint_is_offered_when_security_is_on(secured):
         endpoints = await client.connect_and_get_server_endpoints()
         assert {e.SecurityMode for e in endpoints} == {ua.MessageSecurityMode.SignAndEncrypt}
         assert {e.SecurityPolicyUri for e in endpoints} == {
-            "http://opcfoundation.org/UA/SecurityPolicy#Basic256Sha256"}
+            "http://opcfoundation.org/UA/SecurityPolicy#Basic256Sha256"
+        }
 
     loop.run_until_complete(run())

@@ -134,7 +134,11 @@ def test_attach_links_the_configured_faces_and_the_simulation_only_with_faults()
         cell._start_machines(1.0)
         lk = cell.links["m1"]
         assert lk.ports == {
-            "dnc": 7101, "modbus": 5121, "shdr": 7978, "simulation": sim, "opcua": None
+            "dnc": 7101,
+            "modbus": 5121,
+            "shdr": 7978,
+            "simulation": sim,
+            "opcua": None,
         }
         assert cell.machines == []  # nothing started: the machines run elsewhere
 
@@ -200,7 +204,10 @@ def test_the_cell_lists_each_machines_opcua_endpoint():
 def test_the_default_cell_serves_opcua_on_its_fixed_ports_and_not_with_free_ones():
     fixed = default_cell()
     assert {n: m.ports.opcua for n, m in fixed.machines.items()} == {
-        "mill1": 4841, "lathe1": 4842, "mill2": 4843}
+        "mill1": 4841,
+        "lathe1": 4842,
+        "mill2": 4843,
+    }
     assert all(m.ports.opcua is None for m in default_cell(free_ports=True).machines.values())
     assert all(
         m.ports.opcua == 0 for m in default_cell(free_ports=True, opcua=True).machines.values()

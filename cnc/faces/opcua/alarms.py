@@ -81,7 +81,9 @@ class AlarmBook:
         item.RequestedNewNodeId = cond.node
         item.BrowseName = ua.QualifiedName(cond.node.Identifier, self.space.machine_ns)
         item.NodeClass = ua.NodeClass.Object
-        item.ParentNodeId = ua.NodeId(f"{self.machine}.Notification.Messages", self.space.machine_ns)
+        item.ParentNodeId = ua.NodeId(
+            f"{self.machine}.Notification.Messages", self.space.machine_ns
+        )
         item.ReferenceTypeId = ua.NodeId(ua.ObjectIds.HasCondition)
         item.TypeDefinition = ua.NodeId(ua.ObjectIds.AlarmConditionType)
         attrs = ua.ObjectAttributes()
@@ -105,17 +107,19 @@ class AlarmBook:
             ev = gen.event
             ev.NodeId = cond.node  # the ConditionId
             ev.SourceNode = self.space.root
-            ev.SourceName = f"{self.machine}/{alarm.source}" + (f"/{alarm.axis}" if alarm.axis else "")
+            ev.SourceName = f"{self.machine}/{alarm.source}" + (
+                f"/{alarm.axis}" if alarm.axis else ""
+            )
             ev.ConditionName = str(alarm.number)
             ev.Message = ua.LocalizedText(alarm.text)
             ev.Severity = SEVERITY.get(alarm.severity, 500)
             ev.Retain = retain
             ev.Time = when
-            setattr(ev, "ActiveState", ua.LocalizedText("Active" if cond.active else "Inactive"))
+            ev.ActiveState = ua.LocalizedText("Active" if cond.active else "Inactive")
             setattr(ev, "ActiveState/Id", cond.active)
-            setattr(ev, "AckedState", ua.LocalizedText("Acknowledged" if cond.acked else "Unacknowledged"))
+            ev.AckedState = ua.LocalizedText("Acknowledged" if cond.acked else "Unacknowledged")
             setattr(ev, "AckedState/Id", cond.acked)
-            setattr(ev, "EnabledState", ua.LocalizedText("Enabled"))
+            ev.EnabledState = ua.LocalizedText("Enabled")
             setattr(ev, "EnabledState/Id", True)
             await gen.trigger(time_attr=when)
             ids.append(_bytes(ev.EventId))

@@ -87,8 +87,9 @@ class CellUsers:
     `authenticate` gives (the cell's API keys: user name = the key's user, password = the
     key); unknown -> refused (BadUserAccessDenied)."""
 
-    def __init__(self, authenticate: Callable[[str, str], int | None] | None,
-                 anonymous: bool) -> None:
+    def __init__(
+        self, authenticate: Callable[[str, str], int | None] | None, anonymous: bool
+    ) -> None:
         self.authenticate = authenticate
         self.anonymous = anonymous
 
@@ -206,8 +207,11 @@ class OpcUaFace:
     async def start(self) -> None:
         port = self.port or _free_port(self.host)
         sec = self.security
-        server = Server(user_manager=CellUsers(sec.authenticate if sec else None,
-                                               sec.anonymous if sec else True))
+        server = Server(
+            user_manager=CellUsers(
+                sec.authenticate if sec else None, sec.anonymous if sec else True
+            )
+        )
         await server.init()
         server.set_endpoint(f"opc.tcp://{self.host}:{port}/")
         server.set_server_name(f"fmscell {self.machine}")
@@ -244,44 +248,85 @@ class OpcUaFace:
         sp = self.space
         name = self.machine
         machines = sp.node(m.MACHINES_FOLDER)
-        b.object(ua.NodeId(ua.ObjectIds.ObjectsFolder), machines,
-                 ua.QualifiedName("Machines", sp.ns[m.MACHINERY]), ua.NodeId(ua.ObjectIds.FolderType),
-                 ref=ua.ObjectIds.Organizes)
-        root = b.child_object(machines, name, (m.FMSCELL, name), m.MACHINE_TOOL_TYPE.node,
-                              ref=ua.ObjectIds.Organizes, notifier=True)
+        b.object(
+            ua.NodeId(ua.ObjectIds.ObjectsFolder),
+            machines,
+            ua.QualifiedName("Machines", sp.ns[m.MACHINERY]),
+            ua.NodeId(ua.ObjectIds.FolderType),
+            ref=ua.ObjectIds.Organizes,
+        )
+        root = b.child_object(
+            machines,
+            name,
+            (m.FMSCELL, name),
+            m.MACHINE_TOOL_TYPE.node,
+            ref=ua.ObjectIds.Organizes,
+            notifier=True,
+        )
         sp.root = root
         ident = self.identification
-        idn = b.child_object(root, f"{name}.Identification", (m.DI, "Identification"),
-                             m.MACHINE_TOOL_IDENTIFICATION.node, ref=m.HAS_ADD_IN)
+        idn = b.child_object(
+            root,
+            f"{name}.Identification",
+            (m.DI, "Identification"),
+            m.MACHINE_TOOL_IDENTIFICATION.node,
+            ref=m.HAS_ADD_IN,
+        )
         for key, nm, dt, value in (
             ("Manufacturer", (m.DI, "Manufacturer"), m.LOCALIZED_TEXT, ident.manufacturer),
             ("SerialNumber", (m.DI, "SerialNumber"), m.STRING, ident.serial_number),
-            ("ProductInstanceUri", (m.DI, "ProductInstanceUri"), m.STRING,
-             f"urn:fmscell:{ident.manufacturer}:{ident.model}:{ident.serial_number}"),
+            (
+                "ProductInstanceUri",
+                (m.DI, "ProductInstanceUri"),
+                m.STRING,
+                f"urn:fmscell:{ident.manufacturer}:{ident.model}:{ident.serial_number}",
+            ),
             ("Model", (m.DI, "Model"), m.LOCALIZED_TEXT, ident.model),
             ("SoftwareRevision", (m.DI, "SoftwareRevision"), m.STRING, ident.software_revision),
             ("Location", (m.MACHINERY, "Location"), m.STRING, ident.location),
         ):
             b.value(idn, f"{name}.Identification.{key}", nm, dt, value, prop=True)
 
-        mon = b.child_object(root, f"{name}.Monitoring", (m.MACHINE_TOOL, "Monitoring"),
-                             m.MONITORING.node)
-        op = b.child_object(mon, f"{name}.Monitoring.MachineTool", (m.MACHINE_TOOL, "MachineTool"),
-                            m.MACHINE_OPERATION_MONITORING.node)
+        mon = b.child_object(
+            root, f"{name}.Monitoring", (m.MACHINE_TOOL, "Monitoring"), m.MONITORING.node
+        )
+        op = b.child_object(
+            mon,
+            f"{name}.Monitoring.MachineTool",
+            (m.MACHINE_TOOL, "MachineTool"),
+            m.MACHINE_OPERATION_MONITORING.node,
+        )
         p = f"{name}.Monitoring.MachineTool"
-        b.value(op, f"{p}.OperationMode", (m.MACHINE_TOOL, "OperationMode"),
-                m.MACHINE_OPERATION_MODE.node, 1)
+        b.value(
+            op,
+            f"{p}.OperationMode",
+            (m.MACHINE_TOOL, "OperationMode"),
+            m.MACHINE_OPERATION_MODE.node,
+            1,
+        )
         b.value(op, f"{p}.PowerOnDuration", (m.MACHINE_TOOL, "PowerOnDuration"), m.UINT32, 0)
-        b.value(op, f"{p}.FeedOverride", (m.MACHINE_TOOL, "FeedOverride"), m.DOUBLE, 100.0,
-                typedef=m.ANALOG_UNIT_RANGE)
+        b.value(
+            op,
+            f"{p}.FeedOverride",
+            (m.MACHINE_TOOL, "FeedOverride"),
+            m.DOUBLE,
+            100.0,
+            typedef=m.ANALOG_UNIT_RANGE,
+        )
         p = f"{name}.Monitoring.Channel1"
         ch = b.child_object(mon, p, (m.MACHINE_TOOL, "Channel1"), m.CHANNEL_MONITORING.node)
         b.value(ch, f"{p}.Name", (m.MACHINE_TOOL, "Name"), m.STRING, "Channel1", prop=True)
         b.value(ch, f"{p}.ChannelState", (m.MACHINE_TOOL, "ChannelState"), m.CHANNEL_STATE.node, 2)
         b.value(ch, f"{p}.ChannelMode", (m.MACHINE_TOOL, "ChannelMode"), m.CHANNEL_MODE.node, 0)
         for what in ("FeedOverride", "RapidOverride"):
-            b.value(ch, f"{p}.{what}", (m.MACHINE_TOOL, what), m.DOUBLE, 100.0,
-                    typedef=m.ANALOG_UNIT_RANGE)
+            b.value(
+                ch,
+                f"{p}.{what}",
+                (m.MACHINE_TOOL, what),
+                m.DOUBLE,
+                100.0,
+                typedef=m.ANALOG_UNIT_RANGE,
+            )
         b.value(ch, f"{p}.Line", (m.FMSCELL, "Line"), m.UINT32, 0)
         b.value(ch, f"{p}.PathFeedRate", (m.FMSCELL, "PathFeedRate"), m.DOUBLE, 0.0)
         for axis in self.axes:
@@ -291,46 +336,94 @@ class OpcUaFace:
         sp_node = b.child_object(mon, p, (m.MACHINE_TOOL, "Spindle"), m.SPINDLE_MONITORING.node)
         b.value(sp_node, f"{p}.Name", (m.MACHINE_TOOL, "Name"), m.STRING, "Spindle", prop=True)
         b.value(sp_node, f"{p}.IsRotating", (m.MACHINE_TOOL, "IsRotating"), m.BOOLEAN, False)
-        b.value(sp_node, f"{p}.Override", (m.MACHINE_TOOL, "Override"), m.DOUBLE, 100.0,
-                typedef=m.ANALOG_UNIT_RANGE)
+        b.value(
+            sp_node,
+            f"{p}.Override",
+            (m.MACHINE_TOOL, "Override"),
+            m.DOUBLE,
+            100.0,
+            typedef=m.ANALOG_UNIT_RANGE,
+        )
         b.value(sp_node, f"{p}.Speed", (m.FMSCELL, "Speed"), m.DOUBLE, 0.0)
         p = f"{name}.Monitoring.Stacklight"
         sl = b.child_object(mon, p, (m.MACHINE_TOOL, "Stacklight"), m.BASIC_STACKLIGHT.node)
-        b.value(sl, f"{p}.StacklightMode", (m.IA, "StacklightMode"),
-                m.STACKLIGHT_OPERATION_MODE.node, 0, prop=True)
+        b.value(
+            sl,
+            f"{p}.StacklightMode",
+            (m.IA, "StacklightMode"),
+            m.STACKLIGHT_OPERATION_MODE.node,
+            0,
+            prop=True,
+        )
         for i, (lamp, lamp_color) in enumerate(STACK_LAMPS):
-            el = b.child_object(sl, f"{p}.{lamp}", (m.FMSCELL, lamp), m.STACK_ELEMENT_LIGHT.node,
-                                ref=49)  # HasOrderedComponent
-            b.value(el, f"{p}.{lamp}.NumberInList", (m.UA, "NumberInList"), m.UINTEGER, i, prop=True)
+            el = b.child_object(
+                sl, f"{p}.{lamp}", (m.FMSCELL, lamp), m.STACK_ELEMENT_LIGHT.node, ref=49
+            )  # HasOrderedComponent
+            b.value(
+                el, f"{p}.{lamp}.NumberInList", (m.UA, "NumberInList"), m.UINTEGER, i, prop=True
+            )
             b.value(el, f"{p}.{lamp}.SignalOn", (m.IA, "SignalOn"), m.BOOLEAN, False, prop=True)
-            b.value(el, f"{p}.{lamp}.SignalColor", (m.IA, "SignalColor"), m.SIGNAL_COLOR.node,
-                    color(lamp_color))
+            b.value(
+                el,
+                f"{p}.{lamp}.SignalColor",
+                (m.IA, "SignalColor"),
+                m.SIGNAL_COLOR.node,
+                color(lamp_color),
+            )
 
-        prod = b.child_object(root, f"{name}.Production", (m.MACHINE_TOOL, "Production"),
-                              m.PRODUCTION.node)
+        prod = b.child_object(
+            root, f"{name}.Production", (m.MACHINE_TOOL, "Production"), m.PRODUCTION.node
+        )
         p = f"{name}.Production.ActiveProgram"
-        ap = b.child_object(prod, p, (m.MACHINE_TOOL, "ActiveProgram"),
-                            m.PRODUCTION_ACTIVE_PROGRAM.node)
+        ap = b.child_object(
+            prod, p, (m.MACHINE_TOOL, "ActiveProgram"), m.PRODUCTION_ACTIVE_PROGRAM.node
+        )
         b.value(ap, f"{p}.Name", (m.MACHINE_TOOL, "Name"), m.STRING, "", prop=True)
         b.value(ap, f"{p}.NumberInList", (m.UA, "NumberInList"), m.UINT16, 0, prop=True)
-        st = b.child_object(ap, f"{p}.State", (m.MACHINE_TOOL, "State"),
-                            m.PRODUCTION_PROGRAM_STATE_MACHINE.node)
-        b.value(st, f"{p}.State.CurrentState", (m.UA, "CurrentState"), m.LOCALIZED_TEXT,
-                "Initializing", typedef=m.FINITE_STATE_VARIABLE)
+        st = b.child_object(
+            ap, f"{p}.State", (m.MACHINE_TOOL, "State"), m.PRODUCTION_PROGRAM_STATE_MACHINE.node
+        )
+        b.value(
+            st,
+            f"{p}.State.CurrentState",
+            (m.UA, "CurrentState"),
+            m.LOCALIZED_TEXT,
+            "Initializing",
+            typedef=m.FINITE_STATE_VARIABLE,
+        )
         b.value(ap, f"{p}.JobIdentifier", (m.MACHINE_TOOL, "JobIdentifier"), m.STRING, "")
-        for key, dt, value in (("Number", m.UINT32, 0), ("Line", m.UINT32, 0),
-                               ("PartCount", m.UINT32, 0), ("Sha256", m.STRING, ""),
-                               ("Revision", m.STRING, "")):
+        for key, dt, value in (
+            ("Number", m.UINT32, 0),
+            ("Line", m.UINT32, 0),
+            ("PartCount", m.UINT32, 0),
+            ("Sha256", m.STRING, ""),
+            ("Revision", m.STRING, ""),
+        ):
             b.value(ap, f"{p}.{key}", (m.FMSCELL, key), dt, value)
-        b.child_object(prod, f"{name}.Production.ProductionPlan", (m.MACHINE_TOOL, "ProductionPlan"),
-                       m.PRODUCTION_JOB_LIST.node)
+        b.child_object(
+            prod,
+            f"{name}.Production.ProductionPlan",
+            (m.MACHINE_TOOL, "ProductionPlan"),
+            m.PRODUCTION_JOB_LIST.node,
+        )
 
-        note = b.child_object(root, f"{name}.Notification", (m.MACHINE_TOOL, "Notification"),
-                              m.NOTIFICATION.node, notifier=True)
-        b.child_object(note, f"{name}.Notification.Messages", (m.MACHINE_TOOL, "Messages"),
-                       m.MESSAGES.node, notifier=True)
-        eq = b.child_object(root, f"{name}.Equipment", (m.MACHINE_TOOL, "Equipment"),
-                            m.EQUIPMENT.node)
+        note = b.child_object(
+            root,
+            f"{name}.Notification",
+            (m.MACHINE_TOOL, "Notification"),
+            m.NOTIFICATION.node,
+            notifier=True,
+        )
+        b.child_object(
+            note,
+            f"{name}.Notification.Messages",
+            (m.MACHINE_TOOL, "Messages"),
+            m.MESSAGES.node,
+            notifier=True,
+        )
+        eq = b.child_object(
+            root, f"{name}.Equipment", (m.MACHINE_TOOL, "Equipment"), m.EQUIPMENT.node
+        )
         b.child_object(eq, f"{name}.Equipment.Tools", (m.MACHINE_TOOL, "Tools"), m.TOOL_LIST.node)
         self._builder = b
 
@@ -400,28 +493,57 @@ class OpcUaFace:
             if number not in self._tool_nodes:
                 node = b.child_object(parent, p, (m.FMSCELL, f"T{number}"), m.TOOL.node)
                 self._tool_nodes[number] = node
-                b.value(node, f"{p}.Name", (m.MACHINE_TOOL, "Name"), m.STRING,
-                        tool.get("comment") or f"T{number}", prop=True)
-                b.value(node, f"{p}.Identifier", (m.MACHINE_TOOL, "Identifier"), m.STRING,
-                        f"T{number}", prop=True)
-                b.value(node, f"{p}.ControlIdentifier1", (m.MACHINE_TOOL, "ControlIdentifier1"),
-                        m.UINT32, int(number))
-                b.value(node, f"{p}.ControlIdentifierInterpretation",
-                        (m.MACHINE_TOOL, "ControlIdentifierInterpretation"),
-                        m.TOOL_MANAGEMENT.node, 0)
+                b.value(
+                    node,
+                    f"{p}.Name",
+                    (m.MACHINE_TOOL, "Name"),
+                    m.STRING,
+                    tool.get("comment") or f"T{number}",
+                    prop=True,
+                )
+                b.value(
+                    node,
+                    f"{p}.Identifier",
+                    (m.MACHINE_TOOL, "Identifier"),
+                    m.STRING,
+                    f"T{number}",
+                    prop=True,
+                )
+                b.value(
+                    node,
+                    f"{p}.ControlIdentifier1",
+                    (m.MACHINE_TOOL, "ControlIdentifier1"),
+                    m.UINT32,
+                    int(number),
+                )
+                b.value(
+                    node,
+                    f"{p}.ControlIdentifierInterpretation",
+                    (m.MACHINE_TOOL, "ControlIdentifierInterpretation"),
+                    m.TOOL_MANAGEMENT.node,
+                    0,
+                )
                 b.value(node, f"{p}.Locked", (m.MACHINE_TOOL, "Locked"), m.BOOLEAN, False)
-                life = b.child_object(node, f"{p}.ToolLife", (m.MACHINE_TOOL, "ToolLife"),
-                                      m.BASE_OBJECT)
-                for key, dt in (("Uses", m.UINT32), ("UsesLimit", m.UINT32),
-                                ("CutTime", m.DOUBLE), ("CutTimeLimit", m.DOUBLE)):
+                life = b.child_object(
+                    node, f"{p}.ToolLife", (m.MACHINE_TOOL, "ToolLife"), m.BASE_OBJECT
+                )
+                for key, dt in (
+                    ("Uses", m.UINT32),
+                    ("UsesLimit", m.UINT32),
+                    ("CutTime", m.DOUBLE),
+                    ("CutTimeLimit", m.DOUBLE),
+                ):
                     b.value(life, f"{p}.ToolLife.{key}", (m.FMSCELL, key), dt, None)
             expired = (tool["life_uses"] > 0 and tool["uses"] >= tool["life_uses"]) or (
                 tool["life_time_s"] > 0 and tool["cut_time_s"] >= tool["life_time_s"]
             )
-            for key, value in (("Locked", expired), ("ToolLife.Uses", int(tool["uses"])),
-                               ("ToolLife.UsesLimit", int(tool["life_uses"])),
-                               ("ToolLife.CutTime", float(tool["cut_time_s"])),
-                               ("ToolLife.CutTimeLimit", float(tool["life_time_s"]))):
+            for key, value in (
+                ("Locked", expired),
+                ("ToolLife.Uses", int(tool["uses"])),
+                ("ToolLife.UsesLimit", int(tool["life_uses"])),
+                ("ToolLife.CutTime", float(tool["cut_time_s"])),
+                ("ToolLife.CutTimeLimit", float(tool["life_time_s"])),
+            ):
                 await self._write(f"{p}.{key}", value, now, now)
 
     def _apply_jobs(self, host: HostData) -> None:
@@ -447,26 +569,64 @@ class OpcUaFace:
                 "State.CurrentState": job.state,
             }
             if job.identifier not in self._job_nodes:
-                node = b.child_object(plan, p, (m.FMSCELL, job.identifier), m.PRODUCTION_JOB.node,
-                                      ref=49)
+                node = b.child_object(
+                    plan, p, (m.FMSCELL, job.identifier), m.PRODUCTION_JOB.node, ref=49
+                )
                 self._job_nodes[job.identifier] = node
-                b.value(node, f"{p}.Identifier", (m.MACHINE_TOOL, "Identifier"), m.STRING,
-                        job.identifier, prop=True)
+                b.value(
+                    node,
+                    f"{p}.Identifier",
+                    (m.MACHINE_TOOL, "Identifier"),
+                    m.STRING,
+                    job.identifier,
+                    prop=True,
+                )
                 b.value(node, f"{p}.NumberInList", (m.UA, "NumberInList"), m.UINT16, i, prop=True)
                 for key in ("RunsPlanned", "RunsCompleted", "PartsCompleted"):
                     b.value(node, f"{p}.{key}", (m.MACHINE_TOOL, key), m.UINT32, 0)
-                st = b.child_object(node, f"{p}.State", (m.MACHINE_TOOL, "State"),
-                                    m.PRODUCTION_JOB_STATE_MACHINE.node)
-                b.value(st, f"{p}.State.CurrentState", (m.UA, "CurrentState"),
-                        m.LOCALIZED_TEXT, "", typedef=m.FINITE_STATE_VARIABLE)
-                progs = b.child_object(node, f"{p}.ProductionPrograms",
-                                       (m.MACHINE_TOOL, "ProductionPrograms"), m.ORDERED_LIST)
-                prog = b.child_object(progs, f"{p}.ProductionPrograms.{job.program}",
-                                      (m.FMSCELL, job.program), m.PRODUCTION_PROGRAM.node, ref=49)
-                b.value(prog, f"{p}.ProductionPrograms.{job.program}.Name",
-                        (m.MACHINE_TOOL, "Name"), m.STRING, job.program, prop=True)
-                b.value(prog, f"{p}.ProductionPrograms.{job.program}.NumberInList",
-                        (m.UA, "NumberInList"), m.UINT16, 0, prop=True)
+                st = b.child_object(
+                    node,
+                    f"{p}.State",
+                    (m.MACHINE_TOOL, "State"),
+                    m.PRODUCTION_JOB_STATE_MACHINE.node,
+                )
+                b.value(
+                    st,
+                    f"{p}.State.CurrentState",
+                    (m.UA, "CurrentState"),
+                    m.LOCALIZED_TEXT,
+                    "",
+                    typedef=m.FINITE_STATE_VARIABLE,
+                )
+                progs = b.child_object(
+                    node,
+                    f"{p}.ProductionPrograms",
+                    (m.MACHINE_TOOL, "ProductionPrograms"),
+                    m.ORDERED_LIST,
+                )
+                prog = b.child_object(
+                    progs,
+                    f"{p}.ProductionPrograms.{job.program}",
+                    (m.FMSCELL, job.program),
+                    m.PRODUCTION_PROGRAM.node,
+                    ref=49,
+                )
+                b.value(
+                    prog,
+                    f"{p}.ProductionPrograms.{job.program}.Name",
+                    (m.MACHINE_TOOL, "Name"),
+                    m.STRING,
+                    job.program,
+                    prop=True,
+                )
+                b.value(
+                    prog,
+                    f"{p}.ProductionPrograms.{job.program}.NumberInList",
+                    (m.UA, "NumberInList"),
+                    m.UINT16,
+                    0,
+                    prop=True,
+                )
             now = _dt.datetime.now(_dt.UTC)
             for key, value in values.items():
                 entry = self.space.variables[f"{p}.{key}"]
@@ -475,7 +635,8 @@ class OpcUaFace:
                     entry[1],
                 )
                 self.server.iserver.aspace.set_attribute_value(
-                    entry[0], ua.AttributeIds.Value,
+                    entry[0],
+                    ua.AttributeIds.Value,
                     ua.DataValue(variant, SourceTimestamp=now, ServerTimestamp=now),
                 )
 
@@ -510,12 +671,19 @@ async def _secure(server: Server, sec: Security, machine: str) -> None:
     if not cert_path.exists() or not key_path.exists():
         key = generate_private_key()
         cert = generate_self_signed_app_certificate(
-            key, f"fmscell {machine}", {"commonName": f"fmscell {machine}"}, _san(uri),
+            key,
+            f"fmscell {machine}",
+            {"commonName": f"fmscell {machine}"},
+            _san(uri),
             extended=[ExtendedKeyUsageOID.SERVER_AUTH, ExtendedKeyUsageOID.CLIENT_AUTH],
         )
-        key_path.write_bytes(key.private_bytes(
-            serialization.Encoding.PEM, serialization.PrivateFormat.TraditionalOpenSSL,
-            serialization.NoEncryption()))
+        key_path.write_bytes(
+            key.private_bytes(
+                serialization.Encoding.PEM,
+                serialization.PrivateFormat.TraditionalOpenSSL,
+                serialization.NoEncryption(),
+            )
+        )
         key_path.chmod(0o600)
         cert_path.write_bytes(cert.public_bytes(serialization.Encoding.DER))
     await server.load_certificate(str(cert_path))
@@ -541,4 +709,3 @@ def _san(uri: str):
     from cryptography import x509
 
     return [x509.UniformResourceIdentifier(uri), x509.DNSName("localhost")]
-

@@ -40,7 +40,14 @@ FINITE_STATE_MACHINE = (UA, 2771)
 FINITE_STATE_VARIABLE = (UA, 2760)
 ORDERED_LIST = (UA, 23518)
 ANALOG_UNIT_RANGE = (UA, 17570)
-BOOLEAN, BYTE, UINT16, UINT32, DOUBLE, STRING = (UA, 1), (UA, 3), (UA, 5), (UA, 7), (UA, 11), (UA, 12)
+BOOLEAN, BYTE, UINT16, UINT32, DOUBLE, STRING = (
+    (UA, 1),
+    (UA, 3),
+    (UA, 5),
+    (UA, 7),
+    (UA, 11),
+    (UA, 12),
+)
 LOCALIZED_TEXT = (UA, 21)
 UINTEGER = (UA, 28)  # abstract: any unsigned integer
 
@@ -77,8 +84,17 @@ class EnumDecl:
     fields: tuple[str, ...]  # values 0, 1, 2, ... in order
 
 
-def _v(ns: str, name: str, node_id: int, data_type: NodeRef, mandatory: bool, *,
-       prop: bool = False, name_ns: str | None = None, typedef: NodeRef | None = None) -> Member:
+def _v(
+    ns: str,
+    name: str,
+    node_id: int,
+    data_type: NodeRef,
+    mandatory: bool,
+    *,
+    prop: bool = False,
+    name_ns: str | None = None,
+    typedef: NodeRef | None = None,
+) -> Member:
     return Member(
         (name_ns or ns, name),
         node_id,
@@ -90,8 +106,9 @@ def _v(ns: str, name: str, node_id: int, data_type: NodeRef, mandatory: bool, *,
     )
 
 
-def _o(ns: str, name: str, node_id: int, typedef: NodeRef, mandatory: bool, *,
-       ref: int = HAS_COMPONENT) -> Member:
+def _o(
+    ns: str, name: str, node_id: int, typedef: NodeRef, mandatory: bool, *, ref: int = HAS_COMPONENT
+) -> Member:
     return Member((ns, name), node_id, "Object", typedef, mandatory, ref)
 
 
@@ -106,8 +123,16 @@ MACHINE_OPERATION_MODE = EnumDecl(
 CHANNEL_MODE = EnumDecl(
     (MACHINE_TOOL, 67),
     "ChannelMode",
-    ("Automatic", "MdaMdi", "JogManual", "JogIncrement", "TeachingHandle", "Remote",
-     "Reference", "Other"),
+    (
+        "Automatic",
+        "MdaMdi",
+        "JogManual",
+        "JogIncrement",
+        "TeachingHandle",
+        "Remote",
+        "Reference",
+        "Other",
+    ),
 )
 TOOL_MANAGEMENT = EnumDecl(
     (MACHINE_TOOL, 69), "ToolManagement", ("NumberBased", "GroupBased", "Other")
@@ -367,5 +392,10 @@ MACHINES_FOLDER: NodeRef = (MA, 1001)
 
 #: the states of ProductionProgramStateMachineType (OPC 40501-1 §11.7), with their state
 #: numbers (the Id of CurrentState is the state node)
-PROGRAM_STATES = {"Initializing": 5039, "Running": 5041, "Ended": 5038, "Interrupted": 5040,
-                  "Aborted": 5037}
+PROGRAM_STATES = {
+    "Initializing": 5039,
+    "Running": 5041,
+    "Ended": 5038,
+    "Interrupted": 5040,
+    "Aborted": 5037,
+}

@@ -72,9 +72,16 @@ class Builder:
         item.TargetNodeClass = ua.NodeClass.Object
         self.server.iserver.node_mgt_service.add_references([item])[0].check()
 
-    def object(self, parent: ua.NodeId, nodeid: ua.NodeId, name: ua.QualifiedName,
-               typedef: ua.NodeId, ref: int = m.HAS_COMPONENT, notifier: bool = False,
-               rule: int | None = None) -> ua.NodeId:
+    def object(
+        self,
+        parent: ua.NodeId,
+        nodeid: ua.NodeId,
+        name: ua.QualifiedName,
+        typedef: ua.NodeId,
+        ref: int = m.HAS_COMPONENT,
+        notifier: bool = False,
+        rule: int | None = None,
+    ) -> ua.NodeId:
         item = ua.AddNodesItem()
         item.RequestedNewNodeId, item.BrowseName = nodeid, name
         item.NodeClass = ua.NodeClass.Object
@@ -89,10 +96,18 @@ class Builder:
             self._ref(nodeid, ua.ObjectIds.HasModellingRule, ua.NodeId(rule))
         return nodeid
 
-    def variable(self, parent: ua.NodeId, nodeid: ua.NodeId, name: ua.QualifiedName,
-                 typedef: ua.NodeId, data_type: ua.NodeId, value: ua.Variant,
-                 ref: int = m.HAS_COMPONENT, rule: int | None = None,
-                 rank: int = -1) -> ua.NodeId:
+    def variable(
+        self,
+        parent: ua.NodeId,
+        nodeid: ua.NodeId,
+        name: ua.QualifiedName,
+        typedef: ua.NodeId,
+        data_type: ua.NodeId,
+        value: ua.Variant,
+        ref: int = m.HAS_COMPONENT,
+        rule: int | None = None,
+        rank: int = -1,
+    ) -> ua.NodeId:
         item = ua.AddNodesItem()
         item.RequestedNewNodeId, item.BrowseName = nodeid, name
         item.NodeClass = ua.NodeClass.Variable
@@ -133,7 +148,9 @@ class Builder:
                 ua.QualifiedName("EnumStrings", 0),
                 ua.NodeId(ua.ObjectIds.PropertyType),
                 ua.NodeId(ua.ObjectIds.LocalizedText),
-                ua.Variant([ua.LocalizedText(f) for f in enum.fields], ua.VariantType.LocalizedText),
+                ua.Variant(
+                    [ua.LocalizedText(f) for f in enum.fields], ua.VariantType.LocalizedText
+                ),
                 ref=m.HAS_PROPERTY,
                 rank=1,
             )
@@ -155,42 +172,88 @@ class Builder:
                 rule = m.MANDATORY if member.mandatory else m.OPTIONAL
                 mid = ua.NodeId(member.node_id, ns)
                 if member.node_class == "Object":
-                    self.object(nodeid, mid, sp.qname(member.name),
-                                sp.node(member.type_definition), member.reference, rule=rule)
+                    self.object(
+                        nodeid,
+                        mid,
+                        sp.qname(member.name),
+                        sp.node(member.type_definition),
+                        member.reference,
+                        rule=rule,
+                    )
                 else:
-                    self.variable(nodeid, mid, sp.qname(member.name),
-                                  sp.node(member.type_definition), sp.node(member.data_type),
-                                  _default(member.data_type), member.reference, rule=rule)
+                    self.variable(
+                        nodeid,
+                        mid,
+                        sp.qname(member.name),
+                        sp.node(member.type_definition),
+                        sp.node(member.data_type),
+                        _default(member.data_type),
+                        member.reference,
+                        rule=rule,
+                    )
 
     # ------------------------------------------------------------------ instance helpers
 
-    def child_object(self, parent: ua.NodeId, key: str, name: m.Name, typedef: m.NodeRef,
-                     ref: int = m.HAS_COMPONENT, notifier: bool = False) -> ua.NodeId:
+    def child_object(
+        self,
+        parent: ua.NodeId,
+        key: str,
+        name: m.Name,
+        typedef: m.NodeRef,
+        ref: int = m.HAS_COMPONENT,
+        notifier: bool = False,
+    ) -> ua.NodeId:
         sp = self.space
-        return self.object(parent, ua.NodeId(key, sp.machine_ns), sp.qname(name),
-                           sp.node(typedef), ref, notifier)
+        return self.object(
+            parent, ua.NodeId(key, sp.machine_ns), sp.qname(name), sp.node(typedef), ref, notifier
+        )
 
-    def value(self, parent: ua.NodeId, key: str, name: m.Name, data_type: m.NodeRef,
-              value, *, prop: bool = False, typedef: m.NodeRef | None = None) -> ua.NodeId:
+    def value(
+        self,
+        parent: ua.NodeId,
+        key: str,
+        name: m.Name,
+        data_type: m.NodeRef,
+        value,
+        *,
+        prop: bool = False,
+        typedef: m.NodeRef | None = None,
+    ) -> ua.NodeId:
         """A live (or fixed) variable; its key is how the updater finds it."""
         sp = self.space
         vtype = VARIANT_OF.get(data_type, ua.VariantType.Int32)  # enumerations are Int32
         td = typedef or (m.PROPERTY if prop else m.BASE_DATA_VARIABLE)
         nodeid = ua.NodeId(key, sp.machine_ns)
-        self.variable(parent, nodeid, sp.qname(name), sp.node(td), sp.node(data_type),
-                      ua.Variant(_coerce(value, vtype), vtype),
-                      m.HAS_PROPERTY if prop else m.HAS_COMPONENT)
+        self.variable(
+            parent,
+            nodeid,
+            sp.qname(name),
+            sp.node(td),
+            sp.node(data_type),
+            ua.Variant(_coerce(value, vtype), vtype),
+            m.HAS_PROPERTY if prop else m.HAS_COMPONENT,
+        )
         sp.variables[key] = (nodeid, vtype)
         if td == m.ANALOG_UNIT_RANGE:  # its two mandatory properties
             ns = sp.machine_ns
-            self.variable(nodeid, ua.NodeId(key + ".EURange", ns), ua.QualifiedName("EURange", 0),
-                          ua.NodeId(ua.ObjectIds.PropertyType), ua.NodeId(ua.ObjectIds.Range),
-                          ua.Variant(ua.Range(0.0, 200.0)), m.HAS_PROPERTY)
-            self.variable(nodeid, ua.NodeId(key + ".EngineeringUnits", ns),
-                          ua.QualifiedName("EngineeringUnits", 0),
-                          ua.NodeId(ua.ObjectIds.PropertyType),
-                          ua.NodeId(ua.ObjectIds.EUInformation), ua.Variant(PERCENT),
-                          m.HAS_PROPERTY)
+            self.variable(
+                nodeid,
+                ua.NodeId(key + ".EURange", ns),
+                ua.QualifiedName("EURange", 0),
+                ua.NodeId(ua.ObjectIds.PropertyType),
+                ua.NodeId(ua.ObjectIds.Range),
+                ua.Variant(ua.Range(0.0, 200.0)),
+                m.HAS_PROPERTY,
+            )
+            self.variable(
+                nodeid,
+                ua.NodeId(key + ".EngineeringUnits", ns),
+                ua.QualifiedName("EngineeringUnits", 0),
+                ua.NodeId(ua.ObjectIds.PropertyType),
+                ua.NodeId(ua.ObjectIds.EUInformation),
+                ua.Variant(PERCENT),
+                m.HAS_PROPERTY,
+            )
         return nodeid
 
 
