@@ -188,6 +188,7 @@ class Cell:
                 Loop("transfer-worker", self.worker.run_once, self.tick_s).start(),
             ]
             self._start_publisher()
+            self._start_opcua_feed()
             self._start_remote_requests()
         except BaseException:
             self.stop()
@@ -323,6 +324,25 @@ class Cell:
         self.mqtt = MqttSink(host or "127.0.0.1", int(port or 1883), prefix="fmscell")
         publisher = OutboxPublisher(self.sessions, self.mqtt)
         self.loops.append(Loop("outbox-publisher", publisher.publish_pending, 0.2).start())
+
+    def _start_opcua_feed(self) -> None:
+        """The host's knowledge (dispatched revisions, jobs) into the OPC UA faces of the
+        machines this process runs; machines in their own processes serve the machine's own
+        data only (docs/opcua.md)."""
+        faces = {
+            name: link.local.opcua
+            for name, link in self.links.items()
+            if getattr(link.local, "opcua", None) is not None
+        }
+        if not faces:
+            return
+        from server.opcua_feed import host_data
+
+        def feed() -> None:
+            for name, face in faces.items():
+                face.set_host_data(host_data(self.library, self.dispatches, self.jobs, name))
+
+        self.loops.append(Loop("opcua-feed", feed, 1.0).start())
 
     def _start_remote_requests(self) -> None:
         from dnc.machine_link import RemoteRequests, client_for

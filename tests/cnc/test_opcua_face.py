@@ -16,6 +16,7 @@ import pytest
 from asyncua import Client, ua
 
 from cnc.faces.loop_thread import LoopThread
+from cnc.faces.opcua import HostData, ProductionJob
 from cnc.faces.opcua import model as m
 from cnc.faces.shdr import ShdrFormatter
 from cnc.machine import Machine
@@ -302,6 +303,47 @@ def test_a_drive_fault_is_an_alarm_event_with_the_mtconnect_code_cleared_by_rese
         wait_for(cleared, "the cleared event", step=lambda: machine.step(5))
         assert cleared()[0].Retain is True  # inactive but not acknowledged: still retained
         assert all(a.number != alarm.number for a in machine.alarms)
+    finally:
+        client_loop.run(client.disconnect)
+
+
+def test_the_hosts_revision_and_jobs_appear_under_production(machine, client_loop):
+    face = machine.faces.opcua
+    if machine.status.program != "O0040":
+        machine.command("select_program", number=machine.load_program(PROGRAM))
+        assert machine.run_until(lambda mm: mm.status.program == "O0040", 1.0)
+    program = machine.status.program
+    face.set_host_data(
+        HostData(
+            revision_by_program={program: "12"},
+            sha256_by_program={program: "f" * 64},
+            jobs=(ProductionJob("job5", program, 4, 1, 1, "Running"),),
+        )
+    )
+    client = connect(client_loop, face.address)
+    try:
+
+        async def read(k: str):
+            ns = await client.get_namespace_index("urn:fmscell:machine:mill1")
+            return await client.get_node(ua.NodeId(key(k), ns)).read_value()
+
+        def shows() -> bool:
+            return client_loop.run(lambda: read("Production.ActiveProgram.Revision")) == "12"
+
+        wait_for(shows, "the dispatched revision", step=lambda: machine.step(5))
+        assert client_loop.run(lambda: read("Production.ActiveProgram.Sha256")) == "f" * 64
+        job = "Production.ProductionPlan.job5"
+        assert client_loop.run(lambda: read(f"{job}.RunsPlanned")) == 4
+        assert client_loop.run(lambda: read(f"{job}.RunsCompleted")) == 1
+        assert client_loop.run(lambda: read(f"{job}.State.CurrentState")).Text == "Running"
+        assert client_loop.run(lambda: read("Production.ActiveProgram.JobIdentifier")) == "job5"
+        face.set_host_data(HostData())  # the job ends: it leaves the plan
+        with pytest.raises(ua.uaerrors.BadNodeIdUnknown):
+            wait_for(
+                lambda: client_loop.run(lambda: read(f"{job}.RunsPlanned")) is None,
+                "the job removed",
+                step=lambda: machine.step(5),
+            )
     finally:
         client_loop.run(client.disconnect)
 

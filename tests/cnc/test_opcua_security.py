@@ -154,6 +154,13 @@ def test_a_viewer_reads_but_only_an_operator_acknowledges_an_alarm(secured):
                     ua.Variant(seen.events[-1].EventId, ua.VariantType.ByteString),
                     ua.LocalizedText("again"),
                 )
+            # reset clears it: inactive and acknowledged, it is no longer retained and its
+            # condition node goes
+            face.publish(MachineStatus(), time.time())
+            await until(lambda: seen.events[-1].ActiveState.Text == "Inactive", "the cleared event")
+            assert seen.events[-1].Retain is False
+            with pytest.raises(ua.uaerrors.BadNodeIdUnknown):
+                await ops.get_node(event.NodeId).read_browse_name()
         finally:
             await ops.disconnect()
             await viewer.disconnect()

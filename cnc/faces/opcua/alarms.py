@@ -70,7 +70,7 @@ class AlarmBook:
                 cond.active = False  # cleared: the machine was reset
                 await self._emit(cond, when)
                 if cond.acked:
-                    self._forget(key)
+                    await self._forget(key)
 
     def _add_condition_node(self, cond: Condition) -> None:
         """The condition's node (its ConditionId; Acknowledge is called on it), referenced
@@ -91,13 +91,11 @@ class AlarmBook:
         item.NodeAttributes = attrs
         self.server.iserver.node_mgt_service.add_nodes([item])[0].StatusCode.check()
 
-    def _forget(self, key: tuple) -> None:
+    async def _forget(self, key: tuple) -> None:
         cond = self.conditions.pop(key)
         if any(c.node == cond.node for c in self.conditions.values()):
             return
-        self.server.iserver.node_mgt_service.delete_nodes(
-            [ua.DeleteNodesItem(NodeId=cond.node, DeleteTargetReferences=True)]
-        )
+        await self.server.delete_nodes([self.server.get_node(cond.node)], recursive=True)
 
     async def _emit(self, cond: Condition, when: _dt.datetime) -> None:
         ids = []
@@ -137,7 +135,7 @@ class AlarmBook:
                 cond.acked = True
                 await self._emit(cond, _dt.datetime.now(_dt.UTC))
                 if not cond.active:
-                    self._forget(key)
+                    await self._forget(key)
                 return []
         return ua.StatusCode(ua.StatusCodes.BadEventIdUnknown)
 

@@ -142,7 +142,7 @@ class HostData:
     """What only the DNC host knows: the dispatched revision of the running program and the
     cell's jobs on this machine. Replaced as a whole (`OpcUaFace.set_host_data`)."""
 
-    revision: str = ""
+    revision_by_program: dict[str, str] = field(default_factory=dict)
     jobs: tuple[ProductionJob, ...] = ()
     sha256_by_program: dict[str, str] = field(default_factory=dict)
 
@@ -441,7 +441,7 @@ class OpcUaFace:
                     await self._apply(*latest)
                 if host is not host_seen:
                     host_seen = host
-                    self._apply_jobs(host)
+                    await self._apply_jobs(host)
                 await self._apply_tools()
                 self.samples += 1
             except Exception:  # noqa: BLE001 - a bad sample must not end the face
@@ -452,7 +452,9 @@ class OpcUaFace:
             self._first_ts = timestamp
         values = status_values(status, timestamp - self._first_ts)
         host = self._host
-        values["Production.ActiveProgram.Revision"] = host.revision
+        values["Production.ActiveProgram.Revision"] = host.revision_by_program.get(
+            status.program, ""
+        )
         sha = host.sha256_by_program.get(status.program, "")
         if not sha and self.program_sha256 is not None and status.program:
             sha = self.program_sha256(status.program)
@@ -546,16 +548,14 @@ class OpcUaFace:
             ):
                 await self._write(f"{p}.{key}", value, now, now)
 
-    def _apply_jobs(self, host: HostData) -> None:
+    async def _apply_jobs(self, host: HostData) -> None:
         b, name, ns = self._builder, self.machine, self.space.machine_ns
         plan = ua.NodeId(f"{name}.Production.ProductionPlan", ns)
         wanted = {j.identifier for j in host.jobs}
         for ident in list(self._job_nodes):
             if ident not in wanted:
                 node = self._job_nodes.pop(ident)
-                self.server.iserver.node_mgt_service.delete_nodes(
-                    [ua.DeleteNodesItem(NodeId=node, DeleteTargetReferences=True)]
-                )
+                await self.server.delete_nodes([self.server.get_node(node)], recursive=True)
                 prefix = f"{name}.Production.ProductionPlan.{ident}."
                 for key in [k for k in self.space.variables if k.startswith(prefix)]:
                     del self.space.variables[key]
@@ -629,16 +629,7 @@ class OpcUaFace:
                 )
             now = _dt.datetime.now(_dt.UTC)
             for key, value in values.items():
-                entry = self.space.variables[f"{p}.{key}"]
-                variant = ua.Variant(
-                    ua.LocalizedText(value) if entry[1] == ua.VariantType.LocalizedText else value,
-                    entry[1],
-                )
-                self.server.iserver.aspace.set_attribute_value(
-                    entry[0],
-                    ua.AttributeIds.Value,
-                    ua.DataValue(variant, SourceTimestamp=now, ServerTimestamp=now),
-                )
+                await self._write(f"{p}.{key}", value, now, now)
 
 
 _UNSET = object()
