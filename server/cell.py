@@ -106,6 +106,7 @@ class Cell:
         rule: str = "fifo",
         state_dir: str | Path | None = None,
         attach: bool = False,
+        opcua_users=None,
     ) -> None:
         if clock not in CLOCKS:
             raise ValueError(f"clock {clock!r}: one of {', '.join(CLOCKS)}")
@@ -120,6 +121,8 @@ class Cell:
         self.state_dir = Path(state_dir) if state_dir else Path.cwd()
         self.tick_s = tick_s if tick_s is not None else (0.05 if clock == "fast" else 0.5)
         self.rule = rule
+        #: (user, password) -> cell role, for machines with a secured OPC UA face (in-process)
+        self.opcua_users = opcua_users
         self.links: dict[str, MachineLink] = {}
         self.machines: list[Any] = []
         self.loops: list[Loop] = []
@@ -280,7 +283,12 @@ class Cell:
                 update={"ports": mcfg.ports.model_copy(update={"secret": secret})}
             )
             m = InProcessMachine(
-                name, mcfg, fast=fast, simulation=self.faults_enabled, ideal=self.ideal_axes
+                name,
+                mcfg,
+                fast=fast,
+                simulation=self.faults_enabled,
+                ideal=self.ideal_axes,
+                opcua_users=self.opcua_users,
             )
             self.machines.append(m)
             self.links[name] = m.link
@@ -647,6 +655,7 @@ def run_cell(
         ideal_axes=ideal_axes,
         config_file=config,
         attach=attach,
+        opcua_users=opcua_users(settings),
     )
     # SIGINT/SIGTERM: uvicorn stops serving, then the cell stops its loops after their
     # current transaction and its machines. uvicorn re-raises the signal once it has shut
@@ -767,3 +776,16 @@ def _tls_files(tls, config: Path | None) -> tuple[str, str] | str | None:
     except (ssl.SSLError, OSError) as err:
         return f"host.tls: cannot load {paths[0]} with {paths[1]}: {err}"
     return paths[0], paths[1]
+
+
+def opcua_users(settings):
+    """The OPC UA user check from the API keys: user name = the key's `user`, password =
+    the key; the session gets the key's role (docs/opcua.md)."""
+
+    def check(user: str, password: str) -> int | None:
+        principal = settings.authenticate(password)
+        if principal is None or principal.user != user:
+            return None
+        return int(principal.role)
+
+    return check

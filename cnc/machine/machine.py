@@ -427,14 +427,19 @@ class Machine:
         self.call_soon(add)
 
     # ------------------------------------------------------------------ faces, lifetime
-    def start_faces(self, *, simulation: bool | None = None, dnc_parity: bool = False):
+    def start_faces(
+        self, *, simulation: bool | None = None, dnc_parity: bool = False, opcua_users=None
+    ):
         """Start the faces (DNC, Modbus, SHDR, simulation if enabled) on one LoopThread.
 
         `dnc_parity`: ISO 7-bit even parity on the DNC port (a parity error rejects the
-        program and raises alarm 2001)."""
+        program and raises alarm 2001). `opcua_users`: `(user, password) -> role` for a
+        secured OPC UA face (docs/opcua.md)."""
         from cnc.machine.faces import MachineFaces
 
-        self.faces = MachineFaces(self, simulation=simulation, dnc_parity=dnc_parity).start()
+        self.faces = MachineFaces(self, simulation=simulation, dnc_parity=dnc_parity)
+        self.faces.opcua_authenticate = opcua_users
+        self.faces.start()
         return self.faces
 
     def close(self) -> None:

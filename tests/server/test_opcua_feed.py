@@ -61,3 +61,21 @@ def test_open_jobs_allocated_to_the_machine_become_production_jobs():
         (j.identifier, j.program, j.runs_planned, j.runs_completed, j.state) for j in data.jobs
     ] == [("job3", "O2001", 5, 2, "Running")]
     assert host_data(Library(), Dispatches(), Jobs(), "mill2").jobs[0].state == "Initializing"
+
+
+def test_opcua_users_are_the_api_keys_with_their_roles():
+    from server.cell import opcua_users
+    from web_api.settings import ApiKey, ApiSettings
+
+    check = opcua_users(
+        ApiSettings(
+            api_keys=(
+                ApiKey(user="ann", role="operator", key="ann-key-0123456789"),
+                ApiKey(user="vic", role="viewer", key="vic-key-0123456789"),
+            )
+        )
+    )
+    assert check("ann", "ann-key-0123456789") == 2  # operator
+    assert check("vic", "vic-key-0123456789") == 1  # viewer
+    assert check("vic", "ann-key-0123456789") is None  # another user's key
+    assert check("ann", "wrong-key-000000000") is None
