@@ -29,6 +29,14 @@ def machine(
         help="simulation face (faults, operator, clock) on or off (default: as configured)",
     ),
     ideal: bool = typer.Option(False, "--ideal", help="ideal axes instead of CANopen drives"),
+    opcua: int | None = typer.Option(
+        None,
+        "--opcua",
+        min=0,
+        max=65535,
+        help="serve OPC UA (OPC 40501 MachineTool) on this port (0 = any free port);"
+        " default: as configured (ports.opcua)",
+    ),
     dnc_parity: bool = typer.Option(False, "--dnc-parity", help="ISO 7-bit even parity"),
     speed: float = typer.Option(1.0, "--speed", help="clock speed factor (1 = real time)"),
     clock: str = typer.Option(
@@ -55,8 +63,8 @@ def machine(
     event_log: Path | None = typer.Option(None, "--event-log", help="JSONL event log file"),
     candump: Path | None = typer.Option(None, "--candump", help="CAN frames, candump log"),
 ) -> None:
-    """Run one machine standalone with its faces (DNC, Modbus, SHDR, simulation) until
-    SIGINT/SIGTERM."""
+    """Run one machine standalone with its faces (DNC, Modbus, SHDR, OPC UA, simulation)
+    until SIGINT/SIGTERM."""
     import signal
 
     from cnc.config import builtin_machine, load_machine_config
@@ -76,6 +84,8 @@ def machine(
             typer.echo("FMSCELL_MACHINE_SECRET: 16-128 printable characters, no blanks", err=True)
             raise typer.Exit(2)
         cfg = cfg.model_copy(update={"ports": cfg.ports.model_copy(update={"secret": secret})})
+    if opcua is not None:
+        cfg = cfg.model_copy(update={"ports": cfg.ports.model_copy(update={"opcua": opcua})})
     if cfg.ports.secret is None and not _loopback(cfg.ports.host):
         typer.echo(
             f"{name}: WARNING: the DNC port and simulation face listen on {cfg.ports.host}"

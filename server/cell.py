@@ -41,23 +41,29 @@ CLOCKS = ("realtime", "fast")
 
 
 DEFAULT_PORTS = {
-    "mill1": {"dnc": 7001, "modbus": 5021, "shdr": 7878},
-    "mill2": {"dnc": 7003, "modbus": 5023, "shdr": 7880},
-    "lathe1": {"dnc": 7002, "modbus": 5022, "shdr": 7879},
+    "mill1": {"dnc": 7001, "modbus": 5021, "shdr": 7878, "opcua": 4841},
+    "mill2": {"dnc": 7003, "modbus": 5023, "shdr": 7880, "opcua": 4843},
+    "lathe1": {"dnc": 7002, "modbus": 5022, "shdr": 7879, "opcua": 4842},
 }
 
 
-def default_cell(*, free_ports: bool = False):
+def default_cell(*, free_ports: bool = False, opcua: bool | None = None):
     """The built-in cell of `fmscell run`: two identical 3-axis mills and one lathe, built
     from the shipped machines (mill3 twice, lathe2), faces on fixed loopback ports (so a
     restarted host finds machines that kept running) or, with `free_ports`, on any free
-    port (tests)."""
+    port (tests). `opcua`: the OPC UA faces on or off; None = on with the fixed ports, off
+    with free ports (an OPC UA server takes seconds to start on a loaded box, and most
+    tests of the cell do not read it)."""
     from cnc.config import load_cell_config
 
+    if opcua is None:
+        opcua = not free_ports
     bases = {"mill1": "mill3", "mill2": "mill3", "lathe1": "lathe2"}
     machines = {}
     for name, base in bases.items():
-        ports = dict.fromkeys(DEFAULT_PORTS[name], 0) if free_ports else DEFAULT_PORTS[name]
+        ports = dict.fromkeys(DEFAULT_PORTS[name], 0) if free_ports else dict(DEFAULT_PORTS[name])
+        if not opcua:
+            ports["opcua"] = None
         machines[name] = {"base": base, "ports": {"host": "127.0.0.1", **ports}}
     return load_cell_config({"machines": machines})
 
@@ -100,6 +106,7 @@ class Cell:
         rule: str | None = None,
         state_dir: str | Path | None = None,
         attach: bool = False,
+        opcua_users=None,
     ) -> None:
         if clock not in CLOCKS:
             raise ValueError(f"clock {clock!r}: one of {', '.join(CLOCKS)}")
@@ -114,6 +121,8 @@ class Cell:
         self.state_dir = Path(state_dir) if state_dir else Path.cwd()
         self.tick_s = tick_s if tick_s is not None else (0.05 if clock == "fast" else 0.5)
         self.rule = rule or self.config.host.dispatch_rule  # None: the cell file's choice
+        #: (user, password) -> cell role, for machines with a secured OPC UA face (in-process)
+        self.opcua_users = opcua_users
         self.links: dict[str, MachineLink] = {}
         self.machines: list[Any] = []
         self.loops: list[Loop] = []
@@ -189,6 +198,7 @@ class Cell:
                 Loop("transfer-worker", self.worker.run_once, self.tick_s).start(),
             ]
             self._start_publisher()
+            self._start_opcua_feed()
             self._start_remote_requests()
         except BaseException:
             self.stop()
@@ -248,7 +258,7 @@ class Cell:
             # machines run elsewhere (their own services): connect to the configured faces
             for name, mcfg in self.config.machines.items():
                 p = mcfg.ports
-                ports = {"dnc": p.dnc, "modbus": p.modbus, "shdr": p.shdr}
+                ports = {"dnc": p.dnc, "modbus": p.modbus, "shdr": p.shdr, "opcua": p.opcua}
                 ports["simulation"] = p.simulation if self.faults_enabled else None
                 self.links[name] = MachineLink(
                     name,
@@ -284,7 +294,12 @@ class Cell:
                 update={"ports": mcfg.ports.model_copy(update={"secret": secret})}
             )
             m = InProcessMachine(
-                name, mcfg, fast=fast, simulation=self.faults_enabled, ideal=self.ideal_axes
+                name,
+                mcfg,
+                fast=fast,
+                simulation=self.faults_enabled,
+                ideal=self.ideal_axes,
+                opcua_users=self.opcua_users,
             )
             self.machines.append(m)
             self.links[name] = m.link
@@ -331,6 +346,25 @@ class Cell:
         self.mqtt = CellFace(settings, self.monitor).start()
         publisher = OutboxPublisher(self.sessions, self.mqtt.publish_event)
         self.loops.append(Loop("outbox-publisher", publisher.publish_pending, 0.2).start())
+
+    def _start_opcua_feed(self) -> None:
+        """The host's knowledge (dispatched revisions, jobs) into the OPC UA faces of the
+        machines this process runs; machines in their own processes serve the machine's own
+        data only (docs/opcua.md)."""
+        faces = {
+            name: link.local.opcua
+            for name, link in self.links.items()
+            if getattr(link.local, "opcua", None) is not None
+        }
+        if not faces:
+            return
+        from server.opcua_feed import host_data
+
+        def feed() -> None:
+            for name, face in faces.items():
+                face.set_host_data(host_data(self.library, self.dispatches, self.jobs, name))
+
+        self.loops.append(Loop("opcua-feed", feed, 1.0).start())
 
     def _start_remote_requests(self) -> None:
         from dnc.machine_link import RemoteRequests, client_for
@@ -379,10 +413,19 @@ class Cell:
             jobs=self.jobs,
             sessions=self.sessions,
             machines_provider=self.monitor.all,
+            opcua_addresses=self.opcua_addresses,
             faults_enabled=self.faults_enabled,
             mtconnect_agent=self.agent,
             cell_control=self,
         )
+
+    def opcua_addresses(self) -> dict[str, str]:
+        """Each machine's OPC UA endpoint (machines whose OPC UA face is off are absent)."""
+        return {
+            name: f"opc.tcp://{link.host}:{link.ports['opcua']}"
+            for name, link in self.links.items()
+            if link.ports.get("opcua")
+        }
 
     # ------------------------------------------------------------------ commands
     def link(self, name: str) -> MachineLink:
@@ -619,6 +662,7 @@ def run_cell(
         ideal_axes=ideal_axes,
         config_file=config,
         attach=attach,
+        opcua_users=opcua_users(settings),
     )
     # SIGINT/SIGTERM: uvicorn stops serving, then the cell stops its loops after their
     # current transaction and its machines. uvicorn re-raises the signal once it has shut
@@ -739,3 +783,16 @@ def _tls_files(tls, config: Path | None) -> tuple[str, str] | str | None:
     except (ssl.SSLError, OSError) as err:
         return f"host.tls: cannot load {paths[0]} with {paths[1]}: {err}"
     return paths[0], paths[1]
+
+
+def opcua_users(settings):
+    """The OPC UA user check from the API keys: user name = the key's `user`, password =
+    the key; the session gets the key's role (docs/opcua.md)."""
+
+    def check(user: str, password: str) -> int | None:
+        principal = settings.authenticate(password)
+        if principal is None or principal.user != user:
+            return None
+        return int(principal.role)
+
+    return check

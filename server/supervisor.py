@@ -192,7 +192,14 @@ class InProcessMachine:
     """One machine in this process: faces up, powered on, stepped by a runner thread."""
 
     def __init__(
-        self, name: str, config, *, fast: bool, simulation: bool, ideal: bool = False
+        self,
+        name: str,
+        config,
+        *,
+        fast: bool,
+        simulation: bool,
+        ideal: bool = False,
+        opcua_users=None,
     ) -> None:
         from cnc.machine import Machine, RealtimeRunner
         from cnc.machine.runner import FAST_SPEED, IDLE_SPEED
@@ -205,7 +212,7 @@ class InProcessMachine:
             self.runner = RealtimeRunner(self.machine)
         self.ready = threading.Event()
         self.error: BaseException | None = None
-        faces = self.machine.start_faces(simulation=simulation)
+        faces = self.machine.start_faces(simulation=simulation, opcua_users=opcua_users)
         self.link = MachineLink(
             name,
             config.kind,

@@ -6,7 +6,7 @@ hands them in; the app only translates HTTP to service calls and refusals to pro
 
 from __future__ import annotations
 
-from collections.abc import AsyncIterator
+from collections.abc import AsyncIterator, Callable, Mapping
 from contextlib import asynccontextmanager
 from typing import Any
 
@@ -53,6 +53,7 @@ def create_app(
     jobs: Jobs,
     sessions: sessionmaker[Session],
     machines_provider: MachinesProvider | None = None,
+    opcua_addresses: Callable[[], Mapping[str, str]] | None = None,
     faults_enabled: bool = False,
     mtconnect_agent: Any | None = None,
     cell_control: CellControl | None = None,
@@ -61,7 +62,8 @@ def create_app(
 
     `sessions` is the session factory the services use (health checks and the event stream
     read through it). `machines_provider`, when given, returns each machine's live status by
-    name and is joined into `/api/machines`. `mtconnect_agent` mounts the MTConnect agent
+    name and is joined into `/api/machines`; `opcua_addresses` gives each machine's OPC UA
+    endpoint (`opcua_address`). `mtconnect_agent` mounts the MTConnect agent
     under `/mtconnect`. `faults_enabled` is reported by `/api/health`; the fault routes
     arrive with the machine endpoints.
     """
@@ -97,6 +99,7 @@ def create_app(
         dispatches=dispatches,
         jobs=jobs,
         machines_provider=machines_provider,
+        opcua_addresses=opcua_addresses,
         faults_enabled=faults_enabled,
     )
     app.state.event_hub = hub

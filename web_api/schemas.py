@@ -291,6 +291,10 @@ class Machine(BaseModel):
     dnc_address: str
     modbus_address: str
     status_address: str
+    opcua_address: str | None = Field(
+        default=None,
+        description="the machine's OPC UA (OPC 40501 MachineTool) endpoint; null when off",
+    )
     memory_bytes: int
     dnc_profile: dict[str, Any]
     status: dict[str, Any] | None = Field(

@@ -1,8 +1,11 @@
-"""The machine's faces on one LoopThread: DNC port, Modbus TCP, SHDR, simulation face."""
+"""The machine's faces on one LoopThread: DNC port, Modbus TCP, SHDR, simulation face; the
+OPC UA face on a loop thread of its own (its clients cost CPU the other faces must not wait
+for)."""
 
 from __future__ import annotations
 
 import contextlib
+from pathlib import Path
 
 from cnc.faces.loop_thread import LoopThread
 
@@ -24,6 +27,10 @@ class MachineFaces:
         self.modbus = None
         self.shdr = None
         self.simulation = None
+        self.opcua = None
+        self.opcua_loop: LoopThread | None = None
+        #: user name + password -> cell role (1 viewer .. 4 admin), for a secured OPC UA face
+        self.opcua_authenticate = None
         self._want_sim = simulation
 
     def start(self) -> MachineFaces:
@@ -72,6 +79,8 @@ class MachineFaces:
             )
             self.loop.run(self.shdr.start)
             m.shdr = self.shdr
+        if ports.opcua is not None:
+            self._start_opcua()
         sim_port = ports.simulation
         if self._want_sim is True and sim_port is None:
             sim_port = 0
@@ -81,6 +90,49 @@ class MachineFaces:
             self.simulation = SimulationFace(m, host=ports.host, port=sim_port, secret=ports.secret)
             self.loop.run(self.simulation.start)
         return self
+
+    def _start_opcua(self) -> None:
+        from cnc.faces.opcua import Identification, OpcUaFace, Security
+
+        m, ports = self.machine, self.machine.config.ports
+        security = None
+        if ports.opcua_security != "none":
+            base = Path(m.state_dir) if getattr(m, "state_dir", None) else Path.home() / ".fmscell"
+            security = Security(
+                cert_dir=base / "opcua",
+                trusted_dir=base / "opcua" / "trusted",
+                authenticate=self.opcua_authenticate,
+            )
+        ctl = m.controller
+        md = getattr(ctl, "machine_data", None)
+        self.opcua = OpcUaFace(
+            m.name,
+            tuple(m.axis_names),
+            host=ports.host,
+            port=ports.opcua,
+            identification=Identification(
+                model=m.config.kind,
+                serial_number=m.name,
+                software_revision=_version(),
+                location=ports.host,
+            ),
+            tools=(lambda: (md.revision, md.tools_dict())) if md is not None else None,
+            program_sha256=self._program_sha256,
+            security=security,
+        )
+        self.opcua_loop = LoopThread(f"opcua-{m.name}").start()
+        self.opcua_loop.run(self.opcua.start, timeout=60.0)
+        m.opcua = self.opcua
+
+    def _program_sha256(self, name: str) -> str:
+        """The sha256 of the running program as held in program memory (O-number names)."""
+        from cnc.faces.opcua.values import program_number
+
+        number = program_number(name)
+        for entry in self.machine.memory.directory():
+            if entry.number == number:
+                return entry.sha256
+        return ""
 
     def _drip(self):
         buffer = self.machine.controller.drip_input()
@@ -115,6 +167,7 @@ class MachineFaces:
             "modbus": self.modbus.bound_port if self.modbus else None,
             "shdr": self.shdr.bound_port if self.shdr else None,
             "simulation": self.simulation.bound_port if self.simulation else None,
+            "opcua": self.opcua.bound_port if self.opcua else None,
         }
 
     def stop(self) -> None:
@@ -124,4 +177,18 @@ class MachineFaces:
                 with contextlib.suppress(Exception):
                     self.loop.run(face.stop)
         self.machine.shdr = None
+        self.machine.opcua = None
+        if self.opcua is not None and self.opcua_loop is not None:
+            with contextlib.suppress(Exception):
+                self.opcua_loop.run(self.opcua.stop)
+            self.opcua_loop.stop()
         self.loop.stop()
+
+
+def _version() -> str:
+    from importlib.metadata import PackageNotFoundError, version
+
+    try:
+        return version("fmscell")
+    except PackageNotFoundError:
+        return "dev"

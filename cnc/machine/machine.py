@@ -171,6 +171,7 @@ class Machine:
         self._path: deque = deque(maxlen=512)
         self._alarm_keys: set = set()
         self.shdr = None  # set by the faces
+        self.opcua = None  # set by the faces
         self.faces = None
 
     # ------------------------------------------------------------------ the lockstep loop
@@ -222,8 +223,12 @@ class Machine:
         if self.trace is not None:
             self.trace.row(self.t, self.last_targets, fb.actual, status.line)
         self._watch_alarms(status)
-        if self.cycle % self.shdr_every == 0 and self.shdr is not None:
-            self.shdr.publish(self.full_status(), self.timestamp())
+        if self.cycle % self.shdr_every == 0 and (self.shdr is not None or self.opcua is not None):
+            full, ts = self.full_status(), self.timestamp()
+            if self.shdr is not None:
+                self.shdr.publish(full, ts)
+            if self.opcua is not None:
+                self.opcua.publish(full, ts)  # a reference store: never waits on a client
         if self.machine_data_file is not None and self.cycle % self.plc_every == 0:
             md = self.controller.machine_data
             if md.revision != self._md_saved and not self.controller.in_cycle:
@@ -458,14 +463,19 @@ class Machine:
         self.call_soon(add)
 
     # ------------------------------------------------------------------ faces, lifetime
-    def start_faces(self, *, simulation: bool | None = None, dnc_parity: bool = False):
+    def start_faces(
+        self, *, simulation: bool | None = None, dnc_parity: bool = False, opcua_users=None
+    ):
         """Start the faces (DNC, Modbus, SHDR, simulation if enabled) on one LoopThread.
 
         `dnc_parity`: ISO 7-bit even parity on the DNC port (a parity error rejects the
-        program and raises alarm 2001)."""
+        program and raises alarm 2001). `opcua_users`: `(user, password) -> role` for a
+        secured OPC UA face (docs/opcua.md)."""
         from cnc.machine.faces import MachineFaces
 
-        self.faces = MachineFaces(self, simulation=simulation, dnc_parity=dnc_parity).start()
+        self.faces = MachineFaces(self, simulation=simulation, dnc_parity=dnc_parity)
+        self.faces.opcua_authenticate = opcua_users
+        self.faces.start()
         return self.faces
 
     def close(self) -> None:

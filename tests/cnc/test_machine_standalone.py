@@ -56,6 +56,53 @@ def test_standalone_machine_serves_its_faces_and_stops_on_sigterm(tmp_path):
     assert last["stopped"] is True and last["realtime"]["cycles"] > 0
 
 
+def test_standalone_machine_serves_opcua_with_the_opcua_option(tmp_path):
+    """`fmscell machine --opcua 0`: the ready line names the bound OPC UA port, and a client
+    browses the machine there (identification from the machine itself, no host)."""
+    import asyncio
+
+    from asyncua import Client, ua
+
+    cfg = tmp_path / "cell.yaml"
+    cfg.write_text(
+        "machines:\n  mill9:\n    base: mill3\n    ports: {dnc: 0, modbus: 0, shdr: 0}\n"
+    )
+    proc = subprocess.Popen(
+        [
+            sys.executable,
+            "-c",
+            RUNNER,
+            "--config",
+            str(cfg),
+            "--name",
+            "mill9",
+            "--ideal",
+            "--opcua",
+            "0",
+        ],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
+    try:
+        ports = json.loads(proc.stdout.readline())["ports"]
+        assert ports["opcua"] > 0
+
+        async def serial() -> str:
+            async with Client(f"opc.tcp://127.0.0.1:{ports['opcua']}", timeout=30) as c:
+                ns = await c.get_namespace_index("urn:fmscell:machine:mill9")
+                node = c.get_node(ua.NodeId("mill9.Identification.SerialNumber", ns))
+                return await node.read_value()
+
+        assert asyncio.run(serial()) == "mill9"
+        proc.send_signal(signal.SIGTERM)
+        proc.communicate(timeout=30)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+    assert proc.returncode == 0
+
+
 def test_standalone_machine_refuses_an_unknown_machine_name(tmp_path):
     cfg = tmp_path / "cell.yaml"
     cfg.write_text("machines:\n  mill9:\n    base: mill3\n")

@@ -134,7 +134,13 @@ def test_attach_links_the_configured_faces_and_the_simulation_only_with_faults()
         cell = Cell(cfg, attach=True, faults=faults)
         cell._start_machines(1.0)
         lk = cell.links["m1"]
-        assert lk.ports == {"dnc": 7101, "modbus": 5121, "shdr": 7978, "simulation": sim}
+        assert lk.ports == {
+            "dnc": 7101,
+            "modbus": 5121,
+            "shdr": 7978,
+            "simulation": sim,
+            "opcua": None,
+        }
         assert cell.machines == []  # nothing started: the machines run elsewhere
 
 
@@ -371,3 +377,25 @@ def test_a_machine_process_secret_is_kept_owner_only_for_the_next_host(tmp_path)
     assert again not in (made, "short") and kept.read_text() == again + "\n"
     fresh = cell._secret("mill1", mcfg, persist=False)
     assert fresh not in (made, again) and kept.read_text() == again + "\n"
+
+
+def test_the_cell_lists_each_machines_opcua_endpoint():
+    """`opcua_address` in GET /api/machines comes from the machines' bound OPC UA ports;
+    a machine whose OPC UA face is off has none."""
+    c = Cell(default_cell(free_ports=True))
+    c.links["m1"] = MachineLink("m1", "mill", "127.0.0.1", {"opcua": 4999}, ("X",), 0)
+    c.links["m2"] = MachineLink("m2", "mill", "127.0.0.1", {"opcua": None}, ("X",), 0)
+    assert c.opcua_addresses() == {"m1": "opc.tcp://127.0.0.1:4999"}
+
+
+def test_the_default_cell_serves_opcua_on_its_fixed_ports_and_not_with_free_ones():
+    fixed = default_cell()
+    assert {n: m.ports.opcua for n, m in fixed.machines.items()} == {
+        "mill1": 4841,
+        "lathe1": 4842,
+        "mill2": 4843,
+    }
+    assert all(m.ports.opcua is None for m in default_cell(free_ports=True).machines.values())
+    assert all(
+        m.ports.opcua == 0 for m in default_cell(free_ports=True, opcua=True).machines.values()
+    )

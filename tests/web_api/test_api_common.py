@@ -115,6 +115,7 @@ def make_api(sessions, **settings_over) -> Api:  # noqa: F811 - the fixture's va
         library.register_machine(name, kind, memory_bytes=64 * 1024)
     dispatches, jobs = Dispatches(sessions), Jobs(sessions)
     provider = settings_over.pop("machines_provider", None)
+    opcua = settings_over.pop("opcua_addresses", None)
     app = create_app(
         settings(**settings_over),
         library=library,
@@ -122,6 +123,7 @@ def make_api(sessions, **settings_over) -> Api:  # noqa: F811 - the fixture's va
         jobs=jobs,
         sessions=sessions,
         machines_provider=provider,
+        opcua_addresses=opcua,
     )
     return Api(TestClient(app), library, dispatches, jobs, sessions)
 

@@ -48,6 +48,17 @@ def test_live_status_from_the_cell_is_joined_by_name(sessions):
     assert len(calls) == 2
 
 
+@SQLITE_ONLY
+def test_each_machines_opcua_endpoint_beside_its_other_faces(sessions):
+    a = make_api(sessions, opcua_addresses=lambda: {"mill-1": "opc.tcp://127.0.0.1:4841"})
+    with a.client:
+        machines = {m["name"]: m for m in a.get("/api/machines").json()}
+        assert machines["mill-1"]["opcua_address"] == "opc.tcp://127.0.0.1:4841"
+        assert machines["mill-2"]["opcua_address"] is None  # its OPC UA face is off
+        one = a.get("/api/machines/mill-1").json()
+        assert one["opcua_address"] == "opc.tcp://127.0.0.1:4841"
+
+
 def test_health_ok(api):
     r = api.client.get("/api/health")
     assert r.json() == {

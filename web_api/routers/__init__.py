@@ -32,6 +32,7 @@ class Services:
     dispatches: Dispatches
     jobs: Jobs
     machines_provider: MachinesProvider | None = None
+    opcua_addresses: Callable[[], Mapping[str, str]] | None = None
     faults_enabled: bool = False
 
 

@@ -16,6 +16,10 @@ router = APIRouter(tags=["machines"], responses=problem_doc(401, 403, 422, 503))
 Svc = Annotated[Services, Depends(get_services)]
 
 
+def _opcua(services: Services) -> dict:
+    return dict(services.opcua_addresses()) if services.opcua_addresses else {}
+
+
 async def _live(services: Services) -> dict:
     if services.machines_provider is None:
         return {}
@@ -26,7 +30,11 @@ async def _live(services: Services) -> dict:
 async def list_machines(services: Svc, _: Viewer) -> list[Machine]:
     registry = await run_in_threadpool(services.library.machines)
     live = await _live(services)
-    return [Machine(**x, status=live.get(x["name"])) for x in registry]
+    opcua = _opcua(services)
+    return [
+        Machine(**x, status=live.get(x["name"]), opcua_address=opcua.get(x["name"]))
+        for x in registry
+    ]
 
 
 @router.get(
@@ -38,4 +46,4 @@ async def list_machines(services: Svc, _: Viewer) -> list[Machine]:
 async def get_machine(name: Annotated[MachineName, Path()], services: Svc, _: Viewer) -> Machine:
     entry = await run_in_threadpool(services.library.machine, name)
     live = await _live(services)
-    return Machine(**entry, status=live.get(name))
+    return Machine(**entry, status=live.get(name), opcua_address=_opcua(services).get(name))

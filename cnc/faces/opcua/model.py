@@ -1,0 +1,401 @@
+"""The OPC UA information model the machine's server uses, declared from the companion
+specifications: OPC 10000-100 (DI), OPC 40001-1 (Machinery), OPC 10000-200 (IA, stack
+light) and OPC 40501-1 v1.02 (MachineTool).
+
+These are facts of the specifications (namespace URIs, numeric node ids, browse names,
+supertypes, modelling rules, data types), written out for the subset the server fills, so
+the server builds its type nodes itself at start instead of importing the NodeSet2 files
+at run time. Tests parse the official NodeSet2 files and check every declaration here
+against them (tests/cnc/faces/test_opcua_model.py).
+
+A node is named `(namespace URI, numeric id)`; a browse name `(namespace URI, name)`.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+UA = "http://opcfoundation.org/UA/"
+DI = "http://opcfoundation.org/UA/DI/"
+MACHINERY = "http://opcfoundation.org/UA/Machinery/"
+IA = "http://opcfoundation.org/UA/IA/"
+MACHINE_TOOL = "http://opcfoundation.org/UA/MachineTool/"
+#: fmscell's own extensions (program line, DNC revision and sha256): a namespace of ours
+FMSCELL = "urn:fmscell:opcua"
+
+#: the order the server registers the companion namespaces in (any order would do: a
+#: client resolves URIs through the NamespaceArray)
+COMPANION_URIS = (DI, MACHINERY, IA, MACHINE_TOOL, FMSCELL)
+
+NodeRef = tuple[str, int]
+Name = tuple[str, str]
+
+# --- standard nodes (namespace 0) used as supertypes, type definitions and data types -----
+BASE_OBJECT = (UA, 58)
+FOLDER = (UA, 61)
+BASE_DATA_VARIABLE = (UA, 63)
+PROPERTY = (UA, 68)
+ENUMERATION = (UA, 29)
+FINITE_STATE_MACHINE = (UA, 2771)
+FINITE_STATE_VARIABLE = (UA, 2760)
+ORDERED_LIST = (UA, 23518)
+ANALOG_UNIT_RANGE = (UA, 17570)
+BOOLEAN, BYTE, UINT16, UINT32, DOUBLE, STRING = (
+    (UA, 1),
+    (UA, 3),
+    (UA, 5),
+    (UA, 7),
+    (UA, 11),
+    (UA, 12),
+)
+LOCALIZED_TEXT = (UA, 21)
+UINTEGER = (UA, 28)  # abstract: any unsigned integer
+
+HAS_COMPONENT, HAS_PROPERTY, HAS_ADD_IN = 47, 46, 17604
+MANDATORY, OPTIONAL = 78, 80
+
+
+@dataclass(frozen=True, slots=True)
+class Member:
+    """An instance declaration of a type (a component, property or add-in)."""
+
+    name: Name
+    node_id: int  # in the declaring type's namespace
+    node_class: str  # "Object" | "Variable"
+    type_definition: NodeRef
+    mandatory: bool
+    reference: int = HAS_COMPONENT
+    data_type: NodeRef | None = None
+
+
+@dataclass(frozen=True, slots=True)
+class ObjectTypeDecl:
+    node: NodeRef
+    name: str  # browse name, in the node's namespace
+    supertype: NodeRef
+    members: tuple[Member, ...] = ()
+    abstract: bool = False
+
+
+@dataclass(frozen=True, slots=True)
+class EnumDecl:
+    node: NodeRef
+    name: str
+    fields: tuple[str, ...]  # values 0, 1, 2, ... in order
+
+
+def _v(
+    ns: str,
+    name: str,
+    node_id: int,
+    data_type: NodeRef,
+    mandatory: bool,
+    *,
+    prop: bool = False,
+    name_ns: str | None = None,
+    typedef: NodeRef | None = None,
+) -> Member:
+    return Member(
+        (name_ns or ns, name),
+        node_id,
+        "Variable",
+        typedef or (PROPERTY if prop else BASE_DATA_VARIABLE),
+        mandatory,
+        HAS_PROPERTY if prop else HAS_COMPONENT,
+        data_type,
+    )
+
+
+def _o(
+    ns: str, name: str, node_id: int, typedef: NodeRef, mandatory: bool, *, ref: int = HAS_COMPONENT
+) -> Member:
+    return Member((ns, name), node_id, "Object", typedef, mandatory, ref)
+
+
+# --- data types --------------------------------------------------------------------------
+
+CHANNEL_STATE = EnumDecl((MACHINE_TOOL, 64), "ChannelState", ("Active", "Interrupted", "Reset"))
+MACHINE_OPERATION_MODE = EnumDecl(
+    (MACHINE_TOOL, 65),
+    "MachineOperationMode",
+    ("Manual", "Automatic", "Setup", "AutoWithManualIntervention", "Service", "Other"),
+)
+CHANNEL_MODE = EnumDecl(
+    (MACHINE_TOOL, 67),
+    "ChannelMode",
+    (
+        "Automatic",
+        "MdaMdi",
+        "JogManual",
+        "JogIncrement",
+        "TeachingHandle",
+        "Remote",
+        "Reference",
+        "Other",
+    ),
+)
+TOOL_MANAGEMENT = EnumDecl(
+    (MACHINE_TOOL, 69), "ToolManagement", ("NumberBased", "GroupBased", "Other")
+)
+STACKLIGHT_OPERATION_MODE = EnumDecl(
+    (IA, 3002), "StacklightOperationMode", ("Segmented", "Levelmeter", "Running_Light", "Other")
+)
+SIGNAL_COLOR = EnumDecl(
+    (IA, 3004),
+    "SignalColor",
+    ("Off", "Red", "Green", "Blue", "Yellow", "Purple", "Cyan", "White"),
+)
+ENUMS = (
+    CHANNEL_STATE,
+    MACHINE_OPERATION_MODE,
+    CHANNEL_MODE,
+    TOOL_MANAGEMENT,
+    STACKLIGHT_OPERATION_MODE,
+    SIGNAL_COLOR,
+)
+
+# --- object types, supertypes first ------------------------------------------------------
+
+MT, MA = MACHINE_TOOL, MACHINERY
+
+FUNCTIONAL_GROUP = ObjectTypeDecl((DI, 1005), "FunctionalGroupType", FOLDER)
+MACHINERY_ITEM_IDENTIFICATION = ObjectTypeDecl(
+    (MA, 1004),
+    "MachineryItemIdentificationType",
+    FUNCTIONAL_GROUP.node,
+    (
+        _v(MA, "Manufacturer", 6002, LOCALIZED_TEXT, True, prop=True, name_ns=DI),
+        _v(MA, "SerialNumber", 6003, STRING, True, prop=True, name_ns=DI),
+        _v(MA, "Model", 6008, LOCALIZED_TEXT, False, prop=True, name_ns=DI),
+        _v(MA, "SoftwareRevision", 6011, STRING, False, prop=True, name_ns=DI),
+    ),
+    abstract=True,
+)
+MACHINE_IDENTIFICATION = ObjectTypeDecl(
+    (MA, 1012),
+    "MachineIdentificationType",
+    MACHINERY_ITEM_IDENTIFICATION.node,
+    (
+        _v(MA, "ProductInstanceUri", 6015, STRING, True, prop=True, name_ns=DI),
+        _v(MA, "Location", 6029, STRING, False, prop=True),
+    ),
+)
+MACHINE_TOOL_IDENTIFICATION = ObjectTypeDecl(
+    (MT, 11), "MachineToolIdentificationType", MACHINE_IDENTIFICATION.node
+)
+
+ELEMENT_MONITORING = ObjectTypeDecl(
+    (MT, 23),
+    "ElementMonitoringType",
+    BASE_OBJECT,
+    (_v(MT, "Name", 234, STRING, True, prop=True),),
+)
+MACHINE_OPERATION_MONITORING = ObjectTypeDecl(
+    (MT, 26),
+    "MachineOperationMonitoringType",
+    BASE_OBJECT,
+    (
+        _v(MT, "OperationMode", 225, MACHINE_OPERATION_MODE.node, True),
+        _v(MT, "PowerOnDuration", 261, UINT32, False),
+        _v(MT, "FeedOverride", 233, DOUBLE, False, typedef=ANALOG_UNIT_RANGE),
+    ),
+)
+CHANNEL_MONITORING = ObjectTypeDecl(
+    (MT, 16),
+    "ChannelMonitoringType",
+    ELEMENT_MONITORING.node,
+    (
+        _v(MT, "ChannelState", 332, CHANNEL_STATE.node, True),
+        _v(MT, "ChannelMode", 249, CHANNEL_MODE.node, True),
+        _v(MT, "FeedOverride", 276, DOUBLE, True, typedef=ANALOG_UNIT_RANGE),
+        _v(MT, "RapidOverride", 287, DOUBLE, False, typedef=ANALOG_UNIT_RANGE),
+    ),
+)
+WORKING_UNIT_MONITORING = ObjectTypeDecl(
+    (MT, 41), "WorkingUnitMonitoringType", ELEMENT_MONITORING.node, abstract=True
+)
+SPINDLE_MONITORING = ObjectTypeDecl(
+    (MT, 22),
+    "SpindleMonitoringType",
+    WORKING_UNIT_MONITORING.node,
+    (
+        _v(MT, "IsRotating", 247, BOOLEAN, True),
+        _v(MT, "Override", 241, DOUBLE, False, typedef=ANALOG_UNIT_RANGE),
+    ),
+)
+STACK_ELEMENT = ObjectTypeDecl(
+    (IA, 1005),
+    "StackElementType",
+    BASE_OBJECT,
+    (
+        _v(IA, "NumberInList", 6015, UINTEGER, True, prop=True, name_ns=UA),
+        _v(IA, "SignalOn", 6013, BOOLEAN, False, prop=True),
+    ),
+    abstract=True,
+)
+STACK_ELEMENT_LIGHT = ObjectTypeDecl(
+    (IA, 1006),
+    "StackElementLightType",
+    STACK_ELEMENT.node,
+    (_v(IA, "SignalColor", 6016, SIGNAL_COLOR.node, False),),
+)
+BASIC_STACKLIGHT = ObjectTypeDecl(
+    (IA, 1002),
+    "BasicStacklightType",
+    ORDERED_LIST,
+    (_v(IA, "StacklightMode", 6009, STACKLIGHT_OPERATION_MODE.node, True, prop=True),),
+)
+MONITORING = ObjectTypeDecl(
+    (MT, 14),
+    "MonitoringType",
+    BASE_OBJECT,
+    (
+        _o(MT, "MachineTool", 119, MACHINE_OPERATION_MONITORING.node, True),
+        _o(MT, "Stacklight", 121, BASIC_STACKLIGHT.node, False),
+    ),
+)
+
+PRODUCTION_STATE_MACHINE = ObjectTypeDecl(
+    (MT, 24),
+    "ProductionStateMachineType",
+    FINITE_STATE_MACHINE,
+    (_v(MT, "CurrentState", 270, LOCALIZED_TEXT, True, name_ns=UA, typedef=FINITE_STATE_VARIABLE),),
+)
+PRODUCTION_PROGRAM_STATE_MACHINE = ObjectTypeDecl(
+    (MT, 15), "ProductionProgramStateMachineType", PRODUCTION_STATE_MACHINE.node
+)
+PRODUCTION_JOB_STATE_MACHINE = ObjectTypeDecl(
+    (MT, 28), "ProductionJobStateMachineType", PRODUCTION_STATE_MACHINE.node
+)
+PRODUCTION_PROGRAM = ObjectTypeDecl(
+    (MT, 59),
+    "ProductionProgramType",
+    BASE_OBJECT,
+    (
+        _v(MT, "Name", 193, STRING, True, prop=True),
+        _v(MT, "NumberInList", 230, UINT16, True, prop=True, name_ns=UA),
+        _o(MT, "State", 5032, PRODUCTION_PROGRAM_STATE_MACHINE.node, False),
+    ),
+)
+PRODUCTION_ACTIVE_PROGRAM = ObjectTypeDecl(
+    (MT, 32),
+    "ProductionActiveProgramType",
+    PRODUCTION_PROGRAM.node,
+    (
+        _o(MT, "State", 5033, PRODUCTION_PROGRAM_STATE_MACHINE.node, True),
+        _v(MT, "JobIdentifier", 384, STRING, False),
+    ),
+)
+PRODUCTION_JOB = ObjectTypeDecl(
+    (MT, 29),
+    "ProductionJobType",
+    BASE_OBJECT,
+    (
+        _v(MT, "Identifier", 189, STRING, True, prop=True),
+        _v(MT, "NumberInList", 196, UINT16, True, prop=True, name_ns=UA),
+        _v(MT, "RunsPlanned", 192, UINT32, True),
+        _v(MT, "RunsCompleted", 191, UINT32, True),
+        _o(MT, "State", 5002, PRODUCTION_JOB_STATE_MACHINE.node, True),
+        _o(MT, "ProductionPrograms", 75, ORDERED_LIST, True),
+        _v(MT, "PartsCompleted", 6015, UINT32, False),
+    ),
+)
+PRODUCTION_JOB_LIST = ObjectTypeDecl((MT, 30), "ProductionJobListType", ORDERED_LIST)
+PRODUCTION = ObjectTypeDecl(
+    (MT, 21),
+    "ProductionType",
+    BASE_OBJECT,
+    (
+        _o(MT, "ActiveProgram", 87, PRODUCTION_ACTIVE_PROGRAM.node, True),
+        _o(MT, "ProductionPlan", 81, PRODUCTION_JOB_LIST.node, False),
+    ),
+)
+
+MESSAGES = ObjectTypeDecl((MT, 38), "MessagesType", BASE_OBJECT)
+NOTIFICATION = ObjectTypeDecl(
+    (MT, 7), "NotificationType", BASE_OBJECT, (_o(MT, "Messages", 90, MESSAGES.node, False),)
+)
+
+BASE_TOOL = ObjectTypeDecl(
+    (MT, 49),
+    "BaseToolType",
+    BASE_OBJECT,
+    (
+        _v(MT, "Name", 176, STRING, False, prop=True),
+        _v(MT, "Identifier", 316, STRING, False, prop=True),
+    ),
+    abstract=True,
+)
+TOOL = ObjectTypeDecl(
+    (MT, 50),
+    "ToolType",
+    BASE_TOOL.node,
+    (
+        _v(MT, "ControlIdentifier1", 178, UINT32, True),
+        _v(MT, "ControlIdentifierInterpretation", 296, TOOL_MANAGEMENT.node, True),
+        _v(MT, "Locked", 321, BOOLEAN, True),
+        _o(MT, "ToolLife", 88, BASE_OBJECT, False),
+    ),
+)
+TOOL_LIST = ObjectTypeDecl((MT, 44), "ToolListType", BASE_OBJECT)
+EQUIPMENT = ObjectTypeDecl(
+    (MT, 12), "EquipmentType", BASE_OBJECT, (_o(MT, "Tools", 116, TOOL_LIST.node, False),)
+)
+
+MACHINE_TOOL_TYPE = ObjectTypeDecl(
+    (MT, 13),
+    "MachineToolType",
+    BASE_OBJECT,
+    (
+        _o(DI, "Identification", 83, MACHINE_TOOL_IDENTIFICATION.node, True, ref=HAS_ADD_IN),
+        _o(MT, "Monitoring", 123, MONITORING.node, True),
+        _o(MT, "Production", 82, PRODUCTION.node, True),
+        _o(MT, "Notification", 128, NOTIFICATION.node, True),
+        _o(MT, "Equipment", 131, EQUIPMENT.node, True),
+    ),
+)
+
+#: every object type the server declares, each after its supertype and member types
+OBJECT_TYPES = (
+    FUNCTIONAL_GROUP,
+    MACHINERY_ITEM_IDENTIFICATION,
+    MACHINE_IDENTIFICATION,
+    MACHINE_TOOL_IDENTIFICATION,
+    ELEMENT_MONITORING,
+    MACHINE_OPERATION_MONITORING,
+    CHANNEL_MONITORING,
+    WORKING_UNIT_MONITORING,
+    SPINDLE_MONITORING,
+    STACK_ELEMENT,
+    STACK_ELEMENT_LIGHT,
+    BASIC_STACKLIGHT,
+    MONITORING,
+    PRODUCTION_STATE_MACHINE,
+    PRODUCTION_PROGRAM_STATE_MACHINE,
+    PRODUCTION_JOB_STATE_MACHINE,
+    PRODUCTION_PROGRAM,
+    PRODUCTION_ACTIVE_PROGRAM,
+    PRODUCTION_JOB,
+    PRODUCTION_JOB_LIST,
+    PRODUCTION,
+    MESSAGES,
+    NOTIFICATION,
+    BASE_TOOL,
+    TOOL,
+    TOOL_LIST,
+    EQUIPMENT,
+    MACHINE_TOOL_TYPE,
+)
+
+#: Objects/Machines, the Machinery entry point every machine registers under
+MACHINES_FOLDER: NodeRef = (MA, 1001)
+
+#: the states of ProductionProgramStateMachineType (OPC 40501-1 §11.7), with their state
+#: numbers (the Id of CurrentState is the state node)
+PROGRAM_STATES = {
+    "Initializing": 5039,
+    "Running": 5041,
+    "Ended": 5038,
+    "Interrupted": 5040,
+    "Aborted": 5037,
+}

@@ -1,0 +1,275 @@
+"""Builds the machine's address space in an asyncua server: the companion types from
+`model.py`, then the MachineTool instance under Objects/Machines.
+
+Nodes are added through the server's node management service with explicit type
+definitions (no automatic instantiation), so the instance holds exactly the members this
+module names, with stable string node ids (`<machine>.Monitoring.Channel1.ChannelState`) in
+the machine's own namespace.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+from asyncua import Server, ua
+
+from cnc.faces.opcua import model as m
+
+PERCENT = ua.EUInformation(
+    NamespaceUri="http://www.opcfoundation.org/UA/units/un/cefact",
+    UnitId=20529,  # UNECE P1
+    DisplayName=ua.LocalizedText("%"),
+    Description=ua.LocalizedText("percent"),
+)
+
+VARIANT_OF = {
+    m.BOOLEAN: ua.VariantType.Boolean,
+    m.BYTE: ua.VariantType.Byte,
+    m.UINTEGER: ua.VariantType.UInt16,
+    m.UINT16: ua.VariantType.UInt16,
+    m.UINT32: ua.VariantType.UInt32,
+    m.DOUBLE: ua.VariantType.Double,
+    m.STRING: ua.VariantType.String,
+    m.LOCALIZED_TEXT: ua.VariantType.LocalizedText,
+}
+
+
+@dataclass
+class Space:
+    """Namespace indexes and the node ids the updater writes, by key."""
+
+    ns: dict[str, int]
+    machine_ns: int
+    root: ua.NodeId | None = None
+    variables: dict[str, tuple[ua.NodeId, ua.VariantType]] = field(default_factory=dict)
+
+    def node(self, ref: m.NodeRef) -> ua.NodeId:
+        uri, ident = ref
+        return ua.NodeId(ident, 0 if uri == m.UA else self.ns[uri])
+
+    def qname(self, name: m.Name) -> ua.QualifiedName:
+        uri, text = name
+        return ua.QualifiedName(text, 0 if uri == m.UA else self.ns[uri])
+
+
+class Builder:
+    def __init__(self, server: Server, space: Space) -> None:
+        self.server = server
+        self.space = space
+        self._items: list[ua.AddNodesItem] = []
+
+    # ------------------------------------------------------------------ raw node adds
+
+    def _add(self, item: ua.AddNodesItem) -> None:
+        result = self.server.iserver.node_mgt_service.add_nodes([item])[0]
+        if not result.StatusCode.is_good():
+            raise RuntimeError(f"OPC UA: cannot add {item.BrowseName}: {result.StatusCode}")
+
+    def _ref(self, source: ua.NodeId, ref: int, target: ua.NodeId) -> None:
+        item = ua.AddReferencesItem()
+        item.SourceNodeId, item.ReferenceTypeId, item.TargetNodeId = source, ua.NodeId(ref), target
+        item.IsForward = True
+        item.TargetNodeClass = ua.NodeClass.Object
+        self.server.iserver.node_mgt_service.add_references([item])[0].check()
+
+    def object(
+        self,
+        parent: ua.NodeId,
+        nodeid: ua.NodeId,
+        name: ua.QualifiedName,
+        typedef: ua.NodeId,
+        ref: int = m.HAS_COMPONENT,
+        notifier: bool = False,
+        rule: int | None = None,
+    ) -> ua.NodeId:
+        item = ua.AddNodesItem()
+        item.RequestedNewNodeId, item.BrowseName = nodeid, name
+        item.NodeClass = ua.NodeClass.Object
+        item.ParentNodeId, item.ReferenceTypeId = parent, ua.NodeId(ref)
+        item.TypeDefinition = typedef
+        attrs = ua.ObjectAttributes()
+        attrs.DisplayName = ua.LocalizedText(name.Name)
+        attrs.EventNotifier = 1 if notifier else 0
+        item.NodeAttributes = attrs
+        self._add(item)
+        if rule is not None:
+            self._ref(nodeid, ua.ObjectIds.HasModellingRule, ua.NodeId(rule))
+        return nodeid
+
+    def variable(
+        self,
+        parent: ua.NodeId,
+        nodeid: ua.NodeId,
+        name: ua.QualifiedName,
+        typedef: ua.NodeId,
+        data_type: ua.NodeId,
+        value: ua.Variant,
+        ref: int = m.HAS_COMPONENT,
+        rule: int | None = None,
+        rank: int = -1,
+    ) -> ua.NodeId:
+        item = ua.AddNodesItem()
+        item.RequestedNewNodeId, item.BrowseName = nodeid, name
+        item.NodeClass = ua.NodeClass.Variable
+        item.ParentNodeId, item.ReferenceTypeId = parent, ua.NodeId(ref)
+        item.TypeDefinition = typedef
+        attrs = ua.VariableAttributes()
+        attrs.DisplayName = ua.LocalizedText(name.Name)
+        attrs.Value = value
+        attrs.DataType = data_type
+        attrs.ValueRank = rank
+        # read-only for everyone: the machine's state is written by the machine only
+        attrs.AccessLevel = attrs.UserAccessLevel = ua.AccessLevel.CurrentRead.mask
+        item.NodeAttributes = attrs
+        self._add(item)
+        if rule is not None:
+            self._ref(nodeid, ua.ObjectIds.HasModellingRule, ua.NodeId(rule))
+        return nodeid
+
+    # ------------------------------------------------------------------ types
+
+    def types(self) -> None:
+        sp = self.space
+        for enum in m.ENUMS:
+            nodeid = sp.node(enum.node)
+            item = ua.AddNodesItem()
+            item.RequestedNewNodeId = nodeid
+            item.BrowseName = ua.QualifiedName(enum.name, sp.ns[enum.node[0]])
+            item.NodeClass = ua.NodeClass.DataType
+            item.ParentNodeId = sp.node(m.ENUMERATION)
+            item.ReferenceTypeId = ua.NodeId(ua.ObjectIds.HasSubtype)
+            attrs = ua.DataTypeAttributes()
+            attrs.DisplayName = ua.LocalizedText(enum.name)
+            item.NodeAttributes = attrs
+            self._add(item)
+            self.variable(
+                nodeid,
+                ua.NodeId(f"{enum.name}.EnumStrings", sp.ns[enum.node[0]]),
+                ua.QualifiedName("EnumStrings", 0),
+                ua.NodeId(ua.ObjectIds.PropertyType),
+                ua.NodeId(ua.ObjectIds.LocalizedText),
+                ua.Variant(
+                    [ua.LocalizedText(f) for f in enum.fields], ua.VariantType.LocalizedText
+                ),
+                ref=m.HAS_PROPERTY,
+                rank=1,
+            )
+        for decl in m.OBJECT_TYPES:
+            nodeid = sp.node(decl.node)
+            item = ua.AddNodesItem()
+            item.RequestedNewNodeId = nodeid
+            item.BrowseName = ua.QualifiedName(decl.name, sp.ns[decl.node[0]])
+            item.NodeClass = ua.NodeClass.ObjectType
+            item.ParentNodeId = sp.node(decl.supertype)
+            item.ReferenceTypeId = ua.NodeId(ua.ObjectIds.HasSubtype)
+            attrs = ua.ObjectTypeAttributes()
+            attrs.DisplayName = ua.LocalizedText(decl.name)
+            attrs.IsAbstract = decl.abstract
+            item.NodeAttributes = attrs
+            self._add(item)
+            ns = sp.ns[decl.node[0]]
+            for member in decl.members:
+                rule = m.MANDATORY if member.mandatory else m.OPTIONAL
+                mid = ua.NodeId(member.node_id, ns)
+                if member.node_class == "Object":
+                    self.object(
+                        nodeid,
+                        mid,
+                        sp.qname(member.name),
+                        sp.node(member.type_definition),
+                        member.reference,
+                        rule=rule,
+                    )
+                else:
+                    self.variable(
+                        nodeid,
+                        mid,
+                        sp.qname(member.name),
+                        sp.node(member.type_definition),
+                        sp.node(member.data_type),
+                        _default(member.data_type),
+                        member.reference,
+                        rule=rule,
+                    )
+
+    # ------------------------------------------------------------------ instance helpers
+
+    def child_object(
+        self,
+        parent: ua.NodeId,
+        key: str,
+        name: m.Name,
+        typedef: m.NodeRef,
+        ref: int = m.HAS_COMPONENT,
+        notifier: bool = False,
+    ) -> ua.NodeId:
+        sp = self.space
+        return self.object(
+            parent, ua.NodeId(key, sp.machine_ns), sp.qname(name), sp.node(typedef), ref, notifier
+        )
+
+    def value(
+        self,
+        parent: ua.NodeId,
+        key: str,
+        name: m.Name,
+        data_type: m.NodeRef,
+        value,
+        *,
+        prop: bool = False,
+        typedef: m.NodeRef | None = None,
+    ) -> ua.NodeId:
+        """A live (or fixed) variable; its key is how the updater finds it."""
+        sp = self.space
+        vtype = VARIANT_OF.get(data_type, ua.VariantType.Int32)  # enumerations are Int32
+        td = typedef or (m.PROPERTY if prop else m.BASE_DATA_VARIABLE)
+        nodeid = ua.NodeId(key, sp.machine_ns)
+        self.variable(
+            parent,
+            nodeid,
+            sp.qname(name),
+            sp.node(td),
+            sp.node(data_type),
+            ua.Variant(_coerce(value, vtype), vtype),
+            m.HAS_PROPERTY if prop else m.HAS_COMPONENT,
+        )
+        sp.variables[key] = (nodeid, vtype)
+        if td == m.ANALOG_UNIT_RANGE:  # its two mandatory properties
+            ns = sp.machine_ns
+            self.variable(
+                nodeid,
+                ua.NodeId(key + ".EURange", ns),
+                ua.QualifiedName("EURange", 0),
+                ua.NodeId(ua.ObjectIds.PropertyType),
+                ua.NodeId(ua.ObjectIds.Range),
+                ua.Variant(ua.Range(0.0, 200.0)),
+                m.HAS_PROPERTY,
+            )
+            self.variable(
+                nodeid,
+                ua.NodeId(key + ".EngineeringUnits", ns),
+                ua.QualifiedName("EngineeringUnits", 0),
+                ua.NodeId(ua.ObjectIds.PropertyType),
+                ua.NodeId(ua.ObjectIds.EUInformation),
+                ua.Variant(PERCENT),
+                m.HAS_PROPERTY,
+            )
+        return nodeid
+
+
+def _default(data_type: m.NodeRef | None) -> ua.Variant:
+    vtype = VARIANT_OF.get(data_type, ua.VariantType.Int32) if data_type else ua.VariantType.Null
+    return ua.Variant(_coerce(None, vtype), vtype)
+
+
+def _coerce(value, vtype: ua.VariantType):
+    if value is not None:
+        if vtype == ua.VariantType.LocalizedText and isinstance(value, str):
+            return ua.LocalizedText(value)
+        return value
+    return {
+        ua.VariantType.Boolean: False,
+        ua.VariantType.String: "",
+        ua.VariantType.LocalizedText: ua.LocalizedText(""),
+        ua.VariantType.Double: 0.0,
+    }.get(vtype, 0 if vtype != ua.VariantType.Null else None)

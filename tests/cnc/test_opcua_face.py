@@ -1,0 +1,411 @@
+"""The machine's OPC UA face with a real asyncua client over loopback: the address space
+against the official nodesets, values following a running program, drive faults as alarm
+events with MTConnect's codes, and the cell roles (anonymous read, refused write/call).
+
+The machine steps in lockstep in the test's thread; the server samples on its own thread,
+so the test waits (on wall-clock deadlines) for the client to see what the machine did.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import threading
+import time
+
+import pytest
+from asyncua import Client, ua
+
+from cnc.faces.loop_thread import LoopThread
+from cnc.faces.opcua import HostData, ProductionJob
+from cnc.faces.opcua import model as m
+from cnc.faces.shdr import ShdrFormatter
+from cnc.machine import Machine
+from tests.cnc.opcua_nodesets import nodes
+from tests.cnc.setups import machine_coordinates
+
+PROGRAM = """%
+O0040 (OPC UA FOLLOWS)
+N10 G21 G90 G17
+N20 G1 X-60 Y-40 F3000
+N30 X-20 Y-20
+N40 M30
+%
+"""
+DEADLINE_S = 30.0  # generous: the box may be loaded
+
+
+def build(**ports) -> Machine:
+    cfg = machine_coordinates("mill3")
+    cfg = cfg.model_copy(
+        update={
+            "ports": cfg.ports.model_copy(
+                update={"dnc": None, "modbus": None, "shdr": None, "opcua": 0, **ports}
+            )
+        }
+    )
+    return Machine(cfg, "mill1")
+
+
+def home(mach: Machine) -> None:
+    mach.step(50)
+    mach.command("mode", mode="REF")
+    mach.command("home")
+    assert mach.run_until(lambda mm: all(mm.controller.referenced.values()), 30.0), mach.alarms
+
+
+class Seen:
+    """Data changes and events a subscription delivered (from the client's thread)."""
+
+    def __init__(self) -> None:
+        self.values: dict[str, list] = {}
+        self.events: list = []
+        self.lock = threading.Lock()
+
+    def datachange_notification(self, node, val, data) -> None:
+        with self.lock:
+            self.values.setdefault(node.nodeid.Identifier, []).append(
+                (val, data.monitored_item.Value.SourceTimestamp)
+            )
+
+    def event_notification(self, event) -> None:
+        with self.lock:
+            self.events.append(event)
+
+    def last(self, key: str):
+        with self.lock:
+            got = self.values.get(key)
+            return got[-1][0] if got else None
+
+    def history(self, key: str) -> list:
+        with self.lock:
+            return [v for v, _ in self.values.get(key, [])]
+
+
+def wait_for(predicate, what: str, step=None) -> None:
+    end = time.monotonic() + DEADLINE_S
+    while not predicate():
+        if time.monotonic() > end:
+            raise AssertionError(f"not seen within {DEADLINE_S} s: {what}")
+        if step is not None:
+            step()
+        time.sleep(0.01)  # the client's thread delivers; the machine is not waited for
+
+
+@pytest.fixture(scope="module")
+def machine():
+    """One machine for the module: an asyncua server's start (its standard address space)
+    takes seconds on a loaded box."""
+    mach = build()
+    faces = mach.start_faces(simulation=False)
+    yield mach
+    faces.stop()
+    mach.close()
+
+
+@pytest.fixture(scope="module")
+def client_loop():
+    loop = LoopThread("opcua-test-client").start()
+    yield loop
+    loop.stop()
+
+
+def connect(loop: LoopThread, url: str, **kw) -> Client:
+    client = Client(url, timeout=10)
+    for key, value in kw.items():
+        getattr(client, f"set_{key}")(value)
+    loop.run(client.connect, timeout=30)
+    return client
+
+
+def key(name: str) -> str:
+    return f"mill1.{name}"
+
+
+def test_the_instance_browses_as_a_machine_tool_with_every_mandatory_component(
+    machine, client_loop
+):
+    client = connect(client_loop, machine.faces.opcua.address)
+    try:
+
+        async def browse():
+            ns_mt = await client.get_namespace_index(m.MACHINE_TOOL)
+            ns_ma = await client.get_namespace_index(m.MACHINERY)
+            machines = client.get_node(ua.NodeId(1001, ns_ma))
+            found = {}
+            for child in await machines.get_children():
+                typedef = await child.read_type_definition()
+                found[(await child.read_browse_name()).Name] = (child, typedef)
+            node, typedef = found["mill1"]
+            assert typedef == ua.NodeId(13, ns_mt)
+
+            # every mandatory component of each type is there, with the official type
+            async def check(obj, type_ref):
+                official = nodes()[type_ref]
+                chain = [official]
+                while chain[-1].targets(45, forward=False)[0] in nodes():
+                    chain.append(nodes()[chain[-1].targets(45, forward=False)[0]])
+                names = {}
+                for ref in (ua.ObjectIds.HierarchicalReferences,):
+                    for c in await obj.get_children(refs=ref):
+                        bn = await c.read_browse_name()
+                        uri = (await client.get_namespace_array())[bn.NamespaceIndex]
+                        names[(uri, bn.Name)] = c
+                for t in chain:
+                    for _r, fwd, target in t.refs:
+                        member = nodes().get(target)
+                        if not fwd or member is None or (m.UA, 78) not in member.targets(37):
+                            continue
+                        assert member.name in names, (t.name, member.name)
+                        child = names[member.name]
+                        if member.node_class == "UAObject":
+                            td = member.targets(40)[0]
+                            got = await child.read_type_definition()
+                            uri = (await client.get_namespace_array())[got.NamespaceIndex]
+                            assert (uri, got.Identifier) == td, member.name
+                            if td in nodes() and td[0] != m.UA:
+                                await check(child, td)
+                return names
+
+            top = await check(node, (m.MACHINE_TOOL, 13))
+            ident = top[(m.DI, "Identification")]
+            props = {
+                (await p.read_browse_name()).Name: (await p.read_value())
+                for p in await ident.get_properties()
+            }
+            assert props["SerialNumber"] == "mill1"
+            assert props["Model"].Text == "mill"
+            assert props["Manufacturer"].Text == "fmscell"
+            assert set(props) >= {"SoftwareRevision", "Location", "ProductInstanceUri"}
+
+        client_loop.run(browse, timeout=120)
+    finally:
+        client_loop.run(client.disconnect)
+
+
+def test_subscribed_values_follow_a_running_program(machine, client_loop):
+    home(machine)
+    client = connect(client_loop, machine.faces.opcua.address)
+    seen = Seen()
+    try:
+
+        async def subscribe():
+            ns = await client.get_namespace_index("urn:fmscell:machine:mill1")
+            sub = await client.create_subscription(100, seen)
+            keys = [
+                "Monitoring.Channel1.ChannelState",
+                "Production.ActiveProgram.Name",
+                "Production.ActiveProgram.Line",
+                "Production.ActiveProgram.State.CurrentState",
+                "Production.ActiveProgram.Sha256",
+                "Monitoring.Stacklight.Green.SignalOn",
+            ]
+            await sub.subscribe_data_change([client.get_node(ua.NodeId(key(k), ns)) for k in keys])
+            return sub
+
+        client_loop.run(subscribe)
+        wait_for(
+            lambda: seen.last(key("Monitoring.Channel1.ChannelState")) == 2,
+            "Reset",
+            step=lambda: machine.step(1),
+        )
+        n = machine.load_program(PROGRAM)
+        machine.command("mode", mode="AUTO")
+        machine.command("select_program", number=n)
+        machine.command("cycle_start")
+        assert machine.run_until(
+            lambda mm: mm.status.execution == "ACTIVE" and mm.status.line > 0, 5.0
+        ), (machine.alarms, machine.status.execution)
+        started_line = machine.status.line
+        # the face samples the newest published snapshot: keep the machine stepping meanwhile
+        wait_for(
+            lambda: seen.last(key("Monitoring.Channel1.ChannelState")) == 0,
+            "Active",
+            step=lambda: machine.step(1),
+        )
+        assert seen.last(key("Production.ActiveProgram.Name")) == "O0040"
+        assert seen.last(key("Production.ActiveProgram.State.CurrentState")).Text == "Running"
+        assert seen.last(key("Monitoring.Stacklight.Green.SignalOn")) is True
+        sha = machine.memory.directory()[0].sha256
+        assert seen.last(key("Production.ActiveProgram.Sha256")) == sha
+        assert machine.run_until(lambda mm: mm.status.execution == "PROGRAM_COMPLETED", 60.0)
+        wait_for(
+            lambda: (
+                seen.last(key("Production.ActiveProgram.State.CurrentState")) is not None
+                and seen.last(key("Production.ActiveProgram.State.CurrentState")).Text == "Ended"
+            ),
+            "Ended",
+            step=lambda: machine.step(1),
+        )
+        assert seen.last(key("Monitoring.Channel1.ChannelState")) == 2
+        lines = seen.history(key("Production.ActiveProgram.Line"))
+        assert any(line >= started_line for line in lines), lines
+        # lockstep: source timestamps are the machine's (2000-01-01Z epoch + machine time)
+        with seen.lock:
+            stamps = [ts for _, ts in seen.values[key("Production.ActiveProgram.Line")]]
+        assert all(ts.year == 2000 for ts in stamps[1:]), stamps
+    finally:
+        client_loop.run(client.disconnect)
+
+
+def test_a_drive_fault_is_an_alarm_event_with_the_mtconnect_code_cleared_by_reset(
+    machine, client_loop
+):
+    client = connect(client_loop, machine.faces.opcua.address)
+    seen = Seen()
+    try:
+
+        async def subscribe():
+            sub = await client.create_subscription(100, seen)
+            await sub.subscribe_events(client.nodes.server, ua.ObjectIds.AlarmConditionType)
+
+        client_loop.run(subscribe)
+        machine.inject("drive:X:encoder")
+        assert machine.run_until(lambda mm: mm.alarms, 1.0)
+        alarm = machine.alarms[0]
+        shdr = ShdrFormatter(machine.axis_names).state(machine.full_status())
+        mtconnect_codes = {c[1] for cond in shdr.values() if isinstance(cond, tuple) for c in cond}
+        assert str(alarm.number) in mtconnect_codes
+
+        def active_event():
+            with seen.lock:
+                return [e for e in seen.events if e.ConditionName == str(alarm.number)]
+
+        wait_for(lambda: active_event(), "the alarm event", step=lambda: machine.step(5))
+        ev = active_event()[0]
+        assert ev.Message.Text == alarm.text
+        assert ev.Severity == 800
+        # anonymous may not acknowledge (a method call): BadUserAccessDenied
+        with pytest.raises(ua.uaerrors.BadUserAccessDenied):
+            client_loop.run(
+                lambda: client.get_node(
+                    ev.NodeId if hasattr(ev, "NodeId") else client.nodes.server
+                ).call_method(
+                    ua.NodeId(ua.ObjectIds.AcknowledgeableConditionType_Acknowledge),
+                    ua.Variant(ev.EventId, ua.VariantType.ByteString),
+                    ua.LocalizedText("seen"),
+                )
+            )
+        machine.clear_fault("drive:X:encoder")  # the repair; then the operator's reset
+        machine.step(20)
+        machine.command("reset")
+        # the fault's alarm goes (a homed axis keeps the 3031 warning: home it again)
+        assert machine.run_until(
+            lambda mm: all(a.number != alarm.number for a in mm.alarms), 2.0
+        ), machine.alarms
+
+        def cleared():
+            return [
+                e
+                for e in active_event()
+                if getattr(e, "ActiveState", None) and e.ActiveState.Text == "Inactive"
+            ]
+
+        wait_for(cleared, "the cleared event", step=lambda: machine.step(5))
+        assert cleared()[0].Retain is True  # inactive but not acknowledged: still retained
+        assert all(a.number != alarm.number for a in machine.alarms)
+    finally:
+        client_loop.run(client.disconnect)
+
+
+def test_the_hosts_revision_and_jobs_appear_under_production(machine, client_loop):
+    face = machine.faces.opcua
+    if machine.status.program != "O0040":
+        machine.command("select_program", number=machine.load_program(PROGRAM))
+        assert machine.run_until(lambda mm: mm.status.program == "O0040", 1.0)
+    program = machine.status.program
+    face.set_host_data(
+        HostData(
+            revision_by_program={program: "12"},
+            sha256_by_program={program: "f" * 64},
+            jobs=(ProductionJob("job5", program, 4, 1, 1, "Running"),),
+        )
+    )
+    client = connect(client_loop, face.address)
+    try:
+
+        async def read(k: str):
+            ns = await client.get_namespace_index("urn:fmscell:machine:mill1")
+            return await client.get_node(ua.NodeId(key(k), ns)).read_value()
+
+        def shows() -> bool:
+            return client_loop.run(lambda: read("Production.ActiveProgram.Revision")) == "12"
+
+        wait_for(shows, "the dispatched revision", step=lambda: machine.step(5))
+        assert client_loop.run(lambda: read("Production.ActiveProgram.Sha256")) == "f" * 64
+        job = "Production.ProductionPlan.job5"
+        assert client_loop.run(lambda: read(f"{job}.RunsPlanned")) == 4
+        assert client_loop.run(lambda: read(f"{job}.RunsCompleted")) == 1
+        assert client_loop.run(lambda: read(f"{job}.State.CurrentState")).Text == "Running"
+        assert client_loop.run(lambda: read("Production.ActiveProgram.JobIdentifier")) == "job5"
+        face.set_host_data(HostData())  # the job ends: it leaves the plan
+        with pytest.raises(ua.uaerrors.BadNodeIdUnknown):
+            wait_for(
+                lambda: client_loop.run(lambda: read(f"{job}.RunsPlanned")) is None,
+                "the job removed",
+                step=lambda: machine.step(5),
+            )
+    finally:
+        client_loop.run(client.disconnect)
+
+
+def test_bad_input_unknown_nodes_refused_writes_and_a_client_that_never_reads(machine, client_loop):
+    url = machine.faces.opcua.address
+    client = connect(client_loop, url)
+    try:
+
+        async def probe():
+            ns = await client.get_namespace_index("urn:fmscell:machine:mill1")
+            with pytest.raises(ua.uaerrors.BadNodeIdUnknown):
+                await client.get_node(ua.NodeId("mill1.Nowhere", ns)).read_value()
+            with pytest.raises(ua.uaerrors.BadNodeIdUnknown):
+                await client.get_node(ua.NodeId(999999, 77)).read_browse_name()
+            node = client.get_node(ua.NodeId(key("Monitoring.Channel1.FeedOverride"), ns))
+            with pytest.raises(ua.uaerrors.BadUserAccessDenied):
+                await node.write_value(ua.Variant(50.0, ua.VariantType.Double))
+
+        client_loop.run(probe)
+    finally:
+        client_loop.run(client.disconnect)
+
+
+def test_many_clients_at_once_and_a_silent_subscriber_do_not_make_the_machine_late(
+    machine, client_loop
+):
+    """100 sessions connecting at once and a subscriber that never sends a Publish: the
+    server keeps serving, and the machine's step (its cycle) does not wait for either."""
+    url = machine.faces.opcua.address
+
+    async def crowd():
+        clients = [Client(url, timeout=30) for _ in range(100)]
+        results = await asyncio.gather(*(c.connect() for c in clients), return_exceptions=True)
+        connected = [c for c, r in zip(clients, results, strict=True) if r is None]
+        await asyncio.gather(*(c.disconnect() for c in connected), return_exceptions=True)
+        return len(connected), [r for r in results if r is not None]
+
+    # a silent subscriber: creates a subscription, then never publishes (stalled reader)
+    async def silent():
+        c = Client(url, timeout=10)
+        await c.connect()
+        params = ua.CreateSubscriptionParameters()
+        params.RequestedPublishingInterval = 100
+        params.RequestedLifetimeCount = 30
+        params.RequestedMaxKeepAliveCount = 10
+        params.PublishingEnabled = True
+        await c.uaclient.create_subscription(params, lambda *_: None)
+        return c
+
+    quiet = client_loop.run(silent, timeout=60)
+    worst = 0.0
+    future = asyncio.run_coroutine_threadsafe(crowd(), client_loop.loop)
+    while not future.done():
+        t0 = time.perf_counter()
+        machine.step(1)
+        worst = max(worst, time.perf_counter() - t0)
+    ok, errors = future.result()
+    assert ok >= 90, errors[:3]  # asyncua's default session limit is far above 100
+    # the machine's step never waited on the server: a 2 ms cycle's work stays far below
+    # a lock held across a client's request (generous for a loaded box)
+    assert worst < 0.5, worst
+    after = connect(client_loop, url)  # still serving
+    client_loop.run(after.disconnect)
+    client_loop.run(quiet.disconnect)

@@ -1,0 +1,81 @@
+"""The host's data for a machine's OPC UA face (server/opcua_feed.py): the revision and
+sha256 of each program dispatched to it (the newest done dispatch wins), and the open jobs
+with an allocation on it."""
+
+from __future__ import annotations
+
+from types import SimpleNamespace as NS
+
+from server.opcua_feed import host_data
+
+
+class Library:
+    revisions = {
+        7: NS(id=7, program_id=1, sha256="a" * 64),
+        9: NS(id=9, program_id=1, sha256="b" * 64),
+        11: NS(id=11, program_id=2, sha256="c" * 64),
+    }
+    programs = {1: NS(number=100), 2: NS(number=2001)}
+
+    def get_revision(self, rid):
+        return self.revisions[rid]
+
+    def get_program(self, pid):
+        return self.programs[pid]
+
+
+class Dispatches:
+    rows = [  # newest first, as Dispatches.list returns them
+        NS(machine="mill1", revision_id=9, state="failed"),
+        NS(machine="mill1", revision_id=7, state="done"),
+        NS(machine="mill1", revision_id=9, state="done"),
+    ]
+
+    def list(self, machine=None, limit=100):
+        return [d for d in self.rows if d.machine == machine][:limit]
+
+
+class Jobs:
+    jobs = {
+        "running": [NS(id=3, revision_id=11, quantity=5, done=2, status="running")],
+        "queued": [NS(id=4, revision_id=7, quantity=1, done=0, status="queued")],
+    }
+    allocs = {3: [{"machine": "mill1"}], 4: [{"machine": "mill2"}]}
+
+    def list(self, status=None, limit=100):
+        return self.jobs.get(status, [])
+
+    def allocations(self, job_id):
+        return self.allocs[job_id]
+
+
+def test_the_newest_done_dispatch_names_the_revision_of_each_program():
+    data = host_data(Library(), Dispatches(), Jobs(), "mill1")
+    assert data.revision_by_program == {"O0100": "7"}  # 9 failed after; 7 is newer than 9
+    assert data.sha256_by_program == {"O0100": "a" * 64}
+
+
+def test_open_jobs_allocated_to_the_machine_become_production_jobs():
+    data = host_data(Library(), Dispatches(), Jobs(), "mill1")
+    assert [
+        (j.identifier, j.program, j.runs_planned, j.runs_completed, j.state) for j in data.jobs
+    ] == [("job3", "O2001", 5, 2, "Running")]
+    assert host_data(Library(), Dispatches(), Jobs(), "mill2").jobs[0].state == "Initializing"
+
+
+def test_opcua_users_are_the_api_keys_with_their_roles():
+    from server.cell import opcua_users
+    from web_api.settings import ApiKey, ApiSettings
+
+    check = opcua_users(
+        ApiSettings(
+            api_keys=(
+                ApiKey(user="ann", role="operator", key="ann-key-0123456789"),
+                ApiKey(user="vic", role="viewer", key="vic-key-0123456789"),
+            )
+        )
+    )
+    assert check("ann", "ann-key-0123456789") == 2  # operator
+    assert check("vic", "vic-key-0123456789") == 1  # viewer
+    assert check("vic", "ann-key-0123456789") is None  # another user's key
+    assert check("ann", "wrong-key-000000000") is None
