@@ -1192,10 +1192,10 @@ def _check_cell(cell: _CellDocument) -> list[tuple[tuple, str]]:
     return out
 
 
-
 #: host key -> a check that raises ValueError with the reason; filled by the packages above
 #: cnc that own those keys (dnc.rules registers `dispatch_rule` when it is imported).
 HOST_CHECKS: dict[str, Callable[[Any], object]] = {}
+
 
 def _load_cell(src: _Source, data: Mapping[str, Any], report: _Reporter) -> CellConfig:
     try:
