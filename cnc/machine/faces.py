@@ -137,16 +137,16 @@ class MachineFaces:
     def _drip(self):
         buffer = self.machine.controller.drip_input()
         if buffer is None:
-            from cnc.faces.dnc_port import ALARM_REFUSED, DncError
+            from cnc.faces.dnc_port import ALARM_REFUSED, DncAlarm
 
-            raise DncError(ALARM_REFUSED, "DRIP refused: the NC is not ready for a drip-feed")
+            raise DncAlarm(ALARM_REFUSED, "DRIP refused: the NC is not ready for a drip-feed")
         return buffer
 
     def _machine_data(self, what: str, doc):
         """The DNC port's TOOLS / OFFSETS: read, or write through the controller (refused
         in cycle, validated all or nothing; the machine saves it to its state directory)."""
         from cnc.controller import CommandRefused
-        from cnc.faces.dnc_port import ALARM_BAD_DATA, ALARM_REFUSED, DncError
+        from cnc.faces.dnc_port import ALARM_BAD_DATA, ALARM_REFUSED, DncAlarm
         from cnc.machine_data import MachineDataError
 
         ctl = self.machine.controller
@@ -154,9 +154,9 @@ class MachineFaces:
             try:
                 ctl.put_machine_data(what, doc)
             except CommandRefused as exc:
-                raise DncError(ALARM_REFUSED, f"{what.upper()} refused: {exc}") from None
+                raise DncAlarm(ALARM_REFUSED, f"{what.upper()} refused: {exc}") from None
             except MachineDataError as exc:
-                raise DncError(ALARM_BAD_DATA, f"{exc.pointer or '/'}: {exc.message}") from None
+                raise DncAlarm(ALARM_BAD_DATA, f"{exc.pointer or '/'}: {exc.message}") from None
         md = ctl.machine_data
         return md.tools_dict() if what == "tools" else md.offsets_dict()
 

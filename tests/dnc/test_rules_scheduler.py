@@ -69,7 +69,10 @@ def test_unknown_rule_is_refused():
     assert rule_named("EDD") is edd
     with pytest.raises(ValueError) as refused:
         rule_named("lifo")
-    assert str(refused.value) == "unknown dispatch rule 'lifo'; known rules: fifo, spt, edd, cr"
+    assert str(refused.value) == (
+        "unknown dispatch rule 'lifo'; known rules: fifo, spt, edd, cr, same_program_first "
+        "(a setup-aware one may fall back to another: 'same_program_first then edd')"
+    )
 
 
 def test_edd_reason_names_the_due_date():
