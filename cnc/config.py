@@ -374,6 +374,11 @@ class MachineDataConfig(_Section):
     tools: dict[int, ToolConfig] = Field(
         default_factory=dict, description="Tool offsets by number 1..999; see the keys below."
     )
+    macro_variables: dict[int, float] = Field(
+        default_factory=dict,
+        description="Kept Macro B variables a setter presets (#500-#999, Haas #10000-#10999):"
+        " number -> value; the others are vacant.",
+    )
 
     def initial(self):
         """The cnc.machine_data.MachineData this section describes."""
@@ -383,6 +388,7 @@ class MachineDataConfig(_Section):
             "tools": {str(n): t.model_dump() for n, t in self.tools.items()},
             "work_offsets": {k: list(v) for k, v in self.work_offsets.items()},
             "parameters": {"power_on_units": self.power_on_units},
+            "macro_variables": {str(n): v for n, v in self.macro_variables.items()},
         }
         if self.g92 is not None:
             doc["g92"] = list(self.g92)
@@ -1102,6 +1108,11 @@ def _check_machine_data(name: tuple[Any, ...], m: MachineConfig) -> list[tuple[t
         except MachineDataError as e:
             sub = e.pointer.split("/")[3:]
             out.append(((*base, "tools", n, *sub), e.message))
+    for n, value in md.macro_variables.items():
+        try:
+            MachineData.from_dict({"macro_variables": {str(n): value}})
+        except MachineDataError as e:
+            out.append(((*base, "macro_variables", n), e.message))
     return out
 
 
