@@ -15,8 +15,8 @@ write. Variable ranges (Fanuc 0i-F, with the Haas NGC extension #10000-#10999):
 | #3001, #3002 | timers ms / hours | from the injected clock |
 | #3003, #3004, #3901, #3902 | single block / feed hold control, parts counters | this run |
 | #4001-#4130 | modal information of the block before (read only) | |
-| #5001-#5085 | positions (read only) | |
-| #5201-#5325, #7001-#7945 | work offsets (`_wofs`) | work offset memory |
+| #5001-#5105 | positions (read only): 1st digit group = end point, machine, current, skip, tool length offset, servo deviation; #50x4/#50x5 the rotary 4th/5th axis (degrees) | |
+| #5201-#5325, #7001-#7945 | work offsets (`_wofs`; #52x4/#52x5 the rotary axes', degrees) | work offset memory |
 | #5401-#5600 | Haas tool feed timers / total tool timers, seconds (read only) | read 0: no tool usage is recorded here |
 
 The persistent store is any `MutableMapping[int, float]` (a plain dict by default): the
@@ -271,8 +271,9 @@ def _read_system(env: MacroVariables, n: int, col: int) -> float | None:
     hit = _work_offset_index(n)
     if hit is not None:
         k, ax = hit
-        if ax > 2:
-            return 0.0  # 4th/5th axis: none on this machine
+        if ax > 2:  # 4th/5th axis: a rotary axis's offset in degrees, else none (0)
+            rot = ip._rot
+            return rot.wofs[k][ax - 3] if rot is not None and ax - 3 < len(rot.names) else 0.0
         v = ip._wofs[k][ax]
         if ax == 0 and ip._diam:
             v *= 2.0
@@ -285,7 +286,7 @@ def _position(ip: Interpreter, n: int, col: int) -> float | None:
     if ax > 4:
         raise _out_of_range(n, col)
     if ax > 2:
-        return 0.0
+        return _rotary_position(ip, group, ax - 3, n, col)
     u = _unit(ip)
     d = 2.0 if ax == 0 and ip._diam else 1.0
     if group in (0, 2, 3):  # block end point, current work position, skip position
@@ -295,6 +296,22 @@ def _position(ip: Interpreter, n: int, col: int) -> float | None:
     if group == 4:  # tool length offset
         return ip._tlo[ax] / u
     if group == 5:  # servo deviation
+        return 0.0
+    raise _out_of_range(n, col)
+
+
+def _rotary_position(ip: Interpreter, group: int, i: int, n: int, col: int) -> float:
+    """#5004/#5005 and their families: the 4th and 5th axes are the machine's rotary axes
+    in configured order (mill4: A is the 4th; mill5: B the 4th, C the 5th), in degrees,
+    never scaled by G20. A machine without that axis reads 0."""
+    rot = ip._rot
+    if rot is None or i >= len(rot.names):
+        return 0.0
+    if group in (0, 2, 3):  # block end point, current position, skip position: program angle
+        return rot.program(ip._wcs)[i]
+    if group == 1:  # machine angle
+        return rot.mach[i]
+    if group in (4, 5):  # tool length offset along a rotary axis, servo deviation
         return 0.0
     raise _out_of_range(n, col)
 
@@ -338,7 +355,11 @@ def _write_system(env: MacroVariables, n: int, v: float | None, col: int) -> Non
     if hit is not None:
         k, ax = hit
         if ax > 2:
-            raise _out_of_range(n, col)
+            rot = ip._rot
+            if rot is None or ax - 3 >= len(rot.names):
+                raise _out_of_range(n, col)  # no 4th/5th axis on this machine
+            rot.wofs[k][ax - 3] = 0.0 if v is None else v  # degrees: the table stays put,
+            return  # its program angle moves with the offset
         val = (0.0 if v is None else v) * _unit(ip)
         if ax == 0 and ip._diam:
             val *= 0.5
