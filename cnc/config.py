@@ -376,8 +376,8 @@ class MachineDataConfig(_Section):
     )
     macro_variables: dict[int, float] = Field(
         default_factory=dict,
-        description="Kept Macro B variables a setter presets (#500-#999, Haas #10000-#10999):"
-        " number -> value; the others are vacant.",
+        description="Kept Macro B variables a setter presets (#500-#999, Fanuc 30i-B"
+        " #500000-#999999, Haas #10000-#10999): number -> value; the others are vacant.",
     )
 
     def initial(self):

@@ -7,8 +7,8 @@ write. Variable ranges (Fanuc 0i-F, with the Haas NGC extension #10000-#10999):
 |---|---|---|
 | #0 | always vacant, read only | |
 | #1-#33 | local: one set per G65/G66 macro level (the arguments) | until the macro returns |
-| #100-#499 | common | the injected `common` mapping (the controller clears it at reset / power off), else cleared with each interpreter |
-| #500-#999, #10000-#10999 | common, kept across power cycles | in the injected `persistent` mapping |
+| #100-#499, #100000-#199999 | common (the 6-digit ones: the Fanuc 30i-B added common variables) | the injected `common` mapping (the controller clears it at reset / power off), else cleared with each interpreter |
+| #500-#999, #500000-#999999, #10000-#10999 | common, kept across power cycles (Fanuc 30i-B added ones; Haas NGC) | in the injected `persistent` mapping |
 | #1000-#1035, #1100-#1135 | interface signals in / out | inputs read 0 (no PLC here) |
 | #2001... | tool offsets (`_tools`) | tool memory |
 | #3000, #3006 | alarm / stop with message (write) | |
@@ -43,7 +43,9 @@ if TYPE_CHECKING:
 INCH = 25.4
 LOCAL = range(1, 34)
 COMMON = range(100, 500)
+COMMON_ADDED = range(100000, 200000)  # Fanuc 30i-B added common variables (cleared)
 PERSISTENT = range(500, 1000)
+PERSISTENT_ADDED = range(500000, 1000000)  # Fanuc 30i-B added common variables (kept)
 PERSISTENT_EXT = range(10000, 11000)  # Haas NGC extended common variables
 HAAS_TOOL_TIMERS = range(5401, 5601)  # Haas: feed time #5400+T, total time #5500+T (s)
 MAX_ALARM = 200  # #3000 = 0..200: alarm 3000..3200 (Fanuc)
@@ -102,9 +104,9 @@ class MacroVariables:
             return self.loc.get(n)
         if n == 0:
             return None
-        if n in COMMON:
+        if n in COMMON or n in COMMON_ADDED:
             return self.common.get(n)
-        if n in PERSISTENT or n in PERSISTENT_EXT:
+        if n in PERSISTENT or n in PERSISTENT_EXT or n in PERSISTENT_ADDED:
             v = self.persistent.get(n)
             return None if v is None else float(v)
         return _read_system(self, n, col)
@@ -116,10 +118,10 @@ class MacroVariables:
             else:
                 self.loc[n] = v
             return
-        if n in COMMON:
+        if n in COMMON or n in COMMON_ADDED:
             _store(self.common, n, v)
             return
-        if n in PERSISTENT or n in PERSISTENT_EXT:
+        if n in PERSISTENT or n in PERSISTENT_EXT or n in PERSISTENT_ADDED:
             _store(self.persistent, n, v)
             return
         if n == 0:
