@@ -206,11 +206,11 @@ class Interpreter:
     `max_blocks` bounds the number of executed blocks (None: unbounded) so a checker can
     refuse programs whose subprogram repeats would run for ever;
     `macro_variables` is the store of the common variables kept across power cycles
-    (#500-#999, #10000-#10999): any mutable mapping number -> value, a vacant variable
-    being an absent key (the controller passes its machine data; default: a new dict);
-    `common_variables` holds #100-#499 the same way (the controller keeps one dict from
-    program to program and clears it at reset or power off, as Fanuc; default: a new dict,
-    so they start vacant);
+    (#500-#999, #500000-#999999, #10000-#10999): any mutable mapping number -> value, a
+    vacant variable being an absent key (the controller passes its machine data; default: a
+    new dict); `common_variables` holds #100-#499 and #100000-#199999 the same way (the
+    controller keeps one dict from program to program and clears it at reset or power off,
+    as Fanuc; default: a new dict, so they start vacant);
     `clock` gives seconds for the #3001/#3002 timers (default: time stands still);
     `macro_budget` bounds the macro statements executed in a row without any command
     coming out (an endless WHILE or GOTO loop is an alarm naming its line, not a hang);

@@ -1,7 +1,8 @@
 """Fanuc Macro B execution: variables, system variables and the macro statements.
 
 `MacroVariables` is the environment the compiled expressions (cnc.gcode.macro) read and
-write. Variable ranges (Fanuc 0i-F, with the Haas NGC extension #10000-#10999):
+write. Variable ranges (Fanuc 0i-F, with the 30i-B added common variables and the Haas NGC
+extension #10000-#10999):
 
 | Variables | Kind | Kept |
 |---|---|---|

@@ -108,8 +108,10 @@ def test_a_setup_is_kept_by_the_regeneration_and_reaches_the_command_line(tmp_pa
         ('{expect: refused-by-controller, reason: "x"}', r"/files/a.nc/alarm is required"),
         ('{expect: refused-by-controller, reason: "x", alarm: "an alarm"}', r"/alarm is required"),
         ("{expect: refused}", r"/files/a.nc/expect must be one of"),
-        ('{expect: pass, args: [--config, corpus_setups/none.yaml], setup: "x"}',
-         r"/files/a.nc/args: no machine file corpus_setups/none.yaml"),
+        (
+            '{expect: pass, args: [--config, corpus_setups/none.yaml], setup: "x"}',
+            r"/files/a.nc/args: no machine file corpus_setups/none.yaml",
+        ),
     ],
 )
 def test_bad_baseline_entry_is_refused_with_its_pointer(tmp_path: Path, entry, says):

@@ -200,7 +200,11 @@ def test_g47_serial_number_counts_up_in_599() -> None:
 @pytest.mark.parametrize(
     ("text", "col", "message"),
     [
-        ("G47 P0 (A\u00e9) Z-1 R2 F100\n", 10, "G47: character '\u00e9' has no glyph in the engraving font .A-Z, a-z"),
+        (
+            "G47 P0 (A\u00e9) Z-1 R2 F100\n",
+            10,
+            "G47: character '\u00e9' has no glyph in the engraving font .A-Z, a-z",
+        ),
         ("G47 P0 (A\u00c4) Z-1 R2 F100\n", 10, "character '\u00c4' has no glyph"),
         ("G47 P0 Z-1 R2 F100\n", 5, "G47 P0 needs the text as a comment"),
         ("G47 P2 (A) Z-1 R2 F100\n", 5, "G47 P must be 0 .text., 1 .serial number. or 32..126"),
@@ -280,7 +284,7 @@ def test_lower_case_glyphs_sit_on_the_base_line(letters, y_min, y_max) -> None:
     for ch in letters:
         x0, y0, x1, y1 = _bbox(font.GLYPHS[ch])
         assert (y0, y1) == (y_min, y_max), ch
-        assert 0.0 <= x0 and x1 <= font.WIDTH, ch  # inside the cell's width
+        assert x0 >= 0.0 and x1 <= font.WIDTH, ch  # inside the cell's width
 
 
 def test_lower_case_stroke_counts() -> None:

@@ -276,7 +276,6 @@ def test_g53_refusals() -> None:
         run("G3 X1 Y1 R1 F10\nG53 X1\n")
 
 
-
 def test_g53_under_g91_moves_by_the_increment() -> None:
     # O919100 (a Kitamura HMC's tool measuring macro): `G91 G53 G00 X#21 Y#22` goes by the
     # increment from where the tool stands, as Fanuc (G53 ignored under G91) and Mitsubishi
