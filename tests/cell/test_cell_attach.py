@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import pytest
 
-from cnc.config import load_cell_config
+from server.config import load_cell_config
 from server.cell import Cell, default_cell
 from server.supervisor import MachineUnavailable
 from tests.cell.conftest import poll

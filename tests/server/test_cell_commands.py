@@ -16,7 +16,7 @@ import time
 import pytest
 import yaml
 
-from cnc.config import load_cell_config
+from server.config import load_cell_config
 from server.cell import Cell, default_cell, fault_spec, run_cell
 from server.cycle_audit import HostRequests
 from server.supervisor import MachineLink, MachineUnavailable

@@ -208,7 +208,7 @@ def _fields(s: MachineStatus) -> dict:
 
 def test_agent_connections_for_a_cell(machine_loop):
     """The cell server's shell: one agent, the default cell's machines, real adapters."""
-    from cnc.config import default_cell_config
+    from server.config import default_cell_config
     from mtconnect import AgentConnections
 
     cell = default_cell_config()
