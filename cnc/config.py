@@ -743,7 +743,9 @@ class ConfigDocument:
         except ValidationError as exc:
             raise ConfigError(self.pydantic_problems(exc, model)) from None
 
-    def pydantic_problems(self, exc: ValidationError, model: type[BaseModel]) -> list[ConfigProblem]:
+    def pydantic_problems(
+        self, exc: ValidationError, model: type[BaseModel]
+    ) -> list[ConfigProblem]:
         """Pydantic's errors of `model` in the one-line `key.path: reason` form."""
         return [self.problem(_loc(e), _reason(e, model)) for e in exc.errors()]
 

@@ -98,9 +98,7 @@ class TlsConfig(Section):
     cert: str = Field(
         min_length=1, description="PEM certificate (chain) file (relative to the cell file)."
     )
-    key: str = Field(
-        min_length=1, description="PEM private key file (relative to the cell file)."
-    )
+    key: str = Field(min_length=1, description="PEM private key file (relative to the cell file).")
 
 
 class ApiConfig(Section):
