@@ -40,7 +40,9 @@ _REQUEST = re.compile(r"/REQ\s*(\d+)", re.I)
 
 class TransferError(DncError):
     """A transfer to or from a machine that failed (a DncError: the package's one root; the
-    REST API answers it as a 502 `transfer-failed` problem, web_api/problems.py). kind: connect | refused | cut_off | xoff_timeout | timeout | protocol | verify | read
+    REST API answers it as a 502 `transfer-failed` problem, web_api/problems.py).
+
+    kind: connect | refused | cut_off | xoff_timeout | timeout | protocol | verify | read
     (the host could not read the revision's text from its database) | encode (the text has
     a character the 7-bit tape cannot carry) | dependency (a program it calls has no released
     revision: nothing sent) | post (an APT/CL revision the post-processor refuses for the
