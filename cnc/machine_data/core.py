@@ -18,6 +18,7 @@ from collections.abc import Iterable, Mapping, MutableMapping
 from dataclasses import dataclass
 from typing import Any
 
+from cnc.errors import CncError
 from cnc.interp.state import ToolOffset
 
 MAX_TOOL_OFFSET = 999  # H/D/lathe offset numbers 1..999 (Fanuc 0i: up to 999 pairs)
@@ -31,7 +32,7 @@ MAX_OFFSET_MM = 1000.0
 MAX_WORK_OFFSET_MM = 10_000.0
 
 
-class MachineDataError(ValueError):
+class MachineDataError(CncError, ValueError):
     """A refused change: `pointer` is the JSON pointer of the bad value ("" = the whole)."""
 
     def __init__(self, message: str, pointer: str = "") -> None:
