@@ -106,9 +106,7 @@ def nc_checker(
     lines = text.splitlines() if isinstance(text, str) else text
     params = _params(machine_kind)
     named: set[str] = set()
-    found = _as_data(
-        check(lines, params, file="program", programs=programs, rotary_named=named)
-    )
+    found = _as_data(check(lines, params, file="program", programs=programs, rotary_named=named))
     found.axes = (*linear_axes(machine_kind), *(a.name for a in params.rotary_axes
                                                 if a.name in named))  # fmt: skip
     return found

@@ -85,8 +85,7 @@ def refusal(needs: Needs, machine: Offer) -> str | None:
         return f"{machine.name} is a {machine.kind}; the program is for {_kinds(needs.kinds)}"
     missing = [a for a in needs.axes if a not in machine.axes]
     return (
-        f"{machine.name} has axes {' '.join(machine.axes)}; the program needs "
-        f"{' '.join(missing)}"
+        f"{machine.name} has axes {' '.join(machine.axes)}; the program needs {' '.join(missing)}"
     )
 
 

@@ -22,9 +22,7 @@ IP = shutil.which("ip") or "/usr/sbin/ip"
 
 
 def _ip(*args: str, check: bool = True) -> subprocess.CompletedProcess:
-    return subprocess.run(
-        [IP, *args], capture_output=True, text=True, timeout=20, check=check
-    )
+    return subprocess.run([IP, *args], capture_output=True, text=True, timeout=20, check=check)
 
 
 def why_not_permitted() -> str | None:

@@ -204,16 +204,19 @@ def test_a_host_attached_to_machines_on_two_other_hosts_reroutes_a_lost_machines
 
         poll(unavailable, 30, "millb UNAVAILABLE in REST")
         poll(
-            lambda: _availability(api("viewer").get("/mtconnect/current").text).get("millb")
-            == "UNAVAILABLE",
+            lambda: (
+                _availability(api("viewer").get("/mtconnect/current").text).get("millb")
+                == "UNAVAILABLE"
+            ),
             30,
             "millb UNAVAILABLE in MTConnect",
         )
         assert _availability(api("viewer").get("/mtconnect/current").text)["milla"] == "AVAILABLE"
         sub.wait_for(
-            lambda ms: (sub.last(f"{root}/millb/availability") or {}).get("value")
-            == "UNAVAILABLE"
-            and (sub.last(f"{root}/millb/state") or {}).get("value") == "offline",
+            lambda ms: (
+                (sub.last(f"{root}/millb/availability") or {}).get("value") == "UNAVAILABLE"
+                and (sub.last(f"{root}/millb/state") or {}).get("value") == "offline"
+            ),
             30,
             what="millb UNAVAILABLE and offline on the broker",
         )

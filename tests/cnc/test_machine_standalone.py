@@ -178,7 +178,9 @@ def test_a_bind_address_off_loopback_needs_the_shared_secret(tmp_path):
     """`--bind 10.x.y.z` puts the DNC port and the simulation face within reach of other
     hosts: refused without a shared secret, before any face is bound."""
     cfg = tmp_path / "cell.yaml"
-    cfg.write_text("machines:\n  mill9:\n    base: mill3\n    ports: {dnc: 0, modbus: 0, shdr: 0}\n")
+    cfg.write_text(
+        "machines:\n  mill9:\n    base: mill3\n    ports: {dnc: 0, modbus: 0, shdr: 0}\n"
+    )
     env = {k: v for k, v in os.environ.items() if k != "FMSCELL_MACHINE_SECRET"}
     args = [sys.executable, "-c", RUNNER, "--config", str(cfg), "--name", "mill9", "--ideal"]
     run = subprocess.run(

@@ -12,7 +12,7 @@ from sqlalchemy import func, select
 
 from cnc.config import builtin_machine
 from dnc import models as m
-from dnc.checker import needed_axes, nc_checker
+from dnc.checker import nc_checker, needed_axes
 from dnc.errors import NoMachineCanRun
 from dnc.jobs import Jobs, Scheduler
 from dnc.library import Library
@@ -212,9 +212,7 @@ def _jobs(sessions) -> int:
         return s.scalar(select(func.count()).select_from(m.Job))
 
 
-def test_revisions_store_the_axes_they_need_and_jobs_what_their_machines_must_have(
-    lib, sessions
-):
+def test_revisions_store_the_axes_they_need_and_jobs_what_their_machines_must_have(lib, sessions):
     rotary, plain = _released(lib, ROTARY, 40), _released(lib, PLAIN, 41)
     assert (rotary.axes, plain.axes) == (list(XYZA), list(XYZ))
     assert lib.machine("mill4")["axes"] == list(XYZA)
@@ -230,9 +228,7 @@ def test_revisions_store_the_axes_they_need_and_jobs_what_their_machines_must_ha
     assert [x["machine"] for x in jobs.allocations(a.id)] == ["mill4"]
 
 
-def test_a_job_no_machine_of_the_cell_can_run_is_refused_with_each_machines_reason(
-    lib, sessions
-):
+def test_a_job_no_machine_of_the_cell_can_run_is_refused_with_each_machines_reason(lib, sessions):
     lib.register_machine("mill4", "mill", axes=XYZ)  # the rotary table taken off
     rotary = _released(lib, ROTARY, 40)
     with pytest.raises(NoMachineCanRun) as err:

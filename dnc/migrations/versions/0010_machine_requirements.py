@@ -55,9 +55,7 @@ def _scan_stored_revisions() -> None:
         ).all()
         for revision_id, text in texts:
             axes = list(needed_axes(text, kinds[revision_id]))
-            bind.execute(
-                revisions.update().where(revisions.c.id == revision_id).values(axes=axes)
-            )
+            bind.execute(revisions.update().where(revisions.c.id == revision_id).values(axes=axes))
 
 
 def downgrade() -> None:
