@@ -30,7 +30,7 @@ from dnc.allocation import (
     settle,
     step,
 )
-from dnc.requirements import Needs, Offer
+from dnc.requirements import Needs
 from dnc.rules import JobView, Rule
 
 IDLE, BUSY, ALARM, OFFLINE = "idle", "busy", "alarm", "offline"
@@ -53,9 +53,6 @@ class MachineView:
     alarm: str | None = None  # a FAULT-level alarm's text ("" if unknown); None = none
     warnings: tuple[str, ...] = ()
     axes: tuple[str, ...] = ()  # its configured axes (X Y Z A); () = not known
-
-    def offer(self) -> Offer:
-        return Offer(self.name, self.kind, self.axes)
 
     def look(self) -> Look:
         alarm = self.alarm if self.alarm is not None else ("" if self.state == ALARM else None)
