@@ -68,3 +68,10 @@ class NotForMachine(DncError):
     the program's line, column and why."""
 
     kind = "not-for-machine"
+
+
+class NoMachineCanRun(DncError):
+    """A job whose program no machine of the cell can run (its kind, an axis it needs):
+    each machine's reason in `machines`, what the program needs in `needs`."""
+
+    kind = "no-machine-can-run"

@@ -165,6 +165,7 @@ class Cell:
                     modbus_address=link.address("modbus"),
                     status_address=link.address("shdr"),
                     memory_bytes=link.memory_bytes,
+                    axes=link.axes,
                     actor="cell",
                 )
             self.agent = Agent.from_cell(self.config)

@@ -40,6 +40,7 @@ STATUS_OF_KIND = {
     "missing-dependency": 409,
     "post-refused": 422,
     "not-for-machine": 422,
+    "no-machine-can-run": 422,
 }
 TITLES = {
     "invalid-upload": "The uploaded program was refused",
@@ -53,6 +54,7 @@ TITLES = {
     "missing-dependency": "A program it calls has no released revision",
     "post-refused": "The post-processor refused the program for this machine",
     "not-for-machine": "The machine cannot run the program (an axis it does not have)",
+    "no-machine-can-run": "No machine of the cell can run the job's program",
     "validation": "The request is invalid",
     "malformed-json": "The request body is not valid JSON",
     "unauthenticated": "An API key is required",
