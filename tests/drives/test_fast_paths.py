@@ -23,33 +23,40 @@ def _enabled(params: PlantParams | None) -> Drive402:
     return d
 
 
+def _plant_state(p: Plant) -> tuple:
+    return (
+        p.theta,
+        p.omega,
+        p.current,
+        p.voltage,
+        p.vdc,
+        p.table_x,
+        p.counts,
+        p.vel_meas,
+        p.vel_integral,
+        p.winding_temp,
+        p.i2t,
+        p.chopper,
+        p.blocked_for,
+        p.mains_lost_for,
+        p.current_limited,
+        p.velocity_limited,
+    )
+
+
 def _trace(d: Drive402, targets: list[int]) -> list[tuple]:
     out = []
     for target in targets:
         d.write_object(0x607A, 0, target)
         d.on_sync()
         d.advance(T)
-        p = d.plant
         out.append(
             (
                 d.state,
                 d.read_object(0x6041, 0),
                 d.read_object(0x6064, 0),
                 d.read_object(0x603F, 0),
-                p.theta,
-                p.omega,
-                p.current,
-                p.vdc,
-                p.table_x,
-                p.vel_meas,
-                p.vel_integral,
-                p.voltage,
-                p.winding_temp,
-                p.i2t,
-                p.chopper,
-                p.blocked_for,
-                p.current_limited,
-                p.velocity_limited,
+                *_plant_state(d.plant),
                 d._fe_timer,
             )
         )
@@ -102,26 +109,6 @@ def test_csp_substep_loop_equals_the_generic_substep(substep, scenario):
         assert fast.read_object(0x603F, 0) == 0x8611
     if scenario in ("encoder_break", "inverter_fault"):
         assert fast.read_object(0x603F, 0) == (0x7305 if scenario == "encoder_break" else 0x2310)
-
-
-def _plant_state(p: Plant) -> tuple:
-    return (
-        p.theta,
-        p.omega,
-        p.current,
-        p.voltage,
-        p.vdc,
-        p.table_x,
-        p.counts,
-        p.vel_meas,
-        p.vel_integral,
-        p.winding_temp,
-        p.i2t,
-        p.chopper,
-        p.blocked_for,
-        p.current_limited,
-        p.velocity_limited,
-    )
 
 
 @pytest.mark.parametrize("noise", [0.0, 30.0])
