@@ -46,7 +46,7 @@ class GeneratedSections:
         """
         parts, at = [], 0
         for m in self._sections(text, where):
-            parts += [text[at : m.end(1)], self.renderers[m.group("name")](), m.group(4)]
+            parts += [text[at : m.end(1)], self.renderers[m.group("name")](), END]
             at = m.end()
         return "".join(parts) + text[at:]
 
