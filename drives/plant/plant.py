@@ -383,6 +383,8 @@ class Plant:
         i2t_limit = self._i2t_limit
         has_neg, neg, has_pos, posl = self._has_neg, self._neg, self._has_pos, self._pos
         has_home, home_x, home_below = self._has_home, self._home, self._home_below
+        powered = mode != OFF  # the inverter switches (else the motor coasts)
+        position_control = mode == POSITION
         # the optional window as a flag and a float: the loop compares plain floats
         check_fe = fe_window is not None
         fe_win = fe_window if fe_window is not None else 0.0
@@ -419,12 +421,12 @@ class Plant:
 
             # --- velocity and current loops
             current_limited = velocity_limited = False
-            if mode == OFF or fault:
+            if not powered or fault:
                 v_app = 0.0
                 i_new = 0.0  # freewheel diodes clear the winding current within the sub-step
                 integ = 0.0
             else:
-                if mode == POSITION:
+                if position_control:
                     v_cmd = kv * (pos_now - theta_m) + kff * vel
                 else:
                     v_cmd = vel_demand
@@ -519,7 +521,8 @@ class Plant:
             # --- thermal and I²t
             temp += h * (i_avg * i_avg * res - (temp - ambient) / r_th) / c_th
             i2t = i2t + (i_new * i_new - ir2) * h
-            i2t = i2t if i2t > 0.0 else 0.0
+            if not i2t > 0.0:
+                i2t = 0.0
             i_old = i_new
 
             # --- plant monitors (first detected wins; checked every sub-step)
@@ -528,10 +531,10 @@ class Plant:
                     fault = OVERCURRENT
                 elif vdc > ov_trip:
                     fault = DC_OVERVOLTAGE
-                elif mode != OFF and vdc < uv_trip:
+                elif powered and vdc < uv_trip:
                     fault = DC_UNDERVOLTAGE
                 else:
-                    if mode != OFF:
+                    if powered:
                         mains_lost_for = 0.0 if supply_on else mains_lost_for + h
                         if mains_lost_for > loss_detect:
                             fault = MAINS_PHASE_FAILURE
