@@ -25,8 +25,8 @@ from datetime import UTC, datetime
 
 import pytest
 
-from cnc.config import load_cell_config
 from server.cell import Cell
+from server.config import load_cell_config
 from tests.cell.conftest import Api, poll, serve, upload_released
 from tests.cell.netns import Namespaces, why_not_permitted
 from tests.cell.test_cell_restart import RESTART_PROGRAM
