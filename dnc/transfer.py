@@ -411,6 +411,21 @@ class DncClient:
         self._reply()  # OK TOOLS <count>
         return data
 
+    def host_data(self, doc: dict) -> dict:
+        """HOST PUT: what the host knows of the machine (dispatched revisions, jobs) for its
+        OPC UA face; returns the machine's answer (the face's commands to audit). A bad
+        document is a TransferError "refused" with alarm 2012 and the JSON pointer."""
+        import json
+
+        body = json.dumps(doc, separators=(",", ":"), ensure_ascii=True).encode("ascii")
+        self._raw_send(f"HOST PUT {len(body)}\n".encode() + body)
+        line = self._reply()
+        if not line.startswith("DATA "):
+            raise TransferError("protocol", f"expected DATA, got {line[:60]!r}", sent=self.sent)
+        answer = json.loads(line[5:])
+        self._reply()  # OK HOST <jobs>
+        return answer
+
     def delete(self, number: int) -> None:
         self._raw_send(f"DELETE O{number:04d}\n".encode())
         self._reply()

@@ -49,9 +49,10 @@ BOOLEAN, BYTE, UINT16, UINT32, DOUBLE, STRING = (
     (UA, 12),
 )
 LOCALIZED_TEXT = (UA, 21)
+NODE_ID = (UA, 17)
 UINTEGER = (UA, 28)  # abstract: any unsigned integer
 
-HAS_COMPONENT, HAS_PROPERTY, HAS_ADD_IN = 47, 46, 17604
+HAS_COMPONENT, HAS_PROPERTY, HAS_ADD_IN, HAS_ORDERED_COMPONENT = 47, 46, 17604, 49
 MANDATORY, OPTIONAL = 78, 80
 
 
@@ -200,6 +201,17 @@ MACHINE_OPERATION_MONITORING = ObjectTypeDecl(
         _v(MT, "FeedOverride", 233, DOUBLE, False, typedef=ANALOG_UNIT_RANGE),
     ),
 )
+CHANNEL_MODIFIER = ObjectTypeDecl(
+    (MT, 33),
+    "ChannelModifierType",
+    BASE_OBJECT,
+    (
+        _v(MT, "BlockSkip", 248, BOOLEAN, False),
+        _v(MT, "DryRun", 340, BOOLEAN, True),
+        _v(MT, "OptionalStop", 325, BOOLEAN, True),
+        _v(MT, "SingleStep", 317, BOOLEAN, True),
+    ),
+)
 CHANNEL_MONITORING = ObjectTypeDecl(
     (MT, 16),
     "ChannelMonitoringType",
@@ -209,6 +221,7 @@ CHANNEL_MONITORING = ObjectTypeDecl(
         _v(MT, "ChannelMode", 249, CHANNEL_MODE.node, True),
         _v(MT, "FeedOverride", 276, DOUBLE, True, typedef=ANALOG_UNIT_RANGE),
         _v(MT, "RapidOverride", 287, DOUBLE, False, typedef=ANALOG_UNIT_RANGE),
+        _o(MT, "ChannelModifiers", 113, CHANNEL_MODIFIER.node, False),
     ),
 )
 WORKING_UNIT_MONITORING = ObjectTypeDecl(
@@ -221,6 +234,7 @@ SPINDLE_MONITORING = ObjectTypeDecl(
     (
         _v(MT, "IsRotating", 247, BOOLEAN, True),
         _v(MT, "Override", 241, DOUBLE, False, typedef=ANALOG_UNIT_RANGE),
+        _v(MT, "IsUsedAsAxis", 371, BOOLEAN, False),
     ),
 )
 STACK_ELEMENT = ObjectTypeDecl(
@@ -284,6 +298,7 @@ PRODUCTION_ACTIVE_PROGRAM = ObjectTypeDecl(
     (
         _o(MT, "State", 5033, PRODUCTION_PROGRAM_STATE_MACHINE.node, True),
         _v(MT, "JobIdentifier", 384, STRING, False),
+        _v(MT, "JobNodeId", 382, NODE_ID, False),
     ),
 )
 PRODUCTION_JOB = ObjectTypeDecl(
@@ -357,6 +372,7 @@ MACHINE_TOOL_TYPE = ObjectTypeDecl(
 
 #: every object type the server declares, each after its supertype and member types
 OBJECT_TYPES = (
+    CHANNEL_MODIFIER,
     FUNCTIONAL_GROUP,
     MACHINERY_ITEM_IDENTIFICATION,
     MACHINE_IDENTIFICATION,
