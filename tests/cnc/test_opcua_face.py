@@ -368,6 +368,135 @@ def test_bad_input_unknown_nodes_refused_writes_and_a_client_that_never_reads(ma
         client_loop.run(client.disconnect)
 
 
+def test_malformed_requests_get_status_codes_and_the_server_keeps_serving(machine, client_loop):
+    """Bytes that are not OPC UA, a truncated Hello, a message claiming 2 GiB, browsing and
+    reading beyond the address space, a method called with arguments it does not take:
+    each ends in a status code or a closed connection, never in a stopped server."""
+    import socket
+    import struct
+
+    face = machine.faces.opcua
+    garbage = [
+        b"GET / HTTP/1.1\r\nHost: x\r\n\r\n",
+        b"HELF" + struct.pack("<I", 12),  # truncated Hello
+        b"HELF" + struct.pack("<I", 0x7FFFFFFF) + b"\x00" * 64,  # claims 2 GiB
+        b"MSGF" + struct.pack("<I", 24) + b"\xff" * 16,  # a message on no channel
+        bytes(range(256)) * 4,
+    ]
+    for data in garbage:
+        with socket.create_connection((face.host, face.bound_port), timeout=10) as sock:
+            sock.sendall(data)
+            sock.settimeout(10)
+            try:
+                while sock.recv(4096):  # an ERR message, then the server closes
+                    pass
+            except (TimeoutError, ConnectionError):
+                pass
+    client = connect(client_loop, face.address)
+    try:
+
+        async def probe():
+            ns = await client.get_namespace_index("urn:fmscell:machine:mill1")
+            # browsing a node that is not there: the browse result's status
+            desc = ua.BrowseDescription()
+            desc.NodeId = ua.NodeId("mill1.Monitoring.Nowhere", ns)
+            desc.BrowseDirection = ua.BrowseDirection.Forward
+            desc.ReferenceTypeId = ua.NodeId(ua.ObjectIds.References)
+            desc.IncludeSubtypes = True
+            params = ua.BrowseParameters()
+            params.NodesToBrowse = [desc]
+            (result,) = await client.uaclient.browse(params)
+            assert result.StatusCode.value in (  # asyncua answers Invalid for a browse
+                ua.StatusCodes.BadNodeIdUnknown,
+                ua.StatusCodes.BadNodeIdInvalid,
+            )
+            # an attribute a variable does not have, an attribute id that does not exist
+            line = client.get_node(ua.NodeId(key("Monitoring.Channel1.Line"), ns))
+            for attr in (ua.AttributeIds.IsAbstract, 99):
+                rv = ua.ReadValueId()
+                rv.NodeId, rv.AttributeId = line.nodeid, attr
+                read = ua.ReadParameters()
+                read.NodesToRead = [rv]
+                (dv,) = await client.uaclient.read(read)
+                assert dv.StatusCode.value == ua.StatusCodes.BadAttributeIdInvalid, attr
+            # a method call from this anonymous session: refused before anything is looked
+            # up (the operator's malformed calls: tests/cnc/test_opcua_security.py)
+            call = ua.CallMethodRequest()
+            call.ObjectId = ua.NodeId("mill1.Nowhere", ns)
+            call.MethodId = ua.NodeId(key("Monitoring.Channel1.Start"), ns)
+            with pytest.raises(ua.uaerrors.BadUserAccessDenied):
+                await client.uaclient.call([call])
+            return await line.read_value()
+
+        assert isinstance(client_loop.run(probe), int)  # still answering on that session
+    finally:
+        client_loop.run(client.disconnect)
+
+
+def test_a_stalled_server_thread_cannot_hold_the_machines_cycle(machine, client_loop):
+    """The machine only stores a reference for the server (`publish`): with the server's
+    event loop blocked outright (a worst case no client can do worse than), the machine
+    still steps every lockstep cycle, its clock exact; the server shows the newest state
+    once it runs again."""
+    face = machine.faces.opcua
+    release = threading.Event()
+    blocked = threading.Event()
+
+    def block() -> None:
+        blocked.set()
+        release.wait(60)
+
+    machine.faces.opcua_loop.loop.call_soon_threadsafe(block)
+    assert blocked.wait(30)
+    try:
+        c0, cycles = machine.cycle, 500
+        started = time.perf_counter()
+        machine.step(cycles)
+        took = time.perf_counter() - started
+        assert machine.cycle == c0 + cycles
+        samples = face.samples
+    finally:
+        release.set()
+    assert took < DEADLINE_S  # it returned at all, with the server frozen throughout
+    client = connect(client_loop, face.address)
+    try:
+
+        async def line():
+            ns = await client.get_namespace_index("urn:fmscell:machine:mill1")
+            n = client.get_node(ua.NodeId(key("Monitoring.Channel1.Line"), ns))
+            return await n.read_value()
+
+        wait_for(lambda: face.samples > samples, "the server sampling again")
+        assert client_loop.run(line) == machine.status.line
+    finally:
+        client_loop.run(client.disconnect)
+
+
+def test_anonymous_start_is_refused_and_written_in_the_machines_event_log(machine, client_loop):
+    """Start/Stop are the panel's cycle start / feed hold for operators and above; an
+    anonymous session (the default endpoint) is refused, and the machine logs who tried."""
+    face = machine.faces.opcua
+    client = connect(client_loop, face.address)
+    try:
+
+        async def start():
+            ns = await client.get_namespace_index("urn:fmscell:machine:mill1")
+            channel = client.get_node(ua.NodeId(key("Monitoring.Channel1"), ns))
+            await channel.call_method(ua.NodeId(key("Monitoring.Channel1.Start"), ns))
+
+        with pytest.raises(ua.uaerrors.BadUserAccessDenied):
+            client_loop.run(start)
+    finally:
+        client_loop.run(client.disconnect)
+    machine.step(2)  # the log is written on the machine's thread, at its next cycle
+    logged = [e for e in machine.events.of_kind("command") if e.text.startswith("OPC UA")]
+    assert logged[-1].text == "OPC UA call by anonymous: BadUserAccessDenied"
+    # what an operator's Start does: the panel button, pressed at the next cycle
+    face.press("feed_hold")
+    machine.step(2)
+    assert machine.events.of_kind("operator")[-1].text == "PanelFeedHold pressed"
+
+
 def test_many_clients_at_once_and_a_silent_subscriber_do_not_make_the_machine_late(
     machine, client_loop
 ):
@@ -403,9 +532,11 @@ def test_many_clients_at_once_and_a_silent_subscriber_do_not_make_the_machine_la
         worst = max(worst, time.perf_counter() - t0)
     ok, errors = future.result()
     assert ok >= 90, errors[:3]  # asyncua's default session limit is far above 100
-    # the machine's step never waited on the server: a 2 ms cycle's work stays far below
-    # a lock held across a client's request (generous for a loaded box)
-    assert worst < 0.5, worst
+    # the machine's step never waited for the crowd (that would be the whole connect
+    # storm, tens of seconds); one step may still lose the interpreter to the server's
+    # thread for a while on a loaded box (2.6 s seen at load 10): the stalled-server test
+    # below proves that no step waits for the server at all
+    assert worst < DEADLINE_S / 3, worst
     after = connect(client_loop, url)  # still serving
     client_loop.run(after.disconnect)
     client_loop.run(quiet.disconnect)

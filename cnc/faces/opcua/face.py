@@ -166,7 +166,9 @@ class OpcUaFace:
         """Start / Stop on the Channel: the panel's cycle start / feed hold, pressed for the
         caller (the permission check has let operators and above through)."""
 
-        async def call(parent):
+        async def call(parent, *args):
+            if args:
+                return self._record(button, ua.StatusCodes.BadTooManyArguments, f"{name}()")
             if self.press is None:
                 return self._record(button, ua.StatusCodes.BadNotExecutable, "no machine")
             refused = self.press(button)
