@@ -82,8 +82,7 @@ def test_a_machine_process_serves_the_hosts_revision_and_jobs_and_is_audited(tmp
             return [
                 e
                 for e in cell.library.audit(entity="machine")
-                if e["action"] == "machine.command_refused"
-                and e["detail"].get("face") == "opcua"
+                if e["action"] == "machine.command_refused" and e["detail"].get("face") == "opcua"
             ]
 
         entry = poll(audited, 30, "the refused call in the host's audit log")[-1]

@@ -95,7 +95,7 @@ def wait_for(predicate, what: str, step=None) -> None:
 def machine():
     """One machine for the module: an asyncua server's start (its standard address space)
     takes seconds on a loaded box."""
-    mach = build()
+    mach = build(dnc=0)  # the DNC port carries the host's data (HOST PUT)
     faces = mach.start_faces(simulation=False)
     yield mach
     faces.stop()
@@ -346,6 +346,62 @@ def test_the_hosts_revision_and_jobs_appear_under_production(machine, client_loo
             )
     finally:
         client_loop.run(client.disconnect)
+
+
+def test_the_hosts_data_over_the_dnc_port_and_bad_documents_refused_with_the_pointer(
+    machine, client_loop
+):
+    """HOST PUT on the machine's DNC port, as a host does for a machine in its own
+    process: the face shows it; a bad document is refused (alarm 2012) naming the field,
+    and the face keeps what it had."""
+    from dnc.transfer import DncClient, TransferError
+
+    face = machine.faces.opcua
+    if machine.status.program != "O0040":
+        machine.command("select_program", number=machine.load_program(PROGRAM))
+        assert machine.run_until(lambda mm: mm.status.program == "O0040", 1.0)
+    doc = {
+        "programs": {"O0040": {"revision": "31", "sha256": "e" * 64}},
+        "jobs": [
+            {
+                "identifier": "job9",
+                "program": "O0040",
+                "runs_planned": 3,
+                "runs_completed": 0,
+                "parts_completed": 0,
+                "state": "Initializing",
+            }
+        ],
+    }
+    client = DncClient("127.0.0.1", machine.faces.dnc.bound_port, timeout_s=15)
+    with client:
+        answer = client.host_data(doc)
+        assert set(answer) == {"commands"}
+        bad = {**doc, "jobs": [{**doc["jobs"][0], "runs_planned": -1}]}
+        with pytest.raises(TransferError, match=r"/jobs/0/runs_planned: an integer") as err:
+            client.host_data(bad)
+        assert err.value.alarm == 2012
+        # not fatal to the connection: the next document on it is read
+        with pytest.raises(TransferError, match=r"/programs/O0040/sha256: 64 lower-case hex"):
+            client.host_data({"programs": {"O0040": {"sha256": "not hex"}}})
+    opc = connect(client_loop, face.address)
+    try:
+
+        async def read(k: str):
+            ns = await opc.get_namespace_index("urn:fmscell:machine:mill1")
+            return await opc.get_node(ua.NodeId(key(k), ns)).read_value()
+
+        wait_for(
+            lambda: client_loop.run(lambda: read("Production.ActiveProgram.Revision")) == "31",
+            "the revision sent over the DNC port",
+            step=lambda: machine.step(5),
+        )
+        assert client_loop.run(lambda: read("Production.ActiveProgram.Sha256")) == "e" * 64
+        job = "Production.ProductionPlan.job9"
+        assert client_loop.run(lambda: read(f"{job}.RunsPlanned")) == 3
+    finally:
+        client_loop.run(opc.disconnect)
+    face.set_host_data(HostData())
 
 
 def test_bad_input_unknown_nodes_refused_writes_and_a_client_that_never_reads(machine, client_loop):
