@@ -143,3 +143,35 @@ def test_the_feed_sends_each_machine_its_data_and_audits_what_its_clients_did():
     assert feed.unreachable == {"mill2": "connection refused"}  # tried again next tick
     feed.tick()
     assert len(ports["mill1"].docs) == 2 and len(library.notes) == 2
+
+
+def test_a_machine_in_this_process_gets_its_data_by_a_direct_call():
+    from cnc.faces.opcua import FaceCommand
+    from server.opcua_feed import OpcUaFeed
+
+    class Face:
+        data = None
+
+        def set_host_data(self, data):
+            self.data = data
+
+        def take_commands(self):
+            return [FaceCommand("ann", "acknowledge", "done", "alarm 3040 (DRIVE)", 1.0)]
+
+    face = Face()
+    links = {"mill1": NS(ports={"opcua": 4841}, local=NS(opcua=face))}
+    library = AuditingLibrary()
+
+    def no_client(name):
+        raise AssertionError("no DNC exchange for a machine in this process")
+
+    OpcUaFeed(library, Dispatches(), Jobs(), links, client=no_client).tick()
+    assert face.data.revision_by_program == {"O0100": "7"}
+    assert library.notes == [
+        (
+            "mill1",
+            "machine.command",
+            "ann",
+            {"command": "acknowledge", "face": "opcua", "detail": "alarm 3040 (DRIVE)"},
+        )
+    ]

@@ -179,19 +179,24 @@ class OpcUaFace:
 
         return call
 
-    def _record(self, command: str, code: int, detail: str = "") -> ua.StatusCode:
-        """Keep a method call for the host's audit and tell the machine's event log."""
+    def _record(
+        self, command: str, code: int, detail: str = "", *, log: bool = True
+    ) -> ua.StatusCode:
+        """Keep a method call for the host's audit and (`log`) tell the machine's event log."""
         user = caller()
         result = "done" if code == ua.StatusCodes.Good else ua.StatusCode(code).name
         entry = FaceCommand(user, command, result, detail, time.time())
         self._commands.append(entry)
-        if self.on_command is not None:
+        if log and self.on_command is not None:
             with contextlib.suppress(Exception):  # the log must not fail the call
                 self.on_command(entry)
         return ua.StatusCode(code)
 
     def _denied(self, user: str, service: str) -> None:
-        self._record(service, ua.StatusCodes.BadUserAccessDenied, f"{user}: not an operator")
+        """A write or call refused by role: kept for the host only. Anyone may send those
+        by the thousand; none of them may add work to the machine's cycle."""
+        code = ua.StatusCodes.BadUserAccessDenied
+        self._record(service, code, f"{user}: not an operator", log=False)
 
     # ------------------------------------------------------------ sampling
 
