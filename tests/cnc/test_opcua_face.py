@@ -198,6 +198,8 @@ def test_subscribed_values_follow_a_running_program(machine, client_loop):
                 "Production.ActiveProgram.State.CurrentState",
                 "Production.ActiveProgram.Sha256",
                 "Monitoring.Stacklight.Green.SignalOn",
+                "Monitoring.MachineTool.MachineryItemState.CurrentState",
+                "Monitoring.Channel1.ChannelModifiers.OptionalStop",
             ]
             await sub.subscribe_data_change([client.get_node(ua.NodeId(key(k), ns)) for k in keys])
             return sub
@@ -209,6 +211,7 @@ def test_subscribed_values_follow_a_running_program(machine, client_loop):
             step=lambda: machine.step(1),
         )
         n = machine.load_program(PROGRAM)
+        machine.command("optional_stop", on=True)  # the operator's M01 switch
         machine.command("mode", mode="AUTO")
         machine.command("select_program", number=n)
         machine.command("cycle_start")
@@ -225,6 +228,9 @@ def test_subscribed_values_follow_a_running_program(machine, client_loop):
         assert seen.last(key("Production.ActiveProgram.Name")) == "O0040"
         assert seen.last(key("Production.ActiveProgram.State.CurrentState")).Text == "Running"
         assert seen.last(key("Monitoring.Stacklight.Green.SignalOn")) is True
+        item_state = key("Monitoring.MachineTool.MachineryItemState.CurrentState")
+        assert seen.last(item_state).Text == "Executing"
+        assert seen.last(key("Monitoring.Channel1.ChannelModifiers.OptionalStop")) is True
         sha = machine.memory.directory()[0].sha256
         assert seen.last(key("Production.ActiveProgram.Sha256")) == sha
         assert machine.run_until(lambda mm: mm.status.execution == "PROGRAM_COMPLETED", 60.0)
@@ -237,6 +243,8 @@ def test_subscribed_values_follow_a_running_program(machine, client_loop):
             step=lambda: machine.step(1),
         )
         assert seen.last(key("Monitoring.Channel1.ChannelState")) == 2
+        assert seen.last(item_state).Text == "NotExecuting"
+        machine.command("optional_stop", on=False)
         lines = seen.history(key("Production.ActiveProgram.Line"))
         assert any(line >= started_line for line in lines), lines
         # lockstep: source timestamps are the machine's (2000-01-01Z epoch + machine time)

@@ -116,6 +116,11 @@ def _operation(b: Builder, mon: ua.NodeId, p: str) -> None:
         ),
     )
     b.override(op, f"{p}.FeedOverride", (MT, "FeedOverride"))
+    for name, typedef, initial in (
+        ("MachineryItemState", m.MACHINERY_ITEM_STATE.node, "NotExecuting"),
+        ("MachineryOperationMode", m.MACHINE_OPERATION_MODE_STATE_MACHINE.node, "Processing"),
+    ):
+        b.state(op, p, typedef, initial, (m.MACHINERY, name))
 
 
 def _channel(

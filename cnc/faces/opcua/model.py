@@ -191,6 +191,19 @@ ELEMENT_MONITORING = ObjectTypeDecl(
     BASE_OBJECT,
     (_v(MT, "Name", 234, STRING, True, prop=True),),
 )
+# OPC 40001-1 state machines; their states and transitions are not instance declarations
+# (no modelling rule): an instance shows its state in CurrentState
+MACHINERY_ITEM_STATE = ObjectTypeDecl(
+    (MA, 1002), "MachineryItemState_StateMachineType", FINITE_STATE_MACHINE
+)
+MACHINERY_OPERATION_MODE = ObjectTypeDecl(
+    (MA, 1008), "MachineryOperationModeStateMachineType", FINITE_STATE_MACHINE
+)
+#: 40501's own subtype (a MaintenanceMode sub-state machine under Maintenance) is what
+#: MachineTool's MachineryOperationMode is declared with
+MACHINE_OPERATION_MODE_STATE_MACHINE = ObjectTypeDecl(
+    (MT, 1003), "MachineOperationModeStateMachineType", MACHINERY_OPERATION_MODE.node
+)
 MACHINE_OPERATION_MONITORING = ObjectTypeDecl(
     (MT, 26),
     "MachineOperationMonitoringType",
@@ -199,6 +212,14 @@ MACHINE_OPERATION_MONITORING = ObjectTypeDecl(
         _v(MT, "OperationMode", 225, MACHINE_OPERATION_MODE.node, True),
         _v(MT, "PowerOnDuration", 261, UINT32, False),
         _v(MT, "FeedOverride", 233, DOUBLE, False, typedef=ANALOG_UNIT_RANGE),
+        Member((MA, "MachineryItemState"), 5006, "Object", MACHINERY_ITEM_STATE.node, False),
+        Member(
+            (MA, "MachineryOperationMode"),
+            5007,
+            "Object",
+            MACHINE_OPERATION_MODE_STATE_MACHINE.node,
+            False,
+        ),
     ),
 )
 CHANNEL_MODIFIER = ObjectTypeDecl(
@@ -378,6 +399,9 @@ OBJECT_TYPES = (
     MACHINE_IDENTIFICATION,
     MACHINE_TOOL_IDENTIFICATION,
     ELEMENT_MONITORING,
+    MACHINERY_ITEM_STATE,
+    MACHINERY_OPERATION_MODE,
+    MACHINE_OPERATION_MODE_STATE_MACHINE,
     MACHINE_OPERATION_MONITORING,
     CHANNEL_MONITORING,
     WORKING_UNIT_MONITORING,

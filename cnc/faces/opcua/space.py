@@ -263,12 +263,21 @@ class Builder:
         """An override in percent (AnalogUnitRange, 0..200 %), as 40501 declares them."""
         return self.value(parent, key, name, m.DOUBLE, 100.0, typedef=m.ANALOG_UNIT_RANGE)
 
-    def state(self, parent: ua.NodeId, prefix: str, typedef: m.NodeRef, initial: str) -> None:
-        """A 40501 state machine `State` with its CurrentState (the state's display name)."""
-        st = self.child_object(parent, f"{prefix}.State", (m.MACHINE_TOOL, "State"), typedef)
+    def state(
+        self,
+        parent: ua.NodeId,
+        prefix: str,
+        typedef: m.NodeRef,
+        initial: str,
+        name: m.Name = (m.MACHINE_TOOL, "State"),
+    ) -> None:
+        """A state machine (40501's `State`, 40001's MachineryItemState...) with its
+        CurrentState (the state's display name)."""
+        key = f"{prefix}.{name[1]}"
+        st = self.child_object(parent, key, name, typedef)
         self.value(
             st,
-            f"{prefix}.State.CurrentState",
+            f"{key}.CurrentState",
             (m.UA, "CurrentState"),
             m.LOCALIZED_TEXT,
             initial,
