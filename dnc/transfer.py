@@ -18,6 +18,7 @@ from collections.abc import Callable, Iterable, Iterator
 from dataclasses import dataclass
 
 from cnc.faces.tape import PUNCH_ON, XOFF, XON, TapeDecoder, encode_program
+from dnc.errors import DncError
 
 _FLOW_BYTE = re.compile(rb"[\x11-\x14]")
 # Parity as whole-buffer translations: the host handles every byte of every transfer, so no
@@ -37,8 +38,11 @@ LINE_ALARMS = frozenset({2001, 2004, 2007, 2010})  # parity, cut off, time-out, 
 _REQUEST = re.compile(r"/REQ\s*(\d+)", re.I)
 
 
-class TransferError(Exception):
-    """kind: connect | refused | cut_off | xoff_timeout | timeout | protocol | verify | read
+class TransferError(DncError):
+    """A transfer to or from a machine that failed (a DncError: the package's one root; the
+    REST API answers it as a 502 `transfer-failed` problem, web_api/problems.py).
+
+    kind: connect | refused | cut_off | xoff_timeout | timeout | protocol | verify | read
     (the host could not read the revision's text from its database) | encode (the text has
     a character the 7-bit tape cannot carry) | dependency (a program it calls has no released
     revision: nothing sent) | post (an APT/CL revision the post-processor refuses for the

@@ -54,7 +54,7 @@ def default_cell(*, free_ports: bool = False, opcua: bool | None = None):
     port (tests). `opcua`: the OPC UA faces on or off; None = on with the fixed ports, off
     with free ports (an OPC UA server takes seconds to start on a loaded box, and most
     tests of the cell do not read it)."""
-    from cnc.config import load_cell_config
+    from server.config import load_cell_config
 
     if opcua is None:
         opcua = not free_ports
@@ -165,6 +165,7 @@ class Cell:
                     modbus_address=link.address("modbus"),
                     status_address=link.address("shdr"),
                     memory_bytes=link.memory_bytes,
+                    axes=link.axes,
                     actor="cell",
                 )
             self.agent = Agent.from_cell(self.config)
@@ -609,16 +610,15 @@ def run_cell(
     import uvicorn
 
     from cnc.errors import NcError
-    from web_api.settings import ApiSettings
 
     if clock not in CLOCKS:
         echo(f"--clock {clock!r}: one of {', '.join(CLOCKS)}")
         return 2
     try:
-        from cnc.config import load_cell_config
+        from server.config import load_cell_config
 
         cfg = load_cell_config(config) if config else default_cell()
-        settings = ApiSettings.from_mapping(cfg.host.auth)
+        settings = cfg.host.auth.api_settings()
         if insecure_open:
             settings = settings.model_copy(update={"insecure_open": True})
     except (NcError, ValueError, OSError) as err:

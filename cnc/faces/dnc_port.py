@@ -41,6 +41,7 @@ import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
 
+from cnc.errors import CncError
 from cnc.faces.drip import DripBuffer
 from cnc.faces.tape import (
     CR,
@@ -136,7 +137,7 @@ def sha256_text(text: str) -> str:
     return hashlib.sha256(text.encode("utf-8")).hexdigest()
 
 
-class DncAlarm(Exception):
+class DncAlarm(CncError):
     """The port's refusal: answered `ERR <alarm> <text>` (the host's refusals are
     dnc.errors.DncError; this is the machine's side of the line)."""
 

@@ -206,11 +206,11 @@ class Interpreter:
     `max_blocks` bounds the number of executed blocks (None: unbounded) so a checker can
     refuse programs whose subprogram repeats would run for ever;
     `macro_variables` is the store of the common variables kept across power cycles
-    (#500-#999, #10000-#10999): any mutable mapping number -> value, a vacant variable
-    being an absent key (the controller passes its machine data; default: a new dict);
-    `common_variables` holds #100-#499 the same way (the controller keeps one dict from
-    program to program and clears it at reset or power off, as Fanuc; default: a new dict,
-    so they start vacant);
+    (#500-#999, #500000-#999999, #10000-#10999): any mutable mapping number -> value, a
+    vacant variable being an absent key (the controller passes its machine data; default: a
+    new dict); `common_variables` holds #100-#499 and #100000-#199999 the same way (the
+    controller keeps one dict from program to program and clears it at reset or power off,
+    as Fanuc; default: a new dict, so they start vacant);
     `clock` gives seconds for the #3001/#3002 timers (default: time stands still);
     `macro_budget` bounds the macro statements executed in a row without any command
     coming out (an endless WHILE or GOTO loop is an alarm naming its line, not a hang);
@@ -296,6 +296,9 @@ class Interpreter:
                 7 + EXTENDED_OFFSETS,
             )
             self._words_ok = self._words_ok | self._rot.letters
+        # the rotary axes a block moved or set (G92): what a machine must have to run the
+        # program (the host's scheduler matches it to the machines' axes, dnc/requirements.py)
+        self.rotary_named: set[str] = set()
         self._tools_known = tools is not None
         self._limits: list[tuple[int, float, float, str]] = []
         home = [0.0, 0.0, 0.0]
@@ -800,7 +803,8 @@ class Interpreter:
         ok = name in ("G53", "G28", "G30", "G92") or (
             name is None and cycle == G80 and motion in (G0, G1) and cls.owner is None
         )
-        letter = self._rot.words_in(blk)[0]
+        named = self._rot.words_in(blk)
+        letter = named[0]
         if not ok:
             raise self._err(
                 f"rotary axis word {letter} moves only with G0/G1, G53 or G28/G30"
@@ -814,6 +818,7 @@ class Interpreter:
                 blk,
                 letter,
             )
+        self.rotary_named.update(named)
         return self._rot.letters
 
     @staticmethod
@@ -2061,11 +2066,14 @@ def check(
     macro_variables: MutableMapping[int, float] | None = None,
     macro_budget: int = MACRO_BUDGET,
     subprogram: bool | None = None,
+    rotary_named: set[str] | None = None,
 ) -> list[NcError]:
     """Interpret a whole program and return ALL its errors (at most CHECK_MAX_ERRORS).
 
     After an error the checker carries on with the next block, with the modal state as the
-    failed block left it. Nothing is kept of the canonical commands.
+    failed block left it. Nothing is kept of the canonical commands. `rotary_named`, if
+    given, receives the rotary axes (A, B, C) the program's blocks move or set (a macro
+    call's argument A is none), its called programs' included.
     """
     interp = Interpreter(
         params,
@@ -2080,4 +2088,7 @@ def check(
         macro_budget=macro_budget,
         subprogram=subprogram,
     )
-    return interp.check_all(lines)
+    errors = interp.check_all(lines)
+    if rotary_named is not None:
+        rotary_named.update(interp.rotary_named)
+    return errors

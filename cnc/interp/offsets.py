@@ -85,23 +85,24 @@ def reference_return(ip: Context, run: BlockRun) -> None:
 
 
 def machine_move(ip: Context, run: BlockRun) -> None:
-    """G53 G0|G1 X Y Z: a move in machine coordinates (absolute only, no offsets)."""
+    """G53 G0|G1 X Y Z: a move in machine coordinates (no offsets). Under G91 the words are
+    increments from where the tool stands, the same displacement in any coordinate system:
+    Fanuc ignores G53 in incremental mode, Mitsubishi moves by the increment (M700 manual,
+    14.4 (4)); a Kitamura HMC's tool measuring macro (O919100) moves `G91 G53 G00 X#21`."""
     blk = run.blk
     motion = run.g.get("motion")
-    if not ip._abs:
-        raise ip._err("G53 needs absolute mode (G90)", blk, "G")
     if ip._comp_engaged():
         raise ip._err("G53 with cutter compensation active", blk, "G")
     mo = motion if motion is not None else ip._motion
     if mo not in (G0, G1):
         raise ip._err("G53 moves only with G0 or G1", blk, "G")
     if ip._rot is not None:
-        ip._rot.move(ip, blk, True, machine=True)
+        ip._rot.move(ip, blk, ip._abs, machine=ip._abs)
     m = list(ip._mach)
     for i, letter in enumerate("XYZ"):
         if letter in blk.words:
             val = ip._dim(blk, letter) * (0.5 if letter == "X" and ip._diam else 1.0)
-            m[i] = val
+            m[i] = val if ip._abs else m[i] + val
     mt = (m[0], 0.0 if ip._lathe else m[1], m[2])
     ip._check(mt, blk, blk.line)
     if mo == G0:
