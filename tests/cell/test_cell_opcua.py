@@ -9,9 +9,9 @@ from __future__ import annotations
 import pytest
 from asyncua import Client, ua
 
-from cnc.config import load_cell_config
 from cnc.faces.loop_thread import LoopThread
 from server.cell import Cell
+from server.config import load_cell_config
 from tests.cell.conftest import Api, poll, serve, upload_released
 from tests.cell.test_cell_restart import RESTART_PROGRAM
 
