@@ -7,6 +7,8 @@ from __future__ import annotations
 
 from dataclasses import asdict, dataclass, field
 
+from cnc.errors import CncError
+
 #: ProductionJobStateMachine states a host may give a job (OPC 40501-1)
 JOB_STATES = ("Initializing", "Running", "Interrupted", "Ended", "Aborted")
 MAX_JOBS = 500  # one machine's plan; more is a host bug, not a plan
@@ -46,7 +48,7 @@ class FaceCommand:
     at: float = 0.0  # wall clock, s
 
 
-class HostDataError(ValueError):
+class HostDataError(CncError, ValueError):
     def __init__(self, pointer: str, message: str) -> None:
         super().__init__(f"{pointer}: {message}")
         self.pointer, self.message = pointer, message
