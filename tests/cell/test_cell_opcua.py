@@ -37,7 +37,9 @@ def test_a_machine_process_serves_the_hosts_revision_and_jobs_and_is_audited(tmp
     try:
         link = cell.links["mill1"]
         assert link.local is None and link.ports["opcua"]  # a process of its own
-        client = Client(f"opc.tcp://127.0.0.1:{link.ports['opcua']}", timeout=30)
+        url = f"opc.tcp://127.0.0.1:{link.ports['opcua']}"
+        # asyncua's default probe calls a session lost after one answer slower than 1 s
+        client = Client(url, timeout=30, watchdog_intervall=30.0)
         loop.run(client.connect, timeout=60)
         ns = loop.run(lambda: client.get_namespace_index("urn:fmscell:machine:mill1"))
 

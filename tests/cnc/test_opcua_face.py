@@ -32,6 +32,10 @@ N40 M30
 %
 """
 DEADLINE_S = 30.0  # generous: the box may be loaded
+# asyncua's client probes the server every second and, by default, calls the connection
+# lost when one probe takes over a second: on a box at load 20+ that ends sessions the
+# server still serves. The tests' clients probe every 30 s with a 30 s allowance.
+WATCHDOG_S = 30.0
 
 
 def build(**ports) -> Machine:
@@ -110,7 +114,7 @@ def client_loop():
 
 
 def connect(loop: LoopThread, url: str, **kw) -> Client:
-    client = Client(url, timeout=10)
+    client = Client(url, timeout=10, watchdog_intervall=WATCHDOG_S)
     for key, value in kw.items():
         getattr(client, f"set_{key}")(value)
     loop.run(client.connect, timeout=30)
@@ -591,7 +595,7 @@ def test_many_clients_at_once_and_a_silent_subscriber_do_not_make_the_machine_la
 
     # a silent subscriber: creates a subscription, then never publishes (stalled reader)
     async def silent():
-        c = Client(url, timeout=10)
+        c = Client(url, timeout=10, watchdog_intervall=WATCHDOG_S)
         await c.connect()
         params = ua.CreateSubscriptionParameters()
         params.RequestedPublishingInterval = 100

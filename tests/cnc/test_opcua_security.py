@@ -88,7 +88,7 @@ def secured(tmp_path_factory):
 
 
 async def session(face, cert, user=None, password=None) -> Client:
-    client = Client(face.address, timeout=15)
+    client = Client(face.address, timeout=15, watchdog_intervall=30.0)  # loaded box
     client.application_uri = CLIENT_URI
     await client.set_security(
         SecurityPolicyBasic256Sha256,
