@@ -349,23 +349,19 @@ class Cell:
         self.loops.append(Loop("outbox-publisher", publisher.publish_pending, 0.2).start())
 
     def _start_opcua_feed(self) -> None:
-        """The host's knowledge (dispatched revisions, jobs) into the OPC UA faces of the
-        machines this process runs; machines in their own processes serve the machine's own
-        data only (docs/opcua.md)."""
-        faces = {
-            name: link.local.opcua
-            for name, link in self.links.items()
-            if getattr(link.local, "opcua", None) is not None
-        }
-        if not faces:
+        """The host's knowledge (dispatched revisions, jobs) into the machines' OPC UA
+        faces, in this process or through their DNC ports; their clients' method calls
+        back into the audit log (server/opcua_feed.py, docs/opcua.md)."""
+        if not any(link.ports.get("opcua") for link in self.links.values()):
             return
-        from server.opcua_feed import host_data
+        from dnc.machine_link import client_for
+        from server.opcua_feed import OpcUaFeed
 
-        def feed() -> None:
-            for name, face in faces.items():
-                face.set_host_data(host_data(self.library, self.dispatches, self.jobs, name))
+        def client(name: str):
+            return client_for(self.library, name, secret=self.links[name].secret)
 
-        self.loops.append(Loop("opcua-feed", feed, 1.0).start())
+        self.opcua_feed = OpcUaFeed(self.library, self.dispatches, self.jobs, self.links, client)
+        self.loops.append(Loop("opcua-feed", self.opcua_feed.tick, 1.0).start())
 
     def _start_remote_requests(self) -> None:
         from dnc.machine_link import RemoteRequests, client_for
