@@ -89,6 +89,8 @@ def machine_move(ip: Context, run: BlockRun) -> None:
     increments from where the tool stands, the same displacement in any coordinate system:
     Fanuc ignores G53 in incremental mode, Mitsubishi moves by the increment (M700 manual,
     14.4 (4)); a Kitamura HMC's tool measuring macro (O919100) moves `G91 G53 G00 X#21`."""
+    if "skip" in run.g:
+        return  # G53 G31: the skip move goes in machine coordinates (cnc.interp.skip)
     blk = run.blk
     motion = run.g.get("motion")
     if ip._comp_engaged():
