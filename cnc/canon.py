@@ -74,7 +74,8 @@ class SkipFeed(StraightFeed):
 
     `signal`: the skip input it waits for (G31 P1..P4: the multi-step skip's steps; 0 for
     G31 without P); `tool_length`: the length of the tool in the spindle as the control
-    knows it (the tool tip is the gauge line minus this along Z), for the tool setter;
+    knows it (the tool tip is the gauge line minus this along Z) and `tool_radius` its
+    radius (the tool's end is a disc of it), for the tool setter;
     `expected`: where the interpreter expects the skip (X Y Z: the machine's tool setter
     met on the programmed path), None when it expects none: a planner without a machine
     (`nc plan`) stops there. The machine stops taking blocks after it until the move has
@@ -83,6 +84,7 @@ class SkipFeed(StraightFeed):
 
     signal: int = 0
     tool_length: float = 0.0
+    tool_radius: float = 0.0
     expected: Pose | None = None
 
     def planned(self) -> StraightFeed:

@@ -135,7 +135,7 @@ def skip_warnings(interp, params) -> list[str]:
     why = (
         "no tool setter on this machine (probe.tool_setter)"
         if params.tool_setter is None
-        else "its path misses the tool setter"
+        else "the tool does not meet the tool setter on its path"
     )
     seen = dict.fromkeys(interp.skip_misses)
     return [

@@ -1,11 +1,12 @@
 """The skip signal's source: a tool-length sensor (tool setter) fixed on the machine.
 
 A tool setter is a disc of `radius` at `x`, `y` (machine coordinates, mm) whose contact
-plane is at `z_trigger`: it switches the skip signal when the tool tip, pressing along
-the spindle axis Z, reaches that plane within the disc. The tool tip is the spindle's
-gauge line (the machine position) minus the tool length the control knows, so the
-sensor sees what the control believes the tool to be, and a G31 towards it measures
-that (docs/gcode.md, "G31 skip and the tool setter").
+plane is at `z_trigger`: it switches the skip signal when the tool's end, pressing along
+the spindle axis Z, reaches that plane over the disc. The tool's end is a flat disc of
+the tool's radius around the spindle axis (a face mill is measured on its cutting edge,
+off its axis) at the spindle's gauge line (the machine position) minus the tool length
+the control knows: the sensor sees what the control believes the tool to be, and a G31
+towards it measures that (docs/gcode.md, "G31 skip and the tool setter").
 
 Pure geometry, shared by the two users: the interpreter decides a G31 from its
 programmed path in `nc check` / `nc plan` (`first_trip`), the real-time controller
@@ -29,13 +30,19 @@ class ToolSetter:
     z_trigger: float
     radius: float = 5.0
 
-    def trips(self, tip: tuple[float, ...]) -> bool:
-        """Whether the sensor switches with the tool tip at `tip` (X Y Z, machine mm)."""
+    def trips(self, tip: tuple[float, ...], tool_radius: float = 0.0) -> bool:
+        """Whether the sensor switches with the tool's end centred at `tip` (X Y Z, machine
+        mm), a disc of `tool_radius`."""
         dx, dy = tip[0] - self.x, tip[1] - self.y
-        return tip[2] <= self.z_trigger + _EPS and dx * dx + dy * dy <= self.radius**2 + _EPS
+        reach = self.radius + max(tool_radius, 0.0)
+        return tip[2] <= self.z_trigger + _EPS and dx * dx + dy * dy <= reach * reach + _EPS
 
     def first_trip(
-        self, start: tuple[float, ...], end: tuple[float, ...], tool_length: float
+        self,
+        start: tuple[float, ...],
+        end: tuple[float, ...],
+        tool_length: float,
+        tool_radius: float = 0.0,
     ) -> tuple[float, float, float] | None:
         """The first machine position (gauge line, X Y Z) on the straight move `start` ->
         `end` at which the sensor switches, or None when it never does; a move that
@@ -52,11 +59,12 @@ class ToolSetter:
             lo = max(lo, gap / dz)
         else:
             hi = min(hi, gap / dz)
-        # and within the disc: |(s - c) + t d|^2 <= r^2 in X Y
+        # and over the disc: |(s - c) + t d|^2 <= (r + tool radius)^2 in X Y
         ox, oy = sx - self.x, sy - self.y
+        reach = self.radius + max(tool_radius, 0.0)
         a = dx * dx + dy * dy
         b = 2.0 * (ox * dx + oy * dy)
-        c = ox * ox + oy * oy - self.radius**2
+        c = ox * ox + oy * oy - reach * reach
         if a < _EPS:
             if c > _EPS:
                 return None

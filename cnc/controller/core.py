@@ -1285,7 +1285,7 @@ class Controller:
         if sk.latched is None and sensor is not None and m.block == sk.block and v > 0.0:
             a = self._actual
             at = (a.get("X", 0.0), a.get("Y", 0.0), a.get("Z", 0.0))
-            if sensor.trips((at[0], at[1], at[2] - sk.cmd.tool_length)):
+            if sensor.trips((at[0], at[1], at[2] - sk.cmd.tool_length), sk.cmd.tool_radius):
                 sk.latched = at
                 m.feed_hold()
                 self._event(f"G31 skip signal at line {sk.cmd.line}: Z {at[2]:.4f}")

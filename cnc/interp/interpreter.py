@@ -79,6 +79,7 @@ from cnc.interp.gnum import (
     G40,
     G41,
     G49,
+    G53,
     G54,
     G64,
     G80,
@@ -703,6 +704,16 @@ class Interpreter:
             ):
                 raise self._err(
                     f"{fmt_g(code)} and another G code of modal group '{grp}' in one block",
+                    blk,
+                    "G",
+                    i + 1,
+                )
+            if (grp == "skip" and gset.get("nonmodal", G53) != G53) or (
+                grp == "nonmodal" and "skip" in gset and code != G53
+            ):  # G31 shares group 00 with G53 only (a skip in machine coordinates)
+                raise self._err(
+                    f"{fmt_g(code)} and another G code of group 00 in one block (only G53"
+                    " goes with G31)",
                     blk,
                     "G",
                     i + 1,

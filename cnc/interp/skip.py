@@ -70,11 +70,12 @@ def skip_move(ip: Context, run: BlockRun) -> None:
         end = (t[0] + o[0], 0.0 if ip._lathe else t[1] + o[1], t[2] + o[2])
     ip._check(end, blk, blk.line)
     feed = ip._feed(blk)
-    tool = ip._tools.get(ip._tool_in) if ip._tool_in else None
-    length = 0.0 if tool is None or ip._lathe else tool.length
+    # the tool in the spindle as the control knows it (offset number = tool number)
+    tool = ip._tools.get(ip._tool_in) if ip._tool_in and not ip._lathe else None
+    length, radius = (0.0, 0.0) if tool is None else (tool.length, tool.radius)
     sensor = ip.params.tool_setter
-    trip = sensor.first_trip(start, end, length) if sensor is not None else None
-    ip._out.append(SkipFeed(blk.line, end, feed, True, signal, length, trip))
+    trip = sensor.first_trip(start, end, length, radius) if sensor is not None else None
+    ip._out.append(SkipFeed(blk.line, end, feed, True, signal, length, radius, trip))
     if trip is None:
         ip.skip_misses.append((ip._frames[-1].file if ip._frames else ip.file, blk.line))
     ip._moved = True
