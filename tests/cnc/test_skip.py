@@ -179,3 +179,58 @@ def test_nc_plan_stops_a_g31_at_the_tool_setter(tmp_path) -> None:
     assert res.exit_code == 0, res.stdout + res.stderr
     report = json.loads(res.stdout)
     assert report["final_work_position"]["Z"] == pytest.approx(-300.0)
+
+
+PROBING = """%
+O0031 (TOOL LENGTH ON THE TOOL SETTER)
+G21 G90 G17
+T1 M6
+G53 G0 X-100 Y-50 Z-270
+G31 Z-30 F300
+#500=#5063
+#501=#5023
+G91 G0 Z10
+#502=#5023
+M30
+%
+"""
+
+
+def test_machine_latches_the_encoder_position_where_the_tool_setter_switches() -> None:
+    """Lockstep, CiA 402 drives on the simulated CAN bus, mill3's G54: tool 1 (30 mm long)
+    skips down onto the sensor (contact plane at machine Z -320: the gauge line at -290,
+    work Z 10); the PLC
+    answers M6, the macro reads the latch. The latch is an encoder sample of the IPO cycle
+    the sensor switched: at most one cycle's travel (300 mm/min x 2 ms = 0.01 mm) below the
+    plane; the machine then stops a little further on (deceleration) and the next block
+    starts from where it stopped."""
+    from cnc.machine import Machine
+    from tests.cnc.setups import machine_coordinates
+
+    cfg = machine_coordinates(
+        "mill3",
+        probe={"tool_setter": {"x": -100.0, "y": -50.0, "z_trigger": -320.0}},
+        machine_data={"tools": {1: {"length": 30.0}}},
+    )
+    m = Machine(cfg, "mill3")
+    try:
+        m.step(50)
+        m.command("mode", mode="REF")
+        m.command("home")
+        assert m.run_until(lambda mm: all(mm.controller.referenced.values()), 30.0), m.alarms
+        n = m.load_program(PROBING)
+        m.command("mode", mode="AUTO")
+        m.command("select_program", number=n)
+        m.command("cycle_start")
+        done = m.run_until(
+            lambda mm: bool(mm.alarms) or mm.status.execution == "PROGRAM_COMPLETED", 60.0
+        )
+        assert done and not m.alarms, m.alarms
+        kept = m.controller.machine_data.macro_variables
+        latched, stopped, after = kept[500], kept[501], kept[502]
+    finally:
+        m.close()
+    # mill3's G54 Z is -300: the skip position in work coordinates is machine Z + 300
+    assert 10.0 - 0.0101 <= latched <= 10.0
+    assert latched - 300.0 - 0.5 < stopped <= latched - 300.0  # overtravel, decelerating
+    assert after == pytest.approx(stopped + 10.0, abs=1e-9)
