@@ -1200,7 +1200,7 @@ class Controller:
                 if m.path.blocks > blocks:
                     run.skip = _SkipWait(cmd, m.path.blocks)
                 else:  # no distance to go: it ends where it starts, without a signal
-                    run.interp.skipped(None, m.pose)
+                    run.interp.skipped(None, cmd.end)
             if motion:
                 feed = getattr(cmd, "feed", None)
                 if cmd.line not in run.lines_feed:

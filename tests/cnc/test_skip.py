@@ -234,3 +234,25 @@ def test_machine_latches_the_encoder_position_where_the_tool_setter_switches() -
     assert 10.0 - 0.0101 <= latched <= 10.0
     assert latched - 300.0 - 0.5 < stopped <= latched - 300.0  # overtravel, decelerating
     assert after == pytest.approx(stopped + 10.0, abs=1e-9)
+
+
+def test_controller_without_a_signal_runs_the_skip_to_its_end_point(monkeypatch) -> None:
+    """IdealAxes lagging 4 ms: the sensor sits away from the path, the G31 runs to its end,
+    which becomes #5063, and the program goes on from there."""
+    from cnc.machine_data import MachineData
+    from tests.cnc.setups import machine_coordinates
+    from tests.cnc.test_controller import Rig
+
+    prog = "%\nO0032\nG21 G90\nG53 G0 X-100 Y-50 Z-270\nG31 Z-280 F600\n#500=#5063\n" \
+        "G91 G0 Z5\n#501=#5023\nM30\n%\n"  # fmt: skip
+    cfg = machine_coordinates(
+        "mill3", probe={"tool_setter": {"x": -200.0, "y": -50.0, "z_trigger": -320.0}}
+    )
+    monkeypatch.setattr("tests.cnc.test_controller.machine_coordinates", lambda name: cfg)
+    rig = Rig(programs={32: prog}, lag_s=0.004, machine_data=MachineData())
+    rig.home()
+    rig.run_program(32)
+    assert rig.ex == "PROGRAM_COMPLETED", rig.ctl.alarms
+    kept = rig.ctl.machine_data.macro_variables
+    assert (kept[500], kept[501]) == pytest.approx((-280.0, -275.0))
+    assert not any("skip signal" in text for _, text in rig.ctl.events)
