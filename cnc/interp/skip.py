@@ -26,6 +26,7 @@ from typing import TYPE_CHECKING
 
 from cnc.canon import SkipFeed
 from cnc.interp.gnum import G53
+from cnc.interp.offsets import machine_target
 
 if TYPE_CHECKING:
     from cnc.interp.context import BlockRun, Context
@@ -56,12 +57,7 @@ def skip_move(ip: Context, run: BlockRun) -> None:
         raise ip._err(f"G31 skips on X Y Z only, not on the rotary axis {letter}", blk, letter)
     start = ip._mach
     if run.g.get("nonmodal") == G53:
-        m = list(start)
-        for i, letter in enumerate("XYZ"):
-            if letter in words:
-                val = ip._dim(blk, letter) * (0.5 if letter == "X" and ip._diam else 1.0)
-                m[i] = val if ip._abs else m[i] + val
-        end = (m[0], 0.0 if ip._lathe else m[1], m[2])
+        end = machine_target(ip, blk)
     else:
         t = ip._target(blk, words)
         if ip._xf_on:

@@ -13,9 +13,9 @@ import pytest
 from cnc.canon import SkipFeed, StraightFeed, StraightTraverse
 from cnc.errors import NcError
 from cnc.interp import Interpreter
+from cnc.interp.state import ToolOffset
 from cnc.params import MachineParams
 from cnc.probe import ToolSetter
-from cnc.interp.state import ToolOffset
 
 # a sensor at machine X-100 Y-50 whose contact plane is at machine Z -300
 SETTER = ToolSetter(-100.0, -50.0, -300.0, 5.0)
