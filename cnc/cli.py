@@ -123,9 +123,25 @@ def check_cmd(
             "before its first F take the caller's feed",
             err=True,
         )
+    for w in skip_warnings(interp, setup.params):
+        typer.echo(w, err=True)
     if not interp.units_programmed:
         typer.echo(units_warning(str(file), setup.machine_data.power_on_units), err=True)
     raise typer.Exit(1 if errors else 0)
+
+
+def skip_warnings(interp, params) -> list[str]:
+    """One warning per G31 line that ran to its end point without a skip signal."""
+    why = (
+        "no tool setter on this machine (probe.tool_setter)"
+        if params.tool_setter is None
+        else "the tool does not meet the tool setter on its path"
+    )
+    seen = dict.fromkeys(interp.skip_misses)
+    return [
+        f"{f}:{line}:1: warning: G31 never tripped: {why}; it ran to its end point"
+        for f, line in seen
+    ]
 
 
 CHECK_MAX_BLOCKS = 5_000_000

@@ -34,6 +34,7 @@ from yaml.nodes import MappingNode, Node, ScalarNode, SequenceNode
 
 from cnc.errors import NcError
 from cnc.params import AxisParams, DecimalStyle, MachineParams
+from cnc.probe import ToolSetter
 from drives.config import CanConfig, DriveAxisConfig, DrivesConfig
 from plc.config import MCodeConfig, PlcConfig
 
@@ -178,6 +179,27 @@ class ToolChangerConfig(Section):
     )
     pockets: int = Field(20, ge=1, le=999, description="Magazine pockets / turret stations.")
     change_time_s: float = Field(2.5, gt=0, description="Time of one M6 change, s.")
+
+
+class ToolSetterConfig(Section):
+    """A tool-length sensor (`probe.tool_setter`): where a G31 skip move finds its skip
+    signal (docs/gcode.md, "G31 skip and the tool setter")."""
+
+    x: float = Field(description="Centre of the sensor's contact disc, machine X, mm.")
+    y: float = Field(description="Centre of the sensor's contact disc, machine Y, mm.")
+    z_trigger: float = Field(
+        description="Machine Z of the tool tip (the gauge line minus the tool length) at which"
+        " the sensor switches, mm."
+    )
+    radius: float = Field(5.0, gt=0, description="Radius of the contact disc, mm.")
+
+
+class ProbeConfig(Section):
+    """The machine's measuring sensors (`probe`)."""
+
+    tool_setter: ToolSetterConfig | None = Field(
+        None, description="The tool-length sensor; null = none fitted (a G31 never trips)."
+    )
 
 
 class PortsConfig(Section):
@@ -347,6 +369,9 @@ class MachineConfig(Section):
     plc: PlcConfig = Field(default_factory=PlcConfig, description="The PLC section.")
     can: CanConfig = Field(default_factory=CanConfig, description="The CAN bus section.")
     ports: PortsConfig = Field(default_factory=PortsConfig, description="The faces' ports section.")
+    probe: ProbeConfig = Field(
+        default_factory=ProbeConfig, description="The measuring sensors section (G31 skip)."
+    )
     machine_data: MachineDataConfig | None = Field(
         default_factory=MachineDataConfig,
         description="The machine data section: tools, work offsets, power-on unit; null ="
@@ -389,6 +414,11 @@ class MachineConfig(Section):
             call_nesting=self.call_nesting,
             macro_nesting=self.macro_nesting,
             plc_m_codes=self.plc.nc_m_codes,
+            tool_setter=(
+                ToolSetter(ts.x, ts.y, ts.z_trigger, ts.radius)
+                if (ts := self.probe.tool_setter) is not None
+                else None
+            ),
             kinematics=(
                 (self.kinematics.d_mm, self.kinematics.tool_length_mm, self.kinematics.z_offset_mm)
                 if self.kinematics is not None
@@ -980,6 +1010,8 @@ MACHINE_SECTIONS: tuple[tuple[str, type[BaseModel]], ...] = (
     ("machines.<NAME>.plc.m_codes.<M>", MCodeConfig),
     ("machines.<NAME>.can", CanConfig),
     ("machines.<NAME>.ports", PortsConfig),
+    ("machines.<NAME>.probe", ProbeConfig),
+    ("machines.<NAME>.probe.tool_setter", ToolSetterConfig),
     ("machines.<NAME>.machine_data", MachineDataConfig),
     ("machines.<NAME>.machine_data.tools.<N>", ToolConfig),
 )

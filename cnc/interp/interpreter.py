@@ -79,6 +79,7 @@ from cnc.interp.gnum import (
     G40,
     G41,
     G49,
+    G53,
     G54,
     G64,
     G80,
@@ -351,6 +352,10 @@ class Interpreter:
         self._ended = False
         self._executed = 0
         self._moved = False
+        # G31: the skip position (work coordinates, mm) for #5061..; None before any G31
+        self._skip_pos: tuple[float, float, float] | None = None
+        # (file, line) of the G31 moves that ran to their end without a skip signal
+        self.skip_misses: list[tuple[str, int]] = []
 
     # --- modal state ------------------------------------------------------------------
 
@@ -702,6 +707,16 @@ class Interpreter:
             ):
                 raise self._err(
                     f"{fmt_g(code)} and another G code of modal group '{grp}' in one block",
+                    blk,
+                    "G",
+                    i + 1,
+                )
+            if (grp == "skip" and gset.get("nonmodal", G53) != G53) or (
+                grp == "nonmodal" and "skip" in gset and code != G53
+            ):  # G31 shares group 00 with G53 only (a skip in machine coordinates)
+                raise self._err(
+                    f"{fmt_g(code)} and another G code of group 00 in one block (only G53"
+                    " goes with G31)",
                     blk,
                     "G",
                     i + 1,
@@ -1329,6 +1344,22 @@ class Interpreter:
                     ) from None
 
     # --- modes with axis words ---------------------------------------------------------
+
+    def skipped(self, latched: Pose | None, stop: Pose) -> None:
+        """The outcome of the last G31 (cnc.interp.skip): the machine position (mm) latched
+        at the skip signal, None when none came, and where the machine stopped. The next
+        block starts from `stop`; #5061.. read `latched` (else the end point) in work
+        coordinates. The controller calls it with the encoder's latch before it takes the
+        next block from the interpreter."""
+        self._mach = (float(stop[0]), float(stop[1]), float(stop[2]))
+        self._pos = self._prog_from_machine()
+        if latched is None:
+            self._skip_pos = self._pos
+        else:
+            keep = self._mach
+            self._mach = (float(latched[0]), float(latched[1]), float(latched[2]))
+            self._skip_pos = self._prog_from_machine()
+            self._mach = keep
 
     def _refresh_offsets(self, resync: bool) -> None:
         self._off = self._compute_off()

@@ -16,7 +16,7 @@ extension #10000-#10999):
 | #3001, #3002 | timers ms / hours | from the injected clock |
 | #3003, #3004, #3901, #3902 | single block / feed hold control, parts counters | this run |
 | #4001-#4130 | modal information of the block before (read only) | |
-| #5001-#5105 | positions (read only): 1st digit group = end point, machine, current, skip, tool length offset, servo deviation; #50x4/#50x5 the rotary 4th/5th axis (degrees) | |
+| #5001-#5105 | positions (read only): 1st digit group = end point, machine, current, skip (the G31 skip position, work coordinates; the current position before any G31), tool length offset, servo deviation; #50x4/#50x5 the rotary 4th/5th axis (degrees) | |
 | #5201-#5325, #7001-#7945 | work offsets (`_wofs`; #52x4/#52x5 the rotary axes', degrees) | work offset memory |
 | #5401-#5600 | Haas tool feed timers / total tool timers, seconds (read only) | read 0: no tool usage is recorded here |
 
@@ -292,7 +292,9 @@ def _position(ip: Interpreter, n: int, col: int) -> float | None:
         return _rotary_position(ip, group, ax - 3, n, col)
     u = _unit(ip)
     d = 2.0 if ax == 0 and ip._diam else 1.0
-    if group in (0, 2, 3):  # block end point, current work position, skip position
+    if group == 3 and ip._skip_pos is not None:  # skip position (G31)
+        return ip._skip_pos[ax] * d / u
+    if group in (0, 2, 3):  # block end point, current work position (skip before any G31)
         return ip._pos[ax] * d / u
     if group == 1:  # machine coordinates
         return ip._mach[ax] / u
