@@ -261,7 +261,14 @@ def test_cli_post_json_and_output_only_on_success(cli, tmp_path: Path) -> None:
     src = tmp_path / "seed.apt"
     src.write_text(SEED15)
     out = tmp_path / "seed.nc"
+    # the part (4 x 8 x 6 in above its zero) placed near a table corner: the shipped G54
+    # (table centre) would put its Y 8 in past the travel, as the default check says
     r = cli("cam", "post", str(src), "--machine", "mill3", "-o", str(out), "--json")
+    assert r.exit_code == 1 and "beyond the soft limit" in r.stderr and not out.exists()
+    r = cli(
+        "cam", "post", str(src), "--machine", "mill3", "--g54", "-500,-300,-300",
+        "-o", str(out), "--json",
+    )  # fmt: skip
     assert r.exit_code == 0, r.output
     doc = json.loads(r.stdout)
     assert doc["blocks_in"] == 15 and doc["blocks_out"] == 9 and doc["nc_check"] == "passed"
