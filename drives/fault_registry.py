@@ -406,9 +406,10 @@ _KINDS = (
         "drive",
         "cabinet temperature (the winding model and the heat-sink sensor)",
         "heat sink: warning bit 7 above 75 degC, EMCY 0x4210 above 85 degC; 0x4310 sooner",
-        "heat-sink sensor (5 s lag behind the cabinet air): warning bit 7 "
-        "above 75 degC, EMCY 0x4210 above 85 degC: 11.5 s at 90 degC; the winding model's "
-        "0x4310 comes much later",
+        "heat-sink sensor, a first-order lag (tau = 5 s) behind the cabinet air: warning bit "
+        "7 above 75 degC, EMCY 0x4210 above 85 degC after tau x ln((T - 40) / (T - 85)) from "
+        "the nominal 40 degC: 11.5 s at 90 degC (machine time: a realtime cell behind its "
+        "clock shows it later in wall time); the winding model's 0x4310 comes much later",
         "temperature",
         "cool the cabinet; RESET when the winding is below 130 degC; home",
         (FaultParam("celsius", "degC", None, -40.0, 200.0),),

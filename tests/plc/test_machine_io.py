@@ -197,3 +197,16 @@ def test_every_field_fault_has_a_detection_bound_counted_from_a_known_event():
     assert set(DETECTION) == set(FAULTS)
     for name, (bound, since, how) in DETECTION.items():
         assert bound > 0 and since in DETECT_FROM and how, name
+
+
+def test_docs_recovery_lists_every_field_fault_with_its_bound():
+    """docs/recovery.md's PLC field fault table says what DETECTION says, row for row."""
+    from pathlib import Path
+
+    from drives.fault_registry import number
+    from plc.machine_io import DETECTION
+
+    doc = (Path(__file__).resolve().parents[2] / "docs" / "recovery.md").read_text()
+    for name, (bound, since, how) in DETECTION.items():
+        frm = "" if since == "injection" else f" from {since}"
+        assert f"| `{name}` | {number(bound)} s{frm} | {how} |" in doc, name
