@@ -10,11 +10,15 @@ binds fixed ones, which a second cell on the box would collide with). Then, for
 - SSE clients churning: `--sse` clients, each connecting to /api/events, reading for 0.5 to
   5 s, disconnecting, again;
 - a fault every `--fault-every` seconds (60), rotating through `/api/fault-types` (aliases
-  left out) on mill1 and mill2 in turn, injected while the machine cuts; its detection time
-  (first new alarm on `GET /api/machines/{name}`, polled every 50 ms) is compared with the
-  bound of docs/recovery.md (machine time; `DETECT_SLACK_S` more for the status stream and
-  the poll), then recovered as docs/recovery.md says: cause taken away (DELETE the fault),
-  standstill, one RESET, home, back in AUTO, READY, referenced, with no alarm;
+  left out) on mill1 and mill2 in turn, injected while the machine cuts, its target and
+  detection bound taken from that list (drives.fault_registry, plc.machine_io.DETECTION;
+  only soak policy, `POLICY`, is kept here); its detection time (first new alarm on
+  `GET /api/machines/{name}`, polled every 50 ms) is converted to machine time with the
+  machine's clock rate over the fault's life (the fault record's `machine_t` and
+  `cleared_machine_t`) and compared with the bound (`DETECT_SLACK_S` more for the status
+  stream and the poll; a bound counted from a later event, `detect_from`, gets two cycles of
+  the soak's part more), then recovered as docs/recovery.md says: cause taken away (DELETE
+  the fault), standstill, one RESET, home, back in AUTO, READY, referenced, with no alarm;
 - the host's RSS every 5 s; growth after warm-up (`--warmup-minutes`, default a quarter of
   the run, at most 10) as the least-squares slope in MB/h.
 
@@ -91,50 +95,49 @@ N70 M30
 """
 CYCLE_S = {"mill": 20.0, "lathe": 10.0}
 
-# How each fault kind is injected and its detection bound in seconds of machine time from
-# docs/recovery.md (tests/cnc/test_recovery.py uses the same specs and bounds). None: the
-# docs give no bound (PLC field faults) or it is undetectable by design (backlash).
-# `after`: what the operator does once the fault is cleared and before RESET: a rest (s),
-# or a spec that stands for the cause being gone (a cooled winding).
-PLAN: dict[str, dict] = {
-    "load_force": {"target": "drive:Y", "params": {"newtons": 1800}, "bound": 3.5, "rest": 4},
-    # a jam shows only when the axis moves: the bound runs from its next move (a cycle away)
-    "blocked": {"target": "drive:Y", "bound": 0.06, "at_next_move": True},
-    "encoder_break": {"target": "drive:X", "bound": 0.01},
-    "encoder_jump": {"target": "drive:X", "bound": 0.01},
-    "inverter_fault": {"target": "drive:X", "bound": 0.01},
-    "supply_loss": {"target": "drive:X", "bound": 0.03},
-    "mains_voltage": {"target": "drive:X", "params": {"volts": 480}, "bound": 0.01},
-    "chopper_failure": {"target": "drive:X", "bound": 0.102},
-    "ambient_temperature": {
-        "target": "drive:Y",
-        "params": {"celsius": 90},
-        "bound": 11.6,
-        "rest": 2,
-    },
-    "winding_temperature": {
-        "target": "drive:X",
-        "params": {"celsius": 160},
-        "bound": 0.01,
-        "cooled": {"celsius": 60},
-    },
-    "backlash": {"target": "drive:X", "params": {"metres": 0.002}, "undetectable": True},
-    "drop": {"target": "bus:X", "params": {"count": 0}, "bound": 0.012},
-    "drop_rpdo": {"target": "bus:X", "params": {"count": 0}, "bound": 0.052},
-    "corrupt": {"target": "bus:Y", "params": {"count": 0}, "bound": 0.012},
-    "delay": {"target": "bus:Z", "params": {"delay_ms": 50, "count": 0}, "bound": 0.012},
-    "bus_off": {"target": "bus:Y", "bound": 0.012},
-    "babble": {"target": "bus:Z", "bound": 0.012},
-    "power_cycle": {"target": "drive:Z", "bound": 0.01},
-    "estop_button": {"target": "plc", "bound": 0.02},
+# Soak policy only: what makes a fault detectable here, on which axis, and what the operator
+# does once it is cleared. The target and the detection bound (machine time, and the event it
+# runs from) come from /api/fault-types (drives.fault_registry, plc.machine_io.DETECTION),
+# so a new kind is injected and judged without an edit here (`fault_plan()`).
+# `axis`: the axis of a drive or bus kind (default X); `params`: what makes it detectable
+# (a required parameter, a level the bound is stated for); `rest` (s) or `cooled` (a spec that
+# stands for the cause being gone) before RESET; `resume`: CYCLE START instead of RESET.
+POLICY: dict[str, dict] = {
+    "load_force": {"axis": "Y", "params": {"newtons": 1800}, "rest": 4},
+    "blocked": {"axis": "Y"},
+    "mains_voltage": {"params": {"volts": 480}},
+    "ambient_temperature": {"axis": "Y", "params": {"celsius": 90}, "rest": 2},
+    "winding_temperature": {"params": {"celsius": 160}, "cooled": {"celsius": 60}},
+    "backlash": {"params": {"metres": 0.002}},
+    "drop": {"params": {"count": 0}},
+    "drop_rpdo": {"params": {"count": 0}},
+    "corrupt": {"axis": "Y", "params": {"count": 0}},
+    "delay": {"axis": "Z", "params": {"delay_ms": 50, "count": 0}},
+    "bus_off": {"axis": "Y"},
+    "babble": {"axis": "Z"},
+    "power_cycle": {"axis": "Z"},
     # feed hold while the door is open; closing it is not enough: CYCLE START resumes
-    "door_open": {"target": "plc", "bound": 0.02, "resume": True},
-    # reached only during a tool change: the bound runs from the next M6 (at most a cycle)
-    "carousel_jam": {"target": "plc", "bound": 5.1, "at_tool_change": True},
-    "changer_jam": {"target": "plc", "bound": 5.1, "at_tool_change": True},
-    "arm_jam": {"target": "plc", "bound": 2.7, "at_tool_change": True},
-    "orient_fail": {"target": "plc", "bound": 5.3, "at_tool_change": True},
+    "door_open": {"resume": True},
 }
+
+
+def fault_plan(row: dict, policy: dict | None = None) -> dict:
+    """How the soak injects and judges one /api/fault-types row: {target, params, bound,
+    detect_from, undetectable, rest, cooled, resume}. The bound is the row's `bound_s`
+    (None: undetectable by design, or no bound stated, which the verdict reports)."""
+    pol = policy or {}
+    target = row["target"].replace("<AXIS>", pol.get("axis", "X"))
+    undetectable = row.get("detection", "").startswith("UNDETECTABLE BY DESIGN")
+    return {
+        "target": target,
+        "params": pol.get("params", {}),
+        "bound": row.get("bound_s"),
+        "detect_from": row.get("detect_from", "injection"),
+        "undetectable": undetectable,
+        **{k: pol[k] for k in ("rest", "cooled", "resume") if k in pol},
+    }
+
+
 DETECT_SLACK_S = 1.0  # status stream to the host, REST poll, a loaded box
 DETECT_WAIT_S = 30.0  # give up on a detection after the bound + this
 RECOVER_WAIT_S = 60.0
@@ -171,6 +174,18 @@ def slope_mb_per_h(samples: list[tuple[float, float]]) -> float | None:
     if var == 0:
         return None
     return sum((t - mt) * (r - mr) for t, r in samples) / var * 3600
+
+
+def clock_rate(
+    inject: tuple[float, float | None], clear: tuple[float, float | None]
+) -> float | None:
+    """Machine seconds per wall second between an injection and its clear, from (wall,
+    machine time) at each (None: the machine did not report its time). At most 1: a realtime
+    machine never runs ahead of the wall clock, only behind it on a loaded host."""
+    (w0, m0), (w1, m1) = inject, clear
+    if m0 is None or m1 is None or w1 <= w0:
+        return None
+    return max(0.0, min(1.0, (m1 - m0) / (w1 - w0)))
 
 
 class Soak:
@@ -287,7 +302,7 @@ class Soak:
             time.sleep(every)
         return None
 
-    def fault_loop(self, types: list[str]) -> None:
+    def fault_loop(self, types: list[dict]) -> None:
         machines = ["mill1", "mill2"]
         if not types:
             return
@@ -297,59 +312,72 @@ class Soak:
             while not self.stop.wait(max(0.0, next_at - time.monotonic())):
                 if time.monotonic() > self.deadline - 5:
                     break
-                kind, name = types[i % len(types)], machines[i % len(machines)]
+                row, name = types[i % len(types)], machines[i % len(machines)]
+                kind = row["type"]
                 i += 1
                 try:
-                    self.faults.append(self.one_fault(c, kind, name))
+                    self.faults.append(self.one_fault(c, row, name))
                 except httpx.HTTPError as exc:
                     self.faults.append({"type": kind, "machine": name, "error": repr(exc)})
                 next_at += self.args.fault_every
                 next_at = max(next_at, time.monotonic())
 
-    def one_fault(self, c: httpx.Client, kind: str, name: str) -> dict:
-        plan = PLAN.get(kind, {"target": "plc"})
+    def one_fault(self, c: httpx.Client, row: dict, name: str) -> dict:
+        kind = row["type"]
+        plan = fault_plan(row, POLICY.get(kind))
+        later = plan["detect_from"] != "injection"  # shows at the next move, M6, M8, M3...
         out: dict = {"type": kind, "machine": name, "target": plan["target"]}
         # on a moving axis, as the bounds are stated: wait (a while) for the machine to cut
         active = self.wait(c, name, lambda s: s["execution"] == "ACTIVE", 40.0, every=0.2)
         out["while_cutting"] = active is not None
         before = {(a["code"], a["text"]) for a in self.status(c, name)["alarms"]}
-        body = {"type": kind, "target": plan["target"], "params": plan.get("params", {})}
+        body = {"type": kind, "target": plan["target"], "params": plan["params"]}
         r = c.post(f"/api/machines/{name}/faults", json=body)
         self.requests += 1
         if r.status_code != 201:
             out["error"] = f"inject: {r.status_code} {r.text[:200]}"
             return out
         fault_id, t_inject = r.json()["id"], time.monotonic()
+        m_inject = r.json().get("machine_t")
         bound = plan.get("bound")
         wait_s = (bound or 0) + DETECT_WAIT_S
-        if plan.get("at_tool_change") or plan.get("at_next_move"):
+        if later:
             wait_s += CYCLE_S["mill"] * 2
-        if plan.get("undetectable"):
+        if plan["undetectable"]:
             wait_s = 10.0  # watched a while to show it stays silent
         seen = self.wait(
             c, name, lambda s: {(a["code"], a["text"]) for a in s["alarms"]} - before, wait_s
         )
-        detected = time.monotonic() - t_inject if seen else None
+        detected_wall = time.monotonic() - t_inject if seen else None
+        # recovery (docs/recovery.md): the cause away, standstill, one RESET, home
+        t_rec = time.monotonic()
+        r = c.delete(f"/api/machines/{name}/faults/{fault_id}")
+        r.raise_for_status()
+        rate = clock_rate((t_inject, m_inject), (t_rec, r.json().get("cleared_machine_t")))
+        # the bounds are machine time: a realtime cell behind its clock on a loaded box
+        # detects a slow fault (the heat-sink lag, the brake check) later in wall time
+        detected = None if detected_wall is None else detected_wall * (rate or 1.0)
+        out["detected_wall_s"] = None if detected_wall is None else round(detected_wall, 3)
+        out["machine_clock_rate"] = None if rate is None else round(rate, 3)
         out["detected_s"] = None if detected is None else round(detected, 3)
         out["bound_s"] = bound
+        out["detect_from"] = plan["detect_from"]
         if seen:
             new = [a for a in seen["alarms"] if (a["code"], a["text"]) not in before]
             out["alarms"] = [f"{a['level']} {a['code']} {a['text'][:90]}" for a in new[:3]]
-        if plan.get("undetectable"):
+        if plan["undetectable"]:
             out["verdict"] = "undetectable by design" if seen is None else "detected"
         elif seen is None:
             out["verdict"] = "not detected"
         elif bound is None:
             out["verdict"] = "detected (no documented bound)"
-        elif plan.get("at_tool_change") or plan.get("at_next_move"):
-            # from the injection: the next tool change (move) is at most a cycle away
+        elif later:
+            # from the injection: the soak's part moves, changes tools, runs the spindle and
+            # the coolant every cycle: the event the bound runs from is at most a cycle away
             ok = detected <= bound + CYCLE_S["mill"] * 2 + DETECT_SLACK_S
             out["verdict"] = "within bound" if ok else "late"
         else:
             out["verdict"] = "within bound" if detected <= bound + DETECT_SLACK_S else "late"
-        # recovery (docs/recovery.md): the cause away, standstill, one RESET, home
-        t_rec = time.monotonic()
-        c.delete(f"/api/machines/{name}/faults/{fault_id}").raise_for_status()
         if "cooled" in plan:
             r = c.post(
                 f"/api/machines/{name}/faults",
@@ -414,7 +442,7 @@ class Soak:
 
         back = reset_and_home("")
         out["recovered"] = back is not None
-        if back is None and not plan.get("undetectable"):
+        if back is None and not plan["undetectable"]:
             # not by the documented procedure (one RESET): does a second one help?
             out["recovered_after_second_reset"] = reset_and_home("again ") is not None
         out["recovery_s"] = round(time.monotonic() - t_rec, 1)
@@ -576,15 +604,16 @@ def main() -> int:
     try:
         with soak.client() as c:
             types = [
-                t["type"]
+                t
                 for t in c.get("/api/fault-types").json()
                 if not t["description"].startswith("= ")  # an alias of another kind
             ]
             if args.faults is not None:
-                unknown = set(args.faults) - set(types)
+                unknown = set(args.faults) - {t["type"] for t in types}
                 if unknown:
                     raise SystemExit(f"--faults: unknown fault types {sorted(unknown)}")
-                types = args.faults
+                by_type = {t["type"]: t for t in types}
+                types = [by_type[t] for t in args.faults]
             before = {
                 m: soak.status(c, m)["counters"]["part_count"] for m in ("mill1", "mill2", "lathe1")
             }

@@ -26,7 +26,8 @@ class MachineUnavailable(CellError):
 
 class FaultRecord(Protocol):
     """An injected fault as the cell keeps it (`as_dict()`: id, machine, type, target, params,
-    spec, state, created_at, cleared_at)."""
+    spec, state, created_at, cleared_at, machine_t, cleared_machine_t: the machine's clock
+    when it took the injection and the clear)."""
 
     def as_dict(self) -> dict[str, Any]: ...
 

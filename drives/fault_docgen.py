@@ -67,11 +67,18 @@ def render_inject() -> str:
 def render_detection() -> str:
     """docs/recovery.md: per kind, its class, how it is detected and what brings it back."""
     rows = [
-        (f"`{k.name}`", k.recovery_class, k.detection, k.recovery)
+        (f"`{k.name}`", k.recovery_class, _bound(k), k.detection, k.recovery)
         for k in FAULT_KINDS.values()
         if k.detectable
     ]
-    return _table(("fault kind", "class", "detected (default mill)", "recovery"), rows)
+    head = ("fault kind", "class", "bound", "detected (default mill)", "recovery")
+    return _table(head, rows)
+
+
+def _bound(k: FaultKind) -> str:
+    """The bound as the soak and the tests read it: `0.012 s`, `0.06 s from next_move`."""
+    since = "" if k.detect_from == "injection" else f" from {k.detect_from}"
+    return f"{number(k.bound_s)} s{since}" if k.bound_s is not None else ""
 
 
 def render_undetected() -> str:

@@ -57,6 +57,8 @@ def describe() -> list[dict]:
             "emcy": [f"0x{code:04X}" for code in k.emcy],
             "error_register": error_register(k),
             "detection": k.detection,
+            "bound_s": k.bound_s,
+            "detect_from": k.detect_from,
             "recovery_class": k.recovery_class,
             "recovery": k.recovery,
             "params": [

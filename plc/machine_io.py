@@ -49,6 +49,50 @@ FAULTS = {
     "door_lock_fail": "door lock bolt never engages",
 }
 
+# How the machine-tool PLC program (plc/programs/machine_tool.ld, docs/machine_plc.md)
+# detects each field fault: (bound in seconds of machine time, counted from, what shows it).
+# The bound is the program's timer plus a scan or two (10 ms); `from` is one of
+# drives.fault_registry.DETECT_FROM. /api/fault-types and benches read it from here.
+DETECTION: dict[str, tuple[float, str, str]] = {
+    "door_open": (0.02, "injection", "1030 and feed hold in the scan that sees the door open"),
+    "air_pressure_loss": (0.02, "injection", "1040 and feed hold in one scan"),
+    "estop_button": (0.02, "injection", "1001 in one scan (NC 3001)"),
+    "estop_chain": (0.02, "injection", "1001 in one scan (NC 3001)"),
+    "coolant_pump_fail": (
+        3.02,
+        "coolant_on",
+        "1006 once the flood pump has run 3 s without pressure: only while the pump runs "
+        "(M8): a pump that is off shows nothing until the next M8",
+    ),
+    "carousel_jam": (5.1, "tool_change", "1017 (T) or 1011 (M6): 5 s step timeout"),
+    "arm_jam": (2.7, "tool_change", "1012: orient, then the arm not at grip within 2 s"),
+    "changer_jam": (5.1, "tool_change", "1017 / 1011: 5 s step timeout"),
+    "spindle_drive_fault": (
+        1.02,
+        "injection",
+        "1002 and feed hold: the drive not ready 1 s after enable (the enable is on whenever "
+        "there is no E-stop, turning or not)",
+    ),
+    "spindle_stall": (
+        2.02,
+        "spindle_on",
+        "1007 and feed hold once the turning spindle has been below its at-speed band for "
+        "2 s; a spindle standing at the injection: 1003 10 s after the next M3/M4",
+    ),
+    "orient_fail": (5.3, "tool_change", "1010: spindle not oriented within 5 s of the M6"),
+    "lube_level_low": (0.02, "injection", "1041 (cycle start refused) in one scan"),
+    "lube_pump_fail": (
+        32.1,
+        "injection",
+        "1042 at the end of the next 2 s lubrication pulse (every 32 s)",
+    ),
+    "door_lock_fail": (
+        1.02,
+        "door_lock",
+        "1031 once the lock is commanded (spindle on, tool change) and not engaged for 1 s",
+    ),
+}
+
 PANEL_BUTTONS = ("PanelCycleStart", "PanelFeedHold", "PanelReset")
 
 

@@ -76,6 +76,9 @@ class Fault:
         self.state = "active"
         self.created_at = time.time()
         self.cleared_at: float | None = None
+        # the machine's clock when it took the injection / the clear (None: not reported)
+        self.machine_t: float | None = None
+        self.cleared_machine_t: float | None = None
 
     def as_dict(self) -> dict:
         return {
@@ -86,6 +89,8 @@ class Fault:
             "state": self.state,
             "created_at": self.created_at,
             "cleared_at": self.cleared_at,
+            "machine_t": self.machine_t,
+            "cleared_machine_t": self.cleared_machine_t,
         }
 
 
@@ -504,20 +509,7 @@ class Cell:
 
     # ------------------------------------------------------------------ faults
     def fault_types(self) -> list[dict]:
-        from cnc.machine.faults import DRIVE_ALIASES, PLC_ALIASES
-        from drives.faults import fault_types
-        from plc.machine_io import FAULTS
-
-        out = fault_types()
-        for alias, (kind, _) in DRIVE_ALIASES.items():
-            out.append(
-                {"type": alias, "target": "drive:<AXIS>", "params": [], "description": f"= {kind}"}
-            )
-        for name, text in FAULTS.items():
-            out.append({"type": name, "target": "plc", "params": [], "description": str(text)})
-        for alias, kind in PLC_ALIASES.items():
-            out.append({"type": alias, "target": "plc", "params": [], "description": f"= {kind}"})
-        return out
+        return fault_types()
 
     def inject(self, name: str, request: dict) -> Fault:
         """Inject a fault through the machine's simulation face (ValueError: bad spec)."""
@@ -528,9 +520,10 @@ class Cell:
         at = request.get("at")
         full = f"{spec}@{at}s" if at is not None else spec
         parse_fault_spec(full if at is not None else spec + "@0", link.axes)
-        link.simulation(f"FAULT {full}")
+        answer = link.simulation(f"FAULT {full}")
         with self._fault_lock:
             fault = Fault(self._next_fault, name, dict(request), full)
+            fault.machine_t = machine_time(answer)
             self._next_fault += 1
             self.faults[fault.id] = fault
         duration = request.get("duration")
@@ -557,8 +550,9 @@ class Cell:
             raise NotFound(f"no fault {fault_id} on machine {name!r}")
         if fault.state == "active":
             spec = fault.spec.split("@", 1)[0]
-            self.link(name).simulation(f"CLEAR {spec}@0")
+            answer = self.link(name).simulation(f"CLEAR {spec}@0")
             fault.state, fault.cleared_at = "cleared", time.time()
+            fault.cleared_machine_t = machine_time(answer)
         return fault
 
 
@@ -792,3 +786,44 @@ def opcua_users(settings):
         return int(principal.role)
 
     return check
+
+
+def machine_time(answer: str) -> float | None:
+    """The machine time a simulation face answer reports (`... t=12.3456`), or None."""
+    for word in answer.split():
+        if word.startswith("t="):
+            try:
+                return float(word[2:])
+            except ValueError:
+                return None
+    return None
+
+
+def fault_types() -> list[dict]:
+    """The `/api/fault-types` rows: the drive, bus and node kinds of drives.fault_registry,
+    their aliases, the PLC field faults with plc.machine_io.DETECTION, the PLC aliases."""
+    from cnc.machine.faults import DRIVE_ALIASES, PLC_ALIASES
+    from drives.faults import fault_types as drive_fault_types
+    from plc.machine_io import DETECTION, FAULTS
+
+    out = drive_fault_types()
+    for alias, (kind, _) in DRIVE_ALIASES.items():
+        out.append(
+            {"type": alias, "target": "drive:<AXIS>", "params": [], "description": f"= {kind}"}
+        )
+    for name, text in FAULTS.items():
+        bound, since, how = DETECTION[name]
+        out.append(
+            {
+                "type": name,
+                "target": "plc",
+                "params": [],
+                "description": str(text),
+                "detection": how,
+                "bound_s": bound,
+                "detect_from": since,
+            }
+        )
+    for alias, kind in PLC_ALIASES.items():
+        out.append({"type": alias, "target": "plc", "params": [], "description": f"= {kind}"})
+    return out

@@ -40,6 +40,7 @@ PLC_ALARM_TEXTS = {
     1004: "spindle orientation (M19) not done within 5 s",
     1005: "spindle not stopped within 10 s (M5)",
     1006: "coolant pump on but no coolant pressure for 3 s (pump failure)",
+    1007: "spindle fell below the commanded speed for 2 s while turning (stall)",
     1010: "tool change: spindle not oriented within 5 s",
     1011: "tool change: carousel not at the tool's pocket within 5 s",
     1012: "tool change: arm not at grip within 2 s",

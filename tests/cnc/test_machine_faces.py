@@ -336,6 +336,26 @@ def test_simulation_face_injects_faults_and_operator_actions():
         m.close()
 
 
+def test_simulation_face_answers_inject_and_clear_with_the_machine_time():
+    """A bench judges detection bounds in machine time: the face says when the machine took
+    the fault and the clear (server.cell keeps it in the fault record)."""
+    m = ready(Machine(config(), "mill1", ideal=True))
+    m.start_faces(simulation=True)
+    try:
+        sim = port(m, "simulation")
+        m.step(50)
+        (injected,) = ask(m, sim, "FAULT plc:lube_level_low")
+        assert injected.startswith("OK injected plc:lube_level_low t=")
+        t_inject = float(injected.rsplit("t=", 1)[1])
+        assert 0 < t_inject <= m.t
+        m.step(50)
+        (cleared,) = ask(m, sim, "CLEAR plc:lube_level_low")
+        t_clear = float(cleared.rsplit("t=", 1)[1])
+        assert cleared.startswith("OK cleared ") and t_clear >= t_inject + 50 * m.ipo_s - 1e-9
+    finally:
+        m.close()
+
+
 def test_simulation_face_clock_control_with_the_realtime_runner():
     from cnc.machine import RealtimeRunner
 

@@ -400,3 +400,66 @@ def test_a_door_opened_in_a_cycle_holds_the_feed_and_cycle_start_resumes_once_cl
         assert all(m.controller.referenced.values())
     finally:
         m.close()
+
+
+SPINDLE_CUT = """%
+O0300 (SPINDLE AND COOLANT ON FOR A LONG CUT)
+N10 G90 G21 G17
+N20 S2000 M3 M8
+N30 G1 X-300 Y-200 Z-100 F3000
+N40 G0 X-50 Y-50 Z-20
+N50 M9
+N60 M5
+N70 M30
+%
+"""
+
+
+@pytest.mark.parametrize(
+    ("fault", "number", "bound_s"),
+    [
+        ("spindle_drive_fault", 1002, 1.01),  # drive not ready 1 s after enable
+        ("spindle_stall", 1007, 2.01),  # below the at-speed band for 2 s while turning
+        ("coolant_pump_fail", 1006, 3.01),  # pump on, no pressure for 3 s
+    ],
+)
+def test_spindle_and_coolant_faults_in_a_cut_hold_the_feed_and_one_reset_recovers(
+    fault, number, bound_s
+):
+    """A spindle that drops out in a cut (docs/machine_plc.md, docs/recovery.md): the PLC
+    alarm within its bound, the feed held with it (no tool fed into the work with the spindle
+    gone), and, the cause gone, one RESET, homing and the program to its end. Before the
+    feed hold a spindle drive fault let the program cut on, and a reset in the motion left
+    the homing that followed with a following error and no reference."""
+    m, _ = _power_on()
+    try:
+        n = m.load_program(SPINDLE_CUT)
+        m.command("select_program", number=n)
+        m.command("cycle_start")
+        assert m.run_until(lambda m: m.status.execution == "ACTIVE", 5.0)
+        m.step(round(1.5 / m.ipo_s))  # spindle at speed, coolant on, axes feeding
+        assert m.status.execution == "ACTIVE" and not m.alarms
+        m.inject(f"plc:{fault}")
+        t0 = m.t
+        assert m.run_until(lambda m: m.alarms, bound_s + 0.5), m.status.execution
+        assert m.t - t0 <= bound_s
+        assert [(a.number, a.source) for a in m.alarms] == [(number, "PLC")]
+        if fault != "coolant_pump_fail":  # no coolant: the cut may go on (the alarm says so)
+            still = _standstill()
+            assert m.run_until(still, 0.5), "the feed must stop with a spindle alarm"
+        m.clear_fault(f"plc:{fault}")
+        if fault == "coolant_pump_fail":
+            assert m.run_until(_standstill(), 20.0)
+        m.press("PanelReset")
+        m.step(3 * m.plc_every)
+        assert not [a for a in m.alarms if a.severity == "FAULT"], m.alarms
+        m.command("mode", mode="REF")
+        m.command("home")
+        assert m.run_until(lambda m: not m.controller.homing, 60.0)
+        m.step(m.plc_every)
+        assert all(m.controller.referenced.values()), (m.controller.referenced, m.alarms)
+        m.command("mode", mode="AUTO")
+        m.step(m.plc_every)
+        _run_program(m, n)
+    finally:
+        m.close()

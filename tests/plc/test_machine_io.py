@@ -186,3 +186,27 @@ def test_read_inputs_steps_the_plant_to_the_scan_time():
     io.nc.set("MStrobe", True)
     io.read_inputs(ix, iw, 1000 + P.pocket_index_ms)
     assert ix[signal("MStrobe").index] and io.state.time_ms == P.pocket_index_ms
+
+
+def test_every_field_fault_has_a_detection_bound_counted_from_a_known_event():
+    """/api/fault-types and the soak read each PLC fault's bound from DETECTION: a fault
+    kind added to FAULTS without one would be judged by nothing."""
+    from drives.fault_registry import DETECT_FROM
+    from plc.machine_io import DETECTION
+
+    assert set(DETECTION) == set(FAULTS)
+    for name, (bound, since, how) in DETECTION.items():
+        assert bound > 0 and since in DETECT_FROM and how, name
+
+
+def test_docs_recovery_lists_every_field_fault_with_its_bound():
+    """docs/recovery.md's PLC field fault table says what DETECTION says, row for row."""
+    from pathlib import Path
+
+    from drives.fault_registry import number
+    from plc.machine_io import DETECTION
+
+    doc = (Path(__file__).resolve().parents[2] / "docs" / "recovery.md").read_text()
+    for name, (bound, since, how) in DETECTION.items():
+        frm = "" if since == "injection" else f" from {since}"
+        assert f"| `{name}` | {number(bound)} s{frm} | {how} |" in doc, name

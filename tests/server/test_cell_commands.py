@@ -253,10 +253,10 @@ def fault_cell(cell):
     face = SimFace(
         None,
         {
-            "FAULT drive:X:encoder_break": "OK",
-            "FAULT drive:Y:encoder_break@2.5s": "OK",
-            "CLEAR drive:X:encoder_break@0": "OK",
-            "CLEAR drive:Y:encoder_break@0": "OK",
+            "FAULT drive:X:encoder_break": "OK injected drive:X:encoder_break t=12.5000",
+            "FAULT drive:Y:encoder_break@2.5s": "OK scheduled drive:Y:encoder_break@2.5s",
+            "CLEAR drive:X:encoder_break@0": "OK cleared drive:X:encoder_break t=13.0000",
+            "CLEAR drive:Y:encoder_break@0": "OK cleared drive:Y:encoder_break t=14.2500",
             "FAULT plc:door_open": "ERR 2010 PLC faults are off on this machine",
         },
     )
@@ -278,6 +278,9 @@ def test_inject_and_clear_go_to_the_simulation_face_once(fault_cell):
     ]
     assert fault.as_dict()["state"] == "active" and fault.as_dict()["target"] == "X"
     assert cell.clear("m1", 2) is later and later.state == "cleared" and later.cleared_at
+    # the machine's clock at the injection and the clear, as the face answered them
+    assert (fault.machine_t, later.machine_t, later.cleared_machine_t) == (12.5, None, 14.25)
+    assert fault.as_dict()["machine_t"] == 12.5
     cell.clear("m1", 2)  # cleared already: nothing is sent again
     assert cell.face.seen == [
         "FAULT drive:X:encoder_break",

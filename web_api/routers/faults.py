@@ -42,6 +42,11 @@ class FaultType(BaseModel):
     emcy: list[str] = []  # the drive's EMCY / 0x603F codes, "0x7305"
     error_register: int | None = None  # the 0x1001 bits those codes set
     detection: str = ""  # what reports it and within which bound, or why nothing does
+    # the bound in seconds of machine time (default mill) from `detect_from` (the injection,
+    # or the next move / tool change / coolant_on / spindle_on / door_lock); None: no bound
+    # (undetectable by design, or an alias: see its kind)
+    bound_s: float | None = None
+    detect_from: str = "injection"
     recovery_class: str = ""  # the row of docs/recovery.md's procedure table
     recovery: str = ""  # what brings the machine back (docs/recovery.md)
 
@@ -70,6 +75,10 @@ class Fault(BaseModel):
     state: str
     created_at: float
     cleared_at: float | None
+    # the machine's clock (s) when it took the injection / the clear: a bench judges a
+    # detection bound (machine time) by it, not by a loaded host's wall time
+    machine_t: float | None = None
+    cleared_machine_t: float | None = None
 
 
 def _defaults(d: dict) -> dict:
