@@ -65,12 +65,16 @@ TARGETS: dict[str, tuple[str, ...]] = {
     # SQLite: minutes per mutant)
     "dnc/allocation.py": ("tests/dnc/test_allocation.py",),
     "cnc/interp/modes.py": (
+        "tests/cnc/test_interp_modes.py",
+        "tests/cnc/test_interp_offsets.py",
         "tests/cnc/test_interp_codes.py",
         "tests/cnc/test_interp_code_table.py",
         "tests/cnc/test_interp_errors.py",
         "tests/cnc/test_interp_motion.py",
     ),
     "cnc/interp/offsets.py": (
+        "tests/cnc/test_interp_offsets.py",
+        "tests/cnc/test_interp_modes.py",
         "tests/cnc/test_interp_codes.py",
         "tests/cnc/test_interp_errors.py",
         "tests/cnc/test_interp_motion.py",

@@ -68,10 +68,12 @@ def plane(ip: Context, run: BlockRun) -> None:
     code = run.g["plane"]
     if code == ip._plane:
         return
+    # the refusals point at the plane's own G word (`G0 X1 G19`: the G19)
+    nth = run.gcol["plane"]
     if ip._comp_engaged():
-        raise ip._err("plane change while cutter compensation is active", run.blk, "G")
+        raise ip._err("plane change while cutter compensation is active", run.blk, "G", nth)
     if ip._xf.rot:
-        raise ip._err("plane change while G68 rotation is active", run.blk, "G")
+        raise ip._err("plane change while G68 rotation is active", run.blk, "G", nth)
     ip._set_plane(code)
 
 

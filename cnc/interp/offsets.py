@@ -48,7 +48,12 @@ def reference_return(ip: Context, run: BlockRun) -> None:
     blk, words = run.blk, run.words
     code = run.g["nonmodal"]
     if ip._comp_engaged():
-        raise ip._err("G28/G30 with cutter compensation active (cancel with G40)", blk, "G")
+        raise ip._err(
+            "G28/G30 with cutter compensation active (cancel with G40)",
+            blk,
+            "G",
+            run.gcol["nonmodal"],
+        )
     if code == G30 and "P" in words and int(words["P"]) not in (1, 2):
         raise ip._err("G30 P3/P4 (third/fourth reference) is not configured", blk, "P")
     named = [i for i, letter in enumerate("XYZ") if letter in words]
@@ -88,13 +93,14 @@ def machine_move(ip: Context, run: BlockRun) -> None:
     """G53 G0|G1 X Y Z: a move in machine coordinates (absolute only, no offsets)."""
     blk = run.blk
     motion = run.g.get("motion")
+    nth = run.gcol["nonmodal"]  # the refusals point at the G53
     if not ip._abs:
-        raise ip._err("G53 needs absolute mode (G90)", blk, "G")
+        raise ip._err("G53 needs absolute mode (G90)", blk, "G", nth)
     if ip._comp_engaged():
-        raise ip._err("G53 with cutter compensation active", blk, "G")
+        raise ip._err("G53 with cutter compensation active", blk, "G", nth)
     mo = motion if motion is not None else ip._motion
     if mo not in (G0, G1):
-        raise ip._err("G53 moves only with G0 or G1", blk, "G")
+        raise ip._err("G53 moves only with G0 or G1", blk, "G", nth)
     if ip._rot is not None:
         ip._rot.move(ip, blk, True, machine=True)
     m = list(ip._mach)
