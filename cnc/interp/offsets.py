@@ -68,7 +68,7 @@ def reference_return(ip: Context, run: BlockRun) -> None:
     if rot_named:
         # the named rotary axes go straight to their reference angle (no intermediate)
         assert rot is not None
-        rot.home_named(blk, ip, None if code == G28 else ip._second_ref_rot)
+        rot.home_named(blk, None if code == G28 else ip._second_ref_rot)
     if named:
         mid = ip._target(blk, words)
         ip._line_to(mid, None, blk, run.exact)
@@ -90,7 +90,9 @@ def reference_return(ip: Context, run: BlockRun) -> None:
 
 
 def machine_move(ip: Context, run: BlockRun) -> None:
-    """G53 G0|G1 X Y Z: a move in machine coordinates (absolute only, no offsets)."""
+    """G53 G0|G1 X Y Z: a move in machine coordinates (absolute only, no offsets).
+
+    The block's G0/G1 becomes the modal motion at the motion step (cnc.interp.motion)."""
     blk = run.blk
     motion = run.g.get("motion")
     nth = run.gcol["nonmodal"]  # the refusals point at the G53
@@ -114,8 +116,6 @@ def machine_move(ip: Context, run: BlockRun) -> None:
         ip._out.append(StraightTraverse(blk.line, mt, run.exact))
     else:
         ip._out.append(StraightFeed(blk.line, mt, ip._feed(blk), run.exact))
-    if motion is not None:
-        ip._motion = motion
     ip._mach = mt
     ip._pos = ip._prog_from_machine()
     ip._moved = True

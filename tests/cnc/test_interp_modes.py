@@ -97,6 +97,8 @@ def test_units_state_names_the_unit() -> None:
 UNIT_MOVES = [
     ("G20 X1 is 25.4 mm", "G20 G0 X1", [T(1, (25.4, 0.0, 0.0))]),
     ("G21 after G20 is mm again", "G20\nG21\nG0 X1", [T(3, (1.0, 0.0, 0.0))]),
+    ("G21 after G20: incremental X in mm", "G20\nG21\nG91 G0 X1", [T(3, (1.0, 0.0, 0.0))]),
+    ("G21 after G20: F in mm/min", "G20\nG21\nG1 X1 F100", [StraightFeed(3, (1.0, 0.0, 0.0), 100.0)]),
     ("the same unit again after motion", "G21 G0 X1\nG21\nG0 X2", [T(1, (1.0, 0.0, 0.0)), T(3, (2.0, 0.0, 0.0))]),
     ("G20 F is in/min", "G20 G1 X1 F10", [StraightFeed(1, (25.4, 0.0, 0.0), 254.0)]),
     # a G28 without axis words is no programmed motion: the unit may still be set (Haas)
@@ -172,6 +174,14 @@ def test_g97_without_s_keeps_the_speed_turning_now() -> None:
 def test_g96_again_does_not_reissue_the_spindle() -> None:
     out = cmds("G0 X100 Z10\nG96 S200 M3\nG96\n", LATHE)
     assert [c.line for c in out if isinstance(c, Spindle)] == [2]
+
+
+def test_g97_with_a_clamp_s_keeps_the_speed_turning_now() -> None:
+    # the S of `G50 S2000` is the clamp, not a speed: G97 keeps 636.6 rpm (was: 200 rpm, the
+    # surface speed's figure read as a speed)
+    it, out = interp("G0 X100 Z10\nG96 S200 M3\nG97 G50 S2000\n", LATHE)
+    assert out[-1] == Spindle(3, CW, pytest.approx(RPM_100))
+    assert it.state.spindle_rpm == pytest.approx(RPM_100)
 
 
 def test_g97_with_s_takes_the_new_speed() -> None:
@@ -277,6 +287,9 @@ REFUSALS = [
     ("negative S", "G0 X1 S-5", MILL, "S must not be negative", 1, 7),
     ("plane change in cutter compensation", "G41 D1 G1 X10 F100\nG1 X20\nG18", MILL,
      "plane change while cutter compensation is active", 3, 1),
+    ("plane change in cutter compensation names its G", "G41 D1 G1 X10 F100\nG1 X20\nG1 G18 X30",
+     MILL, "plane change while cutter compensation is active", 3, 4),
+    ("negative F on a block with other codes", "G91 G1 X5 F-1", MILL, "F must not be negative", 1, 11),
     ("plane change in G68", "G68 R30\nG0 X1 G19", MILL,
      "plane change while G68 rotation is active", 2, 7),
     ("negative G64 P", "G64 P-0.1", MILL, "G64 P tolerance must not be negative", 1, 5),

@@ -180,6 +180,16 @@ def test_machine_moves(prog, params, wofs, last) -> None:
     assert cmds(prog, params, work_offsets=wofs)[-1] == last
 
 
+@pytest.mark.parametrize(
+    ("prog", "last"),
+    [("G53 G0 Z-20", T(1, (50.0, 0.0, -20.0))), ("G28 W0", T(1, (50.0, 0.0, 300.0)))],
+    ids=["G53", "G28"],
+)
+def test_a_lathe_machine_move_keeps_y_at_zero(prog, last) -> None:
+    # a lathe has no Y: a start pose that says otherwise is put back on the X Z plane
+    assert cmds(prog, LATHE, start=(50.0, 7.0, 20.0))[-1] == last
+
+
 def test_after_g53_the_program_position_follows_the_machine() -> None:
     it, out = interp("G55 G0 X1\nG53 G0 X5\nG91 G0 X1\n", work_offsets=WOFS)
     assert out[-1] == T(3, (6.0, 0.0, 0.0))
@@ -198,6 +208,7 @@ REFUSALS = [
      "G53 with cutter compensation active", 3, 4),
     ("G53 in G91", "G91 G53 X1", MILL, "G53 needs absolute mode (G90)", 1, 5),
     ("G53 with G2", "G2 G53 X1 Y0 I1 F10", MILL, "G53 moves only with G0 or G1", 1, 4),
+    ("G53 G1 without F", "G53 G1 X5", MILL, "feed move without F", 1, 1),
     ("G30 P3", "G30 P3 X1", MILL, "G30 P3/P4 (third/fourth reference) is not configured", 1, 5),
     ("G30 beyond the soft limit", "G0 X1\nG30 X5",
      MachineParams(axes=BIG, second_reference_mm=(2000.0, 0.0, 0.0)), LIMIT_X, 2, 5),
