@@ -80,6 +80,24 @@ TARGETS: dict[str, tuple[str, ...]] = {
         "tests/cnc/test_interp_motion.py",
         "tests/cnc/test_machine_data.py",
     ),
+    "cnc/interp/compensation.py": (
+        "tests/cnc/test_interp_compensation.py",
+        "tests/cnc/test_interp_codes.py",
+        "tests/cnc/test_interp_cutter_comp.py",
+        "tests/cnc/test_interp_errors.py",
+        "tests/cnc/test_machine_data.py",
+    ),
+    "cnc/interp/auxiliary.py": (
+        "tests/cnc/test_interp_codes.py",
+        "tests/cnc/test_interp_modes.py",
+        "tests/cnc/test_interp_errors.py",
+    ),
+    "cnc/interp/motion.py": (
+        "tests/cnc/test_interp_codes.py",
+        "tests/cnc/test_interp_motion.py",
+        "tests/cnc/test_interp_errors.py",
+        "tests/cnc/test_interp_cycles.py",
+    ),
 }
 
 # Mutants that cannot change what the module does, each with the reason: left out of the

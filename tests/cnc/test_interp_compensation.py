@@ -8,9 +8,9 @@ tested in test_interp_cutter_comp.py; these are the handlers' choices of H and D
 import pytest
 
 from cnc.canon import StraightTraverse as T
-from cnc.errors import NcError
 from cnc.interp import Interpreter, ToolOffset
 from cnc.params import AxisParams, MachineParams
+from tests.cnc.interp_tables import cases, refused
 
 BIG = tuple(AxisParams(a, -1000, 1000, 30000, 3000, 5e4) for a in "XYZ")
 MILL = MachineParams(axes=BIG)
@@ -46,9 +46,7 @@ LENGTH = [
 # fmt: on
 
 
-@pytest.mark.parametrize(
-    ("prog", "z", "h", "code"), [c[1:] for c in LENGTH], ids=[c[0] for c in LENGTH]
-)
+@cases("prog,z,h,code", LENGTH)
 def test_tool_length_compensation(prog, z, h, code) -> None:
     it, out = interp(prog)
     assert out[-1].end[2] == z and isinstance(out[-1], T)
@@ -91,10 +89,6 @@ REFUSALS = [
 # fmt: on
 
 
-@pytest.mark.parametrize(
-    ("prog", "message", "line", "col"), [c[1:] for c in REFUSALS], ids=[c[0] for c in REFUSALS]
-)
+@cases("prog,message,line,col", REFUSALS)
 def test_refusals(prog, message, line, col) -> None:
-    with pytest.raises(NcError) as ei:
-        interp(prog)
-    assert (ei.value.message, ei.value.line, ei.value.col) == (message, line, col)
+    assert refused(lambda: interp(prog)) == (message, line, col)

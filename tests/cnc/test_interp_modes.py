@@ -11,9 +11,9 @@ import pytest
 
 from cnc.canon import PathMode, SetPathMode, Spindle, SpindleDirection, StraightFeed
 from cnc.canon import StraightTraverse as T
-from cnc.errors import NcError
 from cnc.interp import Interpreter, ToolOffset
 from cnc.params import AxisParams, MachineParams
+from tests.cnc.interp_tables import cases, refused
 
 BIG = tuple(AxisParams(a, -1000, 1000, 30000, 3000, 5e4) for a in "XYZ")
 MILL = MachineParams(axes=BIG)  # default_path_tolerance 0.01 mm, no spindle clamp
@@ -38,12 +38,6 @@ def cmds(text: str, params: MachineParams = MILL, **kw) -> list:
 
 def state(text: str, params: MachineParams = MILL, **kw):
     return interp(text, params, **kw)[0].state
-
-
-def refusal(text: str, params: MachineParams = MILL) -> tuple[str, int, int]:
-    with pytest.raises(NcError) as ei:
-        cmds(text, params)
-    return ei.value.message, ei.value.line, ei.value.col
 
 
 # --- the modal state a program leaves (gcodes, units) -----------------------------------
@@ -73,9 +67,7 @@ STATES = [
 # fmt: on
 
 
-@pytest.mark.parametrize(
-    ("prog", "params", "group", "code"), [c[1:] for c in STATES], ids=[c[0] for c in STATES]
-)
+@cases("prog,params,group,code", STATES)
 def test_modal_group_state(prog, params, group, code) -> None:
     assert state(prog, params).gcodes[group] == code
 
@@ -107,9 +99,7 @@ UNIT_MOVES = [
 # fmt: on
 
 
-@pytest.mark.parametrize(
-    ("prog", "expected"), [c[1:] for c in UNIT_MOVES], ids=[c[0] for c in UNIT_MOVES]
-)
+@cases("prog,expected", UNIT_MOVES)
 def test_units_scale_lengths(prog, expected) -> None:
     assert cmds(prog) == expected
 
@@ -123,9 +113,7 @@ DISTANCES = [
 # fmt: on
 
 
-@pytest.mark.parametrize(
-    ("prog", "expected"), [c[1:] for c in DISTANCES], ids=[c[0] for c in DISTANCES]
-)
+@cases("prog,expected", DISTANCES)
 def test_distance_mode(prog, expected) -> None:
     assert cmds(prog) == expected
 
@@ -199,9 +187,7 @@ SPEEDS = [
 # fmt: on
 
 
-@pytest.mark.parametrize(
-    ("prog", "params", "expected"), [c[1:] for c in SPEEDS], ids=[c[0] for c in SPEEDS]
-)
+@cases("prog,params,expected", SPEEDS)
 def test_speed_word(prog, params, expected) -> None:
     s = state(prog, params)
     got = s.surface_speed if s.gcodes["spindle_mode"] == "G96" else s.spindle_rpm
@@ -255,7 +241,7 @@ PATH = [
 # fmt: on
 
 
-@pytest.mark.parametrize(("prog", "expected"), [c[1:] for c in PATH], ids=[c[0] for c in PATH])
+@cases("prog,expected", PATH)
 def test_path_control(prog, expected) -> None:
     last = [c for c in cmds(prog) if isinstance(c, SetPathMode)][-1]
     assert last.line == expected.line and last.mode is expected.mode
@@ -304,13 +290,9 @@ REFUSALS = [
 # fmt: on
 
 
-@pytest.mark.parametrize(
-    ("prog", "params", "message", "line", "col"),
-    [c[1:] for c in REFUSALS],
-    ids=[c[0] for c in REFUSALS],
-)
+@cases("prog,params,message,line,col", REFUSALS)
 def test_refusals(prog, params, message, line, col) -> None:
-    assert refusal(prog, params) == (message, line, col)
+    assert refused(lambda: cmds(prog, params)) == (message, line, col)
 
 
 def test_the_same_plane_again_in_cutter_compensation_is_no_change() -> None:

@@ -11,9 +11,9 @@ import pytest
 
 from cnc.canon import StraightFeed as F
 from cnc.canon import StraightTraverse as T
-from cnc.errors import NcError
 from cnc.interp import Interpreter, ToolOffset
 from cnc.params import AxisParams, MachineParams
+from tests.cnc.interp_tables import cases, refused
 
 BIG = tuple(AxisParams(a, -1000, 1000, 30000, 3000, 5e4) for a in "XYZ")
 MILL = MachineParams(axes=BIG)
@@ -60,9 +60,7 @@ WORK_OFFSETS = [
 # fmt: on
 
 
-@pytest.mark.parametrize(
-    ("prog", "last", "shown"), [c[1:] for c in WORK_OFFSETS], ids=[c[0] for c in WORK_OFFSETS]
-)
+@cases("prog,last,shown", WORK_OFFSETS)
 def test_work_offset_selection(prog, last, shown) -> None:
     it, out = interp(prog, work_offsets=WOFS)
     assert out[-1] == last
@@ -131,9 +129,7 @@ RETURNS = [
 # fmt: on
 
 
-@pytest.mark.parametrize(
-    ("prog", "params", "last"), [c[1:] for c in RETURNS], ids=[c[0] for c in RETURNS]
-)
+@cases("prog,params,last", RETURNS)
 def test_reference_returns(prog, params, last) -> None:
     out = cmds(prog, params, work_offsets=WOFS if params is MILL else None)
     assert out[-len(last) :] == last
@@ -171,11 +167,7 @@ MACHINE_MOVES = [
 # fmt: on
 
 
-@pytest.mark.parametrize(
-    ("prog", "params", "wofs", "last"),
-    [c[1:] for c in MACHINE_MOVES],
-    ids=[c[0] for c in MACHINE_MOVES],
-)
+@cases("prog,params,wofs,last", MACHINE_MOVES)
 def test_machine_moves(prog, params, wofs, last) -> None:
     assert cmds(prog, params, work_offsets=wofs)[-1] == last
 
@@ -197,7 +189,9 @@ def test_after_g53_the_program_position_follows_the_machine() -> None:
 
 
 # --- refusals: message, line, column ------------------------------------------------------
-LIMIT_X = "axis X move to 2000.0000 mm is beyond the soft limit [-1000, 1000] mm (machine coordinates)"
+LIMIT_X = (
+    "axis X move to 2000.0000 mm is beyond the soft limit [-1000, 1000] mm (machine coordinates)"
+)
 COMP = "G28/G30 with cutter compensation active (cancel with G40)"
 # (name, program, machine, message, line, column)
 # fmt: off
@@ -223,12 +217,6 @@ REFUSALS = [
 # fmt: on
 
 
-@pytest.mark.parametrize(
-    ("prog", "params", "message", "line", "col"),
-    [c[1:] for c in REFUSALS],
-    ids=[c[0] for c in REFUSALS],
-)
+@cases("prog,params,message,line,col", REFUSALS)
 def test_refusals(prog, params, message, line, col) -> None:
-    with pytest.raises(NcError) as ei:
-        cmds(prog, params)
-    assert (ei.value.message, ei.value.line, ei.value.col) == (message, line, col)
+    assert refused(lambda: cmds(prog, params)) == (message, line, col)
