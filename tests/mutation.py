@@ -127,6 +127,31 @@ EQUIVALENT: dict[str, str] = {
     ),
     # codec names are case-insensitive
     "plc.modbus.pdu.xǁDeviceIdentityǁobjects__mutmut_7": "'ASCII' is the same codec",
+    # cnc/interp: an error's column is found by cnc.gcode.lexer.find_col, which upper-cases
+    # the address letter it looks for (a block's words are case-insensitive), so "g" is "G"
+    **{
+        f"cnc.interp.{name}": "find_col upper-cases the letter: the same column"
+        for name in (
+            "modes.x_accuracy__mutmut_20",  # G187 P
+            "modes.x_accuracy__mutmut_46",  # G187 E
+            "modes.x_lookahead_limit__mutmut_23",  # G103 P
+            "modes.x_path_mode__mutmut_33",  # G64 P
+            "modes.x_plane__mutmut_19",  # plane change in cutter compensation
+            "modes.x_plane__mutmut_32",  # plane change in G68
+            "modes.x_speed_word__mutmut_18",  # negative S
+            "modes.x_units__mutmut_22",  # unit change after motion
+            "offsets.x_select_work_offset__mutmut_23",  # G54.1 P
+            "offsets.x_reference_return__mutmut_17",  # G28/G30 in cutter compensation
+            "offsets.x_reference_return__mutmut_42",  # G30 P3/P4
+            "offsets.x_machine_move__mutmut_22",  # G53 in G91
+            "offsets.x_machine_move__mutmut_35",  # G53 in cutter compensation
+            "offsets.x_machine_move__mutmut_53",  # G53 with G2/G3
+        )
+    },
+    # G53 moves the rotary axes with machine=True, which takes the word as the machine angle
+    # before `absolute` is read
+    "cnc.interp.offsets.x_machine_move__mutmut_57": "absolute=None: machine=True decides",
+    "cnc.interp.offsets.x_machine_move__mutmut_63": "absolute=False: machine=True decides",
 }
 
 # mutmut's result names (its `exit_code_to_status`) grouped for the score

@@ -7,6 +7,8 @@ They are the table `make mutation` holds cnc/interp/offsets.py against (tests/mu
 G10 / G92 / G43 are in test_interp_codes.py and test_machine_data.py.
 """
 
+from dataclasses import replace
+
 import pytest
 
 from cnc.canon import StraightFeed as F
@@ -30,6 +32,8 @@ LATHE = MachineParams(
         AxisParams("Z", -500, 500, 1e4, 1e3, 1e4, home_mm=300.0),
     ),
 )
+# its G30 point, one figure per axis as the configuration gives it: X -100 (radius), Z -50
+LATHE_G30 = replace(LATHE, second_reference_mm=(-100.0, -50.0))
 TOOLS = {1: ToolOffset(length=100.0, radius=5.0)}
 
 
@@ -114,6 +118,13 @@ RETURNS = [
      [T(2, (40.0, 0.0, 50.0)), T(2, (150.0, 0.0, 50.0))]),
     ("lathe G28 without words: X and Z", "G0 X100 Z50\nG28", LATHE,
      [T(2, (150.0, 0.0, 300.0))]),
+    # (these three raised IndexError: the lathe's X Z figures were read as X Y Z)
+    ("lathe G30 U0: X to its G30 point", "G0 X100 Z50\nG30 U0", LATHE_G30,
+     [T(2, (50.0, 0.0, 50.0)), T(2, (-100.0, 0.0, 50.0))]),
+    ("lathe G30 W0: Z to its G30 point", "G0 X100 Z50\nG30 W0", LATHE_G30,
+     [T(2, (50.0, 0.0, 50.0)), T(2, (50.0, 0.0, -50.0))]),
+    ("lathe G30 without words: X and Z", "G0 X100 Z50\nG30", LATHE_G30,
+     [T(2, (-100.0, 0.0, -50.0))]),
     # rotary axes (A homes to 10, G30 angle 45): a named A goes straight to its reference
     ("G28 alone homes A too", "G0 X10 A90\nG28", MILL4, [T(2, (0.0, 0.0, 0.0, 10.0))]),
     ("G30 alone takes A to its G30 angle", "G0 X10 A90\nG30", MILL4,
