@@ -152,6 +152,14 @@ EQUIVALENT: dict[str, str] = {
     # before `absolute` is read
     "cnc.interp.offsets.x_machine_move__mutmut_57": "absolute=None: machine=True decides",
     "cnc.interp.offsets.x_machine_move__mutmut_63": "absolute=False: machine=True decides",
+    # G28/G30 on a lathe: m[1] is 0 already, from the intermediate move (_line_to puts a
+    # lathe's Y at 0) or from the reference point (a lathe has no Y axis: home Y 0)
+    "cnc.interp.offsets.x_reference_return__mutmut_106": "a lathe's m[1] is 0 on every path",
+    # an H with G43/G44/G49 in the block: the code's handler runs first at the same step
+    # (codes before words) and took the H; the word's handler would apply the same again
+    "cnc.interp.compensation.x_h_word__mutmut_1": "length_comp already applied this H",
+    "cnc.interp.compensation.x_h_word__mutmut_2": "length_comp already applied this H",
+    "cnc.interp.compensation.x_apply_length__mutmut_33": "resync=None is as falsy as False",
 }
 
 # mutmut's result names (its `exit_code_to_status`) grouped for the score

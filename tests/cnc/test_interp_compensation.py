@@ -49,7 +49,7 @@ LENGTH = [
 @cases("prog,z,h,code", LENGTH)
 def test_tool_length_compensation(prog, z, h, code) -> None:
     it, out = interp(prog)
-    assert out[-1].end[2] == z and isinstance(out[-1], T)
+    assert out[-1] == T(out[-1].line, (0.0, 0.0, z))  # along Z only
     assert it.state.length_offset == h
     assert it.state.gcodes["length_comp"] == code
 
@@ -63,11 +63,29 @@ def test_the_program_position_keeps_the_programmed_z_under_g43() -> None:
 
 @pytest.mark.parametrize(
     ("prog", "shown"),
-    [("D2", 2), ("D2\nD0", 0), ("G41 D1 G1 X10 F100\nG40 X20", 1), ("D2\nG41 G1 X10 F100", 2)],
-    ids=["D alone", "D0", "G41 D", "G41 takes the D before it"],
+    [
+        ("D2", 2),
+        ("D2\nD0", 0),
+        ("G41 D1 G1 X10 F100\nG40 X20", 1),
+        ("D2\nG41 G1 X10 F100", 2),
+        # (a D in a G40 block was dropped)
+        ("D1\nG40 D2", 2),
+        ("G41 D1 G1 X10 F100\nG40 D2 X20", 2),
+    ],
+    ids=["D alone", "D0", "G41 D", "G41 takes the D before it", "G40 D", "G40 D cancelling"],
 )
 def test_d_word_selects_the_radius_offset(prog, shown) -> None:
     assert interp(prog)[0].state.radius_offset == shown
+
+
+def test_a_d_word_in_a_g40_block_is_the_next_g41s_radius() -> None:
+    # D2 (radius 2) given with G40: the G41 after it offsets the path by 2, not by D1's 5
+    out = interp("G41 D1 G1 X10 F100\nG40 D2 X20 Y0\nG41 G1 X30 Y0\nX40\nG40 X50\n")[1]
+    assert [c.end[1] for c in out[2:4]] == [2.0, 2.0]
+
+
+def test_a_lathe_d_word_alone_selects_the_radius_offset() -> None:
+    assert interp("D2\n", LATHE)[0].state.radius_offset == 2
 
 
 def test_a_lathe_cycle_d_is_the_cycle_word_not_a_radius_offset() -> None:
