@@ -93,6 +93,7 @@ TARGETS: dict[str, tuple[str, ...]] = {
         "tests/cnc/test_interp_errors.py",
     ),
     "cnc/interp/motion.py": (
+        "tests/cnc/test_interp_motion_group.py",
         "tests/cnc/test_interp_codes.py",
         "tests/cnc/test_interp_motion.py",
         "tests/cnc/test_interp_errors.py",
