@@ -147,6 +147,7 @@ EQUIVALENT: dict[str, str] = {
             "offsets.x_machine_move__mutmut_22",  # G53 in G91
             "offsets.x_machine_move__mutmut_35",  # G53 in cutter compensation
             "offsets.x_machine_move__mutmut_53",  # G53 with G2/G3
+            "motion.x_motion__mutmut_37",  # a motion code beside G4, G28 with a cycle...
         )
     },
     # G53 moves the rotary axes with machine=True, which takes the word as the machine angle
