@@ -59,7 +59,8 @@ class MachineParams:
     default_path_tolerance: float = 0.01  # mm, G64 without P
     lookahead: int = 200  # blocks
     ipo_cycle_s: float = 0.002
-    second_reference_mm: tuple[float, ...] | None = None  # G30 point; None = home
+    # G30 point, one figure per axis of `axes` in their order (a lathe: X Z); None = home
+    second_reference_mm: tuple[float, ...] | None = None
     max_spindle_rpm: float | None = None  # the spindle's top speed: the G96 clamp; None = none
     lathe_gcode_system: str = "A"  # Fanuc T G-code system A, B or C (cnc.interp.codes)
     call_nesting: int = 10  # program levels called (M98, G65, G66): PS0077 beyond

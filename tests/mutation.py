@@ -65,16 +65,39 @@ TARGETS: dict[str, tuple[str, ...]] = {
     # SQLite: minutes per mutant)
     "dnc/allocation.py": ("tests/dnc/test_allocation.py",),
     "cnc/interp/modes.py": (
+        "tests/cnc/test_interp_modes.py",
+        "tests/cnc/test_interp_offsets.py",
         "tests/cnc/test_interp_codes.py",
         "tests/cnc/test_interp_code_table.py",
         "tests/cnc/test_interp_errors.py",
         "tests/cnc/test_interp_motion.py",
     ),
     "cnc/interp/offsets.py": (
+        "tests/cnc/test_interp_offsets.py",
+        "tests/cnc/test_interp_modes.py",
         "tests/cnc/test_interp_codes.py",
         "tests/cnc/test_interp_errors.py",
         "tests/cnc/test_interp_motion.py",
         "tests/cnc/test_machine_data.py",
+    ),
+    "cnc/interp/compensation.py": (
+        "tests/cnc/test_interp_compensation.py",
+        "tests/cnc/test_interp_codes.py",
+        "tests/cnc/test_interp_cutter_comp.py",
+        "tests/cnc/test_interp_errors.py",
+        "tests/cnc/test_machine_data.py",
+    ),
+    "cnc/interp/auxiliary.py": (
+        "tests/cnc/test_interp_codes.py",
+        "tests/cnc/test_interp_modes.py",
+        "tests/cnc/test_interp_errors.py",
+    ),
+    "cnc/interp/motion.py": (
+        "tests/cnc/test_interp_motion_group.py",
+        "tests/cnc/test_interp_codes.py",
+        "tests/cnc/test_interp_motion.py",
+        "tests/cnc/test_interp_errors.py",
+        "tests/cnc/test_interp_cycles.py",
     ),
 }
 
@@ -105,6 +128,40 @@ EQUIVALENT: dict[str, str] = {
     ),
     # codec names are case-insensitive
     "plc.modbus.pdu.xǁDeviceIdentityǁobjects__mutmut_7": "'ASCII' is the same codec",
+    # cnc/interp: an error's column is found by cnc.gcode.lexer.find_col, which upper-cases
+    # the address letter it looks for (a block's words are case-insensitive), so "g" is "G"
+    **{
+        f"cnc.interp.{name}": "find_col upper-cases the letter: the same column"
+        for name in (
+            "modes.x_accuracy__mutmut_20",  # G187 P
+            "modes.x_accuracy__mutmut_46",  # G187 E
+            "modes.x_lookahead_limit__mutmut_23",  # G103 P
+            "modes.x_path_mode__mutmut_33",  # G64 P
+            "modes.x_plane__mutmut_19",  # plane change in cutter compensation
+            "modes.x_plane__mutmut_32",  # plane change in G68
+            "modes.x_speed_word__mutmut_18",  # negative S
+            "modes.x_units__mutmut_22",  # unit change after motion
+            "offsets.x_select_work_offset__mutmut_23",  # G54.1 P
+            "offsets.x_reference_return__mutmut_17",  # G28/G30 in cutter compensation
+            "offsets.x_reference_return__mutmut_42",  # G30 P3/P4
+            "offsets.x_machine_move__mutmut_22",  # G53 in G91
+            "offsets.x_machine_move__mutmut_35",  # G53 in cutter compensation
+            "offsets.x_machine_move__mutmut_53",  # G53 with G2/G3
+            "motion.x_motion__mutmut_37",  # a motion code beside G4, G28 with a cycle...
+        )
+    },
+    # G53 moves the rotary axes with machine=True, which takes the word as the machine angle
+    # before `absolute` is read
+    "cnc.interp.offsets.x_machine_move__mutmut_57": "absolute=None: machine=True decides",
+    "cnc.interp.offsets.x_machine_move__mutmut_63": "absolute=False: machine=True decides",
+    # G28/G30 on a lathe: m[1] is 0 already, from the intermediate move (_line_to puts a
+    # lathe's Y at 0) or from the reference point (a lathe has no Y axis: home Y 0)
+    "cnc.interp.offsets.x_reference_return__mutmut_106": "a lathe's m[1] is 0 on every path",
+    # an H with G43/G44/G49 in the block: the code's handler runs first at the same step
+    # (codes before words) and took the H; the word's handler would apply the same again
+    "cnc.interp.compensation.x_h_word__mutmut_1": "length_comp already applied this H",
+    "cnc.interp.compensation.x_h_word__mutmut_2": "length_comp already applied this H",
+    "cnc.interp.compensation.x_apply_length__mutmut_33": "resync=None is as falsy as False",
 }
 
 # mutmut's result names (its `exit_code_to_status`) grouped for the score

@@ -26,8 +26,9 @@ def d_word(ip: Context, run: BlockRun) -> None:
     nonmodal = run.rows.get("nonmodal")
     if nonmodal is not None and nonmodal.name in D_WORD_CYCLES and ip._lathe:
         return  # a lathe cycle's D (depth of cut, passes, Haas clearance): the cycle's word
-    if "cutter_comp" not in run.g:  # G41/G42 read their own D
-        ip._d = ip._int_word(run.blk, "D")
+    # G41/G42 read their D first (this runs after them: the same number again); with G40
+    # or alone, D selects the offset the next G41/G42 takes
+    ip._d = ip._int_word(run.blk, "D")
 
 
 def length_comp(ip: Context, run: BlockRun) -> None:

@@ -303,12 +303,17 @@ class Interpreter:
         self._tools_known = tools is not None
         self._limits: list[tuple[int, float, float, str]] = []
         home = [0.0, 0.0, 0.0]
-        for ax in params.axes:
+        # the G30 point: one figure per axis of params.axes, in their order (a lathe's X Z)
+        sr = params.second_reference_mm
+        second = [0.0, 0.0, 0.0]
+        for k, ax in enumerate(params.axes):
             idx = _AXIS_OF.get(ax.name)
             if idx is not None:
                 self._limits.append((idx, ax.min_mm, ax.max_mm, ax.name))
                 home[idx] = ax.home_mm
+                second[idx] = float(sr[k]) if sr is not None and k < len(sr) else ax.home_mm
         self._home = tuple(home)
+        self._second_ref = tuple(second)
         lo = [-math.inf] * 3
         hi = [math.inf] * 3
         for idx, a, b, _ in self._limits:
@@ -316,10 +321,6 @@ class Interpreter:
         self._lo = tuple(lo)
         self._hi = tuple(hi)
         self._axes_present = {ax.name for ax in params.axes}
-        self._second_ref = (
-            tuple(params.second_reference_mm[:3]) if params.second_reference_mm else self._home
-        )
-        sr = params.second_reference_mm
         self._second_ref_rot = [
             float(sr[k]) if sr is not None and k < len(sr) else ax.home_mm
             for k, ax in enumerate(params.axes)

@@ -44,19 +44,27 @@ def feed_word(ip: Context, run: BlockRun) -> None:
     ip._set_feed(run.blk, run.words["F"])
 
 
+def _s_is_speed(run: BlockRun) -> bool:
+    """Whether the block's S is the spindle speed: with G92 S / lathe G50 S it is the
+    maximum spindle speed, set by that code."""
+    if "S" not in run.words:
+        return False
+    nonmodal = run.rows.get("nonmodal")
+    return nonmodal is None or "S" not in nonmodal.words
+
+
 def spindle_mode(ip: Context, run: BlockRun) -> None:
     css = run.g["spindle_mode"] == G96
     if css != ip._css:
         ip._css = css
         run.spindle_changed = True
-        if not css and "S" not in run.words:
+        if not css and not _s_is_speed(run):
             ip._s = ip._rpm_now_from(ip._s, True)  # G97 keeps the speed turning now
 
 
 def speed_word(ip: Context, run: BlockRun) -> None:
-    nonmodal = run.rows.get("nonmodal")
-    if nonmodal is not None and "S" in nonmodal.words:
-        return  # G92 S / lathe G50 S: the maximum spindle speed, set by that code
+    if not _s_is_speed(run):
+        return  # G92 S / lathe G50 S: the clamp's word
     s = run.words["S"]
     if s < 0:
         raise ip._err("S must not be negative", run.blk, "S")
@@ -68,10 +76,12 @@ def plane(ip: Context, run: BlockRun) -> None:
     code = run.g["plane"]
     if code == ip._plane:
         return
+    # the refusals point at the plane's own G word (`G0 X1 G19`: the G19)
+    nth = run.gcol["plane"]
     if ip._comp_engaged():
-        raise ip._err("plane change while cutter compensation is active", run.blk, "G")
+        raise ip._err("plane change while cutter compensation is active", run.blk, "G", nth)
     if ip._xf.rot:
-        raise ip._err("plane change while G68 rotation is active", run.blk, "G")
+        raise ip._err("plane change while G68 rotation is active", run.blk, "G", nth)
     ip._set_plane(code)
 
 

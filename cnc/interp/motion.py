@@ -3,8 +3,8 @@
 The motion step runs once per block: it sets the modal motion from the block's G0..G3 or
 cycle code and moves with the modal motion (or the modal cycle) unless a code of the block
 owns its axis words (G4, G10, G28, G30, G92, G53, transforms). With G10/G28/G30/G92 a
-G0..G3 or G80 only sets the mode (`G0 G91 G28 Z0`); a canned cycle or a transform there
-would need the same words and is refused.
+G0..G3 or G80 only sets the mode (`G0 G91 G28 Z0`), with G53 its G0/G1 is the move's; a
+canned cycle or a transform there would need the same words and is refused.
 """
 
 from __future__ import annotations
@@ -29,11 +29,17 @@ def motion(ip: Context, run: BlockRun) -> None:
     mo = g.get("motion")
     owner = run.owner
     nonmodal = run.rows.get("nonmodal")
-    g53 = nonmodal is not None and nonmodal.name == "G53"  # G53 moves with the G0/G1
     skip_g1 = "skip" in g and cy is None  # `G1 G31 Z..`: G31 moves, G1 stays modal
-    if owner is not None and not g53 and not skip_g1 and (mo is not None or cy is not None):
+    # G53 is one of these codes: it moves with the block's G0/G1 itself (cnc.interp.offsets)
+    # and, as the others, refuses a canned cycle beside it (`G53 G81` was a silent G0)
+    if owner is not None and not skip_g1 and (mo is not None or cy is not None):
         if nonmodal is None or nonmodal.step is not Step.NON_MODAL or cy not in (None, G80):
-            raise ip._err("a motion G code cannot share a block with this G code", run.blk, "G")
+            raise ip._err(
+                "a motion G code cannot share a block with this G code",
+                run.blk,
+                "G",
+                run.gcol["motion" if mo is not None else "cycle"],  # at that motion code
+            )
         if cy == G80:
             cycles.cancel(ip)
     if mo is not None:

@@ -49,7 +49,12 @@ def reference_return(ip: Context, run: BlockRun) -> None:
     blk, words = run.blk, run.words
     code = run.g["nonmodal"]
     if ip._comp_engaged():
-        raise ip._err("G28/G30 with cutter compensation active (cancel with G40)", blk, "G")
+        raise ip._err(
+            "G28/G30 with cutter compensation active (cancel with G40)",
+            blk,
+            "G",
+            run.gcol["nonmodal"],
+        )
     if code == G30 and "P" in words and int(words["P"]) not in (1, 2):
         raise ip._err("G30 P3/P4 (third/fourth reference) is not configured", blk, "P")
     named = [i for i, letter in enumerate("XYZ") if letter in words]
@@ -64,7 +69,7 @@ def reference_return(ip: Context, run: BlockRun) -> None:
     if rot_named:
         # the named rotary axes go straight to their reference angle (no intermediate)
         assert rot is not None
-        rot.home_named(blk, ip, None if code == G28 else ip._second_ref_rot)
+        rot.home_named(blk, None if code == G28 else ip._second_ref_rot)
     if named:
         mid = ip._target(blk, words)
         ip._line_to(mid, None, blk, run.exact)
@@ -89,16 +94,19 @@ def machine_move(ip: Context, run: BlockRun) -> None:
     """G53 G0|G1 X Y Z: a move in machine coordinates (no offsets). Under G91 the words are
     increments from where the tool stands, the same displacement in any coordinate system:
     Fanuc ignores G53 in incremental mode, Mitsubishi moves by the increment (M700 manual,
-    14.4 (4)); a Kitamura HMC's tool measuring macro (O919100) moves `G91 G53 G00 X#21`."""
+    14.4 (4)); a Kitamura HMC's tool measuring macro (O919100) moves `G91 G53 G00 X#21`.
+
+    The block's G0/G1 becomes the modal motion at the motion step (cnc.interp.motion)."""
     if "skip" in run.g:
         return  # G53 G31: the skip move goes in machine coordinates (cnc.interp.skip)
     blk = run.blk
     motion = run.g.get("motion")
+    nth = run.gcol["nonmodal"]  # the refusals point at the G53
     if ip._comp_engaged():
-        raise ip._err("G53 with cutter compensation active", blk, "G")
+        raise ip._err("G53 with cutter compensation active", blk, "G", nth)
     mo = motion if motion is not None else ip._motion
     if mo not in (G0, G1):
-        raise ip._err("G53 moves only with G0 or G1", blk, "G")
+        raise ip._err("G53 moves only with G0 or G1", blk, "G", nth)
     if ip._rot is not None:
         ip._rot.move(ip, blk, ip._abs, machine=ip._abs)
     mt = machine_target(ip, blk)
@@ -107,8 +115,6 @@ def machine_move(ip: Context, run: BlockRun) -> None:
         ip._out.append(StraightTraverse(blk.line, mt, run.exact))
     else:
         ip._out.append(StraightFeed(blk.line, mt, ip._feed(blk), run.exact))
-    if motion is not None:
-        ip._motion = motion
     ip._mach = mt
     ip._pos = ip._prog_from_machine()
     ip._moved = True

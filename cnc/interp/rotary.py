@@ -90,7 +90,7 @@ class RotaryAxes:
                 changed = True
         return changed
 
-    def home_named(self, blk: Block, ip, ref: list[float] | None = None) -> bool:
+    def home_named(self, blk: Block, ref: list[float] | None = None) -> bool:
         """G28/G30: the named rotary axes go to their reference angle."""
         changed = False
         for letter in self.words_in(blk):
