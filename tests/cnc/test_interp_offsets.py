@@ -211,7 +211,6 @@ REFUSALS = [
     ("G30 in cutter compensation", "G41 D1 G1 X10 F100\nG1 X20\nG1 G30 Z5", MILL, COMP, 3, 4),
     ("G53 in cutter compensation", "G41 D1 G1 X10 F100\nG1 X20\nG0 G53 Z5", MILL,
      "G53 with cutter compensation active", 3, 4),
-    ("G53 in G91", "G91 G53 X1", MILL, "G53 needs absolute mode (G90)", 1, 5),
     ("G53 with G2", "G2 G53 X1 Y0 I1 F10", MILL, "G53 moves only with G0 or G1", 1, 4),
     ("G53 G1 without F", "G53 G1 X5", MILL, "feed move without F", 1, 1),
     ("G30 P3", "G30 P3 X1", MILL, "G30 P3/P4 (third/fourth reference) is not configured", 1, 5),
