@@ -6,6 +6,10 @@ from pathlib import Path
 
 import typer
 
+from cnc.cli_setup import SETUP_ERRORS, fail, machine_setup, units_warning
+from cnc.gcode.source import library_programs
+from cnc.interp import Interpreter
+
 nc_app = typer.Typer(
     help="NC kernel: check, plan and simulate part programs.", no_args_is_help=True
 )
@@ -54,9 +58,6 @@ def check_cmd(
     A program whose last block is M99 is checked as a subprogram (its M99 ends it, and
     feed moves before its first F take the caller's feed).
     """
-    from cnc.cli_setup import SETUP_ERRORS, fail, machine_setup, units_warning
-    from cnc.interp import Interpreter
-
     try:
         setup = machine_setup(
             kind=kind, config=config, tools=tools, offsets=offsets, units=units, g54=g54,
@@ -66,8 +67,6 @@ def check_cmd(
         raise fail(err) from None
     programs = None
     if library is not None:
-        from cnc.gcode.source import library_programs
-
         if not library.is_dir():
             typer.echo(f"--library {library}: not a folder", err=True)
             raise typer.Exit(2)

@@ -19,6 +19,9 @@ from pathlib import Path
 
 import typer
 
+from cnc.config import builtin_machine, load_machine_config
+from cnc.errors import NcError
+
 
 def machine(
     config: Path | None = typer.Option(None, "--config", help="cell or machine YAML"),
@@ -67,8 +70,7 @@ def machine(
     until SIGINT/SIGTERM."""
     import signal
 
-    from cnc.config import builtin_machine, load_machine_config
-    from cnc.errors import NcError
+    # deferred: the machine (drives, PLC, faces) is not loaded for the rest of `fmscell`
     from cnc.machine import Machine, RealtimeRunner
     from cnc.machine.runner import FAST_SPEED, IDLE_SPEED
 
