@@ -28,9 +28,10 @@ from pathlib import Path
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 PROGRAM = (
-    "%\nO0100 (ZIG-ZAG, LONG ENOUGH FOR ANY RUN)\nN10 G21 G90 G17\nN20 G0 X-50 Y-50 Z-20\n"
+    # in G54, which the shipped mill3 puts at the table centre with Z0 on the part top
+    "%\nO0100 (ZIG-ZAG, LONG ENOUGH FOR ANY RUN)\nN10 G21 G90 G17 G54\nN20 G0 X-100 Y-100 Z20\n"
     + "".join(
-        f"N{30 + 10 * i} G1 X{-50 - 200 * (i % 2)} Y{-50 - 2 * i} F6000\n" for i in range(100)
+        f"N{30 + 10 * i} G1 X{-100 + 200 * (i % 2)} Y{-100 + 2 * i} F6000\n" for i in range(100)
     )
     + "N9990 M30\n%\n"
 )
@@ -63,6 +64,8 @@ def lockstep(ipo_ms: float, seconds: float, ideal: bool = False, substep=None) -
         cpu0, t0 = time.process_time(), time.perf_counter()
         m.run_until(lambda x: x.t >= end or bool(x.alarms), seconds + 1.0)
         wall, cpu = time.perf_counter() - t0, time.process_time() - cpu0
+        if m.alarms:  # a run cut short by an alarm would measure nothing
+            raise RuntimeError(f"{m.name}: alarm during the timed run: {m.alarms}")
         return {
             "ipo_ms": ipo_ms,
             "machine_s": seconds,

@@ -80,7 +80,8 @@ def client_main(urls_and_keys, seconds: float, out) -> None:
     async def run() -> None:
         clients = []
         for url, keys in urls_and_keys:
-            c = Client(url, timeout=60)
+            # asyncua's default 1 s health probe drops sessions on a loaded box
+            c = Client(url, timeout=60, watchdog_intervall=30.0)
             await c.connect()
             ns = await c.get_namespace_index(keys[0][0])
             sub = await c.create_subscription(PUBLISH_MS, Handler())

@@ -166,6 +166,7 @@ def _nc_check(path: Path, mach, offsets, source: Path, repost) -> dict:
     is traced back to the CL/APT line that produced it."""
     from dataclasses import replace
 
+    machine_data = None
     if mach.kind == "mill5":
         # the NC's mill5 (cnc/machines/mill5.yaml, the post's geometry and travel): its
         # G54 is 0, so the post's travel check is the machine's
@@ -175,14 +176,18 @@ def _nc_check(path: Path, mach, offsets, source: Path, repost) -> dict:
         return {"status": NOT_CHECKED_5AXIS, "travel": False, "errors": []}
     else:
         params = mach.config.params
-        travel = offsets is not None
+        if offsets is None and mach.config.machine_data is not None:
+            # no --g54: the machine's own setup (its shipped or configured machine data,
+            # work offsets and tool lengths) places the program, as it will on the machine
+            machine_data = mach.config.machine_data.initial()
+        travel = offsets is not None or machine_data is not None
     if not travel:
         big = 1e9
         params = replace(
             params, axes=tuple(replace(a, min_mm=-big, max_mm=big) for a in params.axes)
         )
     with open(path, encoding="utf-8") as fh:
-        errors = check(fh, params, file=str(path), work_offsets=offsets)
+        errors = check(fh, params, file=str(path), work_offsets=offsets, machine_data=machine_data)
     if not errors:
         return {"status": "passed", "travel": travel, "errors": []}
     wanted = {e.line for e in errors}

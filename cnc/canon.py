@@ -68,6 +68,33 @@ class ThreadFeed(StraightFeed):
 
 
 @dataclass(frozen=True, slots=True)
+class SkipFeed(StraightFeed):
+    """G31: a linear feed move to `end` that stops at the skip signal; the rest of the move
+    is dropped and the program goes on from where the machine stopped.
+
+    `signal`: the skip input it waits for (G31 P1..P4: the multi-step skip's steps; 0 for
+    G31 without P); `tool_length`: the length of the tool in the spindle as the control
+    knows it (the tool tip is the gauge line minus this along Z) and `tool_radius` its
+    radius (the tool's end is a disc of it), for the tool setter;
+    `expected`: where the interpreter expects the skip (X Y Z: the machine's tool setter
+    met on the programmed path), None when it expects none: a planner without a machine
+    (`nc plan`) stops there. The machine stops taking blocks after it until the move has
+    ended and hands the interpreter the latched position (`Interpreter.skipped`).
+    """
+
+    signal: int = 0
+    tool_length: float = 0.0
+    tool_radius: float = 0.0
+    expected: Pose | None = None
+
+    def planned(self) -> StraightFeed:
+        """The move as a planner without a skip signal runs it: to the expected skip."""
+        if self.expected is None:
+            return StraightFeed(self.line, self.end, self.feed, True)
+        return StraightFeed(self.line, (*self.expected[:3], *self.end[3:]), self.feed, True)
+
+
+@dataclass(frozen=True, slots=True)
 class SpindleSync:
     """Before a thread pass: wait for the spindle's one-revolution signal, so every pass of
     a thread starts at the same spindle angle and cuts the same helix (a sync point: the

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import re
 from pathlib import Path
 
 import typer
@@ -9,6 +10,7 @@ import typer
 from cnc.cli_setup import SETUP_ERRORS, fail, machine_setup, units_warning
 from cnc.gcode.source import library_programs
 from cnc.interp import Interpreter
+from cnc.interp.macro import ARGUMENTS
 
 nc_app = typer.Typer(
     help="NC kernel: check, plan and simulate part programs.", no_args_is_help=True
@@ -52,12 +54,33 @@ def check_cmd(
     gcode_system: str | None = typer.Option(
         None, "--gcode-system", help="lathe G-code system A, B or C (default: the machine's)"
     ),
+    subprogram: bool | None = typer.Option(
+        None,
+        "--subprogram/--main-program",
+        help="check as a subprogram (its M99 returns to a caller) or as a main program"
+        " (default: a subprogram when its last block is M99)",
+    ),
+    g65: str | None = typer.Option(
+        None,
+        "--g65",
+        help="check a macro as `G65 P... ARGS` runs it: 'A.125 C.625 V10100.' sets #1 #3 #22"
+        " (argument specification I); implies --subprogram",
+    ),
 ) -> None:
     """Check a part program: exit 0 when valid, else one `FILE:LINE:COL: message` per error.
 
     A program whose last block is M99 is checked as a subprogram (its M99 ends it, and
     feed moves before its first F take the caller's feed).
     """
+    args: dict[int, float] = {}
+    if g65 is not None:
+        try:
+            args = g65_arguments(g65)
+        except ValueError as err:
+            typer.echo(f"--g65 {g65!r}: {err}", err=True)
+            raise typer.Exit(2) from None
+        subprogram = True
+
     try:
         setup = machine_setup(
             kind=kind, config=config, tools=tools, offsets=offsets, units=units, g54=g54,
@@ -83,10 +106,13 @@ def check_cmd(
         file=str(file),
         block_delete=block_delete,
         machine_data=setup.machine_data,
+        # the kept variables a setter preset (machine_data.macro_variables in the YAML)
+        macro_variables=setup.machine_data.macro_variables,
         max_blocks=CHECK_MAX_BLOCKS,
         programs=programs,
-        subprogram=None,  # decided by the program's last block (M99: a subprogram)
+        subprogram=subprogram,  # None: decided by the program's last block (M99: a subprogram)
     )
+    interp.vars.loc.update(args)  # the locals a G65 call would set
     with fh:
         errors = interp.check_all(fh)
     for e in errors:
@@ -97,12 +123,49 @@ def check_cmd(
             "before its first F take the caller's feed",
             err=True,
         )
+    for w in skip_warnings(interp, setup.params):
+        typer.echo(w, err=True)
     if not interp.units_programmed:
         typer.echo(units_warning(str(file), setup.machine_data.power_on_units), err=True)
     raise typer.Exit(1 if errors else 0)
 
 
+def skip_warnings(interp, params) -> list[str]:
+    """One warning per G31 line that ran to its end point without a skip signal."""
+    why = (
+        "no tool setter on this machine (probe.tool_setter)"
+        if params.tool_setter is None
+        else "the tool does not meet the tool setter on its path"
+    )
+    seen = dict.fromkeys(interp.skip_misses)
+    return [
+        f"{f}:{line}:1: warning: G31 never tripped: {why}; it ran to its end point"
+        for f, line in seen
+    ]
+
+
 CHECK_MAX_BLOCKS = 5_000_000
+_ARGUMENT = re.compile(r"\s*([A-Z])\s*([-+]?(?:\d+\.?\d*|\.\d+))\s*", re.IGNORECASE)
+
+
+def g65_arguments(text: str) -> dict[int, float]:
+    """The local variables `G65 P... <text>` sets (argument specification I: A -> #1,
+    B -> #2, ..., Z -> #26); a letter G65 cannot pass (G L N O P) or a repeated one is an
+    error, as on the control."""
+    out: dict[int, float] = {}
+    pos = 0
+    while pos < len(text):
+        m = _ARGUMENT.match(text, pos)
+        if m is None or m.end() == pos:
+            raise ValueError(f"column {pos + 1}: expected an address and a number (A.125)")
+        letter = m.group(1).upper()
+        if letter not in ARGUMENTS:
+            raise ValueError(f"column {pos + 1}: {letter} is not a G65 argument address")
+        if ARGUMENTS[letter] in out:
+            raise ValueError(f"column {pos + 1}: {letter} given twice")
+        out[ARGUMENTS[letter]] = float(m.group(2))
+        pos = m.end()
+    return out
 
 
 # `nc plan` lives in cnc.cli_plan and registers itself on nc_app when imported.

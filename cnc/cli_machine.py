@@ -40,6 +40,12 @@ def machine(
         help="serve OPC UA (OPC 40501 MachineTool) on this port (0 = any free port);"
         " default: as configured (ports.opcua)",
     ),
+    bind: str | None = typer.Option(
+        None,
+        "--bind",
+        help="address every face binds to (default: ports.host, 127.0.0.1); an address"
+        " other than loopback needs the shared secret (ports.secret or FMSCELL_MACHINE_SECRET)",
+    ),
     dnc_parity: bool = typer.Option(False, "--dnc-parity", help="ISO 7-bit even parity"),
     speed: float = typer.Option(1.0, "--speed", help="clock speed factor (1 = real time)"),
     clock: str = typer.Option(
@@ -88,6 +94,21 @@ def machine(
         cfg = cfg.model_copy(update={"ports": cfg.ports.model_copy(update={"secret": secret})})
     if opcua is not None:
         cfg = cfg.model_copy(update={"ports": cfg.ports.model_copy(update={"opcua": opcua})})
+    if bind is not None:
+        if not bind.strip():
+            typer.echo("--bind: an address (10.77.0.2, ::1, a host name)", err=True)
+            raise typer.Exit(2)
+        if cfg.ports.secret is None and not _loopback(bind):
+            # asked for on the command line to be reached from elsewhere: never open, where a
+            # cell file's ports.host only warns (below) for the files written before secrets
+            typer.echo(
+                f"{name}: --bind {bind} is reachable from other hosts: the DNC port and the"
+                " simulation face need a shared secret (ports.secret in the cell file, or"
+                " FMSCELL_MACHINE_SECRET in the environment; docs/dnc_port.md)",
+                err=True,
+            )
+            raise typer.Exit(2)
+        cfg = cfg.model_copy(update={"ports": cfg.ports.model_copy(update={"host": bind})})
     if cfg.ports.secret is None and not _loopback(cfg.ports.host):
         typer.echo(
             f"{name}: WARNING: the DNC port and simulation face listen on {cfg.ports.host}"

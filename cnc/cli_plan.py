@@ -10,13 +10,13 @@ from __future__ import annotations
 import json
 import math
 import sys
-from collections.abc import Callable, Iterable
+from collections.abc import Callable, Iterable, Iterator
 from pathlib import Path
 
 import typer
 
-from cnc.canon import MOTION_TYPES, Dwell, StraightTraverse
-from cnc.cli import nc_app
+from cnc.canon import MOTION_TYPES, Dwell, SkipFeed, StraightTraverse
+from cnc.cli import nc_app, skip_warnings
 from cnc.cli_setup import SETUP_ERRORS, fail, machine_setup, units_warning
 from cnc.errors import NcError
 from cnc.interp import Interpreter
@@ -64,6 +64,13 @@ class _Deviation:
             self.low += 1
 
 
+def _skips_planned(commands: Iterable) -> Iterator:
+    """Without a machine no skip signal comes: a G31 runs to where the interpreter expects
+    the tool setter to switch (canon.SkipFeed.planned), as it assumed for the blocks after."""
+    for cmd in commands:
+        yield cmd.planned() if type(cmd) is SkipFeed else cmd
+
+
 def plan_run(
     params,
     commands: Iterable,
@@ -92,7 +99,7 @@ def plan_run(
     last_line = None
     feed_len = rapid_len = 0.0
     pos = tuple(start[:3])  # the X Y Z path (rotary axes: docs/motion.md)
-    it = iter(commands)
+    it = iter(_skips_planned(commands))
     pending = next(it, None)
     fed_all = pending is None
     if fed_all:
@@ -268,6 +275,8 @@ def plan_cmd(
             e.file = str(file)
         print(str(e), file=sys.stderr)
         raise typer.Exit(1) from None
+    for w in skip_warnings(interp, params):
+        print(w, file=sys.stderr)
     if not interp.units_programmed:
         print(units_warning(str(file), setup.machine_data.power_on_units), file=sys.stderr)
     if as_json:

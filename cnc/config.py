@@ -1,25 +1,29 @@
-"""Machine and cell configuration: YAML -> validated, typed sections -> MachineParams.
+"""Machine configuration: YAML -> validated, typed sections -> MachineParams; and the
+reading of configuration files that every package's sections share.
 
-One YAML file describes the cell: `machines` by name and the `host`. A machine section holds
-what the NC kernel needs (kind, axes with soft limits, velocity/accel/jerk limits, IPO cycle,
-look-ahead, tolerance, number format) and the sections later layers consume (drives, plc,
-can, ports, spindle, tool changer). A machine may start from a shipped machine or another
-file with `base:` and override keys. docs/configuration.md lists every key.
+A machine section holds what the NC kernel needs (kind, axes with soft limits,
+velocity/accel/jerk limits, IPO cycle, look-ahead, tolerance, number format, spindle, tool
+changer, faces' ports, machine data) and the sections other packages own, each declared and
+checked by its owner: `drives` and `can` (drives/config.py), `plc` (plc/config.py). A
+machine may start from a shipped machine or another file with `base:` and override keys.
+The cell file (`machines:` and `host:`) is composed by server/config.py, which adds the
+host's sections (dnc/config.py, web_api/config.py, its own). docs/configuration.md lists
+every key; docs/architecture.md says how to add one.
 
-Every problem is reported, one line each, as `FILE:LINE:COL: key.path: reason`, e.g.
-`cell.yaml:12:18: machines.mill1.axes.X.max_accel: must be > 0, got -5`. Unknown keys are
-errors (with a did-you-mean), and so are duplicate keys.
+A section is a pydantic model (strict, unknown keys refused) whose rules across keys are a
+`problems()` method returning (key path below the section, reason) pairs; the loader places
+them (`within`) and reports every problem, one line each, as `FILE:LINE:COL: key.path:
+reason`, e.g. `cell.yaml:12:18: machines.mill1.axes.X.max_accel: must be > 0, got -5`.
+Unknown keys are errors (with a did-you-mean), and so are duplicate keys.
 """
 
 from __future__ import annotations
 
-import dataclasses
 import difflib
-import hashlib
 import math
 import types
 import typing
-from collections.abc import Callable, Mapping
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Annotated, Any, Literal
@@ -30,43 +34,43 @@ from yaml.nodes import MappingNode, Node, ScalarNode, SequenceNode
 
 from cnc.errors import NcError
 from cnc.params import AxisParams, DecimalStyle, MachineParams
+from cnc.probe import ToolSetter
+from drives.config import CanConfig, DriveAxisConfig, DrivesConfig
+from plc.config import MCodeConfig, PlcConfig
 
 __all__ = [
     "BUILTIN_MACHINES",
-    "SHIPPED_MACHINES",
     "MACHINES_DIR",
-    "ApiKeyConfig",
-    "AuthConfig",
+    "MACHINE_SECTIONS",
+    "SHIPPED_MACHINES",
     "AxisConfig",
-    "CanConfig",
-    "CellConfig",
+    "ConfigDocument",
     "ConfigError",
     "ConfigProblem",
-    "DriveAxisConfig",
-    "DrivesConfig",
-    "HostConfig",
-    "MqttConfig",
     "MachineConfig",
     "MachineDataConfig",
-    "PlcConfig",
+    "Name",
+    "Port",
     "PortsConfig",
+    "Problem",
+    "Section",
     "SpindleConfig",
-    "TlsConfig",
     "ToolChangerConfig",
     "ToolConfig",
     "builtin_machine",
-    "config_reference_markdown",
-    "default_cell_config",
-    "load_cell_config",
     "load_machine_config",
     "load_machine_params",
+    "machines_problems",
+    "read_config",
+    "reference_tables",
+    "validate_machines",
+    "within",
 ]
 
 MACHINES_DIR = Path(__file__).resolve().parent / "machines"
 BUILTIN_MACHINES = ("mill3", "lathe2")  # the default cell: one of each
 # every machine file shipped in cnc/machines (a `base:` or `--machine` may name any)
 SHIPPED_MACHINES = (*BUILTIN_MACHINES, "mill4", "mill5")
-CAN_BITRATES = (10_000, 20_000, 50_000, 125_000, 250_000, 500_000, 800_000, 1_000_000)
 IPO_CYCLE_MIN_MS = 0.5
 IPO_CYCLE_MAX_MS = 8.0
 
@@ -106,9 +110,16 @@ class ConfigError(NcError):
 # --- the schema --------------------------------------------------------------------------
 
 
-class _Section(BaseModel):
-    # strict: YAML "5" is not 5 and 1 is not true; frozen: a loaded config is a value.
+class Section(BaseModel):
+    """The base of a configuration section. Strict: YAML "5" is not 5 and 1 is not true;
+    unknown keys are refused; frozen: a loaded configuration is a value. (drives and plc,
+    which import nothing of ours, declare the same settings.)"""
+
     model_config = ConfigDict(extra="forbid", strict=True, frozen=True, allow_inf_nan=False)
+
+
+#: One problem a section's rules found: the key path (below the section) and the reason.
+Problem = tuple[tuple[Any, ...], str]
 
 
 Port = Annotated[int, Field(ge=0, le=65535)]
@@ -117,10 +128,9 @@ AxisName = Annotated[str, StringConstraints(pattern=r"^[XYZABCUVW]$")]
 # A shared secret: printable ASCII without blanks (it travels on a command line), long
 # enough not to be guessed.
 Secret = Annotated[str, StringConstraints(pattern=r"^[!-~]{16,128}$")]
-PlantOverrides = dict[str, dict[str, Any]]  # values are checked against PlantParams
 
 
-class AxisConfig(_Section):
+class AxisConfig(Section):
     """One axis (`axes.<NAME>`): soft limits and dynamic limits in machine coordinates."""
 
     min_mm: float = Field(description="Negative soft limit, machine coordinates, mm.")
@@ -139,7 +149,7 @@ class AxisConfig(_Section):
     )
 
 
-class KinematicsConfig(_Section):
+class KinematicsConfig(Section):
     """Machine kinematics constants (`kinematics`): the `mill5` B45/C table-table machine
     (002_postprocessor.md §4; the post-processor's cam/machines/mill5.yaml gives the same)."""
 
@@ -153,7 +163,7 @@ class KinematicsConfig(_Section):
     z_offset_mm: float = Field(0.0, description="z_OwOt of eq. 9, mm.")
 
 
-class SpindleConfig(_Section):
+class SpindleConfig(Section):
     """The main spindle (`spindle`)."""
 
     max_rpm: float = Field(8000.0, gt=0, description="Highest speed, rpm.")
@@ -161,7 +171,7 @@ class SpindleConfig(_Section):
     ramp_s: float = Field(1.0, ge=0, description="Time from 0 to max_rpm, s.")
 
 
-class ToolChangerConfig(_Section):
+class ToolChangerConfig(Section):
     """Tool changer (`tool_changer`): a mill's ATC magazine or a lathe's turret."""
 
     kind: Literal["atc", "turret", "manual"] = Field(
@@ -171,145 +181,28 @@ class ToolChangerConfig(_Section):
     change_time_s: float = Field(2.5, gt=0, description="Time of one M6 change, s.")
 
 
-class DriveAxisConfig(_Section):
-    """One axis' drive (`drives.axes.<NAME>`)."""
+class ToolSetterConfig(Section):
+    """A tool-length sensor (`probe.tool_setter`): where a G31 skip move finds its skip
+    signal (docs/gcode.md, "G31 skip and the tool setter")."""
 
-    node_id: int = Field(ge=1, le=127, description="CANopen node-ID, 1..127.")
-    line: int = Field(
-        0,
-        ge=0,
-        le=3,
-        description="CAN line of the drive (0 = `can.channel`, k = that channel + `.k`):"
-        " a second line doubles the room for cyclic PDOs (5 axes at a 1 ms IPO cycle).",
+    x: float = Field(description="Centre of the sensor's contact disc, machine X, mm.")
+    y: float = Field(description="Centre of the sensor's contact disc, machine Y, mm.")
+    z_trigger: float = Field(
+        description="Machine Z of the tool tip (the gauge line minus the tool length) at which"
+        " the sensor switches, mm."
     )
-    plant: PlantOverrides = Field(
-        default_factory=dict,
-        description="Plant overrides for this axis, on top of `drives.plant`.",
-    )
+    radius: float = Field(5.0, gt=0, description="Radius of the contact disc, mm.")
 
 
-class DrivesConfig(_Section):
-    """Virtual CiA 402 drives (`drives`). Plant overrides are `group: {field: value}` over
-    the drives package's PlantParams groups (motor, screw, loops, encoder, dc_link,
-    thermal, switches, monitor), SI units as PlantParams documents them."""
+class ProbeConfig(Section):
+    """The machine's measuring sensors (`probe`)."""
 
-    plant: PlantOverrides = Field(
-        default_factory=dict, description="Plant overrides applied to every axis."
-    )
-    axes: dict[str, DriveAxisConfig] = Field(
-        default_factory=dict,
-        description="Per-axis drive settings; node-IDs default to 1, 2, 3... in axis order.",
+    tool_setter: ToolSetterConfig | None = Field(
+        None, description="The tool-length sensor; null = none fitted (a G31 never trips)."
     )
 
-    def node_id(self, axis: str, index: int) -> int:
-        """The node-ID of `axis` (the `index`-th configured axis)."""
-        entry = self.axes.get(axis)
-        return entry.node_id if entry is not None else index + 1
 
-    def line(self, axis: str) -> int:
-        """The CAN line of `axis` (0 unless configured)."""
-        entry = self.axes.get(axis)
-        return entry.line if entry is not None else 0
-
-    def plant_overrides(self, axis: str) -> dict[str, dict[str, Any]]:
-        """Merged overrides for one axis: `PlantParams().with_(**overrides)`."""
-        merged = {group: dict(values) for group, values in self.plant.items()}
-        entry = self.axes.get(axis)
-        if entry is not None:
-            for group, values in entry.plant.items():
-                merged.setdefault(group, {}).update(values)
-        return merged
-
-
-class MCodeConfig(_Section):
-    """One M function of the PLC's M-code table (`plc.m_codes.<M>`)."""
-
-    ms: int = Field(
-        0,
-        ge=0,
-        le=29_000,
-        description="How long the function takes: the PLC gives the finish"
-        " this long after the strobe (at least its 50 ms check delay), ms.",
-    )
-    text: str = Field("", description="What it does, for displays and the docs.")
-    sets: str | None = Field(
-        None,
-        description="PLC bit the function switches on (a device: conveyor, air blast).",
-    )
-    clears: str | None = Field(None, description="PLC bit the function switches off.")
-
-
-class PlcConfig(_Section):
-    """The soft-PLC (`plc`)."""
-
-    program: str | None = Field(
-        None,
-        description="Ladder program file (relative to the config file); null = the standard"
-        " machine-tool program.",
-    )
-    period_ms: int = Field(
-        10, ge=1, le=1000, description="Scan period, ms; an integer multiple of the IPO cycle."
-    )
-    watchdog_ms: float | None = Field(
-        None, gt=0, description="Scan execution-time limit, ms; null = 10 × period."
-    )
-    debounce_samples: int = Field(
-        0, ge=0, le=64, description="Input filter: a change counts after N equal samples (0 off)."
-    )
-    m_codes: dict[int, MCodeConfig] | None = Field(
-        None,
-        description="The M-code table: M functions the PLC handles besides the standard"
-        " program's (docs/machine_plc.md), by code; the NC refuses an M code that is neither"
-        " its own nor in this table at its block. null = no table: every M code the NC does"
-        " not know is handed to the PLC.",
-    )
-    modbus_write_allow: str = Field(
-        "",
-        description="Modbus write allow-list (`coil:0-15,hr:1024-1100,%MW0-99`); empty ="
-        " read-only.",
-    )
-
-    @property
-    def m_functions(self) -> tuple:
-        """The M-code table as `plc.m_functions.MFunction`s (raises MTableError)."""
-        from plc.m_functions import table_from
-
-        entries = {c: e.model_dump() for c, e in (self.m_codes or {}).items()}
-        return table_from(entries)
-
-    @property
-    def nc_m_codes(self) -> frozenset[int] | None:
-        """The M codes the NC hands to this PLC (None: no table, any code)."""
-        if self.m_codes is None:
-            return None
-        from plc.m_functions import STANDARD_EXTRA
-
-        return STANDARD_EXTRA | frozenset(self.m_codes)  # the entries: checked by the loader
-
-
-class CanConfig(_Section):
-    """The machine's CAN bus (`can`)."""
-
-    interface: Literal["sim", "socketcan", "virtual"] = Field(
-        "sim", description="`sim` (simulated bus), `socketcan` (real), `virtual` (python-can)."
-    )
-    channel: str | None = Field(
-        None, description="Bus channel (`can0` for socketcan); null = the machine's name."
-    )
-    bitrate: int = Field(
-        1_000_000, description="Bit rate, bit/s: one of the CiA 301 rates 10k … 1M."
-    )
-
-    def bus_config(self, machine: str) -> dict[str, Any]:
-        """The mapping `drives.bus.open_bus` takes."""
-        return {
-            "interface": self.interface,
-            "channel": self.channel or machine,
-            "bitrate": self.bitrate,
-        }
-
-
-class PortsConfig(_Section):
+class PortsConfig(Section):
     """The machine's faces (`ports`): TCP ports; 0 = any free port, null = face off."""
 
     host: str = Field("127.0.0.1", min_length=1, description="Address the faces bind to.")
@@ -339,7 +232,7 @@ class PortsConfig(_Section):
     )
 
 
-class ToolConfig(_Section):
+class ToolConfig(Section):
     """One tool offset (`machine_data.tools.<N>`, N = 1..999), mm; see docs/machine_data.md."""
 
     length: float = Field(0.0, description="Length geometry (G43/G44 H), mm.")
@@ -358,7 +251,7 @@ class ToolConfig(_Section):
     comment: str = Field("", max_length=80, description="Free text (tool description).")
 
 
-class MachineDataConfig(_Section):
+class MachineDataConfig(Section):
     """The machine data a new machine starts with (`machine_data`); once the machine has
     a state directory its saved data wins (docs/machine_data.md)."""
 
@@ -374,6 +267,11 @@ class MachineDataConfig(_Section):
     tools: dict[int, ToolConfig] = Field(
         default_factory=dict, description="Tool offsets by number 1..999; see the keys below."
     )
+    macro_variables: dict[int, float] = Field(
+        default_factory=dict,
+        description="Kept Macro B variables a setter presets (#500-#999, Fanuc 30i-B"
+        " #500000-#999999, Haas #10000-#10999): number -> value; the others are vacant.",
+    )
 
     def initial(self):
         """The cnc.machine_data.MachineData this section describes."""
@@ -383,13 +281,14 @@ class MachineDataConfig(_Section):
             "tools": {str(n): t.model_dump() for n, t in self.tools.items()},
             "work_offsets": {k: list(v) for k, v in self.work_offsets.items()},
             "parameters": {"power_on_units": self.power_on_units},
+            "macro_variables": {str(n): v for n, v in self.macro_variables.items()},
         }
         if self.g92 is not None:
             doc["g92"] = list(self.g92)
         return MachineData.from_dict(doc)
 
 
-class MachineConfig(_Section):
+class MachineConfig(Section):
     """One machine (`machines.<NAME>`, or a whole machine file)."""
 
     kind: str = Field(
@@ -470,6 +369,9 @@ class MachineConfig(_Section):
     plc: PlcConfig = Field(default_factory=PlcConfig, description="The PLC section.")
     can: CanConfig = Field(default_factory=CanConfig, description="The CAN bus section.")
     ports: PortsConfig = Field(default_factory=PortsConfig, description="The faces' ports section.")
+    probe: ProbeConfig = Field(
+        default_factory=ProbeConfig, description="The measuring sensors section (G31 skip)."
+    )
     machine_data: MachineDataConfig | None = Field(
         default_factory=MachineDataConfig,
         description="The machine data section: tools, work offsets, power-on unit; null ="
@@ -512,146 +414,17 @@ class MachineConfig(_Section):
             call_nesting=self.call_nesting,
             macro_nesting=self.macro_nesting,
             plc_m_codes=self.plc.nc_m_codes,
+            tool_setter=(
+                ToolSetter(ts.x, ts.y, ts.z_trigger, ts.radius)
+                if (ts := self.probe.tool_setter) is not None
+                else None
+            ),
             kinematics=(
                 (self.kinematics.d_mm, self.kinematics.tool_length_mm, self.kinematics.z_offset_mm)
                 if self.kinematics is not None
                 else None
             ),
         )
-
-
-class ApiKeyConfig(_Section):
-    """One REST API key (`host.auth.api_keys[]`): who uses it, with which role."""
-
-    user: str = Field(min_length=1, max_length=64, description="Who uses the key (audit).")
-    role: Literal["viewer", "operator", "programmer", "admin"] = Field(
-        description="`viewer` reads; `operator` dispatches, runs jobs, commands machines;"
-        " `programmer` uploads and releases; `admin` injects faults."
-    )
-    key: str | None = Field(None, min_length=16, description="The key in clear (>= 16 chars).")
-    key_sha256: str | None = Field(
-        None,
-        pattern=r"^[0-9a-f]{64}$",
-        description="Or the key's sha256 in hex (`sha256sum` of the key without a newline):"
-        " no usable secret in the file.",
-    )
-
-
-class AuthConfig(_Section):
-    """REST API authentication (`host.auth`)."""
-
-    api_keys: list[ApiKeyConfig] = Field(
-        default_factory=list,
-        description="API keys, each `{user, role, key}` or `{user, role, key_sha256}`.",
-    )
-    insecure_open: bool = Field(
-        False,
-        description="Demo only: no key checked, every caller is an admin (as `--insecure-open`).",
-    )
-
-
-class TlsConfig(_Section):
-    """HTTPS for the REST API and dashboard (`host.tls`)."""
-
-    cert: str = Field(min_length=1, description="PEM certificate (chain) file.")
-    key: str = Field(min_length=1, description="PEM private key file.")
-
-
-# An MQTT broker as HOST:PORT (a name or an IPv4 address; docs/mqtt.md).
-Broker = Annotated[
-    str,
-    StringConstraints(
-        pattern=r"^[A-Za-z0-9_.-]+:([0-9]{1,4}|[1-5][0-9]{4}|6[0-4][0-9]{3}|65[0-4][0-9]{2}|655[0-2][0-9]|6553[0-5])$"
-    ),
-]
-# One MQTT topic level or several (no wildcards, no empty level, no leading/trailing '/').
-TopicPrefix = Annotated[str, StringConstraints(pattern=r"^[A-Za-z0-9_.-]+(/[A-Za-z0-9_.-]+)*$")]
-
-
-class MqttConfig(_Section):
-    """The cell's MQTT face (`host.mqtt`, docs/mqtt.md): live state and events to a broker."""
-
-    broker: Broker = Field(description="The broker, `HOST:PORT` (FMSCELL_MQTT overrides it).")
-    prefix: TopicPrefix = Field(
-        "fmscell", description="First topic level(s), shared by the cells of one factory."
-    )
-    cell_id: Name = Field(
-        "cell", description="This cell's topic level: `<prefix>/<cell_id>/...`; unique per broker."
-    )
-    period_s: float = Field(
-        0.1, gt=0, le=60, description="How often the live state is read and changes published (s)."
-    )
-    position_period_s: float = Field(
-        1.0, gt=0, le=3600, description="Axis positions are published at most this often (s)."
-    )
-    keepalive_s: int = Field(
-        10,
-        ge=2,
-        le=3600,
-        description="MQTT keepalive: a silent cell is declared dead by its"
-        " last will after 1.5 times this (s).",
-    )
-
-
-class HostConfig(_Section):
-    """The DNC host and cell server (`host`)."""
-
-    database_url: str | None = Field(
-        None, description="SQLAlchemy URL; null = the embedded SQLite file."
-    )
-    bind: str = Field("127.0.0.1", min_length=1, description="REST/dashboard bind address.")
-    port: Port = Field(8000, description="REST/dashboard TCP port.")
-    auth: AuthConfig = Field(
-        default_factory=AuthConfig, description="REST API keys (see `host.auth` below)."
-    )
-    tls: TlsConfig | None = Field(
-        None, description="HTTPS certificate and key (see `host.tls`); null = plain HTTP."
-    )
-    lost_contact_s: float = Field(
-        30.0,
-        gt=0,
-        description="A machine out of contact this long is taken as lost: its allocation is"
-        " interrupted and the part rerouted (seconds).",
-    )
-    dispatch_rule: str = Field(
-        "fifo",
-        min_length=1,
-        description="Which waiting job a free machine takes next: `fifo`, `spt`, `edd`, `cr`"
-        " or `same_program_first` (the job whose program the machine already holds, then"
-        " FIFO; `same_program_first then edd` falls back to EDD instead); docs/dnc.md.",
-    )
-    faults: bool = Field(
-        False,
-        description="Fault injection: the `/api/...faults` endpoints and each machine's"
-        " simulation face (as `fmscell run --faults` or FMSCELL_FAULTS=1); off = 404.",
-    )
-    mqtt: MqttConfig | None = Field(
-        None, description="The MQTT face (see `host.mqtt`); null = off (unless FMSCELL_MQTT)."
-    )
-
-
-class _CellDocument(_Section):
-    machines: dict[Name, MachineConfig] = Field(min_length=1)
-    host: HostConfig = Field(default_factory=HostConfig)
-
-
-@dataclass(frozen=True, slots=True)
-class CellConfig:
-    """A validated cell: machines by name (in file order) and the host section."""
-
-    machines: dict[str, MachineConfig]
-    host: HostConfig
-    source: str = "<config>"
-
-    def machine(self, name: str) -> MachineConfig:
-        try:
-            return self.machines[name]
-        except KeyError:
-            known = ", ".join(self.machines)
-            raise NcError(f"no machine {name!r} in the cell (machines: {known})") from None
-
-    def params(self, name: str) -> MachineParams:
-        return self.machine(name).params
 
 
 # --- YAML with positions ---------------------------------------------------------------
@@ -972,14 +745,23 @@ _PATTERN_WORDS = {
 }
 
 
-class _Reporter:
-    """Turns key paths into ConfigProblems that point at the right file, line and column."""
+class ConfigDocument:
+    """A configuration file read for validation: its plain data (YAML merged, machine
+    `base:` files resolved) and the position of every key, so that a problem found at a key
+    path is reported at the file, line and column that wrote it. The packages above cnc
+    that compose a cell (server) validate their sections through it."""
 
-    def __init__(self, src: _Source, marks: _Marks) -> None:
+    def __init__(self, src: _Source, data: Mapping[str, Any], marks: _Marks) -> None:
         self.src = src
+        self.data = data
         self.marks = marks
 
-    def __call__(self, path: tuple[Any, ...], reason: str) -> ConfigProblem:
+    @property
+    def file(self) -> str:
+        return self.src.file
+
+    def problem(self, path: tuple[Any, ...], reason: str) -> ConfigProblem:
+        """The problem `reason` at key path `path`, placed in its file."""
         probe = path
         while probe and probe not in self.marks:
             probe = probe[:-1]
@@ -989,20 +771,42 @@ class _Reporter:
         m = node.start_mark  # may lie in a `base:` file: its name is in the mark
         return ConfigProblem(_dotted(path), reason, m.name, m.line + 1, m.column + 1)
 
-    def validate(self, model: type[_Section], data: Any) -> Any:
+    def validate(self, model: type[BaseModel], data: Any = None) -> Any:
+        """`data` (default: the whole document) as a `model`, or ConfigError."""
+        data = self.data if data is None else data
         try:
             return model.model_validate(data)
         except ValidationError as exc:
-            raise ConfigError([self(_loc(e), _reason(e, model)) for e in exc.errors()]) from None
+            raise ConfigError(self.pydantic_problems(exc, model)) from None
 
-    def check(self, problems: list[tuple[tuple[Any, ...], str]]) -> None:
+    def pydantic_problems(
+        self, exc: ValidationError, model: type[BaseModel]
+    ) -> list[ConfigProblem]:
+        """Pydantic's errors of `model` in the one-line `key.path: reason` form."""
+        return [self.problem(_loc(e), _reason(e, model)) for e in exc.errors()]
+
+    def check(self, problems: list[Problem]) -> None:
+        """Raise ConfigError when a section's rules found problems (key paths from the root)."""
         if problems:
-            raise ConfigError([self(p, r) for p, r in problems])
+            raise ConfigError([self.problem(p, r) for p, r in problems])
 
 
-def _check_machine(name: tuple[Any, ...], m: MachineConfig) -> list[tuple[tuple, str]]:
+def read_config(path_or_dict: str | Path | Mapping[str, Any]) -> ConfigDocument:
+    """A cell or machine file (or the same data as a mapping), read and prepared for
+    validation: duplicate keys and YAML errors are refused here."""
+    src = _source_from(path_or_dict)
+    data, marks = _prepare(src)
+    return ConfigDocument(src, data, marks)
+
+
+def within(path: tuple[Any, ...], problems: list[Problem]) -> list[Problem]:
+    """A section's problems (paths relative to it) placed at `path`."""
+    return [((*path, *p), reason) for p, reason in problems]
+
+
+def _check_machine(name: tuple[Any, ...], m: MachineConfig) -> list[Problem]:
     """Cross-field rules pydantic's per-field constraints cannot express."""
-    out: list[tuple[tuple, str]] = []
+    out: list[Problem] = []
     for axis, a in m.axes.items():
         if a.continuous and axis not in "ABC":
             out.append(
@@ -1059,32 +863,18 @@ def _check_machine(name: tuple[Any, ...], m: MachineConfig) -> list[tuple[tuple,
     if m.spindle.min_rpm > m.spindle.max_rpm:
         reason = f"must be <= max_rpm ({_fmt(m.spindle.max_rpm)}), got {_fmt(m.spindle.min_rpm)}"
         out.append(((*name, "spindle", "min_rpm"), reason))
-    if m.can.bitrate not in CAN_BITRATES:
-        rates = ", ".join(str(r) for r in CAN_BITRATES)
-        out.append(((*name, "can", "bitrate"), f"must be one of {rates}, got {m.can.bitrate}"))
-    if m.plc.m_codes:
-        from plc.m_functions import MTableError
-
-        try:
-            _ = m.plc.m_functions  # compiles the table: its errors name the entry
-        except MTableError as exc:
-            out.append(((*name, "plc", *exc.where.split(".")), exc.message))
-    if m.plc.modbus_write_allow:
-        from plc.modbus.allowlist import AllowList, AllowListError
-
-        try:
-            AllowList.parse(m.plc.modbus_write_allow)
-        except AllowListError as exc:
-            out.append(((*name, "plc", "modbus_write_allow"), str(exc)))
-    out.extend(_check_drives(name, m))
+    # the sections other packages own check themselves (drives/config.py, plc/config.py)
+    out.extend(within((*name, "can"), m.can.problems()))
+    out.extend(within((*name, "plc"), m.plc.problems()))
+    out.extend(within((*name, "drives"), m.drives.problems(tuple(m.axes))))
     out.extend(_check_machine_data(name, m))
     return out
 
 
-def _check_machine_data(name: tuple[Any, ...], m: MachineConfig) -> list[tuple[tuple, str]]:
+def _check_machine_data(name: tuple[Any, ...], m: MachineConfig) -> list[Problem]:
     from cnc.machine_data import MachineData, MachineDataError
 
-    out: list[tuple[tuple, str]] = []
+    out: list[Problem] = []
     md = m.machine_data
     if md is None:
         return out
@@ -1102,82 +892,22 @@ def _check_machine_data(name: tuple[Any, ...], m: MachineConfig) -> list[tuple[t
         except MachineDataError as e:
             sub = e.pointer.split("/")[3:]
             out.append(((*base, "tools", n, *sub), e.message))
-    return out
-
-
-def _check_drives(name: tuple[Any, ...], m: MachineConfig) -> list[tuple[tuple, str]]:
-    out: list[tuple[tuple, str]] = []
-    for axis in m.drives.axes:
-        if axis not in m.axes:
-            reason = f"no such axis (axes: {' '.join(m.axes)})"
-            out.append(((*name, "drives", "axes", axis), reason))
-    ids: dict[int, str] = {}
-    for i, axis in enumerate(m.axes):
-        nid = m.drives.node_id(axis, i)
-        if nid in ids:
-            reason = f"node-ID {nid} already used by axis {ids[nid]}"
-            out.append(((*name, "drives", "axes", axis, "node_id"), reason))
-        ids[nid] = axis
-    out.extend(_check_plant((*name, "drives", "plant"), m.drives.plant))
-    for axis, entry in m.drives.axes.items():
-        out.extend(_check_plant((*name, "drives", "axes", axis, "plant"), entry.plant))
-    return out
-
-
-def _check_plant(path: tuple[Any, ...], plant: PlantOverrides) -> list[tuple[tuple, str]]:
-    """Override groups and fields must exist in the drives package's PlantParams."""
-    if not plant:
-        return []
-    from drives.plant.params import PlantParams  # late: only configs with overrides need it
-
-    out: list[tuple[tuple, str]] = []
-    defaults = PlantParams()
-    groups = [f.name for f in dataclasses.fields(PlantParams)]
-    for group, values in plant.items():
-        if group not in groups:
-            out.append(((*path, group), "unknown plant group" + _hint(group, groups)))
-            continue
-        current = getattr(defaults, group)
-        names = [f.name for f in dataclasses.fields(current)]
-        for key, value in values.items():
-            if key not in names:
-                out.append(((*path, group, key), "unknown plant parameter" + _hint(key, names)))
-                continue
-            default = getattr(current, key)
-            if not isinstance(value, int | float) or (
-                isinstance(value, float) and not math.isfinite(value)
-            ):
-                want = "true or false" if isinstance(default, bool) else "a finite number"
-                out.append(((*path, group, key), f"must be {want}, got {_fmt(value)}"))
-            elif isinstance(default, bool) != isinstance(value, bool):
-                want = "true or false" if isinstance(default, bool) else "a number"
-                out.append(((*path, group, key), f"must be {want}, got {_fmt(value)}"))
-            elif isinstance(default, int) and not isinstance(value, int):
-                out.append(((*path, group, key), f"must be an integer, got {_fmt(value)}"))
-    return out
-
-
-def _check_cell(cell: _CellDocument) -> list[tuple[tuple, str]]:
-    out: list[tuple[tuple, str]] = []
-    used: dict[tuple[str, int], str] = {(cell.host.bind, cell.host.port): "host.port"}
-    digests: dict[str, int] = {}
-    for i, k in enumerate(cell.host.auth.api_keys):
-        where = ("host", "auth", "api_keys", i)
-        if (k.key is None) == (k.key_sha256 is None):
-            out.append((where, f"api key of {k.user!r}: give exactly one of key, key_sha256"))
-            continue
-        digest = k.key_sha256 or hashlib.sha256(k.key.encode()).hexdigest()  # type: ignore[union-attr]
-        if digest in digests:
-            out.append((where, f"the same key as api_keys[{digests[digest]}]"))
-        digests.setdefault(digest, i)
-    # the host's own keys are checked by the host layer, which registers its checks here
-    # (dnc.rules: dispatch_rule): cnc never imports dnc (docs/architecture.md)
-    for key, check in HOST_CHECKS.items():
+    for n, value in md.macro_variables.items():
         try:
-            check(getattr(cell.host, key))
-        except ValueError as exc:
-            out.append((("host", key), str(exc)))
-    for name, m in cell.machines.items():
+            MachineData.from_dict({"macro_variables": {str(n): value}})
+        except MachineDataError as e:
+            out.append(((*base, "macro_variables", n), e.message))
+    return out
+
+
+def machines_problems(
+    machines: Mapping[str, MachineConfig], used: dict[tuple[str, int], str] | None = None
+) -> list[Problem]:
+    """The rules of every machine of a cell (`machines.<NAME>`) and that no two faces share
+    an address and port; `used`: ports taken already, (host, port) -> by whom (a key path)."""
+    out: list[Problem] = []
+    used = dict(used or {})
+    for name, m in machines.items():
         out.extend(_check_machine(("machines", name), m))
         for face in ("dnc", "modbus", "shdr", "simulation", "opcua"):
             port = getattr(m.ports, face)
@@ -1192,20 +922,16 @@ def _check_cell(cell: _CellDocument) -> list[tuple[tuple, str]]:
     return out
 
 
-#: host key -> a check that raises ValueError with the reason; filled by the packages above
-#: cnc that own those keys (dnc.rules registers `dispatch_rule` when it is imported).
-HOST_CHECKS: dict[str, Callable[[Any], object]] = {}
-
-
-def _load_cell(src: _Source, data: Mapping[str, Any], report: _Reporter) -> CellConfig:
+def validate_machines(doc: ConfigDocument, model: type[BaseModel]) -> Any:
+    """The document as `model`, a cell document whose `machines` maps names to
+    MachineConfig. When it fails, machines that are valid on their own still get their
+    rules checked, so that one run reports as much as possible."""
     try:
-        doc = _CellDocument.model_validate(data)
+        return model.model_validate(doc.data)
     except ValidationError as exc:
-        problems = [report(_loc(e), _reason(e, _CellDocument)) for e in exc.errors()]
-        # Machines that are valid on their own still get their cross-field checks, so one
-        # run reports as much as possible.
+        problems = doc.pydantic_problems(exc, model)
         failed = {tuple(e["loc"][:2]) for e in exc.errors()}
-        machines = data.get("machines")
+        machines = doc.data.get("machines")
         for name, section in machines.items() if isinstance(machines, Mapping) else ():
             if ("machines", name) in failed:
                 continue
@@ -1213,17 +939,16 @@ def _load_cell(src: _Source, data: Mapping[str, Any], report: _Reporter) -> Cell
                 machine = MachineConfig.model_validate(section)
             except ValidationError:
                 continue
-            problems += [report(p, r) for p, r in _check_machine(("machines", name), machine)]
+            problems += [doc.problem(p, r) for p, r in _check_machine(("machines", name), machine)]
         raise ConfigError(problems) from None
-    report.check(_check_cell(doc))
-    return CellConfig(dict(doc.machines), doc.host, src.file)
 
 
-def load_cell_config(path: str | Path | Mapping[str, Any]) -> CellConfig:
-    """Load and validate a whole cell file (`machines:` and `host:`)."""
-    src = _source_from(path)
-    data, marks = _prepare(src)
-    return _load_cell(src, data, _Reporter(src, marks))
+class _MachinesOfACell(Section):
+    """A cell file as a machine reads it: its `machines`; the `host` section is the host's,
+    validated by the cell that composes it (server.config)."""
+
+    machines: dict[Name, MachineConfig] = Field(min_length=1)
+    host: dict[str, Any] = Field(default_factory=dict)
 
 
 def load_machine_config(
@@ -1231,15 +956,16 @@ def load_machine_config(
 ) -> MachineConfig:
     """Load one machine: from a cell file (`machines:`; `name` picks one and may be left
     out when there is only one) or from a machine file (the machine section itself, as the
-    shipped cnc/machines/*.yaml; `name` is then ignored)."""
-    src = _source_from(path_or_dict)
-    data, marks = _prepare(src)
-    report = _Reporter(src, marks)
-    if "machines" not in data:
-        machine = report.validate(MachineConfig, data)
-        report.check(_check_machine((), machine))
+    shipped cnc/machines/*.yaml; `name` is then ignored). Every machine of a cell file is
+    checked, and the ports of all; its `host` section is left to the cell
+    (`server.config.load_cell_config`)."""
+    doc = read_config(path_or_dict)
+    if "machines" not in doc.data:
+        machine = doc.validate(MachineConfig)
+        doc.check(_check_machine((), machine))
         return machine
-    cell = _load_cell(src, data, report)
+    cell = validate_machines(doc, _MachinesOfACell)
+    doc.check(machines_problems(cell.machines))
     if name is None and len(cell.machines) == 1:
         name = next(iter(cell.machines))
     if name is None or name not in cell.machines:
@@ -1249,7 +975,7 @@ def load_machine_config(
             if name is None
             else f"no machine {name!r} (machines: {names})"
         )
-        raise ConfigError([report(("machines",), reason)])
+        raise ConfigError([doc.problem(("machines",), reason)])
     return cell.machines[name]
 
 
@@ -1268,37 +994,32 @@ def builtin_machine(name: str) -> MachineConfig:
     return load_machine_config(MACHINES_DIR / f"{name}.yaml")
 
 
-def default_cell_config() -> CellConfig:
-    """The built-in cell `fmscell run` uses without --config: one of each shipped machine."""
-    return load_cell_config({"machines": {n: {"base": n} for n in BUILTIN_MACHINES}})
-
-
 # --- documentation -------------------------------------------------------------------------
 
+#: The machine's sections for the key reference, (title, model); each package's own
+#: sections among them (drives, can: drives/config.py; plc: plc/config.py).
+MACHINE_SECTIONS: tuple[tuple[str, type[BaseModel]], ...] = (
+    ("machines.<NAME>", MachineConfig),
+    ("machines.<NAME>.axes.<AXIS>", AxisConfig),
+    ("machines.<NAME>.kinematics", KinematicsConfig),
+    ("machines.<NAME>.spindle", SpindleConfig),
+    ("machines.<NAME>.tool_changer", ToolChangerConfig),
+    ("machines.<NAME>.drives", DrivesConfig),
+    ("machines.<NAME>.drives.axes.<AXIS>", DriveAxisConfig),
+    ("machines.<NAME>.plc", PlcConfig),
+    ("machines.<NAME>.plc.m_codes.<M>", MCodeConfig),
+    ("machines.<NAME>.can", CanConfig),
+    ("machines.<NAME>.ports", PortsConfig),
+    ("machines.<NAME>.probe", ProbeConfig),
+    ("machines.<NAME>.probe.tool_setter", ToolSetterConfig),
+    ("machines.<NAME>.machine_data", MachineDataConfig),
+    ("machines.<NAME>.machine_data.tools.<N>", ToolConfig),
+)
 
-def config_reference_markdown() -> str:
-    """One Markdown table per section: key, type, default, meaning (docs/configuration.md
-    embeds this text; a test keeps them equal)."""
-    sections: list[tuple[str, type[BaseModel]]] = [
-        ("machines.<NAME>", MachineConfig),
-        ("machines.<NAME>.axes.<AXIS>", AxisConfig),
-        ("machines.<NAME>.kinematics", KinematicsConfig),
-        ("machines.<NAME>.spindle", SpindleConfig),
-        ("machines.<NAME>.tool_changer", ToolChangerConfig),
-        ("machines.<NAME>.drives", DrivesConfig),
-        ("machines.<NAME>.drives.axes.<AXIS>", DriveAxisConfig),
-        ("machines.<NAME>.plc", PlcConfig),
-        ("machines.<NAME>.plc.m_codes.<M>", MCodeConfig),
-        ("machines.<NAME>.can", CanConfig),
-        ("machines.<NAME>.ports", PortsConfig),
-        ("machines.<NAME>.machine_data", MachineDataConfig),
-        ("machines.<NAME>.machine_data.tools.<N>", ToolConfig),
-        ("host", HostConfig),
-        ("host.auth", AuthConfig),
-        ("host.auth.api_keys[]", ApiKeyConfig),
-        ("host.tls", TlsConfig),
-        ("host.mqtt", MqttConfig),
-    ]
+
+def reference_tables(sections: Sequence[tuple[str, type[BaseModel]]]) -> str:
+    """One Markdown table per section: key, default, meaning (server.config composes the
+    cell's reference that docs/configuration.md embeds)."""
     out: list[str] = []
     for title, model in sections:
         out.append(f"### `{title}`\n")

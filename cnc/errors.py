@@ -1,9 +1,16 @@
-"""The NC kernel's one error type: every refusal names file, line, column and reason."""
+"""The cnc package's errors: one root, CncError; NcError, the refusal of a part program,
+configuration or plan, names file, line, column and reason."""
 
 from __future__ import annotations
 
 
-class NcError(Exception):
+class CncError(Exception):
+    """Base of every error the cnc package raises (the NC kernel, the machine, its faces and
+    data). Subclasses that are bad input keep ValueError as a second base, so existing
+    handlers still see them."""
+
+
+class NcError(CncError):
     """A part program, configuration or plan that the NC kernel refuses.
 
     `line` and `col` are 1-based positions in the source text (0 when not applicable).

@@ -9,6 +9,8 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from enum import Enum
 
+from cnc.probe import ToolSetter
+
 
 class DecimalStyle(Enum):
     """How a value written without a decimal point is read (003_dimensions.md)."""
@@ -67,6 +69,9 @@ class MachineParams:
     plc_m_codes: frozenset[int] | None = None
     # mill5: (d, tool length, z offset) mm of the B45/C table (cnc.kinematics); None = 0s
     kinematics: tuple[float, float, float] | None = None
+    # the tool-length sensor a G31 skip move runs into (cnc.probe); None: none fitted,
+    # a G31 then runs to its end point without a skip signal
+    tool_setter: ToolSetter | None = None
 
     @property
     def rotary_axes(self) -> tuple[AxisParams, ...]:

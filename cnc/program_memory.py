@@ -11,6 +11,8 @@ import hashlib
 import threading
 from dataclasses import dataclass
 
+from cnc.errors import CncError
+
 MAX_PROGRAM_NUMBER = 99_999_999
 
 
@@ -28,7 +30,7 @@ class ProgramEntry:
     sha256: str
 
 
-class MemoryFull(Exception):
+class MemoryFull(CncError):
     def __init__(self, number: int, size: int, free: int, capacity: int) -> None:
         super().__init__(
             f"program O{number:04d} needs {size} bytes but only {free} of {capacity} bytes are "

@@ -61,9 +61,37 @@ def machine_check(
     return _as_data(errors)
 
 
+class Findings(list):
+    """The upload check's errors (a list of {line, col, message}) and what the program
+    needs of a machine: `axes`, the kind's linear axes and every rotary axis a block moves
+    or sets (a macro call's argument A is none), its called programs' included
+    (dnc/requirements.py); None when not known."""
+
+    axes: tuple[str, ...] | None = None
+
+
+def linear_axes(machine_kind: str) -> tuple[str, ...]:
+    """The axes every machine of the kind has (its kinematics fix them: mill X Y Z,
+    lathe X Z); the rotary axes (mill4's A) are the machine's own."""
+    params = _params(machine_kind)
+    rotary = {a.name for a in params.rotary_axes}
+    return tuple(a.name for a in params.axes if a.name not in rotary)
+
+
+def needed_axes(
+    text: str, machine_kind: str, *, programs: Mapping[int, str] | None = None
+) -> tuple[str, ...]:
+    """The axes a machine needs to run a G-code program of the kind (see `Findings`):
+    the NC check runs only when the text names one of the kind's rotary addresses."""
+    rotary = "".join(a.name for a in _params(machine_kind).rotary_axes)
+    if not rotary or not re.search(f"[{rotary}]\\s*[-+.\\d#\\[]", text, re.IGNORECASE):
+        return linear_axes(machine_kind)
+    return nc_checker(text, machine_kind, programs=programs).axes or linear_axes(machine_kind)
+
+
 def nc_checker(
     text: str | IO[str], machine_kind: str, *, programs: Mapping[int, str] | None = None
-) -> list[dict[str, Any]]:
+) -> Findings:
     """Errors as plain data ({line, col, message}) for storing with the revision. `text`
     may be an open text file (its path as `name`): its lines are read as the check goes,
     never all at once (a 15 MB program as a list of lines is some 60 MB).
@@ -73,15 +101,20 @@ def nc_checker(
     (`(in O1002)`, its own line and column). A program whose last block is M99 is checked
     as a subprogram."""
     lines = text.splitlines() if isinstance(text, str) else text
-    return _as_data(check(lines, _params(machine_kind), file="program", programs=programs))
+    params = _params(machine_kind)
+    named: set[str] = set()
+    found = _as_data(check(lines, params, file="program", programs=programs, rotary_named=named))
+    found.axes = (*linear_axes(machine_kind), *(a.name for a in params.rotary_axes
+                                                if a.name in named))  # fmt: skip
+    return found
 
 
-def _as_data(errors) -> list[dict[str, Any]]:
-    return [
+def _as_data(errors) -> Findings:
+    return Findings(
         {"line": e.line, "col": e.col,
          "message": e.message if e.file == "program" else f"{e.message} (in {e.file})"}
         for e in errors[:MAX_STORED_ERRORS]
-    ]  # fmt: skip
+    )  # fmt: skip
 
 
 nc_checker.reads_files = True  # type: ignore[attr-defined]  # Library hands it uploads as files

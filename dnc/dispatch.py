@@ -292,10 +292,23 @@ class Dispatches:
                 raise NotFound(f"no dispatch with id {dispatch_id}")
             return dispatch_info(row)
 
-    def list(self, *, machine: str | None = None, limit: int = 100) -> list[DispatchInfo]:
+    def list(
+        self,
+        *,
+        machine: str | None = None,
+        state: str | None = None,
+        before: int | None = None,
+        limit: int = 100,
+    ) -> list[DispatchInfo]:
+        """Dispatches newest first, of `machine` and in `state` if given, with ids below
+        `before` (the page after a cursor) if given."""
         stmt = select(m.Dispatch).order_by(m.Dispatch.id.desc()).limit(limit)
+        if before is not None:
+            stmt = stmt.where(m.Dispatch.id < before)
         if machine:
             stmt = stmt.where(m.Dispatch.machine == machine)
+        if state:
+            stmt = stmt.where(m.Dispatch.state == state)
         with transaction(self._sessions) as s:
             return [dispatch_info(r) for r in s.scalars(stmt)]
 

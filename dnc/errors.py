@@ -1,10 +1,12 @@
 """The DNC host's refusals, every one a DncError.
 
-Each class carries a stable `kind`; web_api/problems.py maps each kind to its problem+json
-type and HTTP status, in one table. Refusals raised elsewhere in the package derive from
-these (dependencies.MissingDependency, posting.PostRefused). The machine's side of the DNC
-line answers with its own alarms (cnc.faces.dnc_port.DncAlarm), and a transfer that fails
-on the line is a dnc.transfer.TransferError (kinds of line trouble, retried or not).
+DncError is the package's one root. Each class carries a stable `kind`; web_api/problems.py
+maps each kind to its problem+json type and HTTP status, in one table. Refusals raised
+elsewhere in the package derive from these (dependencies.MissingDependency,
+posting.PostRefused), and so does a transfer that fails on the line, dnc.transfer.
+TransferError (its `kind` names the line trouble, retried or not; answered as a 502
+`transfer-failed` problem). The machine's side of the DNC line answers with its own alarms
+(cnc.faces.dnc_port.DncAlarm, a CncError). The running cell's errors are dnc.cell.CellError.
 """
 
 from __future__ import annotations
@@ -66,3 +68,10 @@ class NotForMachine(DncError):
     the program's line, column and why."""
 
     kind = "not-for-machine"
+
+
+class NoMachineCanRun(DncError):
+    """A job whose program no machine of the cell can run (its kind, an axis it needs):
+    each machine's reason in `machines`, what the program needs in `needs`."""
+
+    kind = "no-machine-can-run"

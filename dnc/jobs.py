@@ -14,8 +14,9 @@ from dnc.allocation import DEFAULT_LOST_CONTACT_S, dispatch_phase
 from dnc.db import transaction
 from dnc.dependencies import dependencies
 from dnc.dispatch import FAILED, DispatchRequest, create_dispatches
-from dnc.errors import InvalidUpload, NotFound, WorkflowError
+from dnc.errors import InvalidUpload, NoMachineCanRun, NotFound, WorkflowError
 from dnc.events import record, record_many
+from dnc.requirements import Needs, Offer, refusal, revision_needs, why_none
 from dnc.rules import rule_named
 from dnc.scheduler import (
     IDLE,
@@ -60,6 +61,9 @@ class JobInfo:
     status: str
     created_at: datetime
     updated_at: datetime
+    # what a machine must be and have to make its parts ({"kinds", "axes"}); None: queued
+    # before the host knew (its machine kind alone)
+    needs: dict[str, list[str]] | None = None
 
 
 class Jobs:
@@ -95,8 +99,10 @@ class Jobs:
                 raise WorkflowError(
                     f"revision {revision_id} is {rev.status}; jobs need a released revision"
                 )
-            dependencies(s, revision_id)  # a subprogram not released: refused now, not per part
+            # a subprogram not released: refused now, not per part
+            called = dependencies(s, revision_id)
             kind = s.get(m.Program, rev.program_id).machine_kind
+            needs = _needs(s, rev, kind, called)
             job = m.Job(
                 revision_id=revision_id,
                 quantity=quantity,
@@ -107,6 +113,7 @@ class Jobs:
                 machine_group=machine_group,
                 cycle_time_s=cycle_time_s,
                 status=QUEUED,
+                needs=needs.as_data(),
                 created_at=now,
                 updated_at=now,
             )
@@ -253,6 +260,7 @@ class Scheduler:
                         j.cycle_time_s,
                         j.status == CANCELLED,
                         _program(j.number),
+                        Needs.from_data(j.needs, j.machine_kind) if j.needs else None,
                     )
                     for j in jobs
                 ],
@@ -531,6 +539,7 @@ _OPEN_JOBS = (
         _JOBS.c.due_at,
         _JOBS.c.cycle_time_s,
         _JOBS.c.status,
+        _JOBS.c.needs,
         # a subquery, not a join: FOR UPDATE locks the jobs only, never revisions or programs
         select(_PROGRAMS.c.number)
         .join(_REVISIONS, _REVISIONS.c.program_id == _PROGRAMS.c.id)
@@ -627,6 +636,27 @@ _SET_JOB_STATUS = (
 )
 
 
+def _needs(s: Session, rev: m.Revision, kind: str, called: list) -> Needs:
+    """What a machine must be and have to run the revision and the programs it calls
+    (dnc/requirements.py); refused (NoMachineCanRun) when no registered machine of the
+    cell can. A host with no machines registered yet (`fmscell dnc` before its cell is
+    known) does not judge."""
+    called_axes = [s.get(m.Revision, d.revision_id).axes for d in called]
+    needs = revision_needs(rev.kind, kind, rev.post_kinds, rev.axes, called_axes)
+    offers = [
+        Offer(x.name, x.kind, tuple(x.axes or ()))
+        for x in s.scalars(select(m.Machine).order_by(m.Machine.name))
+    ]
+    if offers and not any(refusal(needs, o) is None for o in offers):
+        raise NoMachineCanRun(
+            f"revision {rev.id}: {why_none(needs, offers)}",
+            pointer="#/revision_id",
+            needs=needs.as_data(),
+            machines={o.name: refusal(needs, o) for o in offers},
+        )
+    return needs
+
+
 def _program(number: int | None) -> str | None:
     """The name a machine reports a program by (O1234)."""
     return f"O{number:04d}" if number is not None else None
@@ -646,4 +676,5 @@ def job_info(j: m.Job) -> JobInfo:
         j.status,
         j.created_at,
         j.updated_at,
+        dict(j.needs) if j.needs else None,
     )

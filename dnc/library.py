@@ -68,6 +68,8 @@ A checker with `resolves_calls` also takes `programs=` (the library's programs b
 class Checked:
     errors: list[dict[str, Any]]
     calls: list[Call]  # the calls of other programs, stored with the revision
+    # the axes a machine needs to run it (dnc.checker.Findings), None when not known
+    axes: tuple[str, ...] | None = None
 
 
 @dataclass(frozen=True, slots=True)
@@ -103,6 +105,8 @@ class RevisionInfo:
     check_errors: list[dict[str, Any]] = field(default_factory=list)
     kind: str = "gcode"  # gcode | apt | cl (dnc/posting.py)
     post_kinds: list[str] = field(default_factory=list)  # apt | cl: the kinds it is meant for
+    # gcode: the axes a machine needs to run it, from the upload check (dnc/requirements.py)
+    axes: list[str] | None = None
 
 
 @dataclass(frozen=True, slots=True)
@@ -602,9 +606,11 @@ class Library:
         status_address: str = "",
         memory_bytes: int = 0,
         dnc_profile: dict | None = None,
+        axes: Sequence[str] | None = None,
         actor: str = "system",
     ) -> dict:
-        """Create or update a machine's registry entry (idempotent by name)."""
+        """Create or update a machine's registry entry (idempotent by name). `axes`: its
+        configured axes (what a job's program needs is matched to; None = not known)."""
         with transaction(self._sessions) as s:
             mach = s.scalar(select(m.Machine).where(m.Machine.name == name))
             if mach is None:
@@ -614,6 +620,7 @@ class Library:
             mach.dnc_profile = dict(dnc_profile or {})
             mach.dnc_address, mach.modbus_address = dnc_address, modbus_address
             mach.status_address = status_address
+            mach.axes = list(axes) if axes is not None else None
             s.flush()
             self._record(s, actor, "machine.register", "machine", mach.id, name=name, kind=kind)
             return _machine_dict(mach)
@@ -707,9 +714,9 @@ class Library:
         if isinstance(text, ProgramUpload):
             if getattr(self._checker, "reads_files", False):
                 with text.line_file() as lines:
-                    return Checked(self._checker(lines, machine_kind, **extra), calls)
-            return Checked(self._checker(text.text(), machine_kind, **extra), calls)
-        return Checked(self._checker(text, machine_kind, **extra), calls)
+                    return _checked(self._checker(lines, machine_kind, **extra), calls)
+            return _checked(self._checker(text.text(), machine_kind, **extra), calls)
+        return _checked(self._checker(text, machine_kind, **extra), calls)
 
     def _check_kind(
         self,
@@ -773,6 +780,7 @@ class Library:
             check_errors=checked.errors,
             kind=kind,
             post_kinds=list(post_kinds or []),
+            axes=list(checked.axes) if checked.axes is not None else None,
         )
         s.add(rev)
         try:
@@ -896,7 +904,14 @@ def _revision_info(r: m.Revision) -> RevisionInfo:
         list(r.check_errors or []),
         r.kind or GCODE,
         list(r.post_kinds or []),
+        list(r.axes) if r.axes is not None else None,
     )
+
+
+def _checked(found: list[dict[str, Any]], calls: list[Call]) -> Checked:
+    """A checker that knows what the program needs of a machine (dnc.checker.Findings)
+    says so in `axes`; another's revisions have no axes known."""
+    return Checked(list(found), calls, getattr(found, "axes", None))
 
 
 def _machine_dict(x: m.Machine) -> dict:
@@ -908,6 +923,7 @@ def _machine_dict(x: m.Machine) -> dict:
         status_address=x.status_address,
         memory_bytes=x.memory_bytes,
         dnc_profile=dict(x.dnc_profile or {}),
+        axes=list(x.axes) if x.axes is not None else None,
     )
 
 

@@ -75,6 +75,9 @@ class Machine(Base):
     memory_bytes: Mapped[int] = mapped_column(Integer, default=0)
     # Per-port protocol profile, CIMCO style: parity, chunk size, time-outs.
     dnc_profile: Mapped[dict[str, Any]] = mapped_column(JSON, default=dict)
+    # its configured axes (X Y Z A), what a job's program needs is matched to
+    # (dnc/requirements.py); None = not known (judged by its kind alone)
+    axes: Mapped[list[str] | None] = mapped_column(JSON, nullable=True)
     created_at: Mapped[datetime] = mapped_column(Timestamp)
 
 
@@ -130,6 +133,9 @@ class Revision(Base):
     kind: Mapped[str] = mapped_column(String(8), default="gcode")
     # apt | cl: the machine kinds the source is meant for (dnc/posting.py)
     post_kinds: Mapped[list[str]] = mapped_column(JSON, default=list)
+    # gcode: the axes a machine needs to run it (its kind's linear axes and the rotary
+    # axes its blocks move), from the upload check; None = not known, or an APT/CL source
+    axes: Mapped[list[str] | None] = mapped_column(JSON, nullable=True)
 
 
 class DerivedRevision(Base):
@@ -218,6 +224,9 @@ class Job(Base):
     machine_group: Mapped[str | None] = mapped_column(String(64), nullable=True)
     cycle_time_s: Mapped[float] = mapped_column(Float, default=60.0)
     status: Mapped[str] = mapped_column(String(16), default="queued", index=True)
+    # the kinds and axes a machine needs to make its parts ({"kinds": [...], "axes": [...]},
+    # dnc/requirements.py), fixed when queued; None = its machine kind alone
+    needs: Mapped[dict[str, list[str]] | None] = mapped_column(JSON, nullable=True)
     created_at: Mapped[datetime] = mapped_column(Timestamp)
     updated_at: Mapped[datetime] = mapped_column(Timestamp)
 

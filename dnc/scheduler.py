@@ -30,6 +30,7 @@ from dnc.allocation import (
     settle,
     step,
 )
+from dnc.requirements import Needs
 from dnc.rules import JobView, Rule
 
 IDLE, BUSY, ALARM, OFFLINE = "idle", "busy", "alarm", "offline"
@@ -51,6 +52,7 @@ class MachineView:
     estop: bool = False
     alarm: str | None = None  # a FAULT-level alarm's text ("" if unknown); None = none
     warnings: tuple[str, ...] = ()
+    axes: tuple[str, ...] = ()  # its configured axes (X Y Z A); () = not known
 
     def look(self) -> Look:
         alarm = self.alarm if self.alarm is not None else ("" if self.state == ALARM else None)
@@ -79,6 +81,17 @@ class JobState:
     cycle_time_s: float
     cancelled: bool = False
     program: str | None = None  # O1234: the program the job's parts run
+    # what a machine must be and have to run its program; None = its machine kind alone
+    needs: Needs | None = None
+
+    def runs_on(self, machine: MachineView) -> bool:
+        """Whether the machine can make its parts: its program's needs (kind, axes) and
+        the job's machine group."""
+        if self.machine_group is not None and self.machine_group not in machine.groups:
+            return False
+        if self.needs is None:
+            return self.machine_kind == machine.kind
+        return self.needs.met_by(machine.kind, machine.axes)
 
 
 @dataclass(frozen=True, slots=True)
@@ -224,16 +237,18 @@ def decide(
         (m for m in machines if m.state == IDLE and m.name not in busy_machines),
         key=lambda m: m.name,
     )
-    # The rule ranks the jobs once per class of machine (kind and groups) per tick, a
+    # The rule ranks the jobs once per class of machine (kind, axes and groups) per tick, a
     # setup-aware rule once per class and program held; each idle machine of the class
-    # then takes the best-ranked job that still has parts left.
+    # then takes the best-ranked job that still has parts left. Only the jobs whose
+    # program the machine can run (dnc/requirements.py) are eligible: a job with A words
+    # never goes to a mill without the rotary table.
     setup_aware = getattr(rule, "setup_aware", False)
     rankings: dict[tuple, list] = {}
     by_id = {j.id: j for j in waiting}
     allocated = 0
     for mach in idle:
         held = (mach.program or (last_programs or {}).get(mach.name)) if setup_aware else None
-        key = (mach.kind, mach.groups, held)
+        key = (mach.kind, mach.axes, mach.groups, held)
         if key not in rankings:
             eligible = [
                 JobView(
@@ -246,8 +261,7 @@ def decide(
                     j.program,
                 )
                 for j in waiting
-                if j.machine_kind == mach.kind
-                and (j.machine_group is None or j.machine_group in mach.groups)
+                if j.runs_on(mach)
             ]
             if not eligible:
                 rankings[key] = []

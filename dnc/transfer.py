@@ -18,6 +18,7 @@ from collections.abc import Callable, Iterable, Iterator
 from dataclasses import dataclass
 
 from cnc.faces.tape import PUNCH_ON, XOFF, XON, TapeDecoder, encode_program
+from dnc.errors import DncError
 
 _FLOW_BYTE = re.compile(rb"[\x11-\x14]")
 # Parity as whole-buffer translations: the host handles every byte of every transfer, so no
@@ -37,8 +38,11 @@ LINE_ALARMS = frozenset({2001, 2004, 2007, 2010})  # parity, cut off, time-out, 
 _REQUEST = re.compile(r"/REQ\s*(\d+)", re.I)
 
 
-class TransferError(Exception):
-    """kind: connect | refused | cut_off | xoff_timeout | timeout | protocol | verify | read
+class TransferError(DncError):
+    """A transfer to or from a machine that failed (a DncError: the package's one root; the
+    REST API answers it as a 502 `transfer-failed` problem, web_api/problems.py).
+
+    kind: connect | refused | cut_off | xoff_timeout | timeout | protocol | verify | read
     (the host could not read the revision's text from its database) | encode (the text has
     a character the 7-bit tape cannot carry) | dependency (a program it calls has no released
     revision: nothing sent) | post (an APT/CL revision the post-processor refuses for the
@@ -394,11 +398,22 @@ class DncClient:
         """The machine's tool table (`what` = "tools") or work offsets ("offsets") as JSON
         data; with `doc`, replace them first (TOOLS PUT / OFFSETS PUT). A refusal (in cycle,
         a bad value: alarm 2012 with the JSON pointer) is a TransferError "refused"."""
-        import json
-
         command = what.upper()
         if command not in ("TOOLS", "OFFSETS"):
             raise ValueError(f"machine data is tools or offsets, not {what!r}")
+        return self._json_exchange(command, doc)
+
+    def host_data(self, doc: dict) -> dict:
+        """HOST PUT: what the host knows of the machine (dispatched revisions, jobs) for its
+        OPC UA face; returns the machine's answer (the face's commands to audit). A bad
+        document is a TransferError "refused" with alarm 2012 and the JSON pointer."""
+        return self._json_exchange("HOST", doc)
+
+    def _json_exchange(self, command: str, doc: object | None) -> object:
+        """`COMMAND` (read) or `COMMAND PUT <n>` + JSON body; the answer is `DATA <json>`
+        then `OK ...`."""
+        import json
+
         if doc is None:
             self._raw_send(f"{command}\n".encode())
         else:
@@ -408,7 +423,7 @@ class DncClient:
         if not line.startswith("DATA "):
             raise TransferError("protocol", f"expected DATA, got {line[:60]!r}", sent=self.sent)
         data = json.loads(line[5:])
-        self._reply()  # OK TOOLS <count>
+        self._reply()  # OK <COMMAND> ...
         return data
 
     def delete(self, number: int) -> None:

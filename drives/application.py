@@ -12,6 +12,8 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Protocol
 
+from drives.errors import DrivesError
+
 # SDO abort codes (CiA 301 7.2.4.3.17) that applications raise most often.
 ABORT_NOT_EXIST = 0x06020000  # object does not exist in the object dictionary
 ABORT_SUBINDEX = 0x06090011  # sub-index does not exist
@@ -24,7 +26,7 @@ ABORT_DEVICE_STATE = 0x08000022  # data cannot be transferred because of the dev
 ABORT_GENERAL = 0x08000000
 
 
-class ObjectAccessError(Exception):
+class ObjectAccessError(DrivesError):
     """An object access refused with a CiA 301 SDO abort code (also used for RPDO writes)."""
 
     def __init__(self, abort_code: int, message: str = "") -> None:

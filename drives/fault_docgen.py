@@ -2,19 +2,19 @@
 the fault registry (drives.fault_registry).
 
 A doc marks each generated section with `<!-- generated from drives/fault_registry.py: NAME
--->` and `<!-- end generated -->`; `sync_docs` renders them anew, `python -m
-drives.fault_docgen docs/drives.md docs/cia402.md docs/recovery.md` rewrites the files, and
-tests/drives/test_fault_registry.py fails while a doc and the registry differ.
+-->` and `<!-- end generated -->` (`drives.generated_docs`); `sync_docs` renders them anew,
+`python -m drives.fault_docgen docs/drives.md docs/cia402.md docs/recovery.md` rewrites the
+files, and tests/drives/test_fault_registry.py fails while a doc and the registry differ.
 """
 
 from __future__ import annotations
 
 import math
-import re
 from collections.abc import Callable
 
 from drives.cia402.faults import spec
 from drives.fault_registry import FAULT_KINDS, FaultKind, FaultParam, number
+from drives.generated_docs import GeneratedSections
 
 DOCS = ("docs/drives.md", "docs/cia402.md", "docs/recovery.md")
 
@@ -90,35 +90,21 @@ RENDERERS: dict[str, Callable[[], str]] = {
     "fault-detection": render_detection,
     "undetected-faults": render_undetected,
 }
-_MARK = re.compile(
-    r"(<!-- generated from drives/fault_registry.py: (?P<name>[a-z-]+) -->\n)(?P<body>.*?)"
-    r"(<!-- end generated -->)",
-    re.S,
-)
+SECTIONS = GeneratedSections("drives/fault_registry.py", RENDERERS)
 
 
 def sync_docs(text: str) -> str:
     """`text` with every generated fault section rendered from the registry anew."""
-
-    def fill(m: re.Match) -> str:
-        return m.group(1) + RENDERERS[m.group("name")]() + m.group(4)
-
-    return _MARK.sub(fill, text)
+    return SECTIONS.sync(text)
 
 
 def generated_sections(text: str) -> list[str]:
     """The names of the generated fault sections in `text`."""
-    return [m.group("name") for m in _MARK.finditer(text)]
+    return SECTIONS.names(text)
 
 
 if __name__ == "__main__":  # python -m drives.fault_docgen docs/...md: rewrite their tables
     import sys
-    from pathlib import Path
 
-    for name in sys.argv[1:] or DOCS:
-        path = Path(name)
-        old = path.read_text(encoding="utf-8")
-        new = sync_docs(old)
-        if new != old:
-            path.write_text(new, encoding="utf-8")
-            print(f"{path}: fault tables rewritten")
+    for path in SECTIONS.rewrite(sys.argv[1:] or DOCS):
+        print(f"{path}: fault tables rewritten")

@@ -122,7 +122,7 @@ class Agent:
 
     @classmethod
     def from_cell(cls, cell, **kwargs) -> Agent:
-        """An agent with one device per machine of a `cnc.config.CellConfig`."""
+        """An agent with one device per machine of a `server.config.CellConfig`."""
         return cls(devices_from_cell(cell), **kwargs)
 
     # ------------------------------------------------------------------ lookup

@@ -197,7 +197,7 @@ def build_device(
 
 
 def devices_from_cell(cell) -> list[Device]:
-    """One Device per machine of a `cnc.config.CellConfig`, in file order."""
+    """One Device per machine of a `server.config.CellConfig`, in file order."""
     return [
         build_device(name, list(m.axes), description=m.description, tool_tip=m.kind == "mill5")
         for name, m in cell.machines.items()

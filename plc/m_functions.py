@@ -22,6 +22,7 @@ import re
 from collections.abc import Mapping
 from dataclasses import dataclass
 
+from plc.errors import PlcError
 from plc.ladder.ast import Program
 from plc.ladder.parser import parse_program
 
@@ -35,7 +36,7 @@ MAX_MS = 29_000  # under the program's 30 s M-finish supervision (alarm 1020)
 _TAG = re.compile(r"[A-Za-z_][A-Za-z0-9_]*$")
 
 
-class MTableError(ValueError):
+class MTableError(PlcError, ValueError):
     """A table entry that cannot be compiled; `where` names the entry (e.g. `m_codes.31.ms`)."""
 
     def __init__(self, where: str, message: str) -> None:

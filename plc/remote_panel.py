@@ -29,6 +29,7 @@ from __future__ import annotations
 import time
 from collections.abc import Callable
 
+from plc.errors import PlcError
 from plc.signals import (
     AXIS_BITS,
     HOST_TO_PLC,
@@ -59,12 +60,12 @@ NC_INPUTS = {s.name: s.modbus[1] for s in signals(NC_TO_PLC) if s.area == "IX"}
 NC_REGISTERS = {s.name: s.modbus[1] for s in signals(NC_TO_PLC) if s.area == "IW"}
 
 
-class RemotePanelError(RuntimeError):
+class RemotePanelError(PlcError, RuntimeError):
     """A Modbus request of the panel failed (the text names the request and the answer), or
     a request got no answer in time."""
 
 
-class PanelRefused(RuntimeError):
+class PanelRefused(PlcError, RuntimeError):
     """The PLC or the NC refused a program select or a home all; `code` is one of
     `plc.signals.REFUSE_*`, the text says what and why."""
 

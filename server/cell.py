@@ -26,7 +26,6 @@ import time
 from pathlib import Path
 from typing import Any
 
-from cnc.config import load_cell_config
 from cnc.errors import NcError
 from cnc.faces.dnc_port import ALARM_BAD_DATA, ALARM_REFUSED
 from cnc.machine.faults import DRIVE_ALIASES, PLC_ALIASES, parse_fault_spec
@@ -44,6 +43,7 @@ from dnc.transfer_worker import RetryPolicy, TransferWorker, _default_client
 from mtconnect import Agent
 from mtconnect.client import AgentConnections
 from plc.machine_io import FAULTS
+from server.config import load_cell_config
 from server.cycle_audit import CycleAudit, HostRequests
 from server.host import AlarmWatch, Loop, MonitoringModel, make_starter
 from server.mqtt import CellFace, mqtt_settings
@@ -55,7 +55,7 @@ from server.supervisor import (
     wait_for,
 )
 from web_api.app import create_app
-from web_api.settings import ApiKey, ApiSettings
+from web_api.settings import ApiKey
 
 log = logging.getLogger(__name__)
 
@@ -176,6 +176,7 @@ class Cell:
                     modbus_address=link.address("modbus"),
                     status_address=link.address("shdr"),
                     memory_bytes=link.memory_bytes,
+                    axes=link.axes,
                     actor="cell",
                 )
             self.agent = Agent.from_cell(self.config)
@@ -353,25 +354,19 @@ class Cell:
         self.loops.append(Loop("outbox-publisher", publisher.publish_pending, 0.2).start())
 
     def _start_opcua_feed(self) -> None:
-        """The host's knowledge (dispatched revisions, jobs) into the OPC UA faces of the
-        machines this process runs; machines in their own processes serve the machine's own
-        data only (docs/opcua.md)."""
-        faces = {
-            name: link.local.opcua
-            for name, link in self.links.items()
-            if getattr(link.local, "opcua", None) is not None
-        }
-        if not faces:
+        """The host's knowledge (dispatched revisions, jobs) into the machines' OPC UA
+        faces, in this process or through their DNC ports; their clients' method calls
+        back into the audit log (server/opcua_feed.py, docs/opcua.md)."""
+        if not any(link.ports.get("opcua") for link in self.links.values()):
             return
-        # deferred: asyncua (about a second to import) only when this process runs a machine
-        # with an OPC UA face
-        from server.opcua_feed import host_data
+        # deferred: asyncua (about a second to import) only for a cell with OPC UA faces
+        from server.opcua_feed import OpcUaFeed
 
-        def feed() -> None:
-            for name, face in faces.items():
-                face.set_host_data(host_data(self.library, self.dispatches, self.jobs, name))
+        def client(name: str):
+            return client_for(self.library, name, secret=self.links[name].secret)
 
-        self.loops.append(Loop("opcua-feed", feed, 1.0).start())
+        self.opcua_feed = OpcUaFeed(self.library, self.dispatches, self.jobs, self.links, client)
+        self.loops.append(Loop("opcua-feed", self.opcua_feed.tick, 1.0).start())
 
     def _start_remote_requests(self) -> None:
         for name, link in self.links.items():
@@ -606,7 +601,7 @@ def run_cell(
         return 2
     try:
         cfg = load_cell_config(config) if config else default_cell()
-        settings = ApiSettings.from_mapping(cfg.host.auth)
+        settings = cfg.host.auth.api_settings()
         if insecure_open:
             settings = settings.model_copy(update={"insecure_open": True})
     except (NcError, ValueError, OSError) as err:

@@ -186,6 +186,7 @@ class MonitoringModel:
                     estop=s["emergency_stop"] == "TRIGGERED",
                     alarm=_alarm_text(faults[0]) if faults else None,
                     warnings=tuple(_alarm_text(a) for a in s["alarms"] if a not in faults),
+                    axes=link.axes,
                 )
             )
         return out

@@ -1,11 +1,22 @@
-"""What only the DNC host knows, fed into each in-process machine's OPC UA face: the library
-revision (id and sha256) of each program it dispatched to the machine, and the cell's open
-jobs with an allocation on it (docs/opcua.md, "Where it runs")."""
+"""What only the DNC host knows, fed into each machine's OPC UA face: the library revision
+(id and sha256) of each program it dispatched to the machine, and the cell's open jobs with
+an allocation on it (docs/opcua.md, "Where it runs"). Back come the method calls the face's
+clients made (Start, Stop, Acknowledge, refused writes), for the host's audit log.
+
+A machine in this process gets them by a direct call; a machine in its own process (or on
+another host) through its DNC port (`HOST PUT`), authenticated with the port's shared
+secret like every other operation the host makes there."""
 
 from __future__ import annotations
 
+import logging
+from collections.abc import Callable, Mapping
+
 from cnc.faces.opcua import HostData, ProductionJob
+from cnc.faces.opcua.host_data import to_doc
 from dnc.jobs import OPEN_STATES
+
+log = logging.getLogger(__name__)
 
 # cell job status -> ProductionJobStateMachine state
 JOB_STATE = {"queued": "Initializing", "running": "Running", "interrupted": "Interrupted"}
@@ -44,3 +55,52 @@ def host_data(library, dispatches, jobs, machine: str) -> HostData:
             )
     found.sort(key=lambda j: int(j.identifier[3:]))
     return HostData(revision_by_program=revisions, jobs=tuple(found), sha256_by_program=digests)
+
+
+class OpcUaFeed:
+    """The host loop's step (`tick`, every second): each machine with an OPC UA face gets
+    the host's data, and the calls its clients made go to the audit log as
+    `machine.command` (done) or `machine.command_refused`, the actor being the OPC UA
+    user, as the REST commands are recorded."""
+
+    def __init__(
+        self, library, dispatches, jobs, links: Mapping, client: Callable[[str], object]
+    ) -> None:
+        """`client(name)`: a DncClient for the machine's DNC port (with its secret)."""
+        self.library, self.dispatches, self.jobs = library, dispatches, jobs
+        self.links, self.client = links, client
+        self.unreachable: dict[str, str] = {}  # machine -> why the last exchange failed
+
+    def tick(self) -> None:
+        for name, link in self.links.items():
+            if not link.ports.get("opcua"):
+                continue
+            data = host_data(self.library, self.dispatches, self.jobs, name)
+            try:
+                commands = self._exchange(name, link, data)
+            except Exception as exc:  # noqa: BLE001 - one machine down must not stop the rest
+                if self.unreachable.get(name) != str(exc):
+                    log.info("OPC UA host data for %s not delivered: %s", name, exc)
+                self.unreachable[name] = str(exc)
+                continue
+            self.unreachable.pop(name, None)
+            for command in commands:
+                self._audit(name, command)
+
+    def _exchange(self, name: str, link, data: HostData) -> list[dict]:
+        face = getattr(link.local, "opcua", None)
+        if face is not None:
+            face.set_host_data(data)
+            return [vars(c) for c in face.take_commands()]
+        with self.client(name) as client:
+            return list(client.host_data(to_doc(data)).get("commands", []))
+
+    def _audit(self, name: str, command: dict) -> None:
+        detail = {"command": str(command.get("command", "")), "face": "opcua"}
+        detail["detail"] = str(command.get("detail", ""))
+        action = "machine.command"
+        if command.get("result") != "done":
+            action = "machine.command_refused"
+            detail["reason"] = str(command.get("result", ""))
+        actor = str(command.get("user") or "anonymous")
+        self.library.note_transfer(name, action, actor=actor, **detail)

@@ -25,8 +25,8 @@ import yaml
 from sqlalchemy.engine import make_url
 from typer.testing import CliRunner
 
-from cnc.config import load_cell_config
 from server.cli import app as fmscell_app
+from server.config import load_cell_config
 from web_api.settings import ApiSettings
 
 ROOT = Path(__file__).resolve().parents[1]

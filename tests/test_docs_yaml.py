@@ -1,5 +1,5 @@
 """Every YAML snippet in the docs that is a cell or machine file is accepted by the loader
-(cnc.config; a 5-axis post description by cam.machine5), so a reader who copies one gets a
+(server.config and cnc.config; a 5-axis post description by cam.machine5), so a reader who copies one gets a
 working file."""
 
 from __future__ import annotations
@@ -11,7 +11,8 @@ import pytest
 import yaml
 
 from cam.machine5 import load_mill5
-from cnc.config import load_cell_config, load_machine_config
+from cnc.config import load_machine_config
+from server.config import load_cell_config
 
 ROOT = Path(__file__).resolve().parents[1]
 DOCS = sorted((ROOT / "docs").glob("*.md")) + [ROOT / "README.md"]

@@ -19,7 +19,9 @@ from starlette.exceptions import HTTPException as StarletteHTTPException
 from starlette.routing import Match
 from starlette.types import ASGIApp, Message, Receive, Scope, Send
 
+from dnc.cell import CellError
 from dnc.errors import DncError
+from dnc.transfer import TransferError
 
 PROBLEM_JSON = "application/problem+json"
 log = logging.getLogger(__name__)
@@ -38,6 +40,7 @@ STATUS_OF_KIND = {
     "missing-dependency": 409,
     "post-refused": 422,
     "not-for-machine": 422,
+    "no-machine-can-run": 422,
 }
 TITLES = {
     "invalid-upload": "The uploaded program was refused",
@@ -51,6 +54,7 @@ TITLES = {
     "missing-dependency": "A program it calls has no released revision",
     "post-refused": "The post-processor refused the program for this machine",
     "not-for-machine": "The machine cannot run the program (an axis it does not have)",
+    "no-machine-can-run": "No machine of the cell can run the job's program",
     "validation": "The request is invalid",
     "malformed-json": "The request body is not valid JSON",
     "unauthenticated": "An API key is required",
@@ -60,6 +64,8 @@ TITLES = {
     "internal": "Internal server error",
     "shutting-down": "The server is shutting down",
     "too-many-auth-failures": "Too many failed authentications from this address",
+    "machine-unavailable": "The machine cannot be reached or refused",
+    "transfer-failed": "The transfer to or from the machine failed",
 }
 _KIND_OF_STATUS = {
     400: "bad-request",
@@ -194,6 +200,25 @@ def install_problem_handlers(app: FastAPI, base: str) -> None:
         return problem_response(
             request.url.path, base, dnc_status(exc), exc.kind, exc.message, **extra
         )
+
+    @app.exception_handler(TransferError)
+    async def _transfer(request: Request, exc: TransferError) -> JSONResponse:
+        # a DncError whose `kind` is the line trouble, not a problem type
+        return problem_response(
+            request.url.path,
+            base,
+            502,
+            "transfer-failed",
+            exc.message,
+            transfer_kind=exc.kind,
+            alarm=exc.alarm,
+        )
+
+    @app.exception_handler(CellError)
+    async def _cell(request: Request, exc: CellError) -> JSONResponse:
+        # the cell's default answer; a router that knows better (a refused command: 409)
+        # raises its own ApiProblem
+        return problem_response(request.url.path, base, 503, "machine-unavailable", str(exc))
 
     @app.exception_handler(ApiProblem)
     async def _api(request: Request, exc: ApiProblem) -> JSONResponse:

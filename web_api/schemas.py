@@ -143,6 +143,12 @@ class Revision(BaseModel):
     check_errors: list[CheckError]
     kind: RevisionKind = "gcode"
     post_kinds: list[str] = Field(default_factory=list)
+    axes: list[str] | None = Field(
+        default=None,
+        description="G-code: the axes a machine needs to run it (its kind's linear axes and"
+        " the rotary axes its blocks move), from the upload check; null for APT/CL sources"
+        " (their post_kinds say what they need) and when not known",
+    )
 
 
 class DerivedRevision(BaseModel):
@@ -240,6 +246,11 @@ class DispatchPage(BaseModel):
     next_cursor: str | None
 
 
+class JobNeeds(BaseModel):
+    kinds: list[str] = Field(description="the machine kinds its program is for (one of them)")
+    axes: list[str] = Field(description="the axes the machine must have (all of them)")
+
+
 class Job(BaseModel):
     id: int
     revision_id: int
@@ -253,6 +264,11 @@ class Job(BaseModel):
     status: Literal["queued", "running", "interrupted", "completed", "cancelled"]
     created_at: datetime
     updated_at: datetime
+    needs: JobNeeds | None = Field(
+        default=None,
+        description="what a machine must be and have to make its parts; the scheduler"
+        " allocates only to machines that match (null: a job queued before the host knew)",
+    )
 
 
 class Allocation(BaseModel):
@@ -297,6 +313,9 @@ class Machine(BaseModel):
     )
     memory_bytes: int
     dnc_profile: dict[str, Any]
+    axes: list[str] | None = Field(
+        default=None, description="its configured axes (null: not known to the host)"
+    )
     status: dict[str, Any] | None = Field(
         default=None, description="live status from the cell, when the cell provides it"
     )

@@ -64,8 +64,9 @@ class Principal(BaseModel):
 
 
 class ApiSettings(BaseModel):
-    """Settings of the REST API (the `host.auth` section of the cell configuration gives
-    `api_keys` and `insecure_open`; the limits are the app's own)."""
+    """Settings of the REST API (the cell file's `host.auth` section, web_api/config.py,
+    gives `api_keys`, `insecure_open` and the failed-authentication limit; the other limits
+    are the app's own)."""
 
     model_config = ConfigDict(extra="forbid", frozen=True)
 
@@ -122,8 +123,8 @@ class ApiSettings(BaseModel):
 
     @classmethod
     def from_mapping(cls, data: Mapping[str, Any] | None) -> ApiSettings:
-        """Settings from the configuration file's `host.auth` (a mapping, or the loader's
-        section model); a ValidationError names the key."""
-        if hasattr(data, "model_dump"):
-            data = data.model_dump(exclude_none=True)
+        """Settings from a mapping of these fields, or from the cell file's typed `host.auth`
+        (web_api.config.AuthConfig); a ValidationError names the key."""
+        if hasattr(data, "api_settings"):
+            return data.api_settings()
         return cls.model_validate(dict(data or {}))

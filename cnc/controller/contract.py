@@ -11,12 +11,13 @@ from __future__ import annotations
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 
+from cnc.errors import CncError
 from cnc.status import MachineStatus
 
 AXIS_COMMANDS = ("none", "enable", "disable", "quick_stop", "home", "fault_reset")
 
 
-class CommandRefused(Exception):
+class CommandRefused(CncError):
     """A command the current mode or state forbids; `reason` says why, in the operator's
     words ("cycle start refused: machine not homed (X, Z)")."""
 

@@ -127,6 +127,19 @@ class _Run:
         self.lines_feed: dict[int, float | None] = {}  # line -> max feed mm/min (None rapid)
         self.thread_rpm: dict[int, float] = {}  # line -> the rpm its thread moves are fed for
         self.text_lines = source if isinstance(source, list) else None
+        self.skip: _SkipWait | None = None  # a G31 move under way: no block is taken after it
+
+
+class _SkipWait:
+    """A G31 move in the motion queue: `block` its number there; `latched` the encoder
+    position (X Y Z, machine mm) of the IPO cycle its skip signal came, None until then."""
+
+    __slots__ = ("cmd", "block", "latched")
+
+    def __init__(self, cmd: canon.SkipFeed, block: int) -> None:
+        self.cmd = cmd
+        self.block = block
+        self.latched: tuple[float, float, float] | None = None
 
 
 class Controller:
@@ -1157,8 +1170,8 @@ class Controller:
     def _feed_interpreter(self, run: _Run) -> None:
         m = run.motion
         for _ in range(INTERP_BUDGET):
-            if run.src_done or run.aborting:
-                return
+            if run.src_done or run.aborting or run.skip is not None:
+                return  # (after a G31 the next block waits for its skip position)
             if run.pending is None:
                 cmd = self._next_cmd(run)
                 if cmd is False:
@@ -1175,6 +1188,7 @@ class Controller:
             sync = not motion and not isinstance(cmd, canon.SetPathMode)
             if sync and run.syncs_out >= SYNC_AHEAD:
                 return
+            blocks = m.path.blocks
             try:
                 if not m.push(cmd):
                     return
@@ -1182,6 +1196,11 @@ class Controller:
                 self._program_alarm(al.PROGRAM_ERROR, f"program error: {exc}", "NC")
                 return
             run.pending = None
+            if type(cmd) is canon.SkipFeed:
+                if m.path.blocks > blocks:
+                    run.skip = _SkipWait(cmd, m.path.blocks)
+                else:  # no distance to go: it ends where it starts, without a signal
+                    run.interp.skipped(None, cmd.end)
             if motion:
                 feed = getattr(cmd, "feed", None)
                 if cmd.line not in run.lines_feed:
@@ -1232,6 +1251,8 @@ class Controller:
             actual = tuple(self._actual.get(a, 0.0) for a in self._pose_axes)
             self._tip.sample(s.pose, run.motion, actual)
         self._path_v = s.velocity
+        if run.skip is not None:
+            self._skip_step(run, s.velocity)
         if s.line != run.line:
             run.line = s.line
             self.blocks += 1
@@ -1249,6 +1270,34 @@ class Controller:
             and not run.aborting
         ):
             self._finish(run)
+
+    def _skip_step(self, run: _Run, v: float) -> None:
+        """G31 under way: test the tool setter on the encoder position of this IPO cycle
+        while the skip move runs; at the signal latch that position and stop along the
+        path (as a feed hold); once at rest, drop the rest of the move and hand the
+        interpreter the latch and the stop position. The latch resolves one IPO cycle:
+        the tool travels feed x cycle between two tests (100 mm/min, 2 ms: 3.3 um),
+        where a real control latches the encoder in hardware within microseconds."""
+        sk = run.skip
+        assert sk is not None
+        m = run.motion
+        sensor = self.params.tool_setter
+        if sk.latched is None and sensor is not None and m.block == sk.block and v > 0.0:
+            a = self._actual
+            at = (a.get("X", 0.0), a.get("Y", 0.0), a.get("Z", 0.0))
+            if sensor.trips((at[0], at[1], at[2] - sk.cmd.tool_length), sk.cmd.tool_radius):
+                sk.latched = at
+                m.feed_hold()
+                self._event(f"G31 skip signal at line {sk.cmd.line}: Z {at[2]:.4f}")
+        if sk.latched is not None:
+            if v == 0.0 and m.holding:
+                stop = m.pose
+                run.motion = m.continued()
+                run.skip = None
+                run.interp.skipped(sk.latched, stop)
+        elif m.idle:
+            run.skip = None
+            run.interp.skipped(None, m.pose)
 
     def _book_cut_time(self) -> None:
         """Book the cutting time since the last tool change on that tool (its life)."""

@@ -12,6 +12,9 @@ command line; a connection may run several operations in turn:
     LISTEN          stay connected for remote requests: DC2 %\\nO9999\\n(/REQ nnnn)\\n% DC4
     TOOLS | OFFSETS read the tool table / work offsets  -> DATA <json>, OK TOOLS <count>
     TOOLS PUT <n> | OFFSETS PUT <n>   then <n> bytes of JSON: replace them -> OK ...
+    HOST PUT <n>    then <n> bytes of JSON: what only the cell's host knows (dispatched
+                    revisions, jobs) for the OPC UA face -> DATA <json: the face's
+                    commands to audit>, OK HOST <jobs>
     QUIT            close
 
 A connection that starts straight with tape (`%`, NUL leader, blank lines) is a READ, so a
@@ -38,6 +41,7 @@ import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
 
+from cnc.errors import CncError
 from cnc.faces.drip import DripBuffer
 from cnc.faces.tape import (
     CR,
@@ -110,6 +114,9 @@ Policy = Callable[[str, int | None], str | None]
 MachineDataAccess = Callable[[str, object | None], object]
 """(what: "tools" | "offsets", None to read or a document to write) -> the data (read) or
 the stored data (write); raises DncAlarm with the machine's refusal or ALARM_BAD_DATA."""
+HostDataAccess = Callable[[object], dict]
+"""(the host's document) -> what the machine gives back (the OPC UA face's commands since
+the last exchange); raises DncAlarm ALARM_BAD_DATA naming the JSON pointer."""
 
 
 def program_number(lines: list[str]) -> int | None:
@@ -130,7 +137,7 @@ def sha256_text(text: str) -> str:
     return hashlib.sha256(text.encode("utf-8")).hexdigest()
 
 
-class DncAlarm(Exception):
+class DncAlarm(CncError):
     """The port's refusal: answered `ERR <alarm> <text>` (the host's refusals are
     dnc.errors.DncError; this is the machine's side of the line)."""
 
@@ -165,6 +172,7 @@ class DncPort(TcpFace):
         on_warning: Callable[[int, str], None] | None = None,
         policy: Policy | None = None,
         machine_data: MachineDataAccess | None = None,
+        host_data: HostDataAccess | None = None,
         xoff_slack_bytes: int = 256,
         max_block: int = 4096,
         secret: str | None = None,
@@ -179,6 +187,7 @@ class DncPort(TcpFace):
         self._on_warning = on_warning or (lambda n, t: log.warning("DNC %s: %s", n, t))
         self._policy = policy or (lambda op, n: None)
         self._machine_data = machine_data
+        self._host_data = host_data
         self.xoff_slack = xoff_slack_bytes
         self.max_block = max_block
         self.stats = DncPortStats()
@@ -297,6 +306,8 @@ class DncPort(TcpFace):
             await conn.reply("OK AUTH" if self._secret is not None else "OK AUTH (no secret)")
         elif command in ("TOOLS", "OFFSETS"):
             await self._data(conn, command, arg)
+        elif command == "HOST":
+            await self._host(conn, arg)
         else:
             raise DncAlarm(ALARM_UNKNOWN_COMMAND, f"unknown command {command!r}")
 
@@ -308,25 +319,41 @@ class DncPort(TcpFace):
         word, _, size_text = arg.partition(" ")
         body = None
         if word.upper() == "PUT":
-            if not size_text.strip().isdigit():
-                raise DncAlarm(ALARM_UNKNOWN_COMMAND, f"{command} PUT needs the body size")
-            size = int(size_text)
-            if size > MACHINE_DATA_MAX:
-                raise DncAlarm(ALARM_UNKNOWN_COMMAND, f"{command} PUT body over {MACHINE_DATA_MAX}")
-            raw = await conn.read_exact(size, self.idle_timeout_s)
-            try:
-                body = json.loads(raw.decode("ascii"))
-            except (UnicodeDecodeError, json.JSONDecodeError) as exc:
-                raise DncAlarm(ALARM_BAD_DATA, f"body is not ASCII JSON: {exc}") from None
+            body = await self._json_body(conn, command, size_text)
         elif arg:
             raise DncAlarm(ALARM_UNKNOWN_COMMAND, f"{command} takes no argument but PUT <n>")
         if self._machine_data is None:
             raise DncAlarm(ALARM_REFUSED, f"{command} refused: this port has no machine data")
         data = self._machine_data(what, body)
-        text = json.dumps(data, separators=(",", ":"), ensure_ascii=True)
-        await conn.reply(f"DATA {text}")
+        await conn.reply(f"DATA {_json(data)}")
         count = len(data) if what == "tools" else len(data.get("work_offsets", {}))
         await conn.reply(f"OK {command} {count}{' stored' if body is not None else ''}")
+
+    async def _host(self, conn: _Conn, arg: str) -> None:
+        """HOST PUT <bytes>: the host's knowledge for the OPC UA face (docs/opcua.md); the
+        answer carries what the face's clients did, for the host's audit log."""
+        word, _, size_text = arg.partition(" ")
+        if word.upper() != "PUT":
+            raise DncAlarm(ALARM_UNKNOWN_COMMAND, "HOST takes PUT <n>")
+        body = await self._json_body(conn, "HOST", size_text)
+        if self._host_data is None:
+            raise DncAlarm(ALARM_REFUSED, "HOST refused: this machine serves no OPC UA face")
+        answer = self._host_data(body)
+        await conn.reply(f"DATA {_json(answer)}")
+        jobs = body.get("jobs", []) if isinstance(body, dict) else []
+        await conn.reply(f"OK HOST {len(jobs)}")
+
+    async def _json_body(self, conn: _Conn, command: str, size_text: str) -> object:
+        if not size_text.strip().isdigit():
+            raise DncAlarm(ALARM_UNKNOWN_COMMAND, f"{command} PUT needs the body size")
+        size = int(size_text)
+        if size > MACHINE_DATA_MAX:
+            raise DncAlarm(ALARM_UNKNOWN_COMMAND, f"{command} PUT body over {MACHINE_DATA_MAX}")
+        raw = await conn.read_exact(size, self.idle_timeout_s)
+        try:
+            return json.loads(raw.decode("ascii"))
+        except (UnicodeDecodeError, json.JSONDecodeError) as exc:
+            raise DncAlarm(ALARM_BAD_DATA, f"body is not ASCII JSON: {exc}") from None
 
     def _allow(self, op: str, number: int | None) -> None:
         reason = self._policy(op, number)
@@ -706,6 +733,10 @@ class _Conn:
                 # Kept in arrival order (parity stripped bytes are re-read as plain text
                 # only when parity is off; with parity the raw bytes are kept).
                 self._pending += bytes(rest) if not self.parity else add_parity(bytes(rest))
+
+
+def _json(data: object) -> str:
+    return json.dumps(data, separators=(",", ":"), ensure_ascii=True)
 
 
 def _number(arg: str) -> int:

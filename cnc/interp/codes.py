@@ -30,6 +30,7 @@ from cnc.interp import (
     modes,
     motion,
     offsets,
+    skip,
 )
 from cnc.interp import lathe_cycles as lc
 from cnc.interp import transform_codes as xf
@@ -67,7 +68,7 @@ _STEP_TEXT = {
     Step.MIRROR: "G50.1/G51.1",
     Step.SCALING: "G50/G51",
     Step.ROTATION: "G68/G69",
-    Step.NON_MODAL: "G10/G28/G30/G53/G92",
+    Step.NON_MODAL: "G10/G28/G30/G31/G53/G92",
     Step.MOTION: "motion (or the modal motion/cycle)",
     Step.STOP: "M0/M1/M2/M30",
     Step.SUBPROGRAM: "M98/M99, G65/G66/G67",
@@ -76,6 +77,7 @@ _STEP_TEXT = {
 # Modal groups: table name -> Fanuc group number (for the docs; "" where Fanuc has none).
 GROUPS = {
     "nonmodal": "00",
+    "skip": "00",
     "motion": "01",
     "plane": "02",
     "distance": "03",
@@ -197,6 +199,11 @@ CODES: tuple[Code, ...] = (
        doc="return to the reference point via the intermediate point"),
     _g("G30", "nonmodal", Step.NON_MODAL, offsets.reference_return, words="@P", owns_axes=True,
        doc="return to the second reference point (P2)"),
+    _g("G31", "skip", Step.NON_MODAL, skip.skip_move, words="@P", needs=("XYZUW",),
+       owns_axes=True,
+       doc="skip: linear feed that stops at the skip signal (the tool setter, probe.tool_setter);"
+           " skip position in #5061.. (work coordinates); P1..P4 multi-step skip; with G53:"
+           " machine coordinates"),
     _g("G53", "nonmodal", Step.NON_MODAL, offsets.machine_move, words="@", owns_axes=True,
        doc="G0/G1 move in machine coordinates"),
     _g("G92", "nonmodal", Step.NON_MODAL, offsets.coordinate_set, MILL, words="XYZS",

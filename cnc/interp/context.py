@@ -55,7 +55,7 @@ class Step(IntEnum):
     MIRROR = 20  # G50.1 G51.1 (Fanuc: mirror, then scaling, then rotation)
     SCALING = 21  # G50 G51
     ROTATION = 22  # G68 G69
-    NON_MODAL = 23  # G10 G28 G30 G53 G92 (lathe G50)
+    NON_MODAL = 23  # G10 G28 G30 G31 G53 G92 (lathe G50)
     MOTION = 24  # G0..G3, canned cycles, G80
     STOP = 25  # M0 M1 M2 M30
     SUBPROGRAM = 26  # M98 M99
@@ -193,6 +193,8 @@ class Context(Protocol):
     _rot: RotaryAxes | None
     _off: tuple[float, float, float]
     _out: list[CanonCommand]
+    _tools: dict[int, ToolOffset]
+    skip_misses: list[tuple[str, int]]
     _comp: object
     _frames: list  # the program levels (cnc.interp.interpreter._Frame), innermost last
     vars: MacroVariables
@@ -218,6 +220,7 @@ class Context(Protocol):
     def _arc_to(self, e, c, cw: bool, turns: int, feed: float, blk: Block, exact: bool) -> None: ...
     def _motion_block(self, blk: Block, words, exact: bool, explicit: int | None) -> None: ...
     def _prog_from_machine(self) -> tuple[float, float, float]: ...
+    def skipped(self, latched, stop) -> None: ...
     def _refresh_offsets(self, resync: bool) -> None: ...
     def _set_plane(self, code: int) -> None: ...
     def _comp_engaged(self) -> bool: ...

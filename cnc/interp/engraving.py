@@ -158,9 +158,9 @@ def _text(ip: Context, blk: Block) -> str:
         raise ip._err(f"G47 text longer than {MAX_TEXT} characters", blk, "P")
     for i, ch in enumerate(text):
         if font.glyph(ch) is None:
-            what = "a lower-case letter" if ch.islower() else f"character {ch!r}"
             err = ip._err(
-                f"G47: {what} has no glyph in the engraving font (A-Z, 0-9, space and "
+                f"G47: character {ch!r} has no glyph in the engraving font (A-Z, a-z, 0-9, "
+                "space and "
                 f"{_PUNCTUATION})",
                 blk,
                 "P",

@@ -7,7 +7,8 @@ bare numbers; tests/cnc/test_interp_code_table.py checks each against the code t
 G0, G1, G2, G3 = 0, 10, 20, 30
 G17, G18, G19 = 170, 180, 190
 G20, G21 = 200, 210
-G28, G30 = 280, 300
+G28, G30, G31 = 280, 300, 310
+G53 = 530
 G40, G41, G42 = 400, 410, 420
 G43, G44, G49 = 430, 440, 490
 G54, G54_1 = 540, 541

@@ -79,6 +79,7 @@ from cnc.interp.gnum import (
     G40,
     G41,
     G49,
+    G53,
     G54,
     G64,
     G80,
@@ -206,11 +207,11 @@ class Interpreter:
     `max_blocks` bounds the number of executed blocks (None: unbounded) so a checker can
     refuse programs whose subprogram repeats would run for ever;
     `macro_variables` is the store of the common variables kept across power cycles
-    (#500-#999, #10000-#10999): any mutable mapping number -> value, a vacant variable
-    being an absent key (the controller passes its machine data; default: a new dict);
-    `common_variables` holds #100-#499 the same way (the controller keeps one dict from
-    program to program and clears it at reset or power off, as Fanuc; default: a new dict,
-    so they start vacant);
+    (#500-#999, #500000-#999999, #10000-#10999): any mutable mapping number -> value, a
+    vacant variable being an absent key (the controller passes its machine data; default: a
+    new dict); `common_variables` holds #100-#499 and #100000-#199999 the same way (the
+    controller keeps one dict from program to program and clears it at reset or power off,
+    as Fanuc; default: a new dict, so they start vacant);
     `clock` gives seconds for the #3001/#3002 timers (default: time stands still);
     `macro_budget` bounds the macro statements executed in a row without any command
     coming out (an endless WHILE or GOTO loop is an alarm naming its line, not a hang);
@@ -296,6 +297,9 @@ class Interpreter:
                 7 + EXTENDED_OFFSETS,
             )
             self._words_ok = self._words_ok | self._rot.letters
+        # the rotary axes a block moved or set (G92): what a machine must have to run the
+        # program (the host's scheduler matches it to the machines' axes, dnc/requirements.py)
+        self.rotary_named: set[str] = set()
         self._tools_known = tools is not None
         self._limits: list[tuple[int, float, float, str]] = []
         home = [0.0, 0.0, 0.0]
@@ -348,6 +352,10 @@ class Interpreter:
         self._ended = False
         self._executed = 0
         self._moved = False
+        # G31: the skip position (work coordinates, mm) for #5061..; None before any G31
+        self._skip_pos: tuple[float, float, float] | None = None
+        # (file, line) of the G31 moves that ran to their end without a skip signal
+        self.skip_misses: list[tuple[str, int]] = []
 
     # --- modal state ------------------------------------------------------------------
 
@@ -703,6 +711,16 @@ class Interpreter:
                     "G",
                     i + 1,
                 )
+            if (grp == "skip" and gset.get("nonmodal", G53) != G53) or (
+                grp == "nonmodal" and "skip" in gset and code != G53
+            ):  # G31 shares group 00 with G53 only (a skip in machine coordinates)
+                raise self._err(
+                    f"{fmt_g(code)} and another G code of group 00 in one block (only G53"
+                    " goes with G31)",
+                    blk,
+                    "G",
+                    i + 1,
+                )
             gset[grp] = code
             cls.rows[grp] = row
             cls.gcol[grp] = i + 1
@@ -800,7 +818,8 @@ class Interpreter:
         ok = name in ("G53", "G28", "G30", "G92") or (
             name is None and cycle == G80 and motion in (G0, G1) and cls.owner is None
         )
-        letter = self._rot.words_in(blk)[0]
+        named = self._rot.words_in(blk)
+        letter = named[0]
         if not ok:
             raise self._err(
                 f"rotary axis word {letter} moves only with G0/G1, G53 or G28/G30"
@@ -814,6 +833,7 @@ class Interpreter:
                 blk,
                 letter,
             )
+        self.rotary_named.update(named)
         return self._rot.letters
 
     @staticmethod
@@ -1324,6 +1344,22 @@ class Interpreter:
                     ) from None
 
     # --- modes with axis words ---------------------------------------------------------
+
+    def skipped(self, latched: Pose | None, stop: Pose) -> None:
+        """The outcome of the last G31 (cnc.interp.skip): the machine position (mm) latched
+        at the skip signal, None when none came, and where the machine stopped. The next
+        block starts from `stop`; #5061.. read `latched` (else the end point) in work
+        coordinates. The controller calls it with the encoder's latch before it takes the
+        next block from the interpreter."""
+        self._mach = (float(stop[0]), float(stop[1]), float(stop[2]))
+        self._pos = self._prog_from_machine()
+        if latched is None:
+            self._skip_pos = self._pos
+        else:
+            keep = self._mach
+            self._mach = (float(latched[0]), float(latched[1]), float(latched[2]))
+            self._skip_pos = self._prog_from_machine()
+            self._mach = keep
 
     def _refresh_offsets(self, resync: bool) -> None:
         self._off = self._compute_off()
@@ -2061,11 +2097,14 @@ def check(
     macro_variables: MutableMapping[int, float] | None = None,
     macro_budget: int = MACRO_BUDGET,
     subprogram: bool | None = None,
+    rotary_named: set[str] | None = None,
 ) -> list[NcError]:
     """Interpret a whole program and return ALL its errors (at most CHECK_MAX_ERRORS).
 
     After an error the checker carries on with the next block, with the modal state as the
-    failed block left it. Nothing is kept of the canonical commands.
+    failed block left it. Nothing is kept of the canonical commands. `rotary_named`, if
+    given, receives the rotary axes (A, B, C) the program's blocks move or set (a macro
+    call's argument A is none), its called programs' included.
     """
     interp = Interpreter(
         params,
@@ -2080,4 +2119,7 @@ def check(
         macro_budget=macro_budget,
         subprogram=subprogram,
     )
-    return interp.check_all(lines)
+    errors = interp.check_all(lines)
+    if rotary_named is not None:
+        rotary_named.update(interp.rotary_named)
+    return errors

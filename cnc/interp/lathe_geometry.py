@@ -17,6 +17,8 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
+from cnc.errors import CncError
+
 RAPID, FEED, CW, CCW, THREAD = 0, 1, 2, 3, 32
 MAX_MOVES = 1_000_000  # one cycle block's moves: a tiny depth or step cannot flood the planner
 MAX_DIVISIONS = 9999  # G73 passes
@@ -42,7 +44,7 @@ class Seg:
         return self.kind in (CW, CCW)
 
 
-class CycleGeometryError(ValueError):
+class CycleGeometryError(CncError, ValueError):
     """A contour or a cycle's words the cycle cannot run; `line` is the offending block."""
 
     def __init__(self, message: str, line: int = 0, alarm: str = "") -> None:

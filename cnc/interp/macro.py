@@ -1,22 +1,23 @@
 """Fanuc Macro B execution: variables, system variables and the macro statements.
 
 `MacroVariables` is the environment the compiled expressions (cnc.gcode.macro) read and
-write. Variable ranges (Fanuc 0i-F, with the Haas NGC extension #10000-#10999):
+write. Variable ranges (Fanuc 0i-F, with the 30i-B added common variables and the Haas NGC
+extension #10000-#10999):
 
 | Variables | Kind | Kept |
 |---|---|---|
 | #0 | always vacant, read only | |
 | #1-#33 | local: one set per G65/G66 macro level (the arguments) | until the macro returns |
-| #100-#499 | common | the injected `common` mapping (the controller clears it at reset / power off), else cleared with each interpreter |
-| #500-#999, #10000-#10999 | common, kept across power cycles | in the injected `persistent` mapping |
+| #100-#499, #100000-#199999 | common (the 6-digit ones: the Fanuc 30i-B added common variables) | the injected `common` mapping (the controller clears it at reset / power off), else cleared with each interpreter |
+| #500-#999, #500000-#999999, #10000-#10999 | common, kept across power cycles (Fanuc 30i-B added ones; Haas NGC) | in the injected `persistent` mapping |
 | #1000-#1035, #1100-#1135 | interface signals in / out | inputs read 0 (no PLC here) |
 | #2001... | tool offsets (`_tools`) | tool memory |
 | #3000, #3006 | alarm / stop with message (write) | |
 | #3001, #3002 | timers ms / hours | from the injected clock |
 | #3003, #3004, #3901, #3902 | single block / feed hold control, parts counters | this run |
 | #4001-#4130 | modal information of the block before (read only) | |
-| #5001-#5085 | positions (read only) | |
-| #5201-#5325, #7001-#7945 | work offsets (`_wofs`) | work offset memory |
+| #5001-#5105 | positions (read only): 1st digit group = end point, machine, current, skip (the G31 skip position, work coordinates; the current position before any G31), tool length offset, servo deviation; #50x4/#50x5 the rotary 4th/5th axis (degrees) | |
+| #5201-#5325, #7001-#7945 | work offsets (`_wofs`; #52x4/#52x5 the rotary axes', degrees) | work offset memory |
 | #5401-#5600 | Haas tool feed timers / total tool timers, seconds (read only) | read 0: no tool usage is recorded here |
 
 The persistent store is any `MutableMapping[int, float]` (a plain dict by default): the
@@ -43,7 +44,9 @@ if TYPE_CHECKING:
 INCH = 25.4
 LOCAL = range(1, 34)
 COMMON = range(100, 500)
+COMMON_ADDED = range(100000, 200000)  # Fanuc 30i-B added common variables (cleared)
 PERSISTENT = range(500, 1000)
+PERSISTENT_ADDED = range(500000, 1000000)  # Fanuc 30i-B added common variables (kept)
 PERSISTENT_EXT = range(10000, 11000)  # Haas NGC extended common variables
 HAAS_TOOL_TIMERS = range(5401, 5601)  # Haas: feed time #5400+T, total time #5500+T (s)
 MAX_ALARM = 200  # #3000 = 0..200: alarm 3000..3200 (Fanuc)
@@ -102,9 +105,9 @@ class MacroVariables:
             return self.loc.get(n)
         if n == 0:
             return None
-        if n in COMMON:
+        if n in COMMON or n in COMMON_ADDED:
             return self.common.get(n)
-        if n in PERSISTENT or n in PERSISTENT_EXT:
+        if n in PERSISTENT or n in PERSISTENT_EXT or n in PERSISTENT_ADDED:
             v = self.persistent.get(n)
             return None if v is None else float(v)
         return _read_system(self, n, col)
@@ -116,10 +119,10 @@ class MacroVariables:
             else:
                 self.loc[n] = v
             return
-        if n in COMMON:
+        if n in COMMON or n in COMMON_ADDED:
             _store(self.common, n, v)
             return
-        if n in PERSISTENT or n in PERSISTENT_EXT:
+        if n in PERSISTENT or n in PERSISTENT_EXT or n in PERSISTENT_ADDED:
             _store(self.persistent, n, v)
             return
         if n == 0:
@@ -271,8 +274,9 @@ def _read_system(env: MacroVariables, n: int, col: int) -> float | None:
     hit = _work_offset_index(n)
     if hit is not None:
         k, ax = hit
-        if ax > 2:
-            return 0.0  # 4th/5th axis: none on this machine
+        if ax > 2:  # 4th/5th axis: a rotary axis's offset in degrees, else none (0)
+            rot = ip._rot
+            return rot.wofs[k][ax - 3] if rot is not None and ax - 3 < len(rot.names) else 0.0
         v = ip._wofs[k][ax]
         if ax == 0 and ip._diam:
             v *= 2.0
@@ -285,16 +289,34 @@ def _position(ip: Interpreter, n: int, col: int) -> float | None:
     if ax > 4:
         raise _out_of_range(n, col)
     if ax > 2:
-        return 0.0
+        return _rotary_position(ip, group, ax - 3, n, col)
     u = _unit(ip)
     d = 2.0 if ax == 0 and ip._diam else 1.0
-    if group in (0, 2, 3):  # block end point, current work position, skip position
+    if group == 3 and ip._skip_pos is not None:  # skip position (G31)
+        return ip._skip_pos[ax] * d / u
+    if group in (0, 2, 3):  # block end point, current work position (skip before any G31)
         return ip._pos[ax] * d / u
     if group == 1:  # machine coordinates
         return ip._mach[ax] / u
     if group == 4:  # tool length offset
         return ip._tlo[ax] / u
     if group == 5:  # servo deviation
+        return 0.0
+    raise _out_of_range(n, col)
+
+
+def _rotary_position(ip: Interpreter, group: int, i: int, n: int, col: int) -> float:
+    """#5004/#5005 and their families: the 4th and 5th axes are the machine's rotary axes
+    in configured order (mill4: A is the 4th; mill5: B the 4th, C the 5th), in degrees,
+    never scaled by G20. A machine without that axis reads 0."""
+    rot = ip._rot
+    if rot is None or i >= len(rot.names):
+        return 0.0
+    if group in (0, 2, 3):  # block end point, current position, skip position: program angle
+        return rot.program(ip._wcs)[i]
+    if group == 1:  # machine angle
+        return rot.mach[i]
+    if group in (4, 5):  # tool length offset along a rotary axis, servo deviation
         return 0.0
     raise _out_of_range(n, col)
 
@@ -338,7 +360,11 @@ def _write_system(env: MacroVariables, n: int, v: float | None, col: int) -> Non
     if hit is not None:
         k, ax = hit
         if ax > 2:
-            raise _out_of_range(n, col)
+            rot = ip._rot
+            if rot is None or ax - 3 >= len(rot.names):
+                raise _out_of_range(n, col)  # no 4th/5th axis on this machine
+            rot.wofs[k][ax - 3] = 0.0 if v is None else v  # degrees: the table stays put,
+            return  # its program angle moves with the offset
         val = (0.0 if v is None else v) * _unit(ip)
         if ax == 0 and ip._diam:
             val *= 0.5

@@ -30,7 +30,8 @@ def motion(ip: Context, run: BlockRun) -> None:
     owner = run.owner
     nonmodal = run.rows.get("nonmodal")
     g53 = nonmodal is not None and nonmodal.name == "G53"  # G53 moves with the G0/G1
-    if owner is not None and not g53 and (mo is not None or cy is not None):
+    skip_g1 = "skip" in g and cy is None  # `G1 G31 Z..`: G31 moves, G1 stays modal
+    if owner is not None and not g53 and not skip_g1 and (mo is not None or cy is not None):
         if nonmodal is None or nonmodal.step is not Step.NON_MODAL or cy not in (None, G80):
             raise ip._err("a motion G code cannot share a block with this G code", run.blk, "G")
         if cy == G80:

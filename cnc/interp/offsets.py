@@ -13,6 +13,7 @@ from cnc.canon import StraightFeed, StraightTraverse
 from cnc.interp.gnum import G0, G1, G28, G30, G54, G54_1
 
 if TYPE_CHECKING:
+    from cnc.gcode.lexer import Block
     from cnc.interp.context import BlockRun, Context
 
 EXTENDED_OFFSETS = 48  # G54.1 P1..P48 (Fanuc option "additional workpiece coordinate systems")
@@ -85,24 +86,22 @@ def reference_return(ip: Context, run: BlockRun) -> None:
 
 
 def machine_move(ip: Context, run: BlockRun) -> None:
-    """G53 G0|G1 X Y Z: a move in machine coordinates (absolute only, no offsets)."""
+    """G53 G0|G1 X Y Z: a move in machine coordinates (no offsets). Under G91 the words are
+    increments from where the tool stands, the same displacement in any coordinate system:
+    Fanuc ignores G53 in incremental mode, Mitsubishi moves by the increment (M700 manual,
+    14.4 (4)); a Kitamura HMC's tool measuring macro (O919100) moves `G91 G53 G00 X#21`."""
+    if "skip" in run.g:
+        return  # G53 G31: the skip move goes in machine coordinates (cnc.interp.skip)
     blk = run.blk
     motion = run.g.get("motion")
-    if not ip._abs:
-        raise ip._err("G53 needs absolute mode (G90)", blk, "G")
     if ip._comp_engaged():
         raise ip._err("G53 with cutter compensation active", blk, "G")
     mo = motion if motion is not None else ip._motion
     if mo not in (G0, G1):
         raise ip._err("G53 moves only with G0 or G1", blk, "G")
     if ip._rot is not None:
-        ip._rot.move(ip, blk, True, machine=True)
-    m = list(ip._mach)
-    for i, letter in enumerate("XYZ"):
-        if letter in blk.words:
-            val = ip._dim(blk, letter) * (0.5 if letter == "X" and ip._diam else 1.0)
-            m[i] = val
-    mt = (m[0], 0.0 if ip._lathe else m[1], m[2])
+        ip._rot.move(ip, blk, ip._abs, machine=ip._abs)
+    mt = machine_target(ip, blk)
     ip._check(mt, blk, blk.line)
     if mo == G0:
         ip._out.append(StraightTraverse(blk.line, mt, run.exact))
@@ -113,3 +112,14 @@ def machine_move(ip: Context, run: BlockRun) -> None:
     ip._mach = mt
     ip._pos = ip._prog_from_machine()
     ip._moved = True
+
+
+def machine_target(ip: Context, blk: Block) -> tuple[float, float, float]:
+    """A G53 block's end point in machine coordinates: its words under G90, increments
+    from where the tool stands under G91 (G53 G0/G1 here, G53 G31 in cnc.interp.skip)."""
+    m = list(ip._mach)
+    for i, letter in enumerate("XYZ"):
+        if letter in blk.words:
+            val = ip._dim(blk, letter) * (0.5 if letter == "X" and ip._diam else 1.0)
+            m[i] = val if ip._abs else m[i] + val
+    return (m[0], 0.0 if ip._lathe else m[1], m[2])

@@ -1,4 +1,4 @@
-"""The single-stroke engraving font of G47: upper-case letters, digits and punctuation.
+"""The single-stroke engraving font of G47: letters of both cases, digits and punctuation.
 
 Each glyph is a tuple of strokes on a grid 4 wide and 6 high (the cap height; the origin is
 the bottom left of the character cell, y up). A stroke is its start point followed by
@@ -7,9 +7,12 @@ centre (cx, cy), counter-clockwise when `ccw` (a full circle when it ends where 
 starts). A stroke of its start point alone is a dot (a plunge). The cutter engraves each
 stroke in one plunge; the cell advances by `ADVANCE` units per character.
 
-The character set is the one the Haas G47 literal text takes (ASCII 32..126) without the
-lower-case letters: ``A-Z 0-9`` and ``space ! " # $ % & ' ( ) * + , - . / : ; < = > ? @ [
-\\ ] ^ _ ` { | } ~`` (a lower-case letter, or any other character, has no glyph here).
+The character set is the one the Haas G47 literal text takes (ASCII 32..126): ``A-Z a-z
+0-9`` and ``space ! " # $ % & ' ( ) * + , - . / : ; < = > ? @ [ \\ ] ^ _ ` { | } ~`` (any
+other character has no glyph here). The lower-case letters stand on the same base line:
+their body is 4 units high (the x-height, a circle of radius 2 for the bowls of a b d g o
+p q), the ascenders of b d f h k l reach the cap height 6, the descenders of g j p q y go
+down to -2, below the cell.
 """
 
 from __future__ import annotations
@@ -28,6 +31,10 @@ _CW, _CCW = False, True
 _O: Stroke = ((4, 4), (0, 4, 2, 4, _CCW), (0, 2), (4, 2, 2, 2, _CCW), (4, 4))
 _P: Stroke = ((0, 0), (0, 6), (2.5, 6), (2.5, 3, 2.5, 4.5, _CW), (0, 3))
 _S: Stroke = ((3.5, 4.5), (2, 3, 2, 4.5, _CCW), (0.5, 1.5, 2, 1.5, _CW))
+# lower case: the bowl (a full circle on the x-height) and the s of two unit circles
+_BOWL: Stroke = ((4, 2), (4, 2, 2, 2, _CCW))
+_H = 3**0.5 / 2  # cos 30 deg
+_s: Stroke = ((2 + _H, 3.5), (2, 2, 2, 3, _CCW), (2 - _H, 0.5, 2, 1, _CW))
 
 # fmt: off
 GLYPHS: dict[str, tuple[Stroke, ...]] = {
@@ -59,6 +66,33 @@ GLYPHS: dict[str, tuple[Stroke, ...]] = {
     "X": (((0, 0), (4, 6)), ((0, 6), (4, 0))),
     "Y": (((0, 6), (2, 3), (4, 6)), ((2, 3), (2, 0))),
     "Z": (((0, 6), (4, 6), (0, 0), (4, 0)),),
+    "a": (_BOWL, ((4, 4), (4, 0))),
+    "b": (((0, 6), (0, 0)), ((0, 2), (0, 2, 2, 2, _CCW))),
+    "c": (((2 + 2 * _H, 3), (2 + 2 * _H, 1, 2, 2, _CCW)),),
+    "d": (_BOWL, ((4, 6), (4, 0))),
+    "e": (((0, 2), (4, 2), (2 + 2 * _H, 1, 2, 2, _CCW)),),
+    "f": (((1, 0), (1, 5), (3, 5, 2, 5, _CW)), ((0, 4), (2.5, 4))),
+    "g": (_BOWL, ((4, 4), (4, -0.5), (1, -0.5, 2.5, -0.5, _CW))),
+    "h": (((0, 6), (0, 0)), ((0, 2), (4, 2, 2, 2, _CW), (4, 0))),
+    "i": (((2, 0), (2, 4)), ((2, 5.5),)),
+    "j": (((3, 4), (3, -1), (1, -1, 2, -1, _CW)), ((3, 5.5),)),
+    "k": (((0, 0), (0, 6)), ((3.5, 4), (0, 1.5)), ((1.25, 1.5 + 1.25 * 2.5 / 3.5), (3.5, 0))),
+    "l": (((2, 6), (2, 0)),),
+    "m": (((0, 0), (0, 4)), ((0, 3), (2, 3, 1, 3, _CW), (2, 0)),
+          ((2, 3), (4, 3, 3, 3, _CW), (4, 0))),
+    "n": (((0, 0), (0, 4)), ((0, 2), (4, 2, 2, 2, _CW), (4, 0))),
+    "o": (_BOWL,),
+    "p": (((0, 4), (0, -2)), ((0, 2), (0, 2, 2, 2, _CCW))),
+    "q": (_BOWL, ((4, 4), (4, -2))),
+    "r": (((0, 0), (0, 4)), ((0, 2), (4, 2, 2, 2, _CW))),
+    "s": (_s,),
+    "t": (((1.5, 6), (1.5, 1), (3.5, 1, 2.5, 1, _CCW)), ((0.5, 4), (3, 4))),
+    "u": (((0, 4), (0, 2), (4, 2, 2, 2, _CCW)), ((4, 4), (4, 0))),
+    "v": (((0, 4), (2, 0), (4, 4)),),
+    "w": (((0, 4), (1, 0), (2, 3), (3, 0), (4, 4)),),
+    "x": (((0, 0), (4, 4)), ((0, 4), (4, 0))),
+    "y": (((0, 4), (2, 0)), ((4, 4), (1, -2))),
+    "z": (((0, 4), (4, 4), (0, 0), (4, 0)),),
     "0": (_O, ((0.6, 1.2), (3.4, 4.8))),
     "1": (((1, 5), (2, 6), (2, 0)), ((1, 0), (3, 0))),
     "2": (((0, 4), (4, 4, 2, 4, _CW), (0, 0), (4, 0)),),

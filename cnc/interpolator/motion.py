@@ -209,6 +209,21 @@ class Motion:
             self.path.finish()
             self._dirty = True
 
+    def continued(self) -> Motion:
+        """A Motion at rest at this one's pose that has dropped the rest of the path, with
+        the same path mode, look-ahead limit, overrides and single-block switch: how the
+        program goes on after a G31 stopped at its skip signal (cnc.controller)."""
+        m = Motion(self.params, start=self.pose, ipo_cycle_s=self.ipo)
+        path = self.path
+        m.path.set_path_mode(SetPathMode(self._line, path.mode, path.tolerance))
+        m._lookahead = self._lookahead
+        m._feed_ovr = self._feed_ovr
+        m._rapid_ovr = self._rapid_ovr
+        m.single_block = self.single_block
+        m._cycle = self._cycle
+        m._line = self._line
+        return m
+
     # -- operator -----------------------------------------------------------------------
     def set_feed_override(self, f: float) -> None:
         """Feed override 0..2 (0..200 %); 0 holds feed moves like a feed hold."""

@@ -56,6 +56,7 @@ class MachineFaces:
                 policy=getattr(ctl, "policy", None),
                 secret=ports.secret,
                 machine_data=self._machine_data if hasattr(ctl, "machine_data") else None,
+                host_data=self._host_data if ports.opcua is not None else None,
             )
             self.loop.run(self.dnc.start)
         if ports.modbus is not None:
@@ -120,11 +121,34 @@ class MachineFaces:
             ),
             tools=(lambda: (md.revision, md.tools_dict())) if md is not None else None,
             program_sha256=self._program_sha256,
+            switches=lambda: {
+                "BlockSkip": getattr(ctl, "block_skip", False),
+                "OptionalStop": getattr(ctl, "optional_stop", False),
+                "SingleStep": getattr(ctl, "single_block", False),
+                "DryRun": False,  # the controllers have no dry run
+            },
+            press=self._press,
+            on_command=self._face_command,
             security=security,
         )
         self.opcua_loop = LoopThread(f"opcua-{m.name}").start()
         self.opcua_loop.run(self.opcua.start, timeout=60.0)
         m.opcua = self.opcua
+
+    def _press(self, button: str) -> None:
+        """OPC UA Start / Stop: the panel's button, pressed at the machine's next cycle
+        (the server's thread never waits for the cycle)."""
+        m = self.machine
+        panel = {"cycle_start": "PanelCycleStart", "feed_hold": "PanelFeedHold"}[button]
+        m.call_soon(lambda: m.press(panel))
+
+    def _face_command(self, command) -> None:
+        """An OPC UA method call into the machine's event log (the machine's own audit)."""
+        from dataclasses import asdict
+
+        m = self.machine
+        text = f"OPC UA {command.command} by {command.user}: {command.result}"
+        m.call_soon(lambda: m.events.add(m.t, "command", text, asdict(command)))
 
     def _program_sha256(self, name: str) -> str:
         """The sha256 of the running program as held in program memory (O-number names)."""
@@ -155,6 +179,23 @@ class MachineFaces:
                 raise DncAlarm(ALARM_BAD_DATA, f"{exc.pointer or '/'}: {exc.message}") from None
         md = ctl.machine_data
         return md.tools_dict() if what == "tools" else md.offsets_dict()
+
+    def _host_data(self, doc) -> dict:
+        """The DNC port's HOST PUT: the host's knowledge into the OPC UA face; the answer
+        is what the face's clients did since the last exchange (the host audits it)."""
+        from dataclasses import asdict
+
+        # deferred: part of the OPC UA face (asyncua), loaded with it
+        from cnc.faces.opcua import HostDataError
+        from cnc.faces.opcua.host_data import from_doc
+
+        if self.opcua is None:
+            raise DncAlarm(ALARM_REFUSED, "HOST refused: the OPC UA face is not running")
+        try:
+            self.opcua.set_host_data(from_doc(doc))
+        except HostDataError as exc:
+            raise DncAlarm(ALARM_BAD_DATA, f"{exc.pointer}: {exc.message}") from None
+        return {"commands": [asdict(c) for c in self.opcua.take_commands()]}
 
     def ports(self) -> dict[str, int | None]:
         """Bound TCP ports by face (None = off)."""

@@ -22,6 +22,8 @@ import math
 import re
 from dataclasses import dataclass, field
 
+from cnc.errors import CncError
+
 # Short names in the operator's words -> (drives.faults kind, default parameters).
 DRIVE_ALIASES: dict[str, tuple[str, dict[str, float]]] = {
     "encoder": ("encoder_break", {}),
@@ -36,7 +38,7 @@ _TIME = re.compile(r"^(?P<num>[0-9]+(?:\.[0-9]*)?|\.[0-9]+)(?P<unit>s|ms)?$")
 _AXIS = re.compile(r"^[XYZABCUVW]$")
 
 
-class FaultSpecError(ValueError):
+class FaultSpecError(CncError, ValueError):
     """A spec that does not parse or names an unknown kind; the message lists the valid ones."""
 
 

@@ -18,6 +18,7 @@ from collections.abc import Iterable, Mapping, MutableMapping
 from dataclasses import dataclass
 from typing import Any
 
+from cnc.errors import CncError
 from cnc.interp.state import ToolOffset
 
 MAX_TOOL_OFFSET = 999  # H/D/lathe offset numbers 1..999 (Fanuc 0i: up to 999 pairs)
@@ -31,7 +32,7 @@ MAX_OFFSET_MM = 1000.0
 MAX_WORK_OFFSET_MM = 10_000.0
 
 
-class MachineDataError(ValueError):
+class MachineDataError(CncError, ValueError):
     """A refused change: `pointer` is the JSON pointer of the bad value ("" = the whole)."""
 
     def __init__(self, message: str, pointer: str = "") -> None:
@@ -191,11 +192,13 @@ def _xyz(value: Any, pointer: str) -> tuple[float, float, float]:
     raise MachineDataError("must be [x, y, z] or {x, y, z} in mm", pointer)
 
 
-KEPT_VARIABLES = (range(500, 1000), range(10000, 11000))  # Fanuc #500-#999, Haas #10000+
+# Fanuc #500-#999 and the 30i-B added #500000-#999999, Haas NGC #10000-#10999
+KEPT_VARIABLES = (range(500, 1000), range(500000, 1000000), range(10000, 11000))
 
 
 class KeptVariables(MutableMapping):
-    """Macro B common variables kept across power cycles (#500-#999, Haas #10000-#10999), as
+    """Macro B common variables kept across power cycles (#500-#999, the Fanuc 30i-B added
+    #500000-#999999, Haas #10000-#10999), as
     the interpreter's `macro_variables` store: a vacant variable is an absent key. Each
     write counts the owner's revision, so the machine saves them like its offsets."""
 
@@ -211,7 +214,9 @@ class KeptVariables(MutableMapping):
     def __setitem__(self, number: int, value: float) -> None:
         p = f"/macro_variables/{number}"
         if not isinstance(number, int) or not any(number in r for r in KEPT_VARIABLES):
-            raise MachineDataError("a kept macro variable is #500-#999 or #10000-#10999", p)
+            raise MachineDataError(
+                "a kept macro variable is #500-#999, #500000-#999999 or #10000-#10999", p
+            )
         if isinstance(value, bool) or not isinstance(value, int | float):
             raise MachineDataError(f"must be a number, got {value!r}", p)
         if not math.isfinite(value):

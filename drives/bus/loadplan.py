@@ -11,6 +11,7 @@ import warnings
 from dataclasses import dataclass, field
 
 from drives.bus.frame import nominal_bits, worst_case_bits
+from drives.errors import DrivesError
 
 WARN_LOAD = 0.70
 MAX_LOAD = 1.00
@@ -53,7 +54,7 @@ class LoadPlan:
         )
 
 
-class BusOverloadError(ValueError):
+class BusOverloadError(DrivesError, ValueError):
     """The configured cyclic traffic needs more than the bitrate; `.plan` has the figures."""
 
     def __init__(self, plan: LoadPlan) -> None:

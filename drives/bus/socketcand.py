@@ -35,6 +35,8 @@ from collections.abc import Callable
 
 import can
 
+from drives.errors import DrivesError
+
 log = logging.getLogger(__name__)
 
 DEFAULT_PORT = 29536  # socketcand's own default
@@ -46,7 +48,7 @@ MAX_LINE = 256  # the longest command is `< send 1FFFFFFF 8 ff ff ff ff ff ff ff
 OUT_QUEUE_LIMIT = 10_000  # frames queued for a client that does not read: then it is dropped
 
 
-class ProtocolError(ValueError):
+class ProtocolError(DrivesError, ValueError):
     """A command the server cannot take."""
 
 

@@ -5,6 +5,8 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field
 
+from drives.errors import DrivesError
+
 
 @dataclass(frozen=True)
 class AxisConfig:
@@ -105,7 +107,7 @@ class AxisFeedback:
         return all(self.fresh.values())
 
 
-class AxisError(RuntimeError):
+class AxisError(DrivesError, RuntimeError):
     """An axis did not do what the group asked (state, homing, boot): names axis and state."""
 
     def __init__(self, message: str, axes: tuple[str, ...] = ()) -> None:

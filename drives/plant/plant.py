@@ -14,12 +14,14 @@ One call to `Plant.step(h, ...)` integrates one sub-step of h seconds:
 * winding thermal model, I²t accumulator, and the plant-level monitors.
 
 The plant knows nothing of CANopen; `step` returns 0 or the CiA 402 fault code it detected.
+This physics is written once, in `Plant._substeps`: `step` runs one sub-step of it and the
+CSP fast path `follow_ramp` runs many on a demand ramp, with the state in local variables.
 """
 
 from __future__ import annotations
 
 import math
-from typing import Final
+from typing import Final, final
 
 from drives.plant.params import PlantParams
 
@@ -43,6 +45,57 @@ _TWO_PI: Final = 2.0 * math.pi
 _NOISE_SEED: Final = 2463534242  # xorshift32: the same noise on every run (lockstep tests)
 
 
+@final
+class Constants:
+    """The parameters as the sub-step loop uses them, by name, computed once per plant.
+
+    All floats (a YAML integer becomes 2.0 here, the same value in every expression): the
+    compiled plant (mypyc, drives/plant/mypyc.list) keeps them as C doubles.
+    """
+
+    def __init__(self, p: PlantParams, inertia: float, rad_per_count: float) -> None:
+        m, sc, dl, th, mo, enc = p.motor, p.screw, p.dc_link, p.thermal, p.monitor, p.encoder
+        mpr = p.metres_per_motor_rad
+        # winding, inner loops, current limits
+        self.resistance = float(m.resistance)
+        self.inductance = float(m.inductance)
+        self.kb = float(m.kb)
+        self.km = float(m.km)
+        self.kv = float(p.loops.kv)
+        self.velocity_feedforward = float(p.loops.velocity_feedforward)
+        self.peak_current = float(m.peak_current)
+        self.overcurrent_trip = float(m.overcurrent_trip)
+        self.rated_current_sq = float(m.rated_current**2)  # the I²t integrand's zero
+        # mechanics at the motor shaft
+        self.viscous = float(sc.viscous)
+        self.coulomb_torque = float(sc.coulomb_torque)
+        self.load_arm = float(mpr / sc.efficiency)  # N·m at the motor per N on the table
+        self.inertia = float(inertia)
+        self.metres_per_rad = float(mpr)
+        # encoder: the plausible count change per second (faster is a broken signal)
+        self.rad_per_count = float(rad_per_count)
+        self.max_counts_per_s = float(
+            enc.max_speed_factor * m.max_speed_rpm / 60.0 * enc.counts_per_rev
+        )
+        # DC link, as conductances
+        self.capacitance = float(dl.capacitance)
+        self.g_bleed = float(1.0 / dl.bleed_resistance)
+        self.chopper_on = float(dl.chopper_on)
+        self.chopper_off = float(dl.chopper_off)
+        self.g_chopper = float(1.0 / dl.chopper_resistance)
+        self.g_source = float(1.0 / dl.source_resistance)
+        self.overvoltage_trip = float(dl.overvoltage_trip)
+        self.undervoltage_trip = float(dl.undervoltage_trip)
+        self.mains_loss = float(dl.mains_loss_detect)  # s without mains before 0x3130
+        # winding temperature
+        self.thermal_capacity = float(th.time_constant / th.thermal_resistance)
+        self.thermal_resistance = float(th.thermal_resistance)
+        self.temperature_trip = float(th.trip)
+        # the blocked-motor monitor
+        self.blocked_time = float(mo.blocked_time)
+        self.blocked_speed = float(mo.blocked_speed)
+
+
 class Plant:
     """Motor + screw + table + encoder + DC link with the drive's inner loops."""
 
@@ -57,7 +110,7 @@ class Plant:
         self._mpr = p.metres_per_motor_rad
         self._h_cached = -1.0
         self._decay = 0.0
-        self._c: tuple[float, ...] = self._constants()
+        self._k = Constants(p, self.inertia, self._rad_per_count)
         # the switch positions as a flag and a float (the parameter set is immutable): the
         # sub-step loop compares plain floats, without attribute lookups on the parameters
         sw = p.switches
@@ -174,46 +227,7 @@ class Plant:
     def torque(self) -> float:
         return self.params.motor.km * self.current
 
-    # -- one sub-step ---------------------------------------------------------------------
-    def _constants(self) -> tuple[float, ...]:
-        # all floats (a YAML integer becomes 2.0 here, the same value in every expression):
-        # the compiled plant (mypyc, drives/plant/mypyc.list) keeps them as C doubles
-        p = self.params
-        m, sc, dl, th, mo = p.motor, p.screw, p.dc_link, p.thermal, p.monitor
-        values = (
-            m.resistance,
-            m.kb,
-            m.km,
-            m.max_speed_rpm * _TWO_PI / 60.0,
-            p.loops.kv,
-            p.loops.velocity_feedforward,
-            m.peak_current,
-            m.overcurrent_trip,
-            sc.viscous,
-            sc.coulomb_torque,
-            self._mpr / sc.efficiency,
-            self.inertia,
-            self._mpr,
-            self._rad_per_count,
-            p.encoder.max_speed_factor * m.max_speed_rpm / 60.0 * p.encoder.counts_per_rev,
-            dl.capacitance,
-            1.0 / dl.bleed_resistance,
-            dl.chopper_on,
-            dl.chopper_off,
-            1.0 / dl.chopper_resistance,
-            1.0 / dl.source_resistance,
-            dl.overvoltage_trip,
-            dl.undervoltage_trip,
-            dl.mains_loss_detect,
-            th.time_constant / th.thermal_resistance,
-            th.thermal_resistance,
-            th.trip,
-            m.rated_current**2,
-            mo.blocked_time,
-            mo.blocked_speed,
-        )
-        return tuple(float(v) for v in values)
-
+    # -- the sub-steps --------------------------------------------------------------------
     def step(
         self,
         h: float,
@@ -226,199 +240,27 @@ class Plant:
         block_positive: bool = False,
     ) -> int:
         """Integrate h seconds. Angles in motor rad (encoder frame). Returns a fault code or 0."""
-        (
-            res,
-            kb,
-            km,
-            vmax,
-            kv,
-            kff,
-            ipk,
-            itrip,
-            visc,
-            coul,
-            load_arm,
-            j,
-            mpr,
-            rpc,
-            max_counts_per_s,
-            cap,
-            g_bleed,
-            chop_on,
-            chop_off,
-            g_chop,
-            g_src,
-            ov_trip,
-            uv_trip,
-            loss_detect,
-            c_th,
-            r_th,
-            temp_trip,
-            ir2,
-            blocked_time,
-            blocked_speed,
-        ) = self._c
-        if h != self._h_cached:
-            self._h_cached = h
-            self._decay = math.exp(-h * res / self.params.motor.inductance)
-        a = self._decay
-        fault = ENCODER if self.encoder_broken else 0
-
-        # --- feedback: the encoder was read at the end of the previous sub-step
-        theta_m = self.counts * rpc
-        vel_m = self.vel_meas
-
-        # --- velocity and current loops
-        omega = self.omega
-        i_old = self.current
-        vdc = self.vdc
-        current_limited = velocity_limited = False
-        if mode == OFF or fault:
-            v_app = 0.0
-            i_new = 0.0  # freewheel diodes clear the winding current within the sub-step
-            self.vel_integral = 0.0
-        else:
-            if mode == POSITION:
-                v_cmd = kv * (pos_demand - theta_m) + kff * vel_ff
-            else:
-                v_cmd = vel_demand
-            vmax = self.speed_limit
-            if v_cmd > vmax:
-                v_cmd, velocity_limited = vmax, True
-            elif v_cmd < -vmax:
-                v_cmd, velocity_limited = -vmax, True
-            if block_negative and v_cmd < 0.0:
-                v_cmd, velocity_limited = 0.0, True
-            if block_positive and v_cmd > 0.0:
-                v_cmd, velocity_limited = 0.0, True
-            err = v_cmd - vel_m
-            ilim = ipk if current_limit is None or current_limit > ipk else current_limit
-            integ = self.vel_integral
-            i_cmd = self.kp_v * err + integ
-            if i_cmd > ilim:
-                i_cmd, current_limited = ilim, True
-                if err < 0.0:
-                    integ += self.ki_v * err * h
-            elif i_cmd < -ilim:
-                i_cmd, current_limited = -ilim, True
-                if err > 0.0:
-                    integ += self.ki_v * err * h
-            else:
-                integ += self.ki_v * err * h
-            self.vel_integral = integ
-            # deadbeat: the voltage that brings I to i_cmd at the end of the sub-step
-            v_app = res * (i_cmd - a * i_old) / (1.0 - a) + kb * omega
-            if self.inverter_fault:
-                v_app = vdc  # a shorted switch: full link voltage, current runs away
-            elif v_app > vdc:
-                v_app = vdc
-            elif v_app < -vdc:
-                v_app = -vdc
-            i_ss = (v_app - kb * omega) / res
-            i_new = i_ss + (i_old - i_ss) * a
-        self.current_limited = current_limited
-        self.velocity_limited = velocity_limited
-        i_avg = 0.5 * (i_old + i_new)
-        self.current = i_new
-        self.voltage = v_app
-
-        # --- mechanics (semi-implicit Euler with stiction)
-        net = km * i_avg + self.load_force * load_arm - visc * omega
-        tc = coul + 1.0e3 if self.blocked else coul
-        if omega == 0.0:
-            if -tc <= net <= tc:
-                w_new = 0.0
-            else:
-                w_new = h * (net - math.copysign(tc, net)) / j
-        else:
-            w_new = omega + h * (net - math.copysign(tc, omega)) / j
-            if w_new * omega < 0.0:
-                w_new = 0.0
-        theta = self.theta + 0.5 * (omega + w_new) * h
-        self.theta = theta
-        self.omega = w_new
-        nut = self._nut_origin + theta * mpr
-        b = self.backlash
-        if b > 0.0:
-            half = 0.5 * b
-            if self.table_x < nut - half:
-                self.table_x = nut - half
-            elif self.table_x > nut + half:
-                self.table_x = nut + half
-        else:
-            self.table_x = nut
-        # The hard stop: an inelastic impact, table, screw and motor stop at it. (`follow_ramp`
-        # needs no check: it hands over at the limit switch before the stop, and the drive
-        # lets no demand move further into an active limit switch.)
-        tx = self.table_x
-        if tx > self._stop_hi or tx < self._stop_lo:
-            edge = self._stop_hi if tx > self._stop_hi else self._stop_lo
-            theta += (edge - tx) / mpr
-            self.theta = theta
-            self.omega = 0.0
-            self.table_x = edge
-
-        # --- encoder read at the end of the sub-step; speed from the count difference
-        counts = math.floor(theta / rpc) + self.encoder_offset
-        if self.encoder_noise > 0.0:
-            counts += self._noise_counts()
-        dc = counts - self._prev_counts
-        jump = max_counts_per_s * h + 2
-        if dc > jump or -dc > jump:
-            fault = ENCODER  # implausible jump between two reads
-        self._prev_counts = counts
-        self.counts = counts
-        self.vel_meas = dc * rpc / h
-
-        # --- DC link (implicit in the conductances): C·dV/dt = I_src − I_inv − V·g
-        i_inv = v_app * i_avg / vdc if vdc > 1.0 else 0.0
-        if self.chopper_failed:
-            self.chopper = False
-        elif vdc >= chop_on:
-            self.chopper = True
-        elif vdc <= chop_off:
-            self.chopper = False
-        g = g_bleed + g_chop if self.chopper else g_bleed
-        k = h / cap
-        v_new = (vdc - k * i_inv) / (1.0 + k * g)
-        mains = self.mains_voltage
-        if self.supply_on and v_new < mains:
-            v_new = (vdc + k * (mains * g_src - i_inv)) / (1.0 + k * (g + g_src))
-            if v_new > mains:
-                v_new = mains
-        self.vdc = v_new if v_new > 0.0 else 0.0
-
-        # --- thermal and I²t
-        temp = self.winding_temp
-        temp += h * (i_avg * i_avg * res - (temp - self.ambient) / r_th) / c_th
-        self.winding_temp = temp
-        i2t = self.i2t + (i_new * i_new - ir2) * h
-        self.i2t = i2t if i2t > 0.0 else 0.0
-
-        # --- plant monitors (first detected wins; checked every sub-step)
-        if fault:
-            return fault
-        if i_new > itrip or i_new < -itrip:
-            return OVERCURRENT
-        if self.vdc > ov_trip:
-            return DC_OVERVOLTAGE
-        if mode != OFF:
-            if self.vdc < uv_trip:
-                return DC_UNDERVOLTAGE
-            self.mains_lost_for = 0.0 if self.supply_on else self.mains_lost_for + h
-            if self.mains_lost_for > loss_detect:
-                return MAINS_PHASE_FAILURE
-            if current_limited and -blocked_speed < vel_m < blocked_speed:
-                self.blocked_for += h
-                if self.blocked_for > blocked_time:
-                    return MOTOR_BLOCKED
-            else:
-                self.blocked_for = 0.0
-        if self.i2t > self._i2t_limit:
-            return I2T
-        if temp > temp_trip:
-            return OVERTEMPERATURE
-        return 0
+        # one sub-step of `_substeps` on a demand that holds pos_demand (no ramp, no watched
+        # following error: the drive runs its monitors around `step` itself)
+        return self._substeps(
+            h,
+            1,
+            mode,
+            pos_demand,
+            vel_ff,
+            vel_demand,
+            0.0,
+            0.0,
+            0.0,
+            0.0,
+            current_limit,
+            block_negative,
+            block_positive,
+            None,
+            0.0,
+            0.0,
+            0,
+        )[1]
 
     def follow_ramp(
         self,
@@ -441,75 +283,108 @@ class Plant:
 
         The demand moves at seg_v from `pos` until the ramp's time seg_T (then it holds
         seg_to); each sub-step controls on the demand at its start with the ramp speed as
-        feed-forward, as the CSP fine interpolator does. This is `step` unrolled into one
-        loop with the state in local variables, the same operations in the same order (so
-        bit-identical results, `tests/drives/test_fast_paths.py`): at 8 kHz per axis the
-        attribute traffic of a call per sub-step was half the plant's cost.
+        feed-forward, as the CSP fine interpolator does. `step` and this are the same loop
+        (`_substeps`), so the CSP fast path computes what the drive's general sub-step
+        computes, bit for bit (`tests/drives/test_fast_paths.py`), with the state in local
+        variables for all n sub-steps: at 8 kHz per axis the attribute traffic of a call per
+        sub-step was half the plant's cost.
 
         The loop also runs the monitors the drive checks every sub-step: the following error
         (`fe_window` rad for longer than `fe_timeout` s gives FOLLOWING_ERROR) and the switch
         inputs (`switch_inputs` bits). It stops after the first sub-step that ends with a
         fault or changed inputs. Returns (sub-steps done, fault or 0, inputs, demand
-        position, demand velocity, ramp time, following-error timer); 0 sub-steps when an
-        injected inverter or encoder fault (or encoder noise) needs the general `step`.
+        position, demand velocity, ramp time, following-error timer).
         """
-        if self.encoder_broken or self.inverter_fault or self.encoder_noise > 0.0 or n <= 0:
+        if n <= 0:
             return 0, 0, inputs, pos, 0.0, seg_t, fe_timer
-        (
-            res,
-            kb,
-            km,
-            _vmax,
-            kv,
-            kff,
-            ipk,
-            itrip,
-            visc,
-            coul,
-            load_arm,
-            j,
-            mpr,
-            rpc,
-            max_counts_per_s,
-            cap,
-            g_bleed,
-            chop_on,
-            chop_off,
-            g_chop,
-            g_src,
-            ov_trip,
-            uv_trip,
-            loss_detect,
-            c_th,
-            r_th,
-            temp_trip,
-            ir2,
-            blocked_time,
-            blocked_speed,
-        ) = self._c
+        return self._substeps(
+            h,
+            n,
+            POSITION,
+            pos,
+            0.0,
+            0.0,
+            seg_t,
+            seg_T,
+            seg_to,
+            seg_v,
+            current_limit,
+            block_negative,
+            block_positive,
+            fe_window,
+            fe_timer,
+            fe_timeout,
+            inputs,
+        )
+
+    def _substeps(
+        self,
+        h: float,
+        n: int,
+        mode: int,
+        pos: float,
+        vel_ff: float,
+        vel_demand: float,
+        seg_t: float,
+        seg_T: float,
+        seg_to: float,
+        seg_v: float,
+        current_limit: float | None,
+        block_negative: bool,
+        block_positive: bool,
+        fe_window: float | None,
+        fe_timer: float,
+        fe_timeout: float,
+        inputs: int,
+    ) -> tuple[int, int, int, float, float, float, float]:
+        """The plant's physics, written once: up to n sub-steps of h seconds in `mode`.
+
+        The position demand starts at `pos`; while the ramp time seg_t is below seg_T it
+        moves at seg_v (feed-forward seg_v) and lands on seg_to, then it holds with
+        feed-forward vel_ff (`step`: seg_t = seg_T = 0, a demand held for its one sub-step).
+        VELOCITY mode commands vel_demand. Stops after the first sub-step that ends with a
+        fault or changed switch inputs; returns what `follow_ramp` returns.
+        """
+        c = self._k
+        res, kb, km = c.resistance, c.kb, c.km
+        kv, kff = c.kv, c.velocity_feedforward
+        ipk, itrip = c.peak_current, c.overcurrent_trip
+        visc, coul, load_arm, j = c.viscous, c.coulomb_torque, c.load_arm, c.inertia
+        mpr, rpc = c.metres_per_rad, c.rad_per_count
+        cap, g_bleed, g_chop, g_src = c.capacitance, c.g_bleed, c.g_chopper, c.g_source
+        chop_on, chop_off = c.chopper_on, c.chopper_off
+        ov_trip, uv_trip, loss_detect = c.overvoltage_trip, c.undervoltage_trip, c.mains_loss
+        c_th, r_th, temp_trip = c.thermal_capacity, c.thermal_resistance, c.temperature_trip
+        ir2, blocked_time, blocked_speed = c.rated_current_sq, c.blocked_time, c.blocked_speed
         if h != self._h_cached:
             self._h_cached = h
-            self._decay = math.exp(-h * res / self.params.motor.inductance)
+            self._decay = math.exp(-h * res / c.inductance)
         a = self._decay
         one_minus_a = 1.0 - a
         vmax = self.speed_limit
         ilim = ipk if current_limit is None or current_limit > ipk else current_limit
         kp_v, ki_v = self.kp_v, self.ki_v
+        # the injections hold for the whole call
         load = self.load_force * load_arm
         tc = coul + 1.0e3 if self.blocked else coul
-        nut_origin = self._nut_origin
-        backlash = self.backlash
-        half = 0.5 * backlash
-        encoder_offset = self.encoder_offset
-        jump = max_counts_per_s * h + 2
+        inverter_fault = self.inverter_fault
+        noisy = self.encoder_noise > 0.0
         chopper_failed = self.chopper_failed
         supply_on = self.supply_on
         mains = self.mains_voltage
-        k = h / cap
         ambient = self.ambient
+        backlash = self.backlash
+        half = 0.5 * backlash
+        nut_origin = self._nut_origin
+        stop_lo, stop_hi = self._stop_lo, self._stop_hi
+        encoder_offset = self.encoder_offset
+        jump = c.max_counts_per_s * h + 2
+        k = h / cap
         i2t_limit = self._i2t_limit
         has_neg, neg, has_pos, posl = self._has_neg, self._neg, self._has_pos, self._pos
         has_home, home_x, home_below = self._has_home, self._home, self._home_below
+        powered = mode != OFF  # the inverter switches (else the motor coasts)
+        position_control = mode == POSITION
         # the optional window as a flag and a float: the loop compares plain floats
         check_fe = fe_window is not None
         fe_win = fe_window if fe_window is not None else 0.0
@@ -522,12 +397,13 @@ class Plant:
         v_app = self.voltage
         current_limited = velocity_limited = False
         vel = 0.0
-        fault = 0
+        fault = ENCODER if self.encoder_broken else 0
         new_inputs = inputs
         done = 0
         while done < n:
             done += 1
-            # --- the demand (fine interpolation of the ramp)
+            # --- the demand at the start of the sub-step (the fine interpolation of the
+            # ramp moves it to the end)
             pos_now = pos
             if seg_t < seg_T:
                 seg_t += h
@@ -537,40 +413,56 @@ class Plant:
                     pos += seg_v * h
                     vel = seg_v
             else:
-                vel = 0.0
-            # --- velocity and current loops (`step`, mode POSITION)
+                vel = vel_ff
+
+            # --- feedback: the encoder was read at the end of the previous sub-step
             theta_m = counts * rpc
+            vel_read = vel_m
+
+            # --- velocity and current loops
             current_limited = velocity_limited = False
-            v_cmd = kv * (pos_now - theta_m) + kff * vel
-            if v_cmd > vmax:
-                v_cmd, velocity_limited = vmax, True
-            elif v_cmd < -vmax:
-                v_cmd, velocity_limited = -vmax, True
-            if block_negative and v_cmd < 0.0:
-                v_cmd, velocity_limited = 0.0, True
-            if block_positive and v_cmd > 0.0:
-                v_cmd, velocity_limited = 0.0, True
-            err = v_cmd - vel_m
-            i_cmd = kp_v * err + integ
-            if i_cmd > ilim:
-                i_cmd, current_limited = ilim, True
-                if err < 0.0:
-                    integ += ki_v * err * h
-            elif i_cmd < -ilim:
-                i_cmd, current_limited = -ilim, True
-                if err > 0.0:
-                    integ += ki_v * err * h
+            if not powered or fault:
+                v_app = 0.0
+                i_new = 0.0  # freewheel diodes clear the winding current within the sub-step
+                integ = 0.0
             else:
-                integ += ki_v * err * h
-            v_app = res * (i_cmd - a * i_old) / one_minus_a + kb * omega
-            if v_app > vdc:
-                v_app = vdc
-            elif v_app < -vdc:
-                v_app = -vdc
-            i_ss = (v_app - kb * omega) / res
-            i_new = i_ss + (i_old - i_ss) * a
+                if position_control:
+                    v_cmd = kv * (pos_now - theta_m) + kff * vel
+                else:
+                    v_cmd = vel_demand
+                if v_cmd > vmax:
+                    v_cmd, velocity_limited = vmax, True
+                elif v_cmd < -vmax:
+                    v_cmd, velocity_limited = -vmax, True
+                if block_negative and v_cmd < 0.0:
+                    v_cmd, velocity_limited = 0.0, True
+                if block_positive and v_cmd > 0.0:
+                    v_cmd, velocity_limited = 0.0, True
+                err = v_cmd - vel_read
+                i_cmd = kp_v * err + integ
+                if i_cmd > ilim:
+                    i_cmd, current_limited = ilim, True
+                    if err < 0.0:
+                        integ += ki_v * err * h
+                elif i_cmd < -ilim:
+                    i_cmd, current_limited = -ilim, True
+                    if err > 0.0:
+                        integ += ki_v * err * h
+                else:
+                    integ += ki_v * err * h
+                # deadbeat: the voltage that brings I to i_cmd at the end of the sub-step
+                v_app = res * (i_cmd - a * i_old) / one_minus_a + kb * omega
+                if inverter_fault:
+                    v_app = vdc  # a shorted switch: full link voltage, current runs away
+                elif v_app > vdc:
+                    v_app = vdc
+                elif v_app < -vdc:
+                    v_app = -vdc
+                i_ss = (v_app - kb * omega) / res
+                i_new = i_ss + (i_old - i_ss) * a
             i_avg = 0.5 * (i_old + i_new)
-            # --- mechanics
+
+            # --- mechanics (semi-implicit Euler with stiction)
             net = km * i_avg + load - visc * omega
             if omega == 0.0:
                 if -tc <= net <= tc:
@@ -591,15 +483,26 @@ class Plant:
                     table_x = nut + half
             else:
                 table_x = nut
-            # --- encoder
+            # The hard stop: an inelastic impact, table, screw and motor stop at it (only an
+            # external force with the power stage off gets there: the drive lets no demand
+            # move further into an active limit switch)
+            if table_x > stop_hi or table_x < stop_lo:
+                edge = stop_hi if table_x > stop_hi else stop_lo
+                theta += (edge - table_x) / mpr
+                omega = 0.0
+                table_x = edge
+
+            # --- encoder read at the end of the sub-step; speed from the count difference
             counts = math.floor(theta / rpc) + encoder_offset
+            if noisy:
+                counts += self._noise_counts()
             dc = counts - prev_counts
             if dc > jump or -dc > jump:
-                fault = ENCODER
+                fault = ENCODER  # implausible jump between two reads
             prev_counts = counts
-            vel_read = vel_m  # the speed this sub-step controlled on (the blocked monitor's)
             vel_m = dc * rpc / h
-            # --- DC link
+
+            # --- DC link (implicit in the conductances): C·dV/dt = I_src − I_inv − V·g
             i_inv = v_app * i_avg / vdc if vdc > 1.0 else 0.0
             if chopper_failed:
                 chopper = False
@@ -614,36 +517,39 @@ class Plant:
                 if v_new > mains:
                     v_new = mains
             vdc = v_new if v_new > 0.0 else 0.0
+
             # --- thermal and I²t
             temp += h * (i_avg * i_avg * res - (temp - ambient) / r_th) / c_th
             i2t = i2t + (i_new * i_new - ir2) * h
-            if i2t <= 0.0:
+            if not i2t > 0.0:
                 i2t = 0.0
             i_old = i_new
-            # --- plant monitors, in `step`'s order
+
+            # --- plant monitors (first detected wins; checked every sub-step)
             if not fault:
                 if i_new > itrip or i_new < -itrip:
                     fault = OVERCURRENT
                 elif vdc > ov_trip:
                     fault = DC_OVERVOLTAGE
-                elif vdc < uv_trip:
+                elif powered and vdc < uv_trip:
                     fault = DC_UNDERVOLTAGE
                 else:
-                    mains_lost_for = 0.0 if supply_on else mains_lost_for + h
-                    if mains_lost_for > loss_detect:
-                        fault = MAINS_PHASE_FAILURE
-                    else:
-                        if current_limited and -blocked_speed < vel_read < blocked_speed:
+                    if powered:
+                        mains_lost_for = 0.0 if supply_on else mains_lost_for + h
+                        if mains_lost_for > loss_detect:
+                            fault = MAINS_PHASE_FAILURE
+                        elif current_limited and -blocked_speed < vel_read < blocked_speed:
                             blocked_for += h
                             if blocked_for > blocked_time:
                                 fault = MOTOR_BLOCKED
                         else:
                             blocked_for = 0.0
-                        if not fault:
-                            if i2t > i2t_limit:
-                                fault = I2T
-                            elif temp > temp_trip:
-                                fault = OVERTEMPERATURE
+                    if not fault:
+                        if i2t > i2t_limit:
+                            fault = I2T
+                        elif temp > temp_trip:
+                            fault = OVERTEMPERATURE
+
             # --- the drive's monitors: following error, then the switch inputs
             if check_fe and abs(pos - counts * rpc) > fe_win:
                 fe_timer += h

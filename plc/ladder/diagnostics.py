@@ -5,6 +5,8 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Literal
 
+from plc.errors import PlcError
+
 Severity = Literal["error", "warning"]
 
 
@@ -22,7 +24,7 @@ class Diagnostic:
         return f"{self.file}:{self.line}:{self.col}: {self.severity}: {self.message}"
 
 
-class LadderError(Exception):
+class LadderError(PlcError):
     """Raised when a program has errors; `diagnostics` holds all of them (warnings too)."""
 
     def __init__(self, diagnostics: list[Diagnostic]) -> None:

@@ -23,6 +23,7 @@ import bisect
 import re
 from dataclasses import dataclass
 
+from plc.errors import PlcError
 from plc.image import Area
 from plc.modbus.map import ModbusMap, Table
 
@@ -39,7 +40,7 @@ _IEC = re.compile(r"%([IQM])([XW])(\d+)(?:\.(\d+))?$", re.IGNORECASE)
 _BARE = re.compile(r"(\d+)(?:\.(\d+))?$")
 
 
-class AllowListError(ValueError):
+class AllowListError(PlcError, ValueError):
     """A malformed allow-list; the message names the item, its column and the reason."""
 
 

@@ -16,6 +16,8 @@ from __future__ import annotations
 
 import struct
 
+from plc.errors import PlcError
+
 MBAP_SIZE = 7
 MAX_PDU = 253
 MAX_ADU = MBAP_SIZE - 1 + 1 + MAX_PDU  # 260
@@ -27,7 +29,7 @@ _unpack_header = _HEADER.unpack_from
 Frame = tuple[int, int, bytes]
 
 
-class FrameViolation(Exception):
+class FrameViolation(PlcError):
     """The byte stream broke an MBAP rule; the connection must be closed.
 
     `frames` holds the well-formed frames that preceded the bad header in the same data:

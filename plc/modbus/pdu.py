@@ -14,6 +14,7 @@ from __future__ import annotations
 import struct
 from dataclasses import dataclass
 
+from plc.errors import PlcError
 from plc.image import Area, Snapshot, Write
 from plc.modbus.allowlist import WriteGuard
 from plc.modbus.map import ModbusMap, Piece, Table
@@ -42,7 +43,7 @@ _UNPACK = [bytes((v >> j) & 1 for j in range(8)) for v in range(256)]
 Result = tuple[bytes, tuple[Write, ...] | None]
 
 
-class PduSizeError(Exception):
+class PduSizeError(PlcError):
     """The PDU's size contradicts its function code's own fields; close the connection."""
 
 

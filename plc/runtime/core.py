@@ -28,6 +28,7 @@ from collections import deque
 from collections.abc import Callable
 from dataclasses import dataclass, field
 
+from plc.errors import PlcError
 from plc.image import BIT_AREAS, ImageSize, ProcessImage, Snapshot, Write, WriteQueue, _to_int
 from plc.ladder.compiler import CompiledProgram, TagInfo
 from plc.ladder.instructions import MEMBER_ALIASES
@@ -84,7 +85,7 @@ class RuntimeConfig:
 Target = tuple[str, int]  # (area, index); area "V" = the program's slot list
 
 
-class ProgramSwapError(ValueError):
+class ProgramSwapError(PlcError, ValueError):
     pass
 
 

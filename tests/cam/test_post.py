@@ -261,7 +261,14 @@ def test_cli_post_json_and_output_only_on_success(cli, tmp_path: Path) -> None:
     src = tmp_path / "seed.apt"
     src.write_text(SEED15)
     out = tmp_path / "seed.nc"
+    # the part (4 x 8 x 6 in above its zero) placed near a table corner: the shipped G54
+    # (table centre) would put its Y 8 in past the travel, as the default check says
     r = cli("cam", "post", str(src), "--machine", "mill3", "-o", str(out), "--json")
+    assert r.exit_code == 1 and "beyond the soft limit" in r.stderr and not out.exists()
+    r = cli(
+        "cam", "post", str(src), "--machine", "mill3", "--g54", "-500,-300,-300",
+        "-o", str(out), "--json",
+    )  # fmt: skip
     assert r.exit_code == 0, r.output
     doc = json.loads(r.stdout)
     assert doc["blocks_in"] == 15 and doc["blocks_out"] == 9 and doc["nc_check"] == "passed"
@@ -315,3 +322,23 @@ def test_readme_example_posts_for_two_machines(cli, tmp_path: Path) -> None:
     assert doc["kind"] == "mill5" and doc["singular_count"] == 16 and len(doc["warnings"]) == 1
     text = out5.read_text()
     assert "G00 X-20. Y-20. Z2. B0. C0." in text and " B" not in text.split("B0. C0.", 1)[1]
+
+
+def test_post_without_g54_checks_travel_on_the_machines_own_setup(cli, tmp_path: Path) -> None:
+    """With no --g54 the posted program is placed by the machine's own machine data (the
+    shipped mill3's G54 is the table centre, X-300 Y-200): a path 400 mm right of the part
+    zero runs off the X travel (0 at the right end), and the refusal names the CL line."""
+    src = tmp_path / "long.cl"
+    src.write_text(
+        "PARTNO LONG\nUNITS/MM\nLOADTL/1\nSPINDL/3000,CLW\nRAPID\nGOTO/0,0,10\n"
+        "FEDRAT/500\nGOTO/0,0,-1\nGOTO/400,0,-1\nRAPID\nGOTO/400,0,10\nEND\nFINI\n"
+    )
+    r = cli("cam", "post", str(src), "--machine", "mill3", "--json")
+    assert r.exit_code != 0
+    assert f"{src}:9:0:" in r.output and "X" in r.output, r.output
+    ok = tmp_path / "short.cl"
+    ok.write_text(src.read_text().replace("GOTO/400,", "GOTO/200,"))
+    r = cli("cam", "post", str(ok), "--machine", "mill3", "--json")
+    assert r.exit_code == 0, r.output
+    doc = json.loads(r.stdout)
+    assert (doc["nc_check"], doc["travel_checked"]) == ("passed", True)

@@ -120,8 +120,8 @@ def test_a_machine_process_killed_mid_part_loses_its_part_to_another_machine(tmp
     import os
     import signal
 
-    from cnc.config import load_cell_config
     from server.cell import Cell
+    from server.config import load_cell_config
     from tests.cell.conftest import Api, serve
     from tests.cell.test_cell_restart import RESTART_PROGRAM
 
@@ -195,8 +195,8 @@ def test_a_machine_process_killed_and_restarted_frees_its_allocation(tmp_path, m
     import socket
     import subprocess
 
-    from cnc.config import load_cell_config
     from server.cell import Cell
+    from server.config import load_cell_config
     from server.supervisor import machine_command
     from tests.cell.conftest import Api, serve
     from tests.cell.test_cell_restart import RESTART_PROGRAM

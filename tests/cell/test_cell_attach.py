@@ -5,8 +5,8 @@ from __future__ import annotations
 
 import pytest
 
-from cnc.config import load_cell_config
 from server.cell import Cell, default_cell
+from server.config import load_cell_config
 from server.supervisor import MachineUnavailable
 from tests.cell.conftest import poll
 

@@ -11,7 +11,7 @@ import math
 
 import pytest
 
-from cnc.config import load_cell_config
+from server.config import load_cell_config
 from tests.cell.conftest import idem, poll, upload_released
 
 pytestmark = pytest.mark.timeout(240)  # ~1 min on a quiet box (pure Python); margin for load

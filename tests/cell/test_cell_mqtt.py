@@ -7,7 +7,7 @@ import uuid
 
 import pytest
 
-from cnc.config import load_cell_config
+from server.config import load_cell_config
 from tests.cell.conftest import idem, upload_released
 from tests.server.mqtt_support import Subscriber, broker_answers, clear_retained
 

@@ -166,8 +166,8 @@ def test_run_without_keys_prints_a_working_admin_key_and_serves_https(tmp_path):
 
 
 def test_machine_secrets_generated_kept_owner_only_and_configured_ones_win(tmp_path):
-    from cnc.config import load_cell_config
     from server.cell import Cell
+    from server.config import load_cell_config
 
     cfg = load_cell_config(
         {

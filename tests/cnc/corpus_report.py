@@ -19,15 +19,21 @@ entry per file:
     expect: fail,    error: "L:C: ..." today's first error (a known gap, part 2's work)
     expect: invalid, reason: "..."     another controller's language (Okuma, Siemens 840D
                                        native, Marlin, ...): excluded from N passed / M failed
+    expect: refused-by-controller,     a program of our dialect that the real control refuses
+      alarm: "PS0041", reason: "..."   too (the defect and the evidence in reason): it must keep
+                                       failing, and its first error must name that alarm
 
 and with any of them `args: [...]` (extra `nc check` options: `--no-soft-limits`,
-`--gcode-system B`, `--units inch`, `--g54 X,Y,Z`, ...) with `setup: "..."`, why the program
+`--gcode-system B`, `--units inch`, `--g54 X,Y,Z`, `--g65 "A.125 C.625"`, `--subprogram`,
+`--config corpus_setups/NAME.yaml`: a machine file beside this module, e.g. with the macro
+variables or the M codes of the program's machine, ...) with `setup: "..."`, why the program
 needs them (the machine it was written for, the variables a setter presets): a judgement,
 kept by the regeneration like an invalid reason.
 
-A problem is a file that passed and now fails (a regression), a file marked fail or invalid
-that now passes (the baseline must be updated: the report prints the exact edit), and a
-file present on one side only. A fail file whose first error changed is reported, not a
+A problem is a file that passed and now fails (a regression), a file marked fail, invalid or
+refused-by-controller that now passes (the baseline must be updated: the report prints the
+exact edit), a refused-by-controller file whose first error no longer names its alarm (the
+record would rot), and a file present on one side only. A fail file whose first error changed is reported, not a
 problem: other work moves first errors all the time.
 
     python -m tests.cnc.corpus_report            # table + `N passed, M failed`; exit 1 on a problem
@@ -51,17 +57,21 @@ import yaml
 from tests.reference import GCODE_CORPUS, MISSING
 
 BASELINE = Path(__file__).with_name("corpus_expected.yaml")
-EXPECTS = ("pass", "fail", "invalid")
+SETUPS = "corpus_setups/"  # an `args` path starting so names a machine file beside this module
+REFUSED = "refused-by-controller"
+EXPECTS = ("pass", "fail", "invalid", REFUSED)
 # A warning line as the checker prints it: `FILE:LINE:COL: warning: ...` (or bare `warning: ...`).
 _WARNING = re.compile(r"(^|:\s)warning\b", re.IGNORECASE)
 
 
 @dataclass(frozen=True)
 class Expected:
-    expect: str  # pass | fail | invalid
-    note: str = ""  # the first error (fail) or why it is another controller's language (invalid)
+    expect: str  # pass | fail | invalid | refused-by-controller
+    note: str = ""  # the first error (fail), why it is another controller's language (invalid),
+    # or why the real control refuses it too, with the evidence (refused-by-controller)
     args: tuple[str, ...] = ()  # extra `nc check` options for this file
     setup: str = ""  # why it needs them
+    alarm: str = ""  # refused-by-controller: the alarm the first error must name (PS0041, 3001)
 
 
 @dataclass(frozen=True)
@@ -114,6 +124,8 @@ def check_argv(
     `--library FOLDER` for a program that calls programs of other files."""
     lathe = ["--kind", "lathe"] if kind == "lathe" else []
     shop = ["--library", str(library)] if library is not None else []
+    here = Path(__file__).parent
+    args = [str(here / a) if a.startswith(SETUPS) else a for a in args]
     return ["check", *lathe, *args, *shop, str(path)]
 
 
@@ -212,23 +224,44 @@ def load_baseline(path: Path = BASELINE) -> dict[str, Expected]:
         if not isinstance(entry, dict) or entry.get("expect") not in EXPECTS:
             raise ValueError(f"{where}/expect must be one of {', '.join(EXPECTS)}")
         expect = entry["expect"]
-        note = {"pass": "", "fail": entry.get("error"), "invalid": entry.get("reason")}[expect]
-        if expect != "pass" and not (isinstance(note, str) and note):
-            key = "error" if expect == "fail" else "reason"
+        key = _NOTE_KEY.get(expect)
+        note = entry.get(key) if key else ""
+        if key and not (isinstance(note, str) and note):
             raise ValueError(f"{where}/{key} is required for expect: {expect}")
+        alarm = entry.get("alarm", "")
+        if expect == REFUSED and not (isinstance(alarm, str) and _ALARM.fullmatch(alarm)):
+            raise ValueError(f"{where}/alarm is required for expect: {REFUSED}: the alarm number "
+                             "the control gives (PS0041, 3001), which the first error must name")  # fmt: skip
         args, setup = entry.get("args", []), entry.get("setup", "")
         if not (isinstance(args, list) and all(isinstance(a, str) and a for a in args)):
             raise ValueError(f"{where}/args must be a list of `nc check` options")
         if args and not (isinstance(setup, str) and setup):
             raise ValueError(f"{where}/setup is required with args (why the file needs them)")
-        out[str(name)] = Expected(expect, note or "", tuple(args), setup if args else "")
+        for a in args:
+            if a.startswith(SETUPS) and not (Path(__file__).parent / a).is_file():
+                raise ValueError(f"{where}/args: no machine file {a} beside {Path(__file__).name}")
+        out[str(name)] = Expected(expect, note or "", tuple(args), setup if args else "",
+                                  alarm if expect == REFUSED else "")  # fmt: skip
     return out
+
+
+# The note each expectation carries, by its key in the YAML.
+_NOTE_KEY = {"fail": "error", "invalid": "reason", REFUSED: "reason"}
+# An alarm number as the first error names it: PS0041, 3001 (a #3000 macro alarm), ...
+_ALARM = re.compile(r"[A-Z]{0,3}\d{1,5}")
+
+
+def names_alarm(first_error: str, alarm: str) -> bool:
+    """Whether the first error names the alarm as a word (`PS0041`, not `PS00410`)."""
+    return re.search(rf"(?<![A-Za-z0-9]){re.escape(alarm)}(?![A-Za-z0-9])", first_error) is not None
 
 
 def _entry(name: str, expected: Expected) -> str:
     fields = [f"expect: {expected.expect}"]
-    if expected.expect != "pass":
-        key = "error" if expected.expect == "fail" else "reason"
+    if expected.expect == REFUSED:
+        fields.append(f"alarm: {_quote(expected.alarm)}")
+    key = _NOTE_KEY.get(expected.expect)
+    if key:
         fields.append(f"{key}: {_quote(expected.note)}")
     if expected.args:
         fields.append(f"args: [{', '.join(_quote(a) for a in expected.args)}]")
@@ -256,10 +289,15 @@ def compare(results: Iterable[Result], baseline: Mapping[str, Expected]) -> list
             findings.append(
                 Finding(r.file, True, f"REGRESSION: passed, now fails: {r.first_error}")
             )
-        elif exp.expect in ("fail", "invalid") and r.passed:
-            what = "marked fail" if exp.expect == "fail" else f"marked invalid ({exp.note})"
+        elif exp.expect != "pass" and r.passed:
+            what = {"fail": "marked fail", "invalid": f"marked invalid ({exp.note})",
+                    REFUSED: f"marked {REFUSED} ({exp.alarm})"}[exp.expect]  # fmt: skip
             findings.append(Finding(r.file, True, f"{what}, now passes: update the baseline to "
                                                   f"`{now.strip()}`"))  # fmt: skip
+        elif exp.expect == REFUSED and not names_alarm(r.first_error, exp.alarm):
+            findings.append(Finding(r.file, True, f"marked {REFUSED} with alarm {exp.alarm}, but "
+                                                  f"the first error is now {r.first_error!r}: "
+                                                  "check the record"))  # fmt: skip
         elif exp.expect == "fail" and r.first_error != exp.note:
             findings.append(Finding(r.file, False, f"first error changed: was {exp.note!r}, "
                                                    f"now {r.first_error!r}"))  # fmt: skip
@@ -269,12 +307,17 @@ def compare(results: Iterable[Result], baseline: Mapping[str, Expected]) -> list
 
 
 def summary(results: Iterable[Result], baseline: Mapping[str, Expected]) -> str:
-    counted = [r for r in results if baseline.get(r.file, Expected("fail")).expect != "invalid"]
+    results = list(results)
+    aside = {r.file: baseline[r.file].expect for r in results
+             if r.file in baseline and baseline[r.file].expect in ("invalid", REFUSED)}  # fmt: skip
+    counted = [r for r in results if r.file not in aside]
     passed = sum(r.passed for r in counted)
-    invalid = sum(1 for r in results if r.file not in {c.file for c in counted})
+    invalid = sum(1 for e in aside.values() if e == "invalid")
+    refused = sum(1 for e in aside.values() if e == REFUSED)
     warnings = sum(r.warnings for r in results)
     return (f"{passed} passed, {len(counted) - passed} failed "
-            f"({invalid} expected-invalid excluded; {warnings} warnings)")  # fmt: skip
+            f"({invalid} expected-invalid, {refused} {REFUSED} excluded; "
+            f"{warnings} warnings)")  # fmt: skip
 
 
 def table(results: Iterable[Result], baseline: Mapping[str, Expected]) -> str:
@@ -285,6 +328,8 @@ def table(results: Iterable[Result], baseline: Mapping[str, Expected]) -> str:
         detail = r.first_error if not r.passed else ""
         if exp is not None and exp.expect == "invalid":
             got, detail = f"invalid/{got}", exp.note
+        elif exp is not None and exp.expect == REFUSED:
+            got, detail = f"refused/{got}", f"{exp.alarm}: {r.first_error}"
         rows.append(f"{r.file:34} {r.kind:5} {got:12} {r.errors:5} {r.warnings:4} "
                     f"{r.seconds:6.2f}s  {detail[:110]}")  # fmt: skip
     head = f"{'file':34} {'kind':5} {'result':12} {'errs':>5} {'warn':>4} {'time':>7}  first error / reason"
@@ -292,19 +337,22 @@ def table(results: Iterable[Result], baseline: Mapping[str, Expected]) -> str:
 
 
 def write_baseline(results: Iterable[Result], old: Mapping[str, Expected], path: Path) -> None:
-    """Regenerate from today's results; invalid entries (a judgement, not a result) are kept."""
+    """Regenerate from today's results; invalid and refused-by-controller entries (a
+    judgement, not a result) are kept."""
     lines = [
         "# Expected result of `fmscell nc check [--kind lathe] [args] FILE` on every corpus file",
         "# (../shared/reference/corpus/gcode). Checked by tests/cnc/test_corpus.py and",
         "# `make corpus`; regenerate with `make corpus-baseline` after a change that moves",
         "# results. pass | fail (error: today's first error) | invalid (reason: another",
-        "# controller's language; kept by the regeneration, edit by hand). args: extra",
-        "# `nc check` options with setup: why the file needs them (kept, edit by hand).",
+        "# controller's language; kept by the regeneration, edit by hand) |",
+        "# refused-by-controller (alarm: the alarm the real control gives too, which the first",
+        "# error must name; reason: the defect and the evidence; kept, edit by hand). args:",
+        "# extra `nc check` options with setup: why the file needs them (kept, edit by hand).",
         "files:",
     ]
     for r in results:
         exp = old.get(r.file)
-        if exp is not None and exp.expect == "invalid":
+        if exp is not None and exp.expect in ("invalid", REFUSED):
             lines.append(_entry(r.file, exp))
         else:
             now = Expected("pass") if r.passed else Expected("fail", r.first_error)

@@ -18,15 +18,13 @@ from cnc.config import (
     ConfigError,
     MachineConfig,
     builtin_machine,
-    config_reference_markdown,
-    default_cell_config,
-    load_cell_config,
     load_machine_config,
     load_machine_params,
 )
 from cnc.errors import NcError
 from cnc.kinematics import CartesianMill, Lathe, kinematics_for
 from cnc.params import DecimalStyle, MachineParams
+from server.config import config_reference_markdown, default_cell_config, load_cell_config
 
 ROOT = Path(__file__).resolve().parents[2]
 

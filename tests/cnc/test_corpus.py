@@ -21,6 +21,8 @@ def _r(name: str, passed: bool, first: str = "") -> cr.Result:
 
 
 E = cr.Expected
+# A file the real control refuses too: it must keep failing with its alarm.
+R = E(cr.REFUSED, "a groove narrower than the nose", alarm="PS0041")
 
 
 @pytest.mark.parametrize(
@@ -34,6 +36,11 @@ E = cr.Expected
         (E("invalid", "Okuma"), _r("a.nc", False, "1:1: $"), None, ""),
         (E("invalid", "Okuma"), _r("a.nc", True), True, "marked invalid (Okuma), now passes"),
         (None, _r("a.nc", False, "1:1: x"), True, 'add `a.nc: {expect: fail, error: "1:1: x"}`'),
+        (R, _r("a.nc", False, "27:1: gouge (Fanuc PS0041 interference in CRC)"), None, ""),
+        (R, _r("a.nc", False, "30:1: gouge, elsewhere (PS0041)"), None, ""),  # moved: same alarm
+        (R, _r("a.nc", True), True, "marked refused-by-controller (PS0041), now passes"),
+        (R, _r("a.nc", False, "3:1: PS00410 boom"), True, "check the record"),
+        (R, _r("a.nc", False, "3:1: M20 is not an M code"), True, "alarm PS0041, but the first"),
     ],
 )
 def test_compare_table(expected, result, problem, says):
@@ -93,11 +100,48 @@ def test_a_setup_is_kept_by_the_regeneration_and_reaches_the_command_line(tmp_pa
         cr.load_baseline(path)
 
 
-def test_bad_baseline_entry_is_refused_with_its_pointer(tmp_path: Path):
+@pytest.mark.parametrize(
+    ("entry", "says"),
+    [
+        ("{expect: fail}", r"/files/a.nc/error is required"),
+        ("{expect: refused-by-controller, alarm: PS0041}", r"/files/a.nc/reason is required"),
+        ('{expect: refused-by-controller, reason: "x"}', r"/files/a.nc/alarm is required"),
+        ('{expect: refused-by-controller, reason: "x", alarm: "an alarm"}', r"/alarm is required"),
+        ("{expect: refused}", r"/files/a.nc/expect must be one of"),
+        (
+            '{expect: pass, args: [--config, corpus_setups/none.yaml], setup: "x"}',
+            r"/files/a.nc/args: no machine file corpus_setups/none.yaml",
+        ),
+    ],
+)
+def test_bad_baseline_entry_is_refused_with_its_pointer(tmp_path: Path, entry, says):
     path = tmp_path / "expected.yaml"
-    path.write_text("files:\n  a.nc: {expect: fail}\n", encoding="utf-8")
-    with pytest.raises(ValueError, match=r"/files/a.nc/error is required"):
+    path.write_text(f"files:\n  a.nc: {entry}\n", encoding="utf-8")
+    with pytest.raises(ValueError, match=says):
         cr.load_baseline(path)
+
+
+def test_the_corpus_setups_are_machine_files_that_load():
+    from cnc.config import load_machine_config
+
+    setups = sorted((Path(cr.__file__).parent / "corpus_setups").glob("*.yaml"))
+    assert setups
+    for path in setups:
+        load_machine_config(path)  # raises ConfigError with the line of a bad key
+    argv = cr.check_argv(Path("a.nc"), "mill", ("--config", "corpus_setups/x.yaml"))
+    assert argv[2] == str(Path(cr.__file__).parent / "corpus_setups" / "x.yaml")
+
+
+def test_a_refused_by_controller_entry_round_trips_and_is_counted_apart(tmp_path: Path):
+    old = {"a.nc": R, "b.nc": E("fail", "1:1: x")}
+    results = [_r("a.nc", False, "27:1: PS0041 gouge"), _r("b.nc", False, "1:1: x"),
+               _r("c.nc", True)]  # fmt: skip
+    path = tmp_path / "expected.yaml"
+    cr.write_baseline(results, old, path)
+    assert cr.load_baseline(path) == {**old, "c.nc": E("pass")}  # the judgement is kept
+    assert cr.summary(results, old).startswith(
+        "1 passed, 1 failed (0 expected-invalid, 1 refused-by-controller excluded;"
+    )
 
 
 def test_sources_md_gives_every_corpus_file_a_kind():

@@ -200,7 +200,11 @@ def test_g47_serial_number_counts_up_in_599() -> None:
 @pytest.mark.parametrize(
     ("text", "col", "message"),
     [
-        ("G47 P0 (Ab) Z-1 R2 F100\n", 10, "G47: a lower-case letter has no glyph"),
+        (
+            "G47 P0 (A\u00e9) Z-1 R2 F100\n",
+            10,
+            "G47: character '\u00e9' has no glyph in the engraving font .A-Z, a-z",
+        ),
         ("G47 P0 (A\u00c4) Z-1 R2 F100\n", 10, "character '\u00c4' has no glyph"),
         ("G47 P0 Z-1 R2 F100\n", 5, "G47 P0 needs the text as a comment"),
         ("G47 P2 (A) Z-1 R2 F100\n", 5, "G47 P must be 0 .text., 1 .serial number. or 32..126"),
@@ -219,8 +223,7 @@ def test_g47_bad_input(text: str, col: int, message: str) -> None:
 
 
 def test_font_covers_the_haas_set_and_its_arcs_are_circles() -> None:
-    wanted = set("ABCDEFGHIJKLMNOPQRSTUVWXYZ0123456789 !\"#$%&'()*+,-./:;<=>?@[\\]^_`{|}~")
-    assert set(font.GLYPHS) == wanted
+    assert set(font.GLYPHS) == {chr(c) for c in range(32, 127)}  # Haas G47 P32..126
     for ch, strokes in font.GLYPHS.items():
         for stroke in strokes:
             x, y = stroke[0]
@@ -238,3 +241,73 @@ def test_every_glyph_engraves() -> None:
     assert any(isinstance(c, ArcFeed) for c in cmds)
     for p in (40, 41):  # the parentheses only by their code (they end a comment)
         assert run(f"G0 Z5\nG47 P{p} Z-1 R2 J6 F100\n")
+
+
+def _bbox(strokes) -> tuple[float, float, float, float]:
+    """(x min, y min, x max, y max) of a glyph, its arcs sampled every degree."""
+    xs, ys = [], []
+    for stroke in strokes:
+        x, y = stroke[0]
+        xs.append(x)
+        ys.append(y)
+        for seg in stroke[1:]:
+            if len(seg) == 5:
+                ex, ey, cx, cy, ccw = seg
+                r = math.hypot(x - cx, y - cy)
+                a0, a1 = math.atan2(y - cy, x - cx), math.atan2(ey - cy, ex - cx)
+                sweep = (a1 - a0) % (2 * math.pi) if ccw else -((a0 - a1) % (2 * math.pi))
+                if abs(sweep) < 1e-12:
+                    sweep = 2 * math.pi if ccw else -2 * math.pi  # ends where it starts
+                for k in range(361):
+                    a = a0 + sweep * k / 360
+                    xs.append(cx + r * math.cos(a))
+                    ys.append(cy + r * math.sin(a))
+            x, y = seg[0], seg[1]
+            xs.append(x)
+            ys.append(y)
+    return (round(min(xs), 3), round(min(ys), 3), round(max(xs), 3), round(max(ys), 3))
+
+
+@pytest.mark.parametrize(
+    ("letters", "y_min", "y_max"),
+    [
+        ("acemnorsuvwxz", 0.0, 4.0),  # the x-height: 4 of the cap height's 6
+        ("bdhkl", 0.0, 6.0),  # ascenders: up to the cap height
+        ("gpqy", -2.0, 4.0),  # descenders: 2 below the base line
+        ("f", 0.0, 6.0),
+        ("t", 0.0, 6.0),
+        ("i", 0.0, 5.5),  # the dot above the x-height
+        ("j", -2.0, 5.5),
+    ],
+)
+def test_lower_case_glyphs_sit_on_the_base_line(letters, y_min, y_max) -> None:
+    for ch in letters:
+        x0, y0, x1, y1 = _bbox(font.GLYPHS[ch])
+        assert (y0, y1) == (y_min, y_max), ch
+        assert x0 >= 0.0 and x1 <= font.WIDTH, ch  # inside the cell's width
+
+
+def test_lower_case_stroke_counts() -> None:
+    # strokes = plunges of the cutter per letter
+    counts = {ch: len(font.GLYPHS[ch]) for ch in "abcdefghijklmnopqrstuvwxyz"}
+    assert counts == {"a": 2, "b": 2, "c": 1, "d": 2, "e": 1, "f": 2, "g": 2, "h": 2, "i": 2,
+                      "j": 2, "k": 3, "l": 1, "m": 3, "n": 2, "o": 1, "p": 2, "q": 2, "r": 2,
+                      "s": 1, "t": 2, "u": 2, "v": 1, "w": 1, "x": 2, "y": 2, "z": 1}  # fmt: skip
+    # each lower-case letter differs from its capital
+    for ch in counts:
+        assert font.GLYPHS[ch] != font.GLYPHS[ch.upper()], ch
+
+
+def test_g47_engraves_a_word_in_lower_case_as_written() -> None:
+    # "Haas": the comment's case is kept; at J6 one grid unit is 1 mm, cells 6 mm apart
+    got = engrave("Haas")
+    plunges = [v for a, b in zip(got, got[1:], strict=False)
+               if a[0] == "T" and b[0] == "F" and b[4] == 50.0 for v in b[1:3]]  # fmt: skip
+    # H: 3 strokes; a (cells at X16, X22): the bowl from (4, 2), then the stem from (4, 4);
+    # s (X28): from (2.866, 3.5)
+    assert plunges == pytest.approx([10, 20, 14, 20, 10, 23,
+                                     20, 22, 20, 24, 26, 22, 26, 24,
+                                     28 + 2 + 3**0.5 / 2, 23.5])  # fmt: skip
+    arcs = [m for m in got if m[0] in ("CW", "CCW")]
+    assert [m[0] for m in arcs] == ["CCW", "CCW", "CCW", "CW"]  # a's bowls, s's two arcs
+    assert engrave("l") != engrave("L")  # the lower-case l is not the capital

@@ -274,8 +274,15 @@ def test_g53_refusals() -> None:
         run("G53 G2 X1 Y0 I1 F10\n")
     with pytest.raises(NcError, match="G53 moves only with G0 or G1"):
         run("G3 X1 Y1 R1 F10\nG53 X1\n")
-    with pytest.raises(NcError, match="G53 needs absolute mode"):
-        run("G91\nG53 G0 X1\n")
+
+
+def test_g53_under_g91_moves_by_the_increment() -> None:
+    # O919100 (a Kitamura HMC's tool measuring macro): `G91 G53 G00 X#21 Y#22` goes by the
+    # increment from where the tool stands, as Fanuc (G53 ignored under G91) and Mitsubishi
+    params = MachineParams(axes=BIG)
+    cmds = run("G0 X10 Y10 Z10\nG91 G53 G0 X-5 Y2\nG53 G1 Z-3 F100\n", params=params)
+    assert [c.end for c in cmds[-2:]] == [(5.0, 12.0, 10.0), (5.0, 12.0, 7.0)]
+    assert isinstance(cmds[-1], StraightFeed)
 
 
 @pytest.mark.parametrize("p", ["0", "49", "1.5"])

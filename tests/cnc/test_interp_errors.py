@@ -50,7 +50,6 @@ LATHE = MachineParams(
         ("G68 R30\nG18\n", 2, 1, "rotation is active"),
         ("G0 X1 (unterminated\n", 1, 7, "unterminated comment"),
         ("G0 X1.2.3\n", 1, 4, "malformed number"),
-        ("G53 G91 X1\n", 1, 1, "absolute"),
         ("G30 P3 X1\n", 1, 5, "third/fourth"),
     ],
 )

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import os
 import signal
 import socket
 import subprocess
@@ -171,3 +172,20 @@ def test_standalone_machine_powers_on_writes_its_ready_file_and_takes_panel_requ
         if proc.poll() is None:
             proc.kill()
     assert proc.returncode == 0, err
+
+
+def test_a_bind_address_off_loopback_needs_the_shared_secret(tmp_path):
+    """`--bind 10.x.y.z` puts the DNC port and the simulation face within reach of other
+    hosts: refused without a shared secret, before any face is bound."""
+    cfg = tmp_path / "cell.yaml"
+    cfg.write_text(
+        "machines:\n  mill9:\n    base: mill3\n    ports: {dnc: 0, modbus: 0, shdr: 0}\n"
+    )
+    env = {k: v for k, v in os.environ.items() if k != "FMSCELL_MACHINE_SECRET"}
+    args = [sys.executable, "-c", RUNNER, "--config", str(cfg), "--name", "mill9", "--ideal"]
+    run = subprocess.run(
+        [*args, "--bind", "10.77.0.2"], capture_output=True, text=True, timeout=60, env=env
+    )
+    assert run.returncode == 2, run.stderr
+    assert "--bind 10.77.0.2 is reachable from other hosts" in run.stderr
+    assert "need a shared secret" in run.stderr and run.stdout == ""

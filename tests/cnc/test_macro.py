@@ -395,6 +395,26 @@ def test_persistent_variables_survive_a_new_interpreter_common_ones_do_not() -> 
     assert ip.vars.loc == {1: 3.0} and common == {100: 3.0}
 
 
+def test_fanuc_30i_added_common_variables() -> None:
+    # A Kitamura HMC's macros (O919100) read sensor data from #901057..#901064: the 30i-B
+    # added common variables, #100000-#199999 cleared like #100-#499, #500000-#999999 kept.
+    store: dict[int, float] = {}
+    common: dict[int, float] = {}
+    run("#100000=1\n#199999=2\n#500000=3\n#901064=-412.5\n#999999=5\n",
+        macro_variables=store, common_variables=common)  # fmt: skip
+    assert common == {100000: 1.0, 199999: 2.0}
+    assert store == {500000: 3.0, 901064: -412.5, 999999: 5.0}
+    ip, _ = run("#26=#901064\n#1=#100000\n", macro_variables=store)
+    assert ip.vars.loc == {26: -412.5}  # #100000 vacant after the "power cycle"
+    for n in (200000, 499999, 1000000):  # between and beyond the added ranges
+        with pytest.raises(NcError, match=f"PS0115 variable #{n} does not exist"):
+            run(f"#1=#{n}\n")
+    from cnc.machine_data import MachineData
+
+    md = MachineData.from_dict({"macro_variables": {"901064": -412.5}})
+    assert md.macro_variables[901064] == -412.5  # kept in the machine data too
+
+
 def test_3006_stops_with_a_message() -> None:
     ip, cmds = run("G0 X1\n#3006=1 (CHECK THE PART)\nG0 X2\n")
     stops = [c for c in cmds if isinstance(c, ProgramStop)]

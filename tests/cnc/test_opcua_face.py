@@ -32,6 +32,10 @@ N40 M30
 %
 """
 DEADLINE_S = 30.0  # generous: the box may be loaded
+# asyncua's client probes the server every second and, by default, calls the connection
+# lost when one probe takes over a second: on a box at load 20+ that ends sessions the
+# server still serves. The tests' clients probe every 30 s with a 30 s allowance.
+WATCHDOG_S = 30.0
 
 
 def build(**ports) -> Machine:
@@ -95,7 +99,7 @@ def wait_for(predicate, what: str, step=None) -> None:
 def machine():
     """One machine for the module: an asyncua server's start (its standard address space)
     takes seconds on a loaded box."""
-    mach = build()
+    mach = build(dnc=0)  # the DNC port carries the host's data (HOST PUT)
     faces = mach.start_faces(simulation=False)
     yield mach
     faces.stop()
@@ -110,7 +114,7 @@ def client_loop():
 
 
 def connect(loop: LoopThread, url: str, **kw) -> Client:
-    client = Client(url, timeout=10)
+    client = Client(url, timeout=10, watchdog_intervall=WATCHDOG_S)
     for key, value in kw.items():
         getattr(client, f"set_{key}")(value)
     loop.run(client.connect, timeout=30)
@@ -198,6 +202,8 @@ def test_subscribed_values_follow_a_running_program(machine, client_loop):
                 "Production.ActiveProgram.State.CurrentState",
                 "Production.ActiveProgram.Sha256",
                 "Monitoring.Stacklight.Green.SignalOn",
+                "Monitoring.MachineTool.MachineryItemState.CurrentState",
+                "Monitoring.Channel1.ChannelModifiers.OptionalStop",
             ]
             await sub.subscribe_data_change([client.get_node(ua.NodeId(key(k), ns)) for k in keys])
             return sub
@@ -209,6 +215,7 @@ def test_subscribed_values_follow_a_running_program(machine, client_loop):
             step=lambda: machine.step(1),
         )
         n = machine.load_program(PROGRAM)
+        machine.command("optional_stop", on=True)  # the operator's M01 switch
         machine.command("mode", mode="AUTO")
         machine.command("select_program", number=n)
         machine.command("cycle_start")
@@ -225,6 +232,9 @@ def test_subscribed_values_follow_a_running_program(machine, client_loop):
         assert seen.last(key("Production.ActiveProgram.Name")) == "O0040"
         assert seen.last(key("Production.ActiveProgram.State.CurrentState")).Text == "Running"
         assert seen.last(key("Monitoring.Stacklight.Green.SignalOn")) is True
+        item_state = key("Monitoring.MachineTool.MachineryItemState.CurrentState")
+        assert seen.last(item_state).Text == "Executing"
+        assert seen.last(key("Monitoring.Channel1.ChannelModifiers.OptionalStop")) is True
         sha = machine.memory.directory()[0].sha256
         assert seen.last(key("Production.ActiveProgram.Sha256")) == sha
         assert machine.run_until(lambda mm: mm.status.execution == "PROGRAM_COMPLETED", 60.0)
@@ -237,6 +247,8 @@ def test_subscribed_values_follow_a_running_program(machine, client_loop):
             step=lambda: machine.step(1),
         )
         assert seen.last(key("Monitoring.Channel1.ChannelState")) == 2
+        assert seen.last(item_state).Text == "NotExecuting"
+        machine.command("optional_stop", on=False)
         lines = seen.history(key("Production.ActiveProgram.Line"))
         assert any(line >= started_line for line in lines), lines
         # lockstep: source timestamps are the machine's (2000-01-01Z epoch + machine time)
@@ -348,6 +360,62 @@ def test_the_hosts_revision_and_jobs_appear_under_production(machine, client_loo
         client_loop.run(client.disconnect)
 
 
+def test_the_hosts_data_over_the_dnc_port_and_bad_documents_refused_with_the_pointer(
+    machine, client_loop
+):
+    """HOST PUT on the machine's DNC port, as a host does for a machine in its own
+    process: the face shows it; a bad document is refused (alarm 2012) naming the field,
+    and the face keeps what it had."""
+    from dnc.transfer import DncClient, TransferError
+
+    face = machine.faces.opcua
+    if machine.status.program != "O0040":
+        machine.command("select_program", number=machine.load_program(PROGRAM))
+        assert machine.run_until(lambda mm: mm.status.program == "O0040", 1.0)
+    doc = {
+        "programs": {"O0040": {"revision": "31", "sha256": "e" * 64}},
+        "jobs": [
+            {
+                "identifier": "job9",
+                "program": "O0040",
+                "runs_planned": 3,
+                "runs_completed": 0,
+                "parts_completed": 0,
+                "state": "Initializing",
+            }
+        ],
+    }
+    client = DncClient("127.0.0.1", machine.faces.dnc.bound_port, timeout_s=15)
+    with client:
+        answer = client.host_data(doc)
+        assert set(answer) == {"commands"}
+        bad = {**doc, "jobs": [{**doc["jobs"][0], "runs_planned": -1}]}
+        with pytest.raises(TransferError, match=r"/jobs/0/runs_planned: an integer") as err:
+            client.host_data(bad)
+        assert err.value.alarm == 2012
+        # not fatal to the connection: the next document on it is read
+        with pytest.raises(TransferError, match=r"/programs/O0040/sha256: 64 lower-case hex"):
+            client.host_data({"programs": {"O0040": {"sha256": "not hex"}}})
+    opc = connect(client_loop, face.address)
+    try:
+
+        async def read(k: str):
+            ns = await opc.get_namespace_index("urn:fmscell:machine:mill1")
+            return await opc.get_node(ua.NodeId(key(k), ns)).read_value()
+
+        wait_for(
+            lambda: client_loop.run(lambda: read("Production.ActiveProgram.Revision")) == "31",
+            "the revision sent over the DNC port",
+            step=lambda: machine.step(5),
+        )
+        assert client_loop.run(lambda: read("Production.ActiveProgram.Sha256")) == "e" * 64
+        job = "Production.ProductionPlan.job9"
+        assert client_loop.run(lambda: read(f"{job}.RunsPlanned")) == 3
+    finally:
+        client_loop.run(opc.disconnect)
+    face.set_host_data(HostData())
+
+
 def test_bad_input_unknown_nodes_refused_writes_and_a_client_that_never_reads(machine, client_loop):
     url = machine.faces.opcua.address
     client = connect(client_loop, url)
@@ -368,6 +436,149 @@ def test_bad_input_unknown_nodes_refused_writes_and_a_client_that_never_reads(ma
         client_loop.run(client.disconnect)
 
 
+def test_malformed_requests_get_status_codes_and_the_server_keeps_serving(machine, client_loop):
+    """Bytes that are not OPC UA, a truncated Hello, a message claiming 2 GiB, browsing and
+    reading beyond the address space, a method called with arguments it does not take:
+    each ends in a status code or a closed connection, never in a stopped server."""
+    import socket
+    import struct
+
+    face = machine.faces.opcua
+    garbage = [
+        b"GET / HTTP/1.1\r\nHost: x\r\n\r\n",
+        b"HELF" + struct.pack("<I", 12),  # truncated Hello
+        b"HELF" + struct.pack("<I", 0x7FFFFFFF) + b"\x00" * 64,  # claims 2 GiB
+        b"MSGF" + struct.pack("<I", 24) + b"\xff" * 16,  # a message on no channel
+        bytes(range(256)) * 4,
+    ]
+    for data in garbage:
+        with socket.create_connection((face.host, face.bound_port), timeout=10) as sock:
+            sock.sendall(data)
+            sock.settimeout(10)
+            try:
+                while sock.recv(4096):  # an ERR message, then the server closes
+                    pass
+            except (TimeoutError, ConnectionError):
+                pass
+    client = connect(client_loop, face.address)
+    try:
+
+        async def probe():
+            ns = await client.get_namespace_index("urn:fmscell:machine:mill1")
+            # browsing a node that is not there: the browse result's status
+            desc = ua.BrowseDescription()
+            desc.NodeId = ua.NodeId("mill1.Monitoring.Nowhere", ns)
+            desc.BrowseDirection = ua.BrowseDirection.Forward
+            desc.ReferenceTypeId = ua.NodeId(ua.ObjectIds.References)
+            desc.IncludeSubtypes = True
+            params = ua.BrowseParameters()
+            params.NodesToBrowse = [desc]
+            (result,) = await client.uaclient.browse(params)
+            assert result.StatusCode.value in (  # asyncua answers Invalid for a browse
+                ua.StatusCodes.BadNodeIdUnknown,
+                ua.StatusCodes.BadNodeIdInvalid,
+            )
+            # an attribute a variable does not have, an attribute id that does not exist
+            line = client.get_node(ua.NodeId(key("Monitoring.Channel1.Line"), ns))
+            for attr in (ua.AttributeIds.IsAbstract, 99):
+                rv = ua.ReadValueId()
+                rv.NodeId, rv.AttributeId = line.nodeid, attr
+                read = ua.ReadParameters()
+                read.NodesToRead = [rv]
+                (dv,) = await client.uaclient.read(read)
+                assert dv.StatusCode.value == ua.StatusCodes.BadAttributeIdInvalid, attr
+            # a method call from this anonymous session: refused before anything is looked
+            # up (the operator's malformed calls: tests/cnc/test_opcua_security.py)
+            call = ua.CallMethodRequest()
+            call.ObjectId = ua.NodeId("mill1.Nowhere", ns)
+            call.MethodId = ua.NodeId(key("Monitoring.Channel1.Start"), ns)
+            with pytest.raises(ua.uaerrors.BadUserAccessDenied):
+                await client.uaclient.call([call])
+            return await line.read_value()
+
+        assert isinstance(client_loop.run(probe), int)  # still answering on that session
+    finally:
+        client_loop.run(client.disconnect)
+
+
+def test_a_stalled_server_thread_cannot_hold_the_machines_cycle(machine, client_loop):
+    """The machine only stores a reference for the server (`publish`): with the server's
+    event loop blocked outright (a worst case no client can do worse than), the machine
+    still steps every lockstep cycle, its clock exact; the server shows the newest state
+    once it runs again."""
+    face = machine.faces.opcua
+    release = threading.Event()
+    blocked = threading.Event()
+
+    def block() -> None:
+        blocked.set()
+        release.wait(60)
+
+    machine.faces.opcua_loop.loop.call_soon_threadsafe(block)
+    assert blocked.wait(30)
+    try:
+        c0, cycles = machine.cycle, 500
+        started = time.perf_counter()
+        machine.step(cycles)
+        took = time.perf_counter() - started
+        assert machine.cycle == c0 + cycles
+        samples = face.samples
+    finally:
+        release.set()
+    assert took < DEADLINE_S  # it returned at all, with the server frozen throughout
+    client = connect(client_loop, face.address)
+    try:
+
+        async def line():
+            ns = await client.get_namespace_index("urn:fmscell:machine:mill1")
+            n = client.get_node(ua.NodeId(key("Monitoring.Channel1.Line"), ns))
+            return await n.read_value()
+
+        wait_for(lambda: face.samples > samples, "the server sampling again")
+        assert client_loop.run(line) == machine.status.line
+    finally:
+        client_loop.run(client.disconnect)
+
+
+def test_anonymous_start_is_refused_and_kept_for_the_host_not_the_machines_cycle(
+    machine, client_loop
+):
+    """Start/Stop are the panel's cycle start / feed hold for operators and above; an
+    anonymous session (the default endpoint) is refused. The refusal is kept for the host's
+    audit, not put in the machine's event log (a flood of refused calls must not add work
+    to the machine's cycle); a call made is logged by the machine."""
+    from cnc.faces.opcua import FaceCommand
+
+    face = machine.faces.opcua
+    face.take_commands()
+    client = connect(client_loop, face.address)
+    try:
+
+        async def start():
+            ns = await client.get_namespace_index("urn:fmscell:machine:mill1")
+            channel = client.get_node(ua.NodeId(key("Monitoring.Channel1"), ns))
+            await channel.call_method(ua.NodeId(key("Monitoring.Channel1.Start"), ns))
+
+        with pytest.raises(ua.uaerrors.BadUserAccessDenied):
+            client_loop.run(start)
+    finally:
+        client_loop.run(client.disconnect)
+    refused = face.take_commands()
+    assert [(c.user, c.command, c.result) for c in refused] == [
+        ("anonymous", "call", "BadUserAccessDenied")
+    ]
+    before = len(machine.events.of_kind("command"))
+    machine.step(2)
+    assert len(machine.events.of_kind("command")) == before
+    # what an operator's Stop does (tests/cnc/test_opcua_security.py makes the call): the
+    # panel button pressed at the machine's next cycle, and the call in its event log
+    face.press("feed_hold")
+    face.on_command(FaceCommand("ops", "feed_hold", "done", "Stop on Channel1", 0.0))
+    machine.step(2)
+    assert machine.events.of_kind("operator")[-1].text == "PanelFeedHold pressed"
+    assert machine.events.of_kind("command")[-1].text == "OPC UA feed_hold by ops: done"
+
+
 def test_many_clients_at_once_and_a_silent_subscriber_do_not_make_the_machine_late(
     machine, client_loop
 ):
@@ -384,7 +595,7 @@ def test_many_clients_at_once_and_a_silent_subscriber_do_not_make_the_machine_la
 
     # a silent subscriber: creates a subscription, then never publishes (stalled reader)
     async def silent():
-        c = Client(url, timeout=10)
+        c = Client(url, timeout=10, watchdog_intervall=WATCHDOG_S)
         await c.connect()
         params = ua.CreateSubscriptionParameters()
         params.RequestedPublishingInterval = 100
@@ -403,9 +614,11 @@ def test_many_clients_at_once_and_a_silent_subscriber_do_not_make_the_machine_la
         worst = max(worst, time.perf_counter() - t0)
     ok, errors = future.result()
     assert ok >= 90, errors[:3]  # asyncua's default session limit is far above 100
-    # the machine's step never waited on the server: a 2 ms cycle's work stays far below
-    # a lock held across a client's request (generous for a loaded box)
-    assert worst < 0.5, worst
+    # the machine's step never waited for the crowd (that would be the whole connect
+    # storm, tens of seconds); one step may still lose the interpreter to the server's
+    # thread for a while on a loaded box (2.6 s seen at load 10): the stalled-server test
+    # below proves that no step waits for the server at all
+    assert worst < DEADLINE_S / 3, worst
     after = connect(client_loop, url)  # still serving
     client_loop.run(after.disconnect)
     client_loop.run(quiet.disconnect)

@@ -21,6 +21,7 @@ from cnc.faces.opcua import OpcUaFace, Security
 from cnc.status import Alarm, MachineStatus
 
 USERS = {("ops", "operator-password-1234"): 2, ("view", "viewer-password-12345"): 1}
+PRESSED: list[str] = []  # the panel buttons the face pressed (Start, Stop)
 CLIENT_URI = "urn:fmscell:test-client"
 
 
@@ -77,6 +78,7 @@ def secured(tmp_path_factory):
         "mill1",
         ("X", "Y", "Z"),
         security=Security(base / "server", trusted, authenticate=lambda u, p: USERS.get((u, p))),
+        press=lambda button: PRESSED.append(button),
     )
     loop = asyncio.new_event_loop()
     loop.run_until_complete(face.start())
@@ -86,7 +88,7 @@ def secured(tmp_path_factory):
 
 
 async def session(face, cert, user=None, password=None) -> Client:
-    client = Client(face.address, timeout=15)
+    client = Client(face.address, timeout=15, watchdog_intervall=30.0)  # loaded box
     client.application_uri = CLIENT_URI
     await client.set_security(
         SecurityPolicyBasic256Sha256,
@@ -166,6 +168,47 @@ def test_a_viewer_reads_but_only_an_operator_acknowledges_an_alarm(secured):
             await viewer.disconnect()
 
     loop.run_until_complete(run())
+
+
+def test_only_an_operator_starts_and_stops_and_every_call_is_kept_for_the_audit(secured):
+    loop, face, mine, _, _ = secured
+    face.take_commands()  # what earlier tests did
+
+    async def run():
+        viewer = await session(face, mine, "view", "viewer-password-12345")
+        ops = await session(face, mine, "ops", "operator-password-1234")
+        try:
+            ns = await ops.get_namespace_index("urn:fmscell:machine:mill1")
+            start, stop = (
+                ua.NodeId(f"mill1.Monitoring.Channel1.{m}", ns) for m in ("Start", "Stop")
+            )
+            channel = ua.NodeId("mill1.Monitoring.Channel1", ns)
+            with pytest.raises(ua.uaerrors.BadUserAccessDenied):
+                await viewer.get_node(channel).call_method(start)
+            assert PRESSED == []
+            await ops.get_node(channel).call_method(start)
+            await ops.get_node(channel).call_method(stop)
+            assert PRESSED == ["cycle_start", "feed_hold"]
+            # malformed calls: an argument Start does not take, an object that is not there
+            with pytest.raises(ua.uaerrors.BadTooManyArguments):
+                await ops.get_node(channel).call_method(start, ua.Variant(1, ua.VariantType.Int32))
+            with pytest.raises((ua.uaerrors.BadNodeIdInvalid, ua.uaerrors.BadNodeIdUnknown)):
+                await ops.get_node(ua.NodeId("mill1.Nowhere", ns)).call_method(start)
+            assert PRESSED == ["cycle_start", "feed_hold"]
+        finally:
+            await ops.disconnect()
+            await viewer.disconnect()
+
+    PRESSED.clear()
+    loop.run_until_complete(run())
+    calls = [(c.user, c.command, c.result) for c in face.take_commands()]
+    assert calls == [
+        ("view", "call", "BadUserAccessDenied"),
+        ("ops", "cycle_start", "done"),
+        ("ops", "feed_hold", "done"),
+        ("ops", "cycle_start", "BadTooManyArguments"),
+    ]
+    assert face.take_commands() == []  # taken once
 
 
 @pytest.mark.parametrize("who", ["wrong password", "anonymous", "stranger", "expired"])

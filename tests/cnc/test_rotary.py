@@ -238,3 +238,51 @@ def test_mill5_tool_tip_of_the_home_pose_is_the_programmed_point():
     tip = kin.tool_tip((j.x, j.y, j.z, j.b, j.c))
     assert tip == pytest.approx((20.0, 0.0, -155.0), abs=1e-9)
     assert math.isfinite(j.c)
+
+
+# --- Macro B system variables of the rotary 4th axis (#5004 family, #52x4 offsets) --------
+
+# G54 carries an A component of 10 deg, so program and machine angles differ by 10.
+G54_A10 = {1: (0.0, 0.0, 0.0, 10.0)}
+ROTARY_VARIABLES = [
+    # program (the value read into #100), expected #100, in degrees
+    ("G90 G0 A30\n#100=#5004", 30.0),  # block end point, program angle
+    ("G90 G0 A30\n#100=#5024", 40.0),  # machine angle = program + G54 A
+    ("G90 G0 A30\n#100=#5044", 30.0),  # current position, program angle
+    ("G90 G0 A30\n#100=#5064", 30.0),  # skip position (no G31 on A: where it stands)
+    ("G90 G0 A30\n#100=#5084", 0.0),  # tool length offset along A: none
+    ("G90 G0 A30\n#100=#5104", 0.0),  # servo deviation: the interpreter's axes are ideal
+    ("G20 G90 G0 A30\n#100=#5004", 30.0),  # degrees: never scaled by G20
+    ("G91 G0 A-45\n#100=#5024", -35.0),  # start at machine 10 (program 0), then -45
+    ("#100=#5224", 10.0),  # G54's A component
+    ("#100=#5204", 0.0),  # EXT's: none
+    ("G55 G90 G0 A30\n#100=#5044", 30.0),  # G55 has no A offset: machine = program
+    ("G55 G90 G0 A30\n#100=#5024", 30.0),
+    ("#5224=25.\nG90 G0 A5\n#100=#5024", 30.0),  # a written offset moves the next A move
+    ("G90 G0 A30\n#5224=0\n#100=#5004", 40.0),  # ... and the program angle of the table
+    ("#7004=7.\nG54.1 P1 G90 G0 A0\n#100=#5024", 7.0),  # G54.1 P1's A component
+    ("G90 G0 A30\n#100=#5005", 0.0),  # no 5th axis on a mill4: 0, as X Y Z's #5004 on mill3
+]
+
+
+def _read(program: str, params: MachineParams = MILL4, **kw) -> float | None:
+    kw = {"start": (-100.0, -100.0, -100.0, 10.0), "work_offsets": G54_A10, **kw}
+    ip = Interpreter(params, **kw)
+    list(ip.run(program + "\nM30\n"))
+    return ip.vars.common.get(100)
+
+
+@pytest.mark.parametrize(("program", "value"), ROTARY_VARIABLES)
+def test_rotary_axis_system_variables(program, value):
+    assert _read(program) == pytest.approx(value, abs=1e-9)
+
+
+def test_rotary_variables_on_the_shipped_mill4_and_a_mill_without_a():
+    mill4 = builtin_machine("mill4").params
+    ip = Interpreter(mill4, machine_data=builtin_machine("mill4").machine_data.initial())
+    list(ip.run("G90 G54 G0 A-90.\n#100=#5004\n#101=#5024\nM30\n"))
+    assert (ip.vars.common[100], ip.vars.common[101]) == (-90.0, -90.0)
+    # a 3-axis mill has no 4th axis: reading gives 0, writing its offset is refused
+    assert _read("#100=#5004", MachineParams(), start=None, work_offsets=None) == 0.0
+    with pytest.raises(NcError, match=r"PS0115 variable #5224 does not exist"):
+        list(Interpreter(MachineParams()).run("#5224=5.\nM30\n"))

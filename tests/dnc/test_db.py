@@ -186,3 +186,39 @@ def test_0007_program_dependencies_scans_the_revisions_stored_before_it(tmp_path
     ]
     assert lib.calls(sub.id) == []
     eng.dispose()
+
+
+def test_0010_machine_requirements_scans_the_g_code_stored_before_it(tmp_path):
+    """0010 finds the axes each G-code revision already stored needs (the NC check only
+    where a rotary address is named), leaves sources and machines unknown; its downgrade
+    drops the columns."""
+    from dnc.checker import nc_checker
+
+    eng = make_engine(f"sqlite:///{tmp_path / 'r.db'}")
+    migrate(eng)
+    lib = Library(session_factory(eng), checker=nc_checker)
+    texts = {
+        40: "%\nO40\nG0 X0 Y0 Z20 A0\nG1 X20 A90 F600\nM30\n%\n",
+        41: "%\nO41 (PART A1)\nG0 X0 Y0 Z20\nM30\n%\n",  # an A in a comment only
+        42: "%\nO42\nG65 P9010 A1. B2.\nM30\n%\n",  # macro arguments
+        43: "%\nO43\nG0 X10 Z2\nM30\n%\n",
+    }
+    revs = {
+        n: lib.create_program(
+            number=n, name=f"p{n}", text=t, machine_kind="lathe" if n == 43 else "mill"
+        )[1].id
+        for n, t in texts.items()
+    }
+    lib.register_machine("mill1", "mill", axes=("X", "Y", "Z"))
+    downgrade(eng, "0009")
+    assert "axes" not in {c["name"] for c in sa.inspect(eng).get_columns("revisions")}
+    migrate(eng)
+    got = {n: lib.get_revision(r).axes for n, r in revs.items()}
+    assert got == {
+        40: ["X", "Y", "Z", "A"],
+        41: ["X", "Y", "Z"],
+        42: ["X", "Y", "Z"],
+        43: ["X", "Z"],
+    }
+    assert lib.machine("mill1")["axes"] is None  # registered again by the cell at its start
+    eng.dispose()

@@ -171,7 +171,10 @@ def test_program_from_machine_is_a_candidate_and_never_overwrites(library):
 
 def test_machine_registry_is_idempotent_by_name(library):
     library.register_machine("lathe1", "lathe", memory_bytes=1000)
-    library.register_machine("lathe1", "lathe", memory_bytes=2000, dnc_profile={"parity": True})
+    assert library.machine("lathe1")["axes"] is None  # not known: judged by its kind alone
+    library.register_machine(
+        "lathe1", "lathe", memory_bytes=2000, dnc_profile={"parity": True}, axes=("X", "Z")
+    )
     assert library.machines() == [
         dict(
             name="lathe1",
@@ -181,6 +184,7 @@ def test_machine_registry_is_idempotent_by_name(library):
             status_address="",
             memory_bytes=2000,
             dnc_profile={"parity": True},
+            axes=["X", "Z"],
         )
     ]
     with pytest.raises(NotFound):

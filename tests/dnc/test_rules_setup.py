@@ -8,10 +8,11 @@ from datetime import UTC, datetime, timedelta
 
 import pytest
 
-from cnc.config import ConfigError, load_cell_config
+from cnc.config import ConfigError
 from dnc.jobs import Jobs, Scheduler
 from dnc.rules import SameProgramFirst, edd, fifo, rule_named, spt
 from dnc.scheduler import Allocate, JobState, MachineView, decide
+from server.config import load_cell_config
 from tests.dnc.test_jobs import worker_started
 from tests.dnc.test_rules_scheduler import jv
 

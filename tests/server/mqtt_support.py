@@ -39,7 +39,7 @@ def _agent_class():
 def live_state(names=("mill1", "lathe1"), *, bases=None):
     """A MonitoringModel over a real MTConnect agent for machines named `names` (mill3, or
     lathe2 for a name starting with "lathe"), each connected, AVAILABLE, AUTOMATIC, READY."""
-    from cnc.config import load_cell_config
+    from server.config import load_cell_config
     from server.host import MonitoringModel
 
     Agent = _agent_class()

@@ -16,8 +16,8 @@ import time
 import pytest
 import yaml
 
-from cnc.config import load_cell_config
 from server.cell import Cell, default_cell, fault_spec, run_cell
+from server.config import load_cell_config
 from server.cycle_audit import HostRequests
 from server.supervisor import MachineLink, MachineUnavailable
 from tests.server.test_supervisor import ScriptedPanel, SimFace, free_port

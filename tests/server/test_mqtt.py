@@ -14,7 +14,8 @@ from pathlib import Path
 import pytest
 from typer.testing import CliRunner
 
-from cnc.config import ConfigError, load_cell_config
+from cnc.config import ConfigError
+from server.config import load_cell_config
 from server.mqtt import CellFace, MqttSettings, mqtt_settings, parse_broker
 from tests.server.mqtt_support import (
     SHARED_BROKER,

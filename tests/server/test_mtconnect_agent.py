@@ -462,7 +462,7 @@ def test_probe_document():
 
 
 def test_agent_from_the_default_cell():
-    from cnc.config import default_cell_config
+    from server.config import default_cell_config
 
     a = Agent.from_cell(default_cell_config(), clock=FakeClock())
     assert [d.name for d in a.devices] == list(default_cell_config().machines)

@@ -79,3 +79,99 @@ def test_opcua_users_are_the_api_keys_with_their_roles():
     assert check("vic", "vic-key-0123456789") == 1  # viewer
     assert check("vic", "ann-key-0123456789") is None  # another user's key
     assert check("ann", "wrong-key-000000000") is None
+
+
+class AuditingLibrary(Library):
+    def __init__(self) -> None:
+        self.notes: list[tuple] = []
+
+    def note_transfer(self, machine, action, *, actor="dnc", **detail):
+        self.notes.append((machine, action, actor, detail))
+
+
+class HostPort:
+    """A machine's DNC port as the feed's client sees it (HOST PUT), or one that is down."""
+
+    def __init__(self, commands=None, down: str = "") -> None:
+        self.commands, self.down, self.docs = commands or [], down, []
+
+    def __enter__(self):
+        if self.down:
+            raise ConnectionRefusedError(self.down)
+        return self
+
+    def __exit__(self, *exc):
+        return False
+
+    def host_data(self, doc):
+        self.docs.append(doc)
+        commands, self.commands = self.commands, []
+        return {"commands": commands}
+
+
+def test_the_feed_sends_each_machine_its_data_and_audits_what_its_clients_did():
+    from server.opcua_feed import OpcUaFeed
+
+    calls = [
+        {"user": "ann", "command": "cycle_start", "result": "done", "detail": "Start"},
+        {"user": "vic", "command": "call", "result": "BadUserAccessDenied", "detail": "vic"},
+    ]
+    ports = {"mill1": HostPort(calls), "mill2": HostPort(down="connection refused")}
+    links = {name: NS(ports={"opcua": 4841 + i}, local=None) for i, name in enumerate(ports)} | {
+        "lathe1": NS(ports={"opcua": None}, local=None)
+    }  # no OPC UA face: nothing sent
+    library = AuditingLibrary()
+    feed = OpcUaFeed(library, Dispatches(), Jobs(), links, client=lambda name: ports[name])
+    feed.tick()
+    sent = ports["mill1"].docs[0]
+    assert sent["programs"] == {"O0100": {"revision": "7", "sha256": "a" * 64}}
+    assert [j["identifier"] for j in sent["jobs"]] == ["job3"]
+    assert library.notes == [
+        (
+            "mill1",
+            "machine.command",
+            "ann",
+            {"command": "cycle_start", "face": "opcua", "detail": "Start"},
+        ),
+        (
+            "mill1",
+            "machine.command_refused",
+            "vic",
+            {"command": "call", "face": "opcua", "detail": "vic", "reason": "BadUserAccessDenied"},
+        ),
+    ]
+    assert feed.unreachable == {"mill2": "connection refused"}  # tried again next tick
+    feed.tick()
+    assert len(ports["mill1"].docs) == 2 and len(library.notes) == 2
+
+
+def test_a_machine_in_this_process_gets_its_data_by_a_direct_call():
+    from cnc.faces.opcua import FaceCommand
+    from server.opcua_feed import OpcUaFeed
+
+    class Face:
+        data = None
+
+        def set_host_data(self, data):
+            self.data = data
+
+        def take_commands(self):
+            return [FaceCommand("ann", "acknowledge", "done", "alarm 3040 (DRIVE)", 1.0)]
+
+    face = Face()
+    links = {"mill1": NS(ports={"opcua": 4841}, local=NS(opcua=face))}
+    library = AuditingLibrary()
+
+    def no_client(name):
+        raise AssertionError("no DNC exchange for a machine in this process")
+
+    OpcUaFeed(library, Dispatches(), Jobs(), links, client=no_client).tick()
+    assert face.data.revision_by_program == {"O0100": "7"}
+    assert library.notes == [
+        (
+            "mill1",
+            "machine.command",
+            "ann",
+            {"command": "acknowledge", "face": "opcua", "detail": "alarm 3040 (DRIVE)"},
+        )
+    ]

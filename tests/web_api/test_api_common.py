@@ -109,8 +109,8 @@ class Api:
         return rev
 
 
-def make_api(sessions, **settings_over) -> Api:  # noqa: F811 - the fixture's value
-    library = Library(sessions, checker=fake_checker, upload_limit=UPLOAD_LIMIT)
+def make_api(sessions, checker=fake_checker, **settings_over) -> Api:  # noqa: F811
+    library = Library(sessions, checker=checker, upload_limit=UPLOAD_LIMIT)
     for name, kind in (("mill-1", "mill"), ("mill-2", "mill"), ("lathe-1", "lathe")):
         library.register_machine(name, kind, memory_bytes=64 * 1024)
     dispatches, jobs = Dispatches(sessions), Jobs(sessions)

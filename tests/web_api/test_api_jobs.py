@@ -3,6 +3,7 @@
 
 from __future__ import annotations
 
+from dnc.checker import nc_checker
 from dnc.jobs import Scheduler
 from dnc.scheduler import MachineView
 from tests.web_api.test_api_common import (  # noqa: F401 - fixtures
@@ -10,6 +11,7 @@ from tests.web_api.test_api_common import (  # noqa: F401 - fixtures
     api,
     assert_problem,
     engine,
+    make_api,
     pg_url,
     sessions,
     sqlite_template,
@@ -92,3 +94,36 @@ def test_job_request_shape_problems(api):
         r = api.post("/api/jobs", role="operator", json=body)
         assert assert_problem(r, 422, "validation")["errors"][0]["pointer"] == pointer, body
     assert api.get("/api/jobs").json()["items"] == []
+
+
+ROTARY = "%\nO1040 (TURN A)\nG0 X0 Y0 Z20 A0\nG1 X20 A90 F600\nM30\n%\n"
+
+
+def test_a_job_whose_program_no_machine_can_run_is_refused_and_one_that_can_waits_for_it(
+    sessions,
+):
+    api = make_api(sessions, checker=nc_checker)
+    with api.client:
+        for name in ("mill-1", "mill-2"):  # the cell's mills are mill3s: X Y Z
+            api.library.register_machine(name, "mill", axes=("X", "Y", "Z"))
+        rev = api.released(1040, ROTARY)
+        assert api.get(f"/api/revisions/{rev}").json()["axes"] == ["X", "Y", "Z", "A"]
+        assert api.get("/api/machines/mill-1").json()["axes"] == ["X", "Y", "Z"]
+        r = api.post("/api/jobs", role="operator", json={"revision_id": rev, "quantity": 2})
+        body = assert_problem(r, 422, "no-machine-can-run")
+        assert body["pointer"] == "#/revision_id"
+        assert body["needs"] == {"kinds": ["mill"], "axes": ["X", "Y", "Z", "A"]}
+        assert body["machines"]["mill-1"] == "mill-1 has axes X Y Z; the program needs A"
+        assert body["machines"]["lathe-1"].startswith("lathe-1 is a lathe;")
+        assert api.get("/api/jobs").json()["items"] == []
+        # a mill4 joins the cell: the job is queued, and only the mill4 gets its parts
+        api.library.register_machine("mill-4", "mill", axes=("X", "Y", "Z", "A"))
+        job = new_job(api, rev, quantity=2)
+        assert job["needs"] == {"kinds": ["mill"], "axes": ["X", "Y", "Z", "A"]}
+        views = [
+            MachineView("mill-1", "mill", "idle", 0, axes=("X", "Y", "Z")),
+            MachineView("mill-4", "mill", "idle", 0, axes=("X", "Y", "Z", "A")),
+        ]
+        Scheduler(api.sessions, lambda: views).tick()
+        detail = api.get(f"/api/jobs/{job['id']}").json()
+        assert [a["machine"] for a in detail["allocations"]] == ["mill-4"]

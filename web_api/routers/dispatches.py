@@ -6,11 +6,7 @@ from typing import Annotated
 
 from fastapi import APIRouter, Depends, Header, Path, Query, Request
 from fastapi.responses import JSONResponse
-from sqlalchemy import select
 
-from dnc import models as m
-from dnc.db import transaction
-from dnc.dispatch import dispatch_info
 from web_api.problems import problem_doc
 from web_api.routers import Services, decode_cursor, encode_cursor, get_services, next_link
 from web_api.routers.auth import Operator, Viewer
@@ -83,15 +79,8 @@ def list_dispatches(
     limit: Annotated[int, Query(ge=1, le=500)] = 50,
 ) -> JSONResponse:
     limit = min(limit, services.settings.page_limit_max)
-    stmt = select(m.Dispatch).order_by(m.Dispatch.id.desc()).limit(limit + 1)
-    if cursor:
-        stmt = stmt.where(m.Dispatch.id < decode_cursor("d", cursor))
-    if machine:
-        stmt = stmt.where(m.Dispatch.machine == machine)
-    if state:
-        stmt = stmt.where(m.Dispatch.state == state)
-    with transaction(services.sessions) as s:
-        rows = [dispatch_info(r) for r in s.scalars(stmt)]
+    before = decode_cursor("d", cursor) if cursor else None
+    rows = services.dispatches.list(machine=machine, state=state, before=before, limit=limit + 1)
     nxt = encode_cursor("d", rows[limit - 1].id) if len(rows) > limit else None
     body = DispatchPage(items=[dispatch_out(r) for r in rows[:limit]], next_cursor=nxt)
     return JSONResponse(body.model_dump(mode="json"), headers=next_link(request, nxt))

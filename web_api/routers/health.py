@@ -16,9 +16,8 @@ from concurrent.futures import Future
 from typing import Annotated
 
 from fastapi import APIRouter, Depends
-from sqlalchemy import text
 
-from dnc.db import transaction
+from dnc.db import ping
 from dnc.errors import DatabaseUnavailable
 from web_api.problems import problem_doc
 from web_api.routers import Services, get_services
@@ -31,7 +30,7 @@ HEALTH_DEADLINE_S = 1.5
 
 
 class DatabaseProbe:
-    """`select 1` with a deadline, on a daemon thread (a hung one never blocks exit)."""
+    """`dnc.db.ping` with a deadline, on a daemon thread (a hung one never blocks exit)."""
 
     def __init__(self, sessions) -> None:
         self._sessions = sessions
@@ -57,8 +56,7 @@ class DatabaseProbe:
 
     def _run(self, probe: Future) -> None:
         try:
-            with transaction(self._sessions) as s:
-                s.execute(text("select 1"))
+            ping(self._sessions)
         except BaseException as exc:  # noqa: BLE001 - handed to the waiting check
             probe.set_exception(exc)
         else:

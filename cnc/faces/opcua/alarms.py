@@ -12,6 +12,7 @@ Server object (clients subscribe to either).
 from __future__ import annotations
 
 import datetime as _dt
+from collections.abc import Callable
 from dataclasses import dataclass
 
 from asyncua import Server, ua
@@ -33,8 +34,16 @@ class Condition:
 
 
 class AlarmBook:
-    def __init__(self, server: Server, space: Space, machine: str) -> None:
+    def __init__(
+        self,
+        server: Server,
+        space: Space,
+        machine: str,
+        record: Callable[[str, int, str], ua.StatusCode] | None = None,
+    ) -> None:
+        """`record(command, status code, detail)`: each Acknowledge call, for the audit."""
         self.server, self.space, self.machine = server, space, machine
+        self._record = record or (lambda command, code, detail="": ua.StatusCode(code))
         self.conditions: dict[tuple, Condition] = {}
         self._generators = []
 
@@ -128,16 +137,20 @@ class AlarmBook:
         eid = event_id.Value if isinstance(event_id, ua.Variant) else event_id
         for key, cond in list(self.conditions.items()):
             if cond.node == parent or eid in cond.event_ids:
+                what = f"alarm {cond.alarm.number} ({cond.alarm.source})"
                 if eid not in cond.event_ids:
-                    return ua.StatusCode(ua.StatusCodes.BadEventIdUnknown)
+                    return self._record("acknowledge", ua.StatusCodes.BadEventIdUnknown, what)
                 if cond.acked:
-                    return ua.StatusCode(ua.StatusCodes.BadConditionBranchAlreadyAcked)
+                    return self._record(
+                        "acknowledge", ua.StatusCodes.BadConditionBranchAlreadyAcked, what
+                    )
                 cond.acked = True
+                self._record("acknowledge", ua.StatusCodes.Good, what)
                 await self._emit(cond, _dt.datetime.now(_dt.UTC))
                 if not cond.active:
                     await self._forget(key)
                 return []
-        return ua.StatusCode(ua.StatusCodes.BadEventIdUnknown)
+        return self._record("acknowledge", ua.StatusCodes.BadEventIdUnknown, str(parent))
 
 
 def _bytes(value) -> bytes:

@@ -49,9 +49,10 @@ BOOLEAN, BYTE, UINT16, UINT32, DOUBLE, STRING = (
     (UA, 12),
 )
 LOCALIZED_TEXT = (UA, 21)
+NODE_ID = (UA, 17)
 UINTEGER = (UA, 28)  # abstract: any unsigned integer
 
-HAS_COMPONENT, HAS_PROPERTY, HAS_ADD_IN = 47, 46, 17604
+HAS_COMPONENT, HAS_PROPERTY, HAS_ADD_IN, HAS_ORDERED_COMPONENT = 47, 46, 17604, 49
 MANDATORY, OPTIONAL = 78, 80
 
 
@@ -190,6 +191,19 @@ ELEMENT_MONITORING = ObjectTypeDecl(
     BASE_OBJECT,
     (_v(MT, "Name", 234, STRING, True, prop=True),),
 )
+# OPC 40001-1 state machines; their states and transitions are not instance declarations
+# (no modelling rule): an instance shows its state in CurrentState
+MACHINERY_ITEM_STATE = ObjectTypeDecl(
+    (MA, 1002), "MachineryItemState_StateMachineType", FINITE_STATE_MACHINE
+)
+MACHINERY_OPERATION_MODE = ObjectTypeDecl(
+    (MA, 1008), "MachineryOperationModeStateMachineType", FINITE_STATE_MACHINE
+)
+#: 40501's own subtype (a MaintenanceMode sub-state machine under Maintenance) is what
+#: MachineTool's MachineryOperationMode is declared with
+MACHINE_OPERATION_MODE_STATE_MACHINE = ObjectTypeDecl(
+    (MT, 1003), "MachineOperationModeStateMachineType", MACHINERY_OPERATION_MODE.node
+)
 MACHINE_OPERATION_MONITORING = ObjectTypeDecl(
     (MT, 26),
     "MachineOperationMonitoringType",
@@ -198,6 +212,25 @@ MACHINE_OPERATION_MONITORING = ObjectTypeDecl(
         _v(MT, "OperationMode", 225, MACHINE_OPERATION_MODE.node, True),
         _v(MT, "PowerOnDuration", 261, UINT32, False),
         _v(MT, "FeedOverride", 233, DOUBLE, False, typedef=ANALOG_UNIT_RANGE),
+        Member((MA, "MachineryItemState"), 5006, "Object", MACHINERY_ITEM_STATE.node, False),
+        Member(
+            (MA, "MachineryOperationMode"),
+            5007,
+            "Object",
+            MACHINE_OPERATION_MODE_STATE_MACHINE.node,
+            False,
+        ),
+    ),
+)
+CHANNEL_MODIFIER = ObjectTypeDecl(
+    (MT, 33),
+    "ChannelModifierType",
+    BASE_OBJECT,
+    (
+        _v(MT, "BlockSkip", 248, BOOLEAN, False),
+        _v(MT, "DryRun", 340, BOOLEAN, True),
+        _v(MT, "OptionalStop", 325, BOOLEAN, True),
+        _v(MT, "SingleStep", 317, BOOLEAN, True),
     ),
 )
 CHANNEL_MONITORING = ObjectTypeDecl(
@@ -209,6 +242,7 @@ CHANNEL_MONITORING = ObjectTypeDecl(
         _v(MT, "ChannelMode", 249, CHANNEL_MODE.node, True),
         _v(MT, "FeedOverride", 276, DOUBLE, True, typedef=ANALOG_UNIT_RANGE),
         _v(MT, "RapidOverride", 287, DOUBLE, False, typedef=ANALOG_UNIT_RANGE),
+        _o(MT, "ChannelModifiers", 113, CHANNEL_MODIFIER.node, False),
     ),
 )
 WORKING_UNIT_MONITORING = ObjectTypeDecl(
@@ -221,6 +255,7 @@ SPINDLE_MONITORING = ObjectTypeDecl(
     (
         _v(MT, "IsRotating", 247, BOOLEAN, True),
         _v(MT, "Override", 241, DOUBLE, False, typedef=ANALOG_UNIT_RANGE),
+        _v(MT, "IsUsedAsAxis", 371, BOOLEAN, False),
     ),
 )
 STACK_ELEMENT = ObjectTypeDecl(
@@ -284,6 +319,7 @@ PRODUCTION_ACTIVE_PROGRAM = ObjectTypeDecl(
     (
         _o(MT, "State", 5033, PRODUCTION_PROGRAM_STATE_MACHINE.node, True),
         _v(MT, "JobIdentifier", 384, STRING, False),
+        _v(MT, "JobNodeId", 382, NODE_ID, False),
     ),
 )
 PRODUCTION_JOB = ObjectTypeDecl(
@@ -357,11 +393,15 @@ MACHINE_TOOL_TYPE = ObjectTypeDecl(
 
 #: every object type the server declares, each after its supertype and member types
 OBJECT_TYPES = (
+    CHANNEL_MODIFIER,
     FUNCTIONAL_GROUP,
     MACHINERY_ITEM_IDENTIFICATION,
     MACHINE_IDENTIFICATION,
     MACHINE_TOOL_IDENTIFICATION,
     ELEMENT_MONITORING,
+    MACHINERY_ITEM_STATE,
+    MACHINERY_OPERATION_MODE,
+    MACHINE_OPERATION_MODE_STATE_MACHINE,
     MACHINE_OPERATION_MONITORING,
     CHANNEL_MONITORING,
     WORKING_UNIT_MONITORING,

@@ -10,6 +10,7 @@ certificates are accepted.
 from __future__ import annotations
 
 from collections.abc import Callable
+from contextvars import ContextVar
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -46,10 +47,18 @@ _READ_SERVICES = frozenset(
         ua.ObjectIds.UnregisterNodesRequest_Encoding_DefaultBinary,
     )
 )
-_OPERATOR_SERVICES = _READ_SERVICES | {
-    ua.NodeId(ua.ObjectIds.WriteRequest_Encoding_DefaultBinary),
-    ua.NodeId(ua.ObjectIds.CallRequest_Encoding_DefaultBinary),
-}
+_WRITE = ua.NodeId(ua.ObjectIds.WriteRequest_Encoding_DefaultBinary)
+_CALL = ua.NodeId(ua.ObjectIds.CallRequest_Encoding_DefaultBinary)
+_OPERATOR_SERVICES = _READ_SERVICES | {_WRITE, _CALL}
+
+#: the user of the request being served: the permission check sets it and the method
+#: callbacks that follow in the same task read it (asyncua does not pass the session)
+_CALLER: ContextVar[str] = ContextVar("opcua_caller", default="anonymous")
+
+
+def caller() -> str:
+    """The user name of the session whose request is being served."""
+    return _CALLER.get()
 
 
 @dataclass
@@ -61,12 +70,21 @@ class CellUser(User):
 
 class CellRoles(PermissionRuleset):
     """Anonymous and viewers read, browse and subscribe; writes and method calls
-    (Acknowledge) need an operator or above: BadUserAccessDenied otherwise."""
+    (Start, Stop, Acknowledge) need an operator or above: BadUserAccessDenied otherwise.
+    `on_denied(user, "write" | "call")` hears each refused write or call (the audit)."""
+
+    def __init__(self, on_denied: Callable[[str, str], None] | None = None) -> None:
+        self.on_denied = on_denied
 
     def check_validity(self, user, action_type_id, body) -> bool:
         role = getattr(user, "cell_role", VIEWER)
+        name = getattr(user, "name", None) or "anonymous"
+        _CALLER.set(name)
         allowed = _OPERATOR_SERVICES if role >= OPERATOR else _READ_SERVICES
-        return action_type_id in allowed
+        ok = action_type_id in allowed
+        if not ok and self.on_denied is not None and action_type_id in (_WRITE, _CALL):
+            self.on_denied(name, "write" if action_type_id == _WRITE else "call")
+        return ok
 
 
 class CellUsers:
@@ -103,7 +121,9 @@ class Security:
     anonymous: bool = False
 
 
-async def secure_endpoint(server: Server, sec: Security, machine: str) -> None:
+async def secure_endpoint(
+    server: Server, sec: Security, machine: str, roles: CellRoles | None = None
+) -> None:
     from asyncua.crypto.cert_gen import generate_private_key, generate_self_signed_app_certificate
     from asyncua.crypto.truststore import TrustStore
     from asyncua.crypto.validator import CertificateValidator, CertificateValidatorOptions
@@ -134,7 +154,9 @@ async def secure_endpoint(server: Server, sec: Security, machine: str) -> None:
         cert_path.write_bytes(cert.public_bytes(serialization.Encoding.DER))
     await server.load_certificate(str(cert_path))
     await server.load_private_key(str(key_path))
-    server.set_security_policy([ua.SecurityPolicyType.Basic256Sha256_SignAndEncrypt], CellRoles())
+    server.set_security_policy(
+        [ua.SecurityPolicyType.Basic256Sha256_SignAndEncrypt], roles or CellRoles()
+    )
     tokens = [ua.UserNameIdentityToken]
     if sec.anonymous:
         tokens.append(ua.AnonymousIdentityToken)

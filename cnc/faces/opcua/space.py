@@ -31,6 +31,7 @@ VARIANT_OF = {
     m.DOUBLE: ua.VariantType.Double,
     m.STRING: ua.VariantType.String,
     m.LOCALIZED_TEXT: ua.VariantType.LocalizedText,
+    m.NODE_ID: ua.VariantType.NodeId,
 }
 
 
@@ -82,19 +83,9 @@ class Builder:
         notifier: bool = False,
         rule: int | None = None,
     ) -> ua.NodeId:
-        item = ua.AddNodesItem()
-        item.RequestedNewNodeId, item.BrowseName = nodeid, name
-        item.NodeClass = ua.NodeClass.Object
-        item.ParentNodeId, item.ReferenceTypeId = parent, ua.NodeId(ref)
-        item.TypeDefinition = typedef
         attrs = ua.ObjectAttributes()
-        attrs.DisplayName = ua.LocalizedText(name.Name)
         attrs.EventNotifier = 1 if notifier else 0
-        item.NodeAttributes = attrs
-        self._add(item)
-        if rule is not None:
-            self._ref(nodeid, ua.ObjectIds.HasModellingRule, ua.NodeId(rule))
-        return nodeid
+        return self._node(ua.NodeClass.Object, parent, nodeid, name, attrs, ref, typedef, rule)
 
     def variable(
         self,
@@ -108,18 +99,33 @@ class Builder:
         rule: int | None = None,
         rank: int = -1,
     ) -> ua.NodeId:
-        item = ua.AddNodesItem()
-        item.RequestedNewNodeId, item.BrowseName = nodeid, name
-        item.NodeClass = ua.NodeClass.Variable
-        item.ParentNodeId, item.ReferenceTypeId = parent, ua.NodeId(ref)
-        item.TypeDefinition = typedef
         attrs = ua.VariableAttributes()
-        attrs.DisplayName = ua.LocalizedText(name.Name)
         attrs.Value = value
         attrs.DataType = data_type
         attrs.ValueRank = rank
         # read-only for everyone: the machine's state is written by the machine only
         attrs.AccessLevel = attrs.UserAccessLevel = ua.AccessLevel.CurrentRead.mask
+        return self._node(ua.NodeClass.Variable, parent, nodeid, name, attrs, ref, typedef, rule)
+
+    def _node(
+        self,
+        node_class: ua.NodeClass,
+        parent: ua.NodeId,
+        nodeid: ua.NodeId,
+        name: ua.QualifiedName,
+        attrs,
+        ref: int,
+        typedef: ua.NodeId | None = None,
+        rule: int | None = None,
+    ) -> ua.NodeId:
+        """One node of any class under `parent`; every add of this module goes here."""
+        item = ua.AddNodesItem()
+        item.RequestedNewNodeId, item.BrowseName = nodeid, name
+        item.NodeClass = node_class
+        item.ParentNodeId, item.ReferenceTypeId = parent, ua.NodeId(ref)
+        if typedef is not None:
+            item.TypeDefinition = typedef
+        attrs.DisplayName = ua.LocalizedText(name.Name)
         item.NodeAttributes = attrs
         self._add(item)
         if rule is not None:
@@ -131,17 +137,14 @@ class Builder:
     def types(self) -> None:
         sp = self.space
         for enum in m.ENUMS:
-            nodeid = sp.node(enum.node)
-            item = ua.AddNodesItem()
-            item.RequestedNewNodeId = nodeid
-            item.BrowseName = ua.QualifiedName(enum.name, sp.ns[enum.node[0]])
-            item.NodeClass = ua.NodeClass.DataType
-            item.ParentNodeId = sp.node(m.ENUMERATION)
-            item.ReferenceTypeId = ua.NodeId(ua.ObjectIds.HasSubtype)
-            attrs = ua.DataTypeAttributes()
-            attrs.DisplayName = ua.LocalizedText(enum.name)
-            item.NodeAttributes = attrs
-            self._add(item)
+            nodeid = self._node(
+                ua.NodeClass.DataType,
+                sp.node(m.ENUMERATION),
+                sp.node(enum.node),
+                ua.QualifiedName(enum.name, sp.ns[enum.node[0]]),
+                ua.DataTypeAttributes(),
+                ua.ObjectIds.HasSubtype,
+            )
             self.variable(
                 nodeid,
                 ua.NodeId(f"{enum.name}.EnumStrings", sp.ns[enum.node[0]]),
@@ -155,18 +158,16 @@ class Builder:
                 rank=1,
             )
         for decl in m.OBJECT_TYPES:
-            nodeid = sp.node(decl.node)
-            item = ua.AddNodesItem()
-            item.RequestedNewNodeId = nodeid
-            item.BrowseName = ua.QualifiedName(decl.name, sp.ns[decl.node[0]])
-            item.NodeClass = ua.NodeClass.ObjectType
-            item.ParentNodeId = sp.node(decl.supertype)
-            item.ReferenceTypeId = ua.NodeId(ua.ObjectIds.HasSubtype)
             attrs = ua.ObjectTypeAttributes()
-            attrs.DisplayName = ua.LocalizedText(decl.name)
             attrs.IsAbstract = decl.abstract
-            item.NodeAttributes = attrs
-            self._add(item)
+            nodeid = self._node(
+                ua.NodeClass.ObjectType,
+                sp.node(decl.supertype),
+                sp.node(decl.node),
+                ua.QualifiedName(decl.name, sp.ns[decl.node[0]]),
+                attrs,
+                ua.ObjectIds.HasSubtype,
+            )
             ns = sp.ns[decl.node[0]]
             for member in decl.members:
                 rule = m.MANDATORY if member.mandatory else m.OPTIONAL
@@ -192,7 +193,9 @@ class Builder:
                         rule=rule,
                     )
 
-    # ------------------------------------------------------------------ instance helpers
+    # ------------------------------------------------------------------ instance groups
+    # The instance's nodes have string ids in the machine's namespace: the path under the
+    # machine (`mill1.Monitoring.Channel1.ChannelState`), which is also the updater's key.
 
     def child_object(
         self,
@@ -235,25 +238,82 @@ class Builder:
         )
         sp.variables[key] = (nodeid, vtype)
         if td == m.ANALOG_UNIT_RANGE:  # its two mandatory properties
-            ns = sp.machine_ns
-            self.variable(
-                nodeid,
-                ua.NodeId(key + ".EURange", ns),
-                ua.QualifiedName("EURange", 0),
-                ua.NodeId(ua.ObjectIds.PropertyType),
-                ua.NodeId(ua.ObjectIds.Range),
-                ua.Variant(ua.Range(0.0, 200.0)),
-                m.HAS_PROPERTY,
-            )
-            self.variable(
-                nodeid,
-                ua.NodeId(key + ".EngineeringUnits", ns),
-                ua.QualifiedName("EngineeringUnits", 0),
-                ua.NodeId(ua.ObjectIds.PropertyType),
-                ua.NodeId(ua.ObjectIds.EUInformation),
-                ua.Variant(PERCENT),
-                m.HAS_PROPERTY,
-            )
+            for prop_name, dt, prop_value in (
+                ("EURange", ua.ObjectIds.Range, ua.Variant(ua.Range(0.0, 200.0))),
+                ("EngineeringUnits", ua.ObjectIds.EUInformation, ua.Variant(PERCENT)),
+            ):
+                self.variable(
+                    nodeid,
+                    ua.NodeId(f"{key}.{prop_name}", sp.machine_ns),
+                    ua.QualifiedName(prop_name, 0),
+                    ua.NodeId(ua.ObjectIds.PropertyType),
+                    ua.NodeId(dt),
+                    prop_value,
+                    m.HAS_PROPERTY,
+                )
+        return nodeid
+
+    def values(self, parent: ua.NodeId, prefix: str, items, *, prop: bool = False) -> None:
+        """Several variables under one node: (browse name, data type, initial value) each,
+        keyed `<prefix>.<name>`."""
+        for name, data_type, value in items:
+            self.value(parent, f"{prefix}.{name[1]}", name, data_type, value, prop=prop)
+
+    def override(self, parent: ua.NodeId, key: str, name: m.Name) -> ua.NodeId:
+        """An override in percent (AnalogUnitRange, 0..200 %), as 40501 declares them."""
+        return self.value(parent, key, name, m.DOUBLE, 100.0, typedef=m.ANALOG_UNIT_RANGE)
+
+    def state(
+        self,
+        parent: ua.NodeId,
+        prefix: str,
+        typedef: m.NodeRef,
+        initial: str,
+        name: m.Name = (m.MACHINE_TOOL, "State"),
+    ) -> None:
+        """A state machine (40501's `State`, 40001's MachineryItemState...) with its
+        CurrentState (the state's display name)."""
+        key = f"{prefix}.{name[1]}"
+        st = self.child_object(parent, key, name, typedef)
+        self.value(
+            st,
+            f"{key}.CurrentState",
+            (m.UA, "CurrentState"),
+            m.LOCALIZED_TEXT,
+            initial,
+            typedef=m.FINITE_STATE_VARIABLE,
+        )
+
+    def ordered(
+        self,
+        parent: ua.NodeId,
+        key: str,
+        name: m.Name,
+        typedef: m.NodeRef,
+        number: int,
+        number_type: m.NodeRef = m.UINT16,
+    ) -> ua.NodeId:
+        """An entry of an ordered list (HasOrderedComponent) with its NumberInList."""
+        node = self.child_object(parent, key, name, typedef, ref=m.HAS_ORDERED_COMPONENT)
+        self.value(
+            node, f"{key}.NumberInList", (m.UA, "NumberInList"), number_type, number, prop=True
+        )
+        return node
+
+    def method(self, parent: ua.NodeId, key: str, name: m.Name, callback) -> ua.NodeId:
+        """A method without arguments; `callback(parent)` runs on the server's loop."""
+        sp = self.space
+        attrs = ua.MethodAttributes()
+        attrs.Executable = attrs.UserExecutable = True
+        nodeid = self._node(
+            ua.NodeClass.Method,
+            parent,
+            ua.NodeId(key, sp.machine_ns),
+            sp.qname(name),
+            attrs,
+            m.HAS_COMPONENT,
+        )
+        self.server.link_method(self.server.get_node(nodeid), callback)
         return nodeid
 
 
@@ -272,4 +332,5 @@ def _coerce(value, vtype: ua.VariantType):
         ua.VariantType.String: "",
         ua.VariantType.LocalizedText: ua.LocalizedText(""),
         ua.VariantType.Double: 0.0,
+        ua.VariantType.NodeId: ua.NodeId(),
     }.get(vtype, 0 if vtype != ua.VariantType.Null else None)

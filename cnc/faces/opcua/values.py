@@ -49,6 +49,14 @@ CHANNEL_MODE_OF = {
     "REF": "Reference",
     "EDIT": "Other",
 }
+# controller mode -> OPC 40001-1 MachineryOperationMode (Processing: the machine produces
+# or is set to produce; Setup: an operator sets it up by hand)
+MACHINERY_OPERATION_MODE_OF = {
+    "AUTOMATIC": "Processing",
+    "MANUAL_DATA_INPUT": "Processing",
+    "MANUAL": "Setup",
+    "EDIT": "Setup",
+}
 #: the stack light's three lamps, top to bottom (NumberInList 0..2)
 STACK_LAMPS = (("Red", "Red"), ("Yellow", "Yellow"), ("Green", "Green"))
 ROTATING_RPM = 0.5  # below this the spindle is standing (encoder noise)
@@ -71,7 +79,17 @@ def status_values(status: MachineStatus, power_on_s: float) -> dict[str, object]
         "Yellow": warnings or CHANNEL_STATE_OF[status.execution] == "Interrupted",
         "Green": status.execution == "ACTIVE",
     }
+    if status.availability != "AVAILABLE":
+        item_state = "NotAvailable"
+    elif faults or status.emergency_stop == "TRIGGERED":
+        item_state = "OutOfService"  # 40501 Annex B: an alarm of severity >= 667 (FAULT: 800)
+    else:
+        item_state = "Executing" if status.execution == "ACTIVE" else "NotExecuting"
     out: dict[str, object] = {
+        "Monitoring.MachineTool.MachineryItemState.CurrentState": item_state,
+        "Monitoring.MachineTool.MachineryOperationMode.CurrentState": (
+            MACHINERY_OPERATION_MODE_OF[status.controller_mode]
+        ),
         "Monitoring.MachineTool.OperationMode": _OPERATION[
             OPERATION_MODE_OF[status.controller_mode]
         ],

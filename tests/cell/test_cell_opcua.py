@@ -1,0 +1,102 @@
+"""The OPC UA face of a machine in its own process (`fmscell machine`), with a host that
+started it: what only the host knows (the dispatched revision and its sha256, the cell's
+jobs on the machine) reaches the face through the machine's DNC port (`HOST PUT`,
+authenticated with the port's secret), and what the face's clients did comes back into the
+host's audit log. A real asyncua client reads it over opc.tcp."""
+
+from __future__ import annotations
+
+import pytest
+from asyncua import Client, ua
+
+from cnc.faces.loop_thread import LoopThread
+from server.cell import Cell
+from server.config import load_cell_config
+from tests.cell.conftest import Api, poll, serve, upload_released
+from tests.cell.test_cell_restart import RESTART_PROGRAM
+
+# a machine process, an asyncua server start and a part on a box at load 30
+pytestmark = pytest.mark.timeout(300)
+
+
+def test_a_machine_process_serves_the_hosts_revision_and_jobs_and_is_audited(tmp_path):
+    ports = {"host": "127.0.0.1", "dnc": 0, "modbus": 0, "shdr": 0, "opcua": 0}
+    config = load_cell_config({"machines": {"mill1": {"base": "mill3", "ports": ports}}})
+    cell = Cell(
+        config,
+        clock="fast",
+        database_url=f"sqlite:///{tmp_path}/cell.db",
+        processes=True,
+        ideal_axes=True,
+        state_dir=tmp_path,
+    ).start()
+    server, thread, sock = serve(cell)
+    api = Api(f"http://127.0.0.1:{sock.getsockname()[1]}")
+    loop = LoopThread("opcua-cell-client").start()
+    client = None
+    try:
+        link = cell.links["mill1"]
+        assert link.local is None and link.ports["opcua"]  # a process of its own
+        url = f"opc.tcp://127.0.0.1:{link.ports['opcua']}"
+        # asyncua's default probe calls a session lost after one answer slower than 1 s
+        client = Client(url, timeout=30, watchdog_intervall=30.0)
+        loop.run(client.connect, timeout=60)
+        ns = loop.run(lambda: client.get_namespace_index("urn:fmscell:machine:mill1"))
+
+        def read(key: str):
+            async def go():
+                return await client.get_node(ua.NodeId(f"mill1.{key}", ns)).read_value()
+
+            return loop.run(go)
+
+        rev = upload_released(api, RESTART_PROGRAM)
+        sha = cell.library.get_revision(rev).sha256
+        job = api("operator").post("/api/jobs", json={"revision_id": rev, "quantity": 2})
+        assert job.status_code == 201, job.text
+        job_id = job.json()["id"]
+
+        def running_with_the_hosts_data():
+            if read("Production.ActiveProgram.Name") != "O1001":
+                return False
+            return read("Production.ActiveProgram.Revision") == str(rev)
+
+        poll(running_with_the_hosts_data, 120, "the dispatched revision on the face", 0.1)
+        assert read("Production.ActiveProgram.Sha256") == sha
+        plan = f"Production.ProductionPlan.job{job_id}"
+        assert read(f"{plan}.RunsPlanned") == 2
+        assert read(f"{plan}.Identifier") == f"job{job_id}"
+        assert read(f"{plan}.ProductionPrograms.O1001.Name") == "O1001"
+        assert read(f"{plan}.State.CurrentState").Text in ("Initializing", "Running")
+        assert read("Production.ActiveProgram.JobIdentifier") == f"job{job_id}"
+        assert read("Production.ActiveProgram.JobNodeId") == ua.NodeId(f"mill1.{plan}", ns)
+
+        # an anonymous client tries Start: refused on the face, audited by the host with
+        # who asked (the call travelled back over the DNC port's HOST exchange)
+        async def start():
+            channel = client.get_node(ua.NodeId("mill1.Monitoring.Channel1", ns))
+            fms = await client.get_namespace_index("urn:fmscell:opcua")
+            await channel.call_method(ua.QualifiedName("Start", fms))
+
+        with pytest.raises(ua.uaerrors.BadUserAccessDenied):
+            loop.run(start)
+
+        def audited():
+            return [
+                e
+                for e in cell.library.audit(entity="machine")
+                if e["action"] == "machine.command_refused" and e["detail"].get("face") == "opcua"
+            ]
+
+        entry = poll(audited, 30, "the refused call in the host's audit log")[-1]
+        assert entry["actor"] == "anonymous"
+        assert entry["detail"]["command"] == "call"
+        assert entry["detail"]["reason"] == "BadUserAccessDenied"
+    finally:
+        if client is not None:
+            loop.run(client.disconnect)
+        loop.stop()
+        api.close()
+        server.should_exit = True
+        thread.join(20)
+        sock.close()
+        cell.stop()
