@@ -16,7 +16,6 @@ from cam.chain import records_from_file
 from cam.cl import write_cl
 from cam.errors import CamError
 from cam.post import PostOptions, load_machine, post
-from cnc.config import builtin_machine
 from cnc.interp import check
 
 cam_app = typer.Typer(
@@ -170,6 +169,8 @@ def _nc_check(path: Path, mach, offsets, source: Path, repost) -> dict:
     if mach.kind == "mill5":
         # the NC's mill5 (cnc/machines/mill5.yaml, the post's geometry and travel): its
         # G54 is 0, so the post's travel check is the machine's
+        from cnc.config import builtin_machine  # deferred: not loaded for `fmscell --help`
+
         params = builtin_machine("mill5").params
         travel = True
     elif mach.kind not in ("mill", "lathe"):

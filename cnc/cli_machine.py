@@ -19,7 +19,6 @@ from pathlib import Path
 
 import typer
 
-from cnc.config import builtin_machine, load_machine_config
 from cnc.errors import NcError
 
 
@@ -76,7 +75,9 @@ def machine(
     until SIGINT/SIGTERM."""
     import signal
 
-    # deferred: the machine (drives, PLC, faces) is not loaded for the rest of `fmscell`
+    # deferred: the configuration and the machine (drives, PLC, faces) are not loaded for
+    # the rest of `fmscell`
+    from cnc.config import builtin_machine, load_machine_config
     from cnc.machine import Machine, RealtimeRunner
     from cnc.machine.runner import FAST_SPEED, IDLE_SPEED
 

@@ -15,7 +15,6 @@ from typing import Any
 
 import typer
 
-from cnc.config import SHIPPED_MACHINES, builtin_machine, load_machine_config
 from cnc.errors import NcError
 from cnc.gcode.lexer import parse_line
 from cnc.params import DecimalStyle
@@ -46,7 +45,9 @@ def machine_setup(
 ) -> Setup:
     """The setup from the command line's options; raises NcError (file:line:col) or
     typer.BadParameter for a bad option."""
-    # deferred: the machine-data store is not loaded for `fmscell --help` (start-up cost)
+    # deferred: the configuration (pydantic models, the PLC's M-code table) and the
+    # machine-data store are not loaded for `fmscell --help` (start-up cost)
+    from cnc.config import SHIPPED_MACHINES, builtin_machine, load_machine_config
     from cnc.machine_data import MachineData, apply_files
 
     if config is not None and str(config) in SHIPPED_MACHINES and not config.exists():

@@ -9,7 +9,6 @@ import typer
 
 from cnc.cli import nc_app
 from cnc.cli_setup import SETUP_ERRORS, fail, names_units, units_warning
-from cnc.config import builtin_machine, load_machine_config
 from cnc.errors import NcError
 from cnc.program_memory import MemoryFull
 
@@ -142,6 +141,9 @@ def _tool_tip(m) -> dict:
 
 
 def _config(machine: str, config_path: Path | None):
+    # deferred: the configuration is not loaded for `fmscell --help` (start-up cost)
+    from cnc.config import builtin_machine, load_machine_config
+
     if config_path is not None:
         return load_machine_config(config_path, machine)
     return builtin_machine(machine)

@@ -15,7 +15,6 @@ from collections.abc import Mapping
 from functools import cache
 from typing import IO, Any
 
-from cnc.config import SHIPPED_MACHINES, builtin_machine
 from cnc.interp import check
 
 MAX_STORED_ERRORS = 100
@@ -24,6 +23,9 @@ UNBOUNDED_MM = 1e9
 
 @cache
 def _params(machine_kind: str):
+    # deferred: the configuration is not loaded for `fmscell --help` (start-up cost)
+    from cnc.config import SHIPPED_MACHINES, builtin_machine
+
     shipped = [builtin_machine(n) for n in SHIPPED_MACHINES]
     of_kind = [c for c in shipped if c.kind == machine_kind] or [builtin_machine("mill3")]
     widest = max(of_kind, key=lambda c: len(c.axes))  # mill4 for mill: X Y Z and A
