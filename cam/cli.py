@@ -11,6 +11,13 @@ from pathlib import Path
 
 import typer
 
+from cam.apt import process
+from cam.chain import records_from_file
+from cam.cl import write_cl
+from cam.errors import CamError
+from cam.post import PostOptions, load_machine, post
+from cnc.interp import check
+
 cam_app = typer.Typer(
     help="CAM to machine: APT source -> CL data -> a machine's NC program.", no_args_is_help=True
 )
@@ -29,10 +36,6 @@ def cl_cmd(
     out: Path | None = typer.Option(None, "-o", "--output", help="write the CL data here"),
 ) -> None:
     """Process an APT program and print its CL data (one statement a line)."""
-    from cam.apt import process
-    from cam.cl import write_cl
-    from cam.errors import CamError
-
     try:
         text = file.read_text(encoding="utf-8")
     except (OSError, UnicodeDecodeError) as e:
@@ -81,10 +84,6 @@ def post_cmd(
 ) -> None:
     """Post APT source or CL data for a machine. The program is written only when the whole
     post (and, for mill and lathe kinds, `nc check`) succeeds."""
-    from cam.chain import records_from_file
-    from cam.errors import CamError
-    from cam.post import PostOptions, load_machine, post
-
     if fmt not in (None, "apt", "cl"):
         raise _fail(f"--format must be apt or cl, not {fmt!r}", 2)
     if tolerance is not None and not tolerance > 0:
@@ -166,13 +165,11 @@ def _nc_check(path: Path, mach, offsets, source: Path, repost) -> dict:
     is traced back to the CL/APT line that produced it."""
     from dataclasses import replace
 
-    from cnc.interp import check
-
     machine_data = None
     if mach.kind == "mill5":
         # the NC's mill5 (cnc/machines/mill5.yaml, the post's geometry and travel): its
         # G54 is 0, so the post's travel check is the machine's
-        from cnc.config import builtin_machine
+        from cnc.config import builtin_machine  # deferred: not loaded for `fmscell --help`
 
         params = builtin_machine("mill5").params
         travel = True

@@ -7,6 +7,11 @@ from pathlib import Path
 
 import typer
 
+from cnc.cli_setup import SETUP_ERRORS, fail, machine_setup, units_warning
+from cnc.gcode.source import library_programs
+from cnc.interp import Interpreter
+from cnc.interp.macro import ARGUMENTS
+
 nc_app = typer.Typer(
     help="NC kernel: check, plan and simulate part programs.", no_args_is_help=True
 )
@@ -67,9 +72,6 @@ def check_cmd(
     A program whose last block is M99 is checked as a subprogram (its M99 ends it, and
     feed moves before its first F take the caller's feed).
     """
-    from cnc.cli_setup import SETUP_ERRORS, fail, machine_setup, units_warning
-    from cnc.interp import Interpreter
-
     args: dict[int, float] = {}
     if g65 is not None:
         try:
@@ -88,8 +90,6 @@ def check_cmd(
         raise fail(err) from None
     programs = None
     if library is not None:
-        from cnc.gcode.source import library_programs
-
         if not library.is_dir():
             typer.echo(f"--library {library}: not a folder", err=True)
             raise typer.Exit(2)
@@ -152,8 +152,6 @@ def g65_arguments(text: str) -> dict[int, float]:
     """The local variables `G65 P... <text>` sets (argument specification I: A -> #1,
     B -> #2, ..., Z -> #26); a letter G65 cannot pass (G L N O P) or a repeated one is an
     error, as on the control."""
-    from cnc.interp.macro import ARGUMENTS
-
     out: dict[int, float] = {}
     pos = 0
     while pos < len(text):

@@ -19,6 +19,8 @@ from pathlib import Path
 
 import typer
 
+from cnc.errors import NcError
+
 
 def machine(
     config: Path | None = typer.Option(None, "--config", help="cell or machine YAML"),
@@ -73,8 +75,9 @@ def machine(
     until SIGINT/SIGTERM."""
     import signal
 
+    # deferred: the configuration and the machine (drives, PLC, faces) are not loaded for
+    # the rest of `fmscell`
     from cnc.config import builtin_machine, load_machine_config
-    from cnc.errors import NcError
     from cnc.machine import Machine, RealtimeRunner
     from cnc.machine.runner import FAST_SPEED, IDLE_SPEED
 

@@ -15,7 +15,11 @@ from pathlib import Path
 
 import typer
 
+from cnc.canon import MOTION_TYPES, Dwell, SkipFeed, StraightTraverse
 from cnc.cli import nc_app, skip_warnings
+from cnc.cli_setup import SETUP_ERRORS, fail, machine_setup, units_warning
+from cnc.errors import NcError
+from cnc.interp import Interpreter
 
 AXIS_INDEX = {"X": 0, "Y": 1, "Z": 2}
 INCH_MM = 25.4
@@ -41,6 +45,7 @@ class _Deviation:
         self.pieces[self.count] = piece
 
     def sample(self, pose, block: int) -> None:
+        # deferred: the planner (compiled) is not loaded for the rest of `fmscell`
         from cnc.planner.geometry import distance_to_piece
 
         if block <= 0:
@@ -62,8 +67,6 @@ class _Deviation:
 def _skips_planned(commands: Iterable) -> Iterator:
     """Without a machine no skip signal comes: a G31 runs to where the interpreter expects
     the tool setter to switch (canon.SkipFeed.planned), as it assumed for the blocks after."""
-    from cnc.canon import SkipFeed
-
     for cmd in commands:
         yield cmd.planned() if type(cmd) is SkipFeed else cmd
 
@@ -81,9 +84,10 @@ def plan_run(
     Dwell sync points hold for their time; every other sync point is acknowledged at
     once (ideal PLC). `on_sample(sample)` sees every IPO sample.
     """
-    from cnc.canon import MOTION_TYPES, Dwell, StraightTraverse
-    from cnc.errors import NcError
+    # deferred: the planner and interpolator (compiled) are not loaded for the rest of
+    # `fmscell` (start-up cost)
     from cnc.interpolator import Motion
+    from cnc.interpolator.motion import Peaks
     from cnc.planner.geometry import Line, arc_from_canon
 
     motion = Motion(params, start=start, ipo_cycle_s=ipo)
@@ -127,8 +131,6 @@ def plan_run(
                     else:
                         feed_len += piece.length
             pos = end
-
-    from cnc.interpolator.motion import Peaks
 
     peaks = Peaks((start[0], start[1], start[2]), t)
     while True:
@@ -226,9 +228,6 @@ def plan_cmd(
     as_json: bool = typer.Option(False, "--json", help="compact one-line JSON"),
 ) -> None:
     """Plan and interpolate FILE on ideal axes; print one JSON object with the figures."""
-    from cnc.cli_setup import SETUP_ERRORS, fail, machine_setup, units_warning
-    from cnc.errors import NcError
-
     try:
         setup = machine_setup(
             kind=kind, config=config, tools=tools, offsets=offsets, units=units, g54=g54,
@@ -238,8 +237,6 @@ def plan_cmd(
         raise fail(err) from None
     params = setup.params
     try:
-        from cnc.interp import Interpreter
-
         try:
             # streamed line by line: memory does not grow with the program's size
             fh = open(file, encoding="latin-1", newline=None)  # noqa: SIM115 - closed below

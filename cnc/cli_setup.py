@@ -16,6 +16,8 @@ from typing import Any
 import typer
 
 from cnc.errors import NcError
+from cnc.gcode.lexer import parse_line
+from cnc.params import DecimalStyle
 
 KIND_MACHINE = {"mill": "mill3", "lathe": "lathe2"}
 NO_LIMIT_MM = 1e9
@@ -43,9 +45,10 @@ def machine_setup(
 ) -> Setup:
     """The setup from the command line's options; raises NcError (file:line:col) or
     typer.BadParameter for a bad option."""
+    # deferred: the configuration (pydantic models, the PLC's M-code table) and the
+    # machine-data store are not loaded for `fmscell --help` (start-up cost)
     from cnc.config import SHIPPED_MACHINES, builtin_machine, load_machine_config
     from cnc.machine_data import MachineData, apply_files
-    from cnc.params import DecimalStyle
 
     if config is not None and str(config) in SHIPPED_MACHINES and not config.exists():
         cfg = builtin_machine(str(config))  # `--config mill4`: a shipped machine by name
@@ -107,8 +110,6 @@ def units_warning(file: str, units: str) -> str:
 
 def names_units(lines) -> bool:
     """Whether a program text says G20 or G21 anywhere (lexed, comments ignored)."""
-    from cnc.gcode.lexer import parse_line
-
     for n, line in enumerate(lines, 1):
         if "20" not in line and "21" not in line:
             continue

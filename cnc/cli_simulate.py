@@ -8,6 +8,9 @@ from pathlib import Path
 import typer
 
 from cnc.cli import nc_app
+from cnc.cli_setup import SETUP_ERRORS, fail, names_units, units_warning
+from cnc.errors import NcError
+from cnc.program_memory import MemoryFull
 
 SETTLE_S = 1.0  # after the end: let the axes settle onto the last setpoint (bounded)
 
@@ -29,7 +32,7 @@ def simulate(
 
     Raises `MemoryFull` (drip-feed suggested) and `FaultSpecError` before anything runs.
     """
-    from cnc.machine import Machine
+    from cnc.machine import Machine  # deferred: the machine is not loaded for `fmscell --help`
 
     m = Machine(
         config,
@@ -138,6 +141,7 @@ def _tool_tip(m) -> dict:
 
 
 def _config(machine: str, config_path: Path | None):
+    # deferred: the configuration is not loaded for `fmscell --help` (start-up cost)
     from cnc.config import builtin_machine, load_machine_config
 
     if config_path is not None:
@@ -163,11 +167,10 @@ def simulate_cmd(
 ) -> None:
     """Run FILE on a complete simulated machine in lockstep: home, cycle start, to the end or
     to an alarm. Prints one JSON object (result, alarms, cycle_time_s, final_position, ...)."""
-    from cnc.cli_setup import SETUP_ERRORS, fail, names_units, units_warning
+    # deferred: the controller and the drives' bus (python-can) are not loaded for the rest
+    # of `fmscell` (start-up cost)
     from cnc.controller import CommandRefused
-    from cnc.errors import NcError
     from cnc.machine.faults import FaultSpecError, parse_fault_spec
-    from cnc.program_memory import MemoryFull
     from drives.bus.loadplan import BusOverloadError
 
     try:
@@ -225,7 +228,7 @@ def simulate_cmd(
 
 def _setup_of(cfg, tools, offsets, units):
     """The machine data of a shipped machine with the command line's files taken in."""
-    from cnc.machine_data import MachineData, apply_files
+    from cnc.machine_data import MachineData, apply_files  # deferred: as in cli_setup
 
     md = cfg.machine_data.initial() if cfg.machine_data is not None else MachineData()
     md = apply_files(md, tools, offsets)

@@ -7,6 +7,10 @@ are waited out) and prints a summary.
 
 from __future__ import annotations
 
+from cnc.canon import ArcFeed, PathMode, Plane, SetPathMode, StraightFeed, StraightTraverse
+from cnc.cli_plan import plan_run
+from cnc.params import MachineParams
+
 SAMPLE_PROGRAM = """%
 O0001 (fmscell demo: pocket contour with arcs and a helical entry)
 N10 G21 G90 G17 G54 G64 P0.01
@@ -36,8 +40,6 @@ N210 M30
 
 def _fallback_commands():
     """The same contour as canonical commands, for when the interpreter is unavailable."""
-    from cnc.canon import ArcFeed, PathMode, Plane, SetPathMode, StraightFeed, StraightTraverse
-
     z = -22.0
     return [
         SetPathMode(3, PathMode.CONTINUOUS, 0.01),
@@ -57,12 +59,9 @@ def _fallback_commands():
 
 
 def run_demo() -> int:
-    from cnc.cli_plan import plan_run
-    from cnc.params import MachineParams
-
     params = MachineParams()
     print("fmscell: the cell server is not built yet; this is the NC kernel demo (issue 2).")
-    try:
+    try:  # deferred: optional, the demo runs fixed commands in a build without the interpreter
         from cnc.interp import Interpreter
     except ImportError:
         Interpreter = None

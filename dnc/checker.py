@@ -15,12 +15,15 @@ from collections.abc import Mapping
 from functools import cache
 from typing import IO, Any
 
+from cnc.interp import check
+
 MAX_STORED_ERRORS = 100
 UNBOUNDED_MM = 1e9
 
 
 @cache
 def _params(machine_kind: str):
+    # deferred: the configuration is not loaded for `fmscell --help` (start-up cost)
     from cnc.config import SHIPPED_MACHINES, builtin_machine
 
     shipped = [builtin_machine(n) for n in SHIPPED_MACHINES]
@@ -55,8 +58,6 @@ def machine_check(
     missing = [a for a in kind_axes(machine_kind) if a not in config.axes]
     if not missing or not re.search(f"[{''.join(missing)}]\\s*[-+.\\d#\\[]", text, re.IGNORECASE):
         return []
-    from cnc.interp import check
-
     errors = check(text.splitlines(), _unbounded(config.params), file="program",
                    programs=programs)  # fmt: skip
     return _as_data(errors)
@@ -101,8 +102,6 @@ def nc_checker(
     programs, dnc.dependencies.LibraryPrograms); an error inside a called program names it
     (`(in O1002)`, its own line and column). A program whose last block is M99 is checked
     as a subprogram."""
-    from cnc.interp import check
-
     lines = text.splitlines() if isinstance(text, str) else text
     params = _params(machine_kind)
     named: set[str] = set()

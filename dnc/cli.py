@@ -6,6 +6,12 @@ from pathlib import Path
 
 import typer
 
+from cnc.errors import NcError
+from dnc.checker import nc_checker
+from dnc.errors import DncError
+from dnc.tape import MAX_PROGRAM_NUMBER
+from dnc.transfer import TransferError
+
 dnc_app = typer.Typer(help="DNC host: program library and transfers.", no_args_is_help=True)
 
 DB_OPTION = typer.Option(
@@ -26,7 +32,7 @@ SECRET_OPTION = typer.Option(
 
 
 def _library(database_url: str | None):
-    from dnc.checker import nc_checker
+    # deferred: SQLAlchemy and the library's models are not loaded for the rest of `fmscell`
     from dnc.db import make_engine, migrate, session_factory
     from dnc.library import Library
 
@@ -51,8 +57,6 @@ def import_(
 ) -> None:
     """Import .nc/.ngc/.tap/.txt programs, and .apt (APT) and .cl/.cls (CL data) sources
     posted for each machine at dispatch; each file becomes a new program or revision."""
-    from dnc.errors import DncError
-
     lib = _library(database_url)
     failed = 0
     outcomes = lib.import_path(
@@ -97,8 +101,6 @@ def _program_number(text: str) -> int:
     digits = text.upper().removeprefix("O")
     if not digits.isdigit():
         raise typer.BadParameter(f"{text!r} is not a program number (O1234 or 1234)")
-    from dnc.tape import MAX_PROGRAM_NUMBER
-
     if not 1 <= int(digits) <= MAX_PROGRAM_NUMBER:
         raise typer.BadParameter(f"{text!r} is outside O1..O{MAX_PROGRAM_NUMBER}")
     return int(digits)
@@ -132,9 +134,9 @@ def send(
     """Send the released revision of PROGRAM to a machine, verified by reading it back."""
     import uuid
 
+    # deferred: SQLAlchemy, as in _library
     from dnc.db import make_engine, migrate, session_factory
     from dnc.dispatch import Dispatches
-    from dnc.errors import DncError
     from dnc.transfer_worker import RetryPolicy, TransferWorker, _default_client
 
     engine = make_engine(database_url)
@@ -184,7 +186,7 @@ def calls(
 
     Exit 1 when a program it calls, directly or through another, has no released revision
     (a dispatch would be refused)."""
-    from dnc.dependencies import MissingDependency
+    from dnc.dependencies import MissingDependency  # deferred: SQLAlchemy, as in _library
 
     lib = _library(database_url)
     number = _program_number(program)
@@ -223,9 +225,7 @@ def receive(
     secret: str | None = SECRET_OPTION,
 ) -> None:
     """Upload a program from a machine; it is stored as a candidate (draft) revision."""
-    from dnc.errors import DncError
-    from dnc.machine_link import upload_from_machine
-    from dnc.transfer import TransferError
+    from dnc.machine_link import upload_from_machine  # deferred: SQLAlchemy, as in _library
 
     lib = _library(database_url)
     try:
@@ -268,10 +268,7 @@ def _machine_data(
     """The host's tool data to and from a machine over its DNC port (TOOLS / OFFSETS)."""
     import json
 
-    from cnc.errors import NcError
-    from dnc.errors import DncError
-    from dnc.machine_link import client_for
-    from dnc.transfer import TransferError
+    from dnc.machine_link import client_for  # deferred: SQLAlchemy, as in _library
 
     doc = None
     if send_file is not None:
@@ -295,6 +292,7 @@ def _machine_data(
 def _data_file(what: str, path: Path) -> object:
     import json
 
+    # deferred: the machine-data store is not loaded for the rest of `fmscell`
     from cnc.machine_data import MachineData, load_offsets, load_tools
 
     if path.suffix.lower() == ".json":

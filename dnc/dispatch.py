@@ -21,8 +21,9 @@ from sqlalchemy.exc import IntegrityError
 from sqlalchemy.orm import Session, sessionmaker
 
 from dnc import models as m
+from dnc.checker import machine_check
 from dnc.db import transaction
-from dnc.dependencies import dependencies
+from dnc.dependencies import LibraryPrograms, dependencies
 from dnc.errors import (
     Conflict,
     IdempotencyMismatch,
@@ -33,6 +34,7 @@ from dnc.errors import (
 )
 from dnc.events import record
 from dnc.posting import (
+    GCODE,
     SOURCE_KINDS,
     MachineConfigs,
     default_machine_configs,
@@ -314,10 +316,6 @@ class Dispatches:
         """A G-code revision passed the upload check for its kind, whose machines may have
         more axes than this one (dnc.checker): checked here with the machine's own
         configuration when the host has it, refused with the first error's line."""
-        from dnc.checker import machine_check
-        from dnc.dependencies import LibraryPrograms
-        from dnc.posting import GCODE
-
         with transaction(self._sessions) as s:
             rev = s.get(m.Revision, revision_id)
             mach = s.scalar(select(m.Machine).where(m.Machine.name == machine))

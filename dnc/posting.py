@@ -30,6 +30,12 @@ from typing import Any
 from sqlalchemy import select
 from sqlalchemy.orm import Session
 
+from cam.chain import APT_SUFFIXES, CL_SUFFIXES, records_from_text
+from cam.errors import CamError
+from cam.machine5 import Mill5Config, from_nc_config
+from cam.post import CAM_KINDS, POSTS, Machine, PostOptions, load_machine, post
+from cnc.config import SHIPPED_MACHINES, builtin_machine
+from cnc.interp import check
 from dnc import models as m
 from dnc.errors import DncError, InvalidUpload, NotFound, WorkflowError
 from dnc.events import record
@@ -70,8 +76,6 @@ class Posted:
 def kind_of_upload(kind: str | None, filename: str | None) -> str:
     """The revision kind of an upload: the `kind` given, else by the file's suffix (`.apt`
     APT, `.cl` `.cls` `.aptsource` `.cldata` `.clf` CL data), else G-code."""
-    from cam.chain import APT_SUFFIXES, CL_SUFFIXES
-
     if kind:
         if kind not in REVISION_KINDS:
             raise InvalidUpload(
@@ -104,9 +108,6 @@ def partno_header(head: str) -> TapeHeader:
 
 def read_source(text: str, kind: str, file: str) -> list:
     """The CL records of a source; malformed input is refused with file, line, column."""
-    from cam.chain import records_from_text
-    from cam.errors import CamError
-
     try:
         return list(records_from_text(text, kind, file))
     except CamError as e:
@@ -123,8 +124,6 @@ def read_source(text: str, kind: str, file: str) -> list:
 def machin_kinds(records: Iterable) -> list[str]:
     """The machine kinds `MACHIN/name` statements name (names that are no machine kind,
     `MACHIN/FANUC,6` as CAM systems write it, say nothing about the kind)."""
-    from cam.post import POSTS
-
     kinds = []
     for rec in records:
         if rec.word == "MACHIN" and rec.words:
@@ -138,8 +137,6 @@ def check_source(
     text: str, kind: str, file: str, post_kinds: Iterable[str] | None, cell_kinds: list[str]
 ) -> tuple[list[str], list[dict[str, Any]]]:
     """(the kinds the source is meant for, check errors of its trial posts)."""
-    from cam.post import POSTS
-
     records = read_source(text, kind, file)
     kinds = _clean_kinds(post_kinds) if post_kinds else []
     for k in kinds:
@@ -182,10 +179,6 @@ def post_for_machine(
     the NC's configuration of the machine: the post's description is made from it
     (`cam.machine5.from_nc_config`: the machine's kinematics and travel), and the NC
     kernel checks the posted program with it."""
-    from cam.errors import CamError
-    from cam.machine5 import Mill5Config, from_nc_config
-    from cam.post import CAM_KINDS, Machine
-
     nc_config = None
     if machine_kind in CAM_KINDS and config is not None and not isinstance(config, Mill5Config):
         nc_config = config
@@ -206,9 +199,6 @@ def post_for_machine(
 def _post(
     records: list, mach, program_number: int | None, file: str, *, travel=False, nc_config=None
 ) -> Posted:
-    from cam.errors import CamError
-    from cam.post import PostOptions, post
-
     try:
         p, stream = post(iter(records), mach, PostOptions(program_number=program_number), file)
         blocks = list(stream)
@@ -234,8 +224,6 @@ def _nc_machine(mach):
     """The NC kernel's configuration to check a post for `mach` with: the machine's own
     for the NC-described kinds (mill, lathe), the kind's shipped NC machine for a kind the
     post describes itself (mill5: cnc/machines/mill5.yaml), None when the NC has none."""
-    from cnc.config import SHIPPED_MACHINES, builtin_machine
-
     if mach.kind in ("mill", "lathe"):
         return mach.config
     return builtin_machine(mach.kind) if mach.kind in SHIPPED_MACHINES else None
@@ -246,8 +234,6 @@ def _nc_check(text: str, blocks: list, mach, cfg, file: str, travel: bool) -> No
     configuration): with its axis travel and work offsets at dispatch (`travel`), syntax
     and modal rules only for a trial post (the kind's machines may differ in travel and
     offsets). The first error points back at the CL/APT line that made the block."""
-    from cnc.interp import check
-
     params = cfg.params
     data = cfg.machine_data.initial() if travel and cfg.machine_data is not None else None
     if not travel:
@@ -281,8 +267,6 @@ def _refused(mach, file: str, line: int, col: int, reason: str) -> PostRefused:
 def _stand_in(kind: str):
     """The kind's shipped machine (`cam.post.load_machine`): mill -> mill3, lathe -> lathe2,
     mill5 -> cam/machines/mill5.yaml."""
-    from cam.post import POSTS, load_machine
-
     shipped = {"mill": "mill3", "lathe": "lathe2", "mill5": "mill5"}
     if kind not in POSTS or kind not in shipped:
         known = ", ".join(sorted(POSTS))

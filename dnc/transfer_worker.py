@@ -25,8 +25,9 @@ from sqlalchemy import bindparam, exists, or_, select, update
 from sqlalchemy.orm import Session, sessionmaker
 
 from dnc import models as m
+from dnc.checker import machine_check
 from dnc.db import transaction
-from dnc.dependencies import Dependency, MissingDependency, dependencies
+from dnc.dependencies import Dependency, LibraryPrograms, MissingDependency, dependencies
 from dnc.dispatch import DONE, FAILED, PENDING, TRANSFERRING, VERIFYING, dispatch_info
 from dnc.errors import DncError
 from dnc.events import record
@@ -311,9 +312,6 @@ class TransferWorker:
         """The machine check of a G-code revision (dnc.checker.machine_check) as a
         failure of kind `check`; None when it passes or the host lacks the machine's
         configuration."""
-        from dnc.checker import machine_check
-        from dnc.dependencies import LibraryPrograms
-
         config = self.machine_configs(found.machine, found.machine_kind)
         if config is None:
             return None

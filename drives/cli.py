@@ -4,14 +4,14 @@ from __future__ import annotations
 
 import typer
 
+from drives import EDS_PATH
+
 drives_app = typer.Typer(help="Virtual CiA 402 drives on CANopen.", no_args_is_help=True)
 
 
 @drives_app.command()
 def eds() -> None:
     """Print the path of the drives' EDS file (load it in your CANopen master)."""
-    from drives import EDS_PATH
-
     typer.echo(EDS_PATH)
 
 
@@ -26,6 +26,7 @@ def plan(
     """Worst-case bus load of the cyclic CSP traffic; exit 1 above 100 %."""
     import warnings
 
+    # deferred: drives.bus loads python-can, which only this and `serve` need
     from drives.bus import BusLoadWarning, BusOverloadError, axis_traffic, plan_load
 
     if sync_ms <= 0:
@@ -66,7 +67,9 @@ def serve(
     """Run virtual CiA 402 drives in realtime for your own CANopen master."""
     import time
 
-    from drives.bus import open_bus
+    # deferred: python-can and canopen, which only this and `plan` need
+    from drives.bus import get_hub, open_bus
+    from drives.bus.socketcand import SocketcandServer, parse_address
     from drives.virtual_drive import VirtualDrive
 
     try:
@@ -83,15 +86,12 @@ def serve(
     try:
         bus = open_bus(config) if interface != "sim" else None
         if interface == "sim":
-            from drives.bus import get_hub
-
             hub = get_hub(channel, bitrate=bitrate, mode="realtime")
     except (ValueError, OSError) as exc:
         typer.echo(f"serve: cannot open {interface}:{channel}: {exc}", err=True)
         raise typer.Exit(2) from None
     server = None
     if socketcand:
-        from drives.bus.socketcand import SocketcandServer, parse_address
 
         def open_endpoint(name: str):
             return hub.endpoint(name) if interface == "sim" else open_bus(config)

@@ -135,7 +135,7 @@ def _plant_problems(path: tuple[Any, ...], plant: PlantOverrides) -> list[Proble
     """Override groups and fields must exist in PlantParams, with values of their type."""
     if not plant:
         return []
-    # late: the plant model is imported only by configurations that override it (start-up
+    # deferred: the plant model is imported only by configurations that override it (start-up
     # cost of the machine CLIs, which load a machine file first)
     from drives.plant.params import PlantParams
 

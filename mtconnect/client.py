@@ -17,6 +17,7 @@ import contextlib
 import logging
 from dataclasses import dataclass
 
+from cnc.faces.loop_thread import LoopThread
 from mtconnect.agent import Agent
 
 log = logging.getLogger(__name__)
@@ -210,8 +211,6 @@ class AgentConnections:
         return cls(agent, endpoints, **kwargs)
 
     def start(self) -> AgentConnections:
-        from cnc.faces.loop_thread import LoopThread
-
         if self._thread is not None:
             return self
         self._thread = LoopThread("mtconnect-agent").start()

@@ -20,7 +20,8 @@ def check(
     """Check a program: exit 0 when valid (warnings printed), else 1 with FILE:LINE:COL lines."""
     import os
 
-    from plc.ladder import check_file
+    # deferred: the ladder compiler is not loaded for the rest of `fmscell`
+    from plc.ladder import check_file, format_program, import_plcopen, load_file, parse_program
 
     if not os.path.isfile(file):
         typer.echo(f"{file}:1:1: error: no such file", err=True)
@@ -38,12 +39,8 @@ def check(
             f"{file}: {len(errors)} error(s), {len(diagnostics) - len(errors)} warning(s)", err=True
         )
         raise typer.Exit(1)
-    from plc.ladder import load_file
-
     program = load_file(file, watchdog_ms=watchdog_ms)
     if export:
-        from plc.ladder import format_program, import_plcopen, parse_program
-
         if file.lower().endswith(".xml"):
             tree, _ = import_plcopen(file)
         else:
@@ -105,7 +102,12 @@ def run(
     import signal
     import threading
 
+    # deferred: the ladder compiler, the runtime and the Modbus face are not loaded for the
+    # rest of `fmscell`
     from plc.ladder import LadderError, load_file
+    from plc.machine_io import MachineIO
+    from plc.modbus import AllowListError, ModbusFace
+    from plc.remote_panel import WRITABLE
     from plc.runtime import FileRetainStore, RealtimeRunner, Runtime, RuntimeConfig
 
     try:
@@ -121,9 +123,6 @@ def run(
     store = FileRetainStore(retain) if retain else None
     io = None
     if machine_io:
-        from plc.machine_io import MachineIO
-        from plc.remote_panel import WRITABLE
-
         io = MachineIO()
         writable = writable or WRITABLE
     runtime = Runtime(program, config, retain_store=store, io=io)
@@ -132,8 +131,6 @@ def run(
     except ValueError as exc:  # e.g. a malformed FMSCELL_PLC_RT_PRIORITY
         typer.echo(f"error: {exc}", err=True)
         raise typer.Exit(2) from None
-    from plc.modbus import AllowListError, ModbusFace
-
     try:
         face = ModbusFace(
             lambda: runtime.snapshot,

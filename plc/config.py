@@ -99,7 +99,7 @@ class PlcConfig(_Section):
             except MTableError as exc:
                 out.append((tuple(exc.where.split(".")), exc.message))
         if self.modbus_write_allow:
-            # late: plc.modbus brings the Modbus server; a machine file is read without it
+            # deferred: plc.modbus brings the Modbus server; a machine file is read without it
             from plc.modbus.allowlist import AllowList, AllowListError
 
             try:

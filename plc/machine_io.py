@@ -20,6 +20,9 @@ import os
 from dataclasses import dataclass, field
 
 from plc.image import ImageSize
+from plc.ladder import LadderError, compile_program, load_file, parse_program
+from plc.m_functions import with_m_functions
+from plc.runtime import Runtime, RuntimeConfig
 from plc.signals import FIELD_TO_PLC, PLC_TO_FIELD, NcPort, signal, signals
 
 ARM_POSITIONS = ("home", "grip", "extract", "swap", "insert")
@@ -455,9 +458,6 @@ def machine_plc(
     through `io.nc` (signal names of `plc.signals`). `m_functions`: the machine's M-code
     table (`plc.m_functions.MFunction`s), compiled into the program at its slot.
     """
-    from plc.ladder import load_file
-    from plc.runtime import Runtime, RuntimeConfig
-
     io = MachineIO(params)
     path = program_path or PROGRAM_PATH
     config = config or RuntimeConfig()
@@ -470,9 +470,6 @@ def machine_plc(
 
 
 def _with_table(path: str, table: tuple):
-    from plc.ladder import LadderError, compile_program, parse_program
-    from plc.m_functions import with_m_functions
-
     with open(path, encoding="utf-8") as f:
         program, sink = parse_program(f.read(), str(path))
     if sink.has_errors:

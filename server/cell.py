@@ -26,14 +26,36 @@ import time
 from pathlib import Path
 from typing import Any
 
+from cnc.errors import NcError
+from cnc.faces.dnc_port import ALARM_BAD_DATA, ALARM_REFUSED
+from cnc.machine.faults import DRIVE_ALIASES, PLC_ALIASES, parse_fault_spec
+from cnc.machine_data import MachineDataError
+from dnc.checker import nc_checker
+from dnc.db import make_engine, migrate, session_factory
+from dnc.dispatch import Dispatches
+from dnc.errors import Conflict, NotFound
+from dnc.jobs import Jobs, Scheduler
+from dnc.library import Library
+from dnc.machine_link import RemoteRequests, client_for
+from dnc.outbox import OutboxPublisher
+from dnc.transfer import TransferError
+from dnc.transfer_worker import RetryPolicy, TransferWorker, _default_client
+from mtconnect import Agent
+from mtconnect.client import AgentConnections
+from plc.machine_io import DETECTION, FAULTS
+from server.config import load_cell_config
 from server.cycle_audit import CycleAudit, HostRequests
 from server.host import AlarmWatch, Loop, MonitoringModel, make_starter
+from server.mqtt import CellFace, mqtt_settings
 from server.supervisor import (
     InProcessMachine,
     MachineLink,
     MachineUnavailable,
     SubprocessMachine,
+    wait_for,
 )
+from web_api.app import create_app
+from web_api.settings import ApiKey
 
 log = logging.getLogger(__name__)
 
@@ -54,8 +76,6 @@ def default_cell(*, free_ports: bool = False, opcua: bool | None = None):
     port (tests). `opcua`: the OPC UA faces on or off; None = on with the fixed ports, off
     with free ports (an OPC UA server takes seconds to start on a loaded box, and most
     tests of the cell do not read it)."""
-    from server.config import load_cell_config
-
     if opcua is None:
         opcua = not free_ports
     bases = {"mill1": "mill3", "mill2": "mill3", "lathe1": "lathe2"}
@@ -140,15 +160,6 @@ class Cell:
 
     # ------------------------------------------------------------------ lifetime
     def start(self, ready_timeout_s: float = 120.0) -> Cell:
-        from dnc.checker import nc_checker
-        from dnc.db import make_engine, migrate, session_factory
-        from dnc.dispatch import Dispatches
-        from dnc.jobs import Jobs, Scheduler
-        from dnc.library import Library
-        from dnc.transfer_worker import RetryPolicy, TransferWorker
-        from mtconnect import Agent
-        from mtconnect.client import AgentConnections
-
         self.engine = make_engine(self.database_url)
         migrate(self.engine)
         self.sessions = session_factory(self.engine)
@@ -230,8 +241,6 @@ class Cell:
     def _dnc_client(self, host: str, port: int, profile: dict):
         """The transfer worker's DncClient: the registry's profile plus the port's shared
         secret, which stays in the host's memory (the registry's profile is public)."""
-        from dnc.transfer_worker import _default_client
-
         secret = next(
             (lk.secret for lk in self.links.values() if lk.address("dnc") == f"{host}:{port}"),
             None,
@@ -342,13 +351,9 @@ class Cell:
     def _start_publisher(self) -> None:
         """The MQTT face (`host.mqtt`, or FMSCELL_MQTT=HOST:PORT) and the outbox publisher
         that sends it the events (docs/mqtt.md)."""
-        from server.mqtt import CellFace, mqtt_settings
-
         settings = mqtt_settings(self.config.host)
         if settings is None:
             return
-        from dnc.outbox import OutboxPublisher
-
         self.mqtt = CellFace(settings, self.monitor).start()
         publisher = OutboxPublisher(self.sessions, self.mqtt.publish_event)
         self.loops.append(Loop("outbox-publisher", publisher.publish_pending, 0.2).start())
@@ -359,7 +364,7 @@ class Cell:
         back into the audit log (server/opcua_feed.py, docs/opcua.md)."""
         if not any(link.ports.get("opcua") for link in self.links.values()):
             return
-        from dnc.machine_link import client_for
+        # deferred: asyncua (about a second to import) only for a cell with OPC UA faces
         from server.opcua_feed import OpcUaFeed
 
         def client(name: str):
@@ -369,8 +374,6 @@ class Cell:
         self.loops.append(Loop("opcua-feed", self.opcua_feed.tick, 1.0).start())
 
     def _start_remote_requests(self) -> None:
-        from dnc.machine_link import RemoteRequests, client_for
-
         for name, link in self.links.items():
 
             def client(name=name, secret=link.secret):
@@ -406,8 +409,6 @@ class Cell:
     # ------------------------------------------------------------------ the API's view
     def app(self, settings):
         """The FastAPI app over this cell (monitoring, commands and, if enabled, faults)."""
-        from web_api.app import create_app
-
         return create_app(
             settings,
             library=self.library,
@@ -431,8 +432,6 @@ class Cell:
 
     # ------------------------------------------------------------------ commands
     def link(self, name: str) -> MachineLink:
-        from dnc.errors import NotFound
-
         try:
             return self.links[name]
         except KeyError:
@@ -461,8 +460,6 @@ class Cell:
             return "E-stop button pressed (simulation face)"
         if command == "home":
             link.home()  # REF, home all, every axis referenced, AUTO: all on the panel
-            from server.supervisor import wait_for
-
             # answer once the host's own view (SHDR -> agent) shows it too
             wait_for(
                 lambda: self.monitor.status(name)["mode"] == "AUTOMATIC",
@@ -488,12 +485,6 @@ class Cell:
         through its DNC port; with `doc`, replaced first. Conflict: the machine refuses
         (in cycle); cnc.machine_data.MachineDataError: a bad value (`.pointer` into doc);
         MachineUnavailable: the DNC port cannot be reached."""
-        from cnc.faces.dnc_port import ALARM_BAD_DATA, ALARM_REFUSED
-        from cnc.machine_data import MachineDataError
-        from dnc.errors import Conflict
-        from dnc.machine_link import client_for
-        from dnc.transfer import TransferError
-
         link = self.link(name)  # NotFound for an unknown machine
         try:
             with client_for(self.library, name, secret=link.secret) as client:
@@ -513,8 +504,6 @@ class Cell:
 
     def inject(self, name: str, request: dict) -> Fault:
         """Inject a fault through the machine's simulation face (ValueError: bad spec)."""
-        from cnc.machine.faults import parse_fault_spec
-
         link = self.link(name)
         spec = fault_spec(request)
         at = request.get("at")
@@ -543,8 +532,6 @@ class Cell:
         return [f for f in self.faults.values() if f.machine == name]
 
     def clear(self, name: str, fault_id: int) -> Fault:
-        from dnc.errors import NotFound
-
         fault = self.faults.get(fault_id)
         if fault is None or fault.machine != name:
             raise NotFound(f"no fault {fault_id} on machine {name!r}")
@@ -603,14 +590,10 @@ def run_cell(
     """`fmscell run`: start the cell and serve the API until SIGINT/SIGTERM; exit status."""
     import uvicorn
 
-    from cnc.errors import NcError
-
     if clock not in CLOCKS:
         echo(f"--clock {clock!r}: one of {', '.join(CLOCKS)}")
         return 2
     try:
-        from server.config import load_cell_config
-
         cfg = load_cell_config(config) if config else default_cell()
         settings = cfg.host.auth.api_settings()
         if insecure_open:
@@ -637,8 +620,6 @@ def run_cell(
     if not settings.api_keys and not settings.insecure_open:
         # loopback without keys (the built-in cell of `make run`): a one-run admin key,
         # printed below, so the API and the README's tour work from the first start
-        from web_api.settings import ApiKey
-
         demo_key = secrets.token_urlsafe(24)
         settings = settings.model_copy(
             update={"api_keys": (ApiKey(user="local-admin", role="admin", key=demo_key),)}
@@ -802,9 +783,9 @@ def machine_time(answer: str) -> float | None:
 def fault_types() -> list[dict]:
     """The `/api/fault-types` rows: the drive, bus and node kinds of drives.fault_registry,
     their aliases, the PLC field faults with plc.machine_io.DETECTION, the PLC aliases."""
-    from cnc.machine.faults import DRIVE_ALIASES, PLC_ALIASES
+    # deferred: drives.faults loads python-can and canopen, which a host whose machines
+    # run in their own processes does not otherwise need
     from drives.faults import fault_types as drive_fault_types
-    from plc.machine_io import DETECTION, FAULTS
 
     out = drive_fault_types()
     for alias, (kind, _) in DRIVE_ALIASES.items():

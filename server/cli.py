@@ -52,6 +52,8 @@ def run(
 ) -> None:
     """Start the cell: DNC host, the configured machines and the REST API, until SIGINT or
     SIGTERM."""
+    # deferred: the cell brings the web stack, SQLAlchemy and the machines, for this
+    # sub-command only (start-up cost of every other `fmscell` command)
     from server.cell import run_cell
 
     raise typer.Exit(

@@ -28,6 +28,9 @@ import time
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 
+from dnc.db import transaction
+from dnc.events import record
+
 NOT_THE_HOST = "not the host: a Modbus client on the remote panel, or the machine's own panel"
 # Executions from which ACTIVE is a cycle start (READY...) or a resume (FEED_HOLD...).
 RESUMES = frozenset({"FEED_HOLD", "OPTIONAL_STOP", "PROGRAM_STOPPED", "INTERRUPTED"})
@@ -127,9 +130,6 @@ class CycleAudit:
 
     def check(self) -> int:
         from datetime import UTC, datetime
-
-        from dnc.db import transaction
-        from dnc.events import record
 
         found = []
         for name in self.monitor.links:

@@ -208,6 +208,7 @@ class AlarmWatch:
     def check(self) -> int:
         from datetime import UTC, datetime
 
+        # deferred: SQLAlchemy; `fmscell --help` loads this module (server.factory)
         from dnc.db import transaction
         from dnc.events import record
 

@@ -108,6 +108,7 @@ class CellFace:
     def __init__(self, settings: MqttSettings, monitor: MonitoringModel) -> None:
         import paho.mqtt.client as mqtt
 
+        # deferred: SQLAlchemy; `fmscell --help` loads this module (server.factory)
         from dnc.outbox import AckedPublish
 
         clash = RESERVED & set(monitor.links)

@@ -52,6 +52,7 @@ class MachineLink:
         from pymodbus.client import ModbusTcpClient
         from pymodbus.exceptions import ModbusException
 
+        # deferred: with pymodbus; `fmscell --help` loads this module (server.factory)
         from plc.remote_panel import PanelRefused, RemotePanel, RemotePanelError
 
         port = self.ports.get("modbus")
@@ -201,6 +202,8 @@ class InProcessMachine:
         ideal: bool = False,
         opcua_users=None,
     ) -> None:
+        # deferred: the machine (drives, canopen, PLC) loads only in a process that runs one;
+        # `fmscell --help` loads this module (server.factory)
         from cnc.machine import Machine, RealtimeRunner
         from cnc.machine.runner import FAST_SPEED, IDLE_SPEED
 

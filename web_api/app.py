@@ -19,15 +19,20 @@ from dnc.dispatch import Dispatches
 from dnc.jobs import Jobs
 from dnc.library import Library
 from web_api.api_docs import install_api_docs
+from web_api.dashboard import dashboard_router
 from web_api.event_hub import outbox_hub
+from web_api.mtconnect import mtconnect_router
 from web_api.problems import BodySizeLimit, Problem, install_problem_handlers, problem_doc
 from web_api.ratelimit import AuthFailureLimiter
 from web_api.routers import MachinesProvider, Services
 from web_api.routers import auth as auth_router
 from web_api.routers import dispatches as dispatches_router
 from web_api.routers import events as events_router
+from web_api.routers import faults as faults_router
 from web_api.routers import health as health_router
 from web_api.routers import jobs as jobs_router
+from web_api.routers import machine_commands as machine_commands_router
+from web_api.routers import machine_data as machine_data_router
 from web_api.routers import machines as machines_router
 from web_api.routers import programs as programs_router
 from web_api.routers import revisions as revisions_router
@@ -120,10 +125,6 @@ def create_app(
     ):
         app.include_router(module.router)
     # machine commands and fault injection act on the running cell (dnc.cell.CellControl)
-    from web_api.routers import faults as faults_router
-    from web_api.routers import machine_commands as machine_commands_router
-    from web_api.routers import machine_data as machine_data_router
-
     app.state.cell_control = cell_control
     if cell_control is not None:
         app.include_router(machine_commands_router.router)
@@ -131,11 +132,7 @@ def create_app(
         if faults_enabled:
             app.include_router(faults_router.router)
     if mtconnect_agent is not None:
-        from web_api.mtconnect import mtconnect_router
-
         app.include_router(mtconnect_router(mtconnect_agent), prefix="/mtconnect")
-    from web_api.dashboard import dashboard_router
-
     app.include_router(dashboard_router())
     install_api_docs(app)
     app.openapi = lambda: _openapi(app)

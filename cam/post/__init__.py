@@ -18,6 +18,7 @@ from cam.errors import CamError
 from cam.post.base import FanucPost, NcBlock, PostOptions, PostSummary
 from cam.post.lathe import LathePost
 from cam.post.mill5 import Mill5Post
+from cnc.errors import NcError
 
 __all__ = [
     "Machine",
@@ -50,9 +51,10 @@ class Machine:
 def load_machine(spec: str | Path) -> Machine:
     """`mill3`, `lathe2` (the NC kernel's shipped machines), `mill5` (cam/machines/mill5.yaml)
     or a machine YAML file (its `kind` picks the loader and the post)."""
+    # deferred: the machines' configurations (pydantic models) are built only when a
+    # machine is loaded, not at `fmscell --help` (start-up cost)
     from cam.machine5 import MILL5_FILE, load_mill5
     from cnc.config import BUILTIN_MACHINES, builtin_machine, load_machine_config
-    from cnc.errors import NcError
 
     text = str(spec)
     if text in BUILTIN_MACHINES:

@@ -297,7 +297,7 @@ def _macro(blk: Block, text: str, raw: str, line: int, file: str) -> Block:
     hit = _MACRO_CACHE.get(key)
     if hit is not None:
         return hit
-    from cnc.gcode.macro import parse_macro
+    from cnc.gcode.macro import parse_macro  # deferred: cycle, macro imports Block from here
 
     mb = parse_macro(text, raw, line, file, blk if type(blk) is MarkedBlock else None)
     if len(_MACRO_CACHE) >= _MACRO_CACHE_MAX:

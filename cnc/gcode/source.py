@@ -22,6 +22,9 @@ import re
 from collections.abc import Iterable, Iterator, Mapping, Sequence
 from typing import NamedTuple
 
+from cnc.errors import NcError
+from cnc.gcode.lexer import parse_line
+
 Lines = Iterator[tuple[int, str]]  # (1-based line number, text)
 
 _O_LINE_TEXT = re.compile(r"\s*(?:/\d?\s*)?[Oo:]\s*(\d+)")
@@ -119,9 +122,6 @@ def skip_leader(numbered: Lines) -> Lines:
     nothing before it is a block, the lines before it are dropped; otherwise every line is
     handed on unchanged (and the bad first line gets its error as usual).
     """
-    from cnc.errors import NcError
-    from cnc.gcode.lexer import parse_line
-
     it = iter(numbered)
     buffered: list[tuple[int, str]] = []
     for item in it:

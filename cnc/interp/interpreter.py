@@ -1375,7 +1375,7 @@ class Interpreter:
             return
         if self._plane == G19:
             raise self._err("cutter compensation in the G19 plane is not supported", blk, "G")
-        try:
+        try:  # deferred: optional, a build without cnc.cutter_comp refuses G41/G42 (below)
             from cnc.cutter_comp import CutterCompensation, Segment
         except ImportError:
             raise self._err(

@@ -32,6 +32,7 @@ from typing import TYPE_CHECKING
 from cnc.canon import ArcFeed, Plane, SpindleDirection, SpindleSync, StraightFeed, ThreadFeed
 from cnc.errors import NcError
 from cnc.gcode.lexer import Block, MarkedBlock, parse_line
+from cnc.gcode.source import _read_file_from
 from cnc.interp import lathe_geometry as lg
 from cnc.interp.gnum import G0, G1, G2, G3, G40, G41, G42, G80
 
@@ -160,8 +161,6 @@ def _reopen(ip: Context):
     seq = getattr(idx, "seq", None)
     if seq is not None:
         return ((i + 1, seq[i]) for i in range(len(seq)))
-    from cnc.gcode.source import _read_file_from
-
     return _read_file_from(idx.path, 0, 1)
 
 

@@ -29,15 +29,15 @@ __all__ = [
 def __getattr__(name: str):
     # drives, canopen and the PLC load on first use: `import cnc.machine` stays cheap
     if name == "Machine":
-        from cnc.machine.machine import Machine
+        from cnc.machine.machine import Machine  # deferred: start-up cost (above)
 
         return Machine
     if name == "RealtimeRunner":
-        from cnc.machine.runner import RealtimeRunner
+        from cnc.machine.runner import RealtimeRunner  # deferred: start-up cost (above)
 
         return RealtimeRunner
     if name in ("CanopenAxes", "IdealAxes"):
-        from cnc.machine import axes
+        from cnc.machine import axes  # deferred: start-up cost (above)
 
         return getattr(axes, name)
     raise AttributeError(f"module 'cnc.machine' has no attribute {name!r}")

@@ -92,6 +92,8 @@ class CanopenAxes:
         candump: TextIO | None = None,
         substep: float | None = None,
     ) -> None:
+        # deferred: python-can and canopen load only for CiA 402 axes (ideal axes and
+        # `import cnc.machine` run without them)
         from drives.bus.hub import CanHub
         from drives.bus.loadplan import BusOverloadError
         from drives.faults import FaultInjector
@@ -229,7 +231,7 @@ class CanopenAxes:
     def apply(self, outputs, dt: float) -> float:
         """Run the axis command (if any) and one IPO cycle; return extra virtual seconds a
         blocking drive sequence took (0 for an ordinary cycle)."""
-        from drives.master import AxisError
+        from drives.master import AxisError  # deferred: as in __init__ (canopen)
 
         cmd = outputs.axis_command
         t0 = self.group.time

@@ -11,6 +11,7 @@ from cnc.controller import (
     AXIS_COMMANDS,
     AxisFeedback,
     CommandRefused,
+    Controller,
     CycleInputs,
     CycleOutputs,
 )
@@ -27,6 +28,4 @@ __all__ = [
 
 def controller_class():
     """The default controller: `cnc.controller.Controller`."""
-    from cnc.controller import Controller
-
     return Controller

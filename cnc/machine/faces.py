@@ -7,7 +7,14 @@ from __future__ import annotations
 import contextlib
 from pathlib import Path
 
+from cnc.controller import CommandRefused
+from cnc.faces.dnc_port import ALARM_BAD_DATA, ALARM_REFUSED, DncAlarm, DncPort
 from cnc.faces.loop_thread import LoopThread
+from cnc.faces.shdr import ShdrAdapter
+from cnc.machine.simface import SimulationFace
+from cnc.machine_data import MachineDataError
+from plc.modbus import ModbusFace
+from plc.remote_panel import WRITABLE
 
 
 class MachineFaces:
@@ -34,12 +41,6 @@ class MachineFaces:
         self._want_sim = simulation
 
     def start(self) -> MachineFaces:
-        from cnc.faces.dnc_port import DncPort
-        from cnc.faces.shdr import ShdrAdapter
-        from cnc.machine.simface import SimulationFace
-        from plc.modbus import ModbusFace
-        from plc.remote_panel import WRITABLE
-
         m, ports = self.machine, self.machine.config.ports
         ctl = m.controller
         self.loop.start()
@@ -93,6 +94,7 @@ class MachineFaces:
         return self
 
     def _start_opcua(self) -> None:
+        # deferred: asyncua (about a second to import) only for a machine with an OPC UA port
         from cnc.faces.opcua import Identification, OpcUaFace, Security
 
         m, ports = self.machine, self.machine.config.ports
@@ -150,7 +152,7 @@ class MachineFaces:
 
     def _program_sha256(self, name: str) -> str:
         """The sha256 of the running program as held in program memory (O-number names)."""
-        from cnc.faces.opcua.values import program_number
+        from cnc.faces.opcua.values import program_number  # deferred: with the OPC UA face
 
         number = program_number(name)
         for entry in self.machine.memory.directory():
@@ -161,18 +163,12 @@ class MachineFaces:
     def _drip(self):
         buffer = self.machine.controller.drip_input()
         if buffer is None:
-            from cnc.faces.dnc_port import ALARM_REFUSED, DncAlarm
-
             raise DncAlarm(ALARM_REFUSED, "DRIP refused: the NC is not ready for a drip-feed")
         return buffer
 
     def _machine_data(self, what: str, doc):
         """The DNC port's TOOLS / OFFSETS: read, or write through the controller (refused
         in cycle, validated all or nothing; the machine saves it to its state directory)."""
-        from cnc.controller import CommandRefused
-        from cnc.faces.dnc_port import ALARM_BAD_DATA, ALARM_REFUSED, DncAlarm
-        from cnc.machine_data import MachineDataError
-
         ctl = self.machine.controller
         if doc is not None:
             try:
@@ -189,7 +185,7 @@ class MachineFaces:
         is what the face's clients did since the last exchange (the host audits it)."""
         from dataclasses import asdict
 
-        from cnc.faces.dnc_port import ALARM_BAD_DATA, ALARM_REFUSED, DncAlarm
+        # deferred: part of the OPC UA face (asyncua), loaded with it
         from cnc.faces.opcua import HostDataError
         from cnc.faces.opcua.host_data import from_doc
 

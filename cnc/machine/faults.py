@@ -58,14 +58,14 @@ class FaultSpec:
 
 
 def _drive_kinds() -> dict:
-    # imported on first use: `cnc` does not load the drive package until a fault names one
+    # deferred: `cnc` does not load the drive package until a fault names one
     from drives.fault_registry import FAULT_KINDS
 
     return FAULT_KINDS
 
 
 def _plc_faults() -> dict[str, str]:
-    from plc.machine_io import FAULTS
+    from plc.machine_io import FAULTS  # deferred: nor the PLC (its runtime), as above
 
     return FAULTS
 

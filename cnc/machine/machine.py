@@ -21,8 +21,18 @@ from cnc.machine.contour import contour_error
 from cnc.machine.contract import CommandRefused, CycleInputs, controller_class
 from cnc.machine.faults import FaultSchedule, FaultSpec, parse_fault_spec
 from cnc.machine.records import EventLog, TraceWriter
+from cnc.machine_data import (
+    counters_file,
+    load,
+    load_part_count,
+    save,
+    save_part_count,
+    state_file,
+)
 from cnc.program_memory import ProgramMemory
 from cnc.status import Alarm, CanBusLoad, MachineStatus
+from plc.machine_io import machine_plc
+from plc.runtime import RuntimeConfig
 
 PANEL_BUTTONS = ("PanelCycleStart", "PanelFeedHold", "PanelReset")
 _UNSET = object()
@@ -80,9 +90,6 @@ class Machine:
         state_dir: str | None = None,
         machine_data=None,
     ) -> None:
-        from plc.machine_io import machine_plc
-        from plc.runtime import RuntimeConfig
-
         self.config = config
         self.name = name
         self.ipo_s = config.ipo_cycle_ms / 1000.0
@@ -116,8 +123,6 @@ class Machine:
         self._md_saved = -1
         md = getattr(self.controller, "machine_data", None)
         if state_dir is not None and md is not None:
-            from cnc.machine_data import load, state_file
-
             self.machine_data_file = state_file(state_dir, name)
             if self.machine_data_file.exists():
                 md.replace_with(load(self.machine_data_file))
@@ -128,8 +133,6 @@ class Machine:
         self.counters_file = None
         self._count_saved = -1
         if state_dir is not None and hasattr(self.controller, "part_count"):
-            from cnc.machine_data import counters_file, load_part_count
-
             self.counters_file = counters_file(state_dir, name)
             self.controller.part_count = self._count_saved = load_part_count(self.counters_file)
         self.axes = (
@@ -239,8 +242,6 @@ class Machine:
         md = getattr(self.controller, "machine_data", None)
         if self.machine_data_file is None or md is None or md.revision == self._md_saved:
             return
-        from cnc.machine_data import save
-
         save(self.machine_data_file, md)
         self._md_saved = md.revision
 
@@ -249,8 +250,6 @@ class Machine:
         count = self.controller.part_count
         if self.counters_file is None or count == self._count_saved:
             return
-        from cnc.machine_data import save_part_count
-
         save_part_count(self.counters_file, count)
         self._count_saved = count
 
@@ -384,6 +383,8 @@ class Machine:
 
         `cnc.program_memory.MemoryFull` (its message suggests drip-feed) when it does not fit.
         """
+        # deferred: the DNC port's module brings asyncio and ssl, which a lockstep machine
+        # does not need
         from cnc.faces.dnc_port import program_number, stored_text
 
         lines = [ln.rstrip("\r") for ln in text.splitlines()]
@@ -471,6 +472,7 @@ class Machine:
         `dnc_parity`: ISO 7-bit even parity on the DNC port (a parity error rejects the
         program and raises alarm 2001). `opcua_users`: `(user, password) -> role` for a
         secured OPC UA face (docs/opcua.md)."""
+        # deferred: the faces (asyncio servers, Modbus) load only when a machine starts them
         from cnc.machine.faces import MachineFaces
 
         self.faces = MachineFaces(self, simulation=simulation, dnc_parity=dnc_parity)

@@ -27,6 +27,7 @@ from cnc.machine_data.core import (
     check_tool_number,
     tool_from_mapping,
     work_offset_index,
+    work_offset_name,
 )
 
 _INT_COLS = ("tip", "uses", "life_uses")
@@ -276,8 +277,6 @@ def parse_offsets(text: str, file: str = "<offsets>") -> dict[str, tuple[float, 
 
 
 def _canonical(name: str) -> str:
-    from cnc.machine_data.core import work_offset_name
-
     return work_offset_name(work_offset_index(name))
 
 
@@ -323,8 +322,6 @@ def tools_csv(data: MachineData) -> str:
 
 def offsets_csv(data: MachineData) -> str:
     """The work offsets that are set (and G92 when set) as the CSV `parse_offsets` reads."""
-    from cnc.machine_data.core import work_offset_name
-
     lines = ["offset,x,y,z"]
     for i, (x, y, z) in enumerate(data.work_offsets):
         if (x, y, z) != (0.0, 0.0, 0.0):

@@ -28,6 +28,7 @@ import can
 
 from drives.bus.candump import CandumpWriter
 from drives.bus.frame import ERROR_FRAME_BITS, data_frame_bits, frame_bits
+from drives.bus.loadplan import plan_load
 from drives.bus.message import OwnedMessage, new_message
 from drives.realtime import RealtimeProcess
 
@@ -264,8 +265,6 @@ class CanHub:
 
     def check_load(self, frames: list, sync_period_s: float):
         """`plan_load` at this hub's bitrate: refuses > 100 %, warns > 70 % (see loadplan)."""
-        from drives.bus.loadplan import plan_load
-
         return plan_load(frames, sync_period_s=sync_period_s, bitrate=self.bitrate)
 
     # ----------------------------------------------------------------- time

@@ -31,6 +31,8 @@ from __future__ import annotations
 from dataclasses import dataclass
 from enum import Enum
 
+from drives.cia402.profile import ramp_velocity, stop_step
+
 NEG_LIMIT, POS_LIMIT, HOME = 1, 2, 4
 
 SUPPORTED_METHODS = frozenset({1, 2, 3, 4, 5, 6, 17, 18, 19, 20, 21, 22, 33, 34, 35, 37})
@@ -119,8 +121,6 @@ class HomingRun:
 
     def drive(self, dem, h: float) -> bool:
         """Advance the demand one sub-step; True once the axis has stopped after the latch."""
-        from drives.cia402.profile import ramp_velocity, stop_step
-
         if self.braking or self.error:
             return stop_step(dem, self.acc, h) and self.standstill
         seg = self.segments[self.i]

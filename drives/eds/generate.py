@@ -173,6 +173,7 @@ RECORD_NAMES = {
 
 def profile_objects() -> list[Obj]:
     sys.path.insert(0, str(HERE.parent.parent))
+    # deferred: run as a script, the project root must be on sys.path first
     from drives.cia402.application import Drive402
     from drives.cia402.objects import OBJECTS
 

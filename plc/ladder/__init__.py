@@ -34,6 +34,7 @@ def check_file(
 ) -> list[Diagnostic]:
     """Every diagnostic for a program file (`.xml` = PLCopen TC6, else neutral text)."""
     if str(path).lower().endswith(".xml"):
+        # deferred: the PLCopen importer (and expat) only for .xml programs: start-up cost
         from plc.ladder.plcopen import import_plcopen
 
         program, sink = import_plcopen(path)
@@ -45,7 +46,7 @@ def check_file(
 def import_plcopen(source: str, file: str | None = None, pou: str | None = None):
     """Import a PLCopen TC6 XML project's LD body: the first program POU, or the POU named
     `pou` (lazy import keeps startup fast)."""
-    from plc.ladder.plcopen import import_plcopen as _imp
+    from plc.ladder.plcopen import import_plcopen as _imp  # deferred: as in check_file
 
     return _imp(source, file, pou)
 

@@ -246,6 +246,7 @@ def load_file(
 ) -> CompiledProgram:
     """Compile a program file: `.xml` is PLCopen TC6, anything else neutral text."""
     if str(path).lower().endswith(".xml"):
+        # deferred: the PLCopen importer (and expat) only for .xml programs: start-up cost
         from plc.ladder.plcopen import import_plcopen
 
         program, sink = import_plcopen(path)

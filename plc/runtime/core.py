@@ -31,6 +31,7 @@ from dataclasses import dataclass, field
 from plc.errors import PlcError
 from plc.image import BIT_AREAS, ImageSize, ProcessImage, Snapshot, Write, WriteQueue, _to_int
 from plc.ladder.compiler import CompiledProgram, TagInfo
+from plc.ladder.instructions import MEMBER_ALIASES
 from plc.ladder.symbols import (
     SLOT_DIV_ZERO,
     SLOT_FAULT_RUNG,
@@ -344,8 +345,6 @@ class Runtime:
         base, _, member = name.partition(".")
         info = (program or self.program).tag(base)
         if member:
-            from plc.ladder.instructions import MEMBER_ALIASES
-
             m = MEMBER_ALIASES.get(member.upper(), member.upper())
             if m not in info.members:
                 raise KeyError(f"{info.type} tag {info.name!r} has no member .{member}")

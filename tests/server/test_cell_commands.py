@@ -104,11 +104,11 @@ class _Client:
     ids=["bad-value-with-pointer", "bad-value", "in-cycle", "unreachable"],
 )  # fmt: skip
 def test_machine_data_refusals_become_the_apis_errors(cell, monkeypatch, alarm, message, want):
-    from dnc import machine_link
     from dnc.transfer import TransferError
+    from server import cell as cell_module
 
     error = TransferError("refused" if alarm else "connect", message, alarm=alarm)
-    monkeypatch.setattr(machine_link, "client_for", lambda *a, **kw: _Client(error))
+    monkeypatch.setattr(cell_module, "client_for", lambda *a, **kw: _Client(error))
     cell.library = object()
     kind, text, pointer = want
     with pytest.raises(Exception) as err:

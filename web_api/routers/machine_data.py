@@ -14,6 +14,7 @@ from fastapi import APIRouter, Body, Path, Request
 from fastapi.concurrency import run_in_threadpool
 
 from dnc.cell import MachineUnavailable
+from dnc.errors import Conflict
 from web_api.problems import ApiProblem, problem_doc
 from web_api.routers.auth import Operator, Viewer
 from web_api.routers.machine_commands import cell_of
@@ -28,8 +29,6 @@ OFFSETS_EXAMPLE = {"work_offsets": {"G54": [-300.0, -200.0, -300.0]}, "g92": [0.
 async def _at_machine(
     request: Request, name: str, what: str, doc: dict | None, actor: str = ""
 ) -> dict:
-    from dnc.errors import Conflict
-
     cell = cell_of(request)
     try:
         return await run_in_threadpool(cell.machine_data, name, what, doc)
