@@ -750,12 +750,18 @@ class Library:
             # hashed and counted as it streamed in; stored from its file a chunk at a time,
             # never whole in memory (dnc.content)
             digest, size, lines = text.sha256, text.stored_size, text.lines
-            store(s, digest, size, text.chunks())
+            chunks = text.chunks()
         else:
             # stored text is ASCII (dnc.tape.normalise_text): characters are bytes
             digest, lines = sha256_of(text), count_lines(text)
             size = len(text) if text.isascii() else len(text.encode("utf-8"))
-            store(s, digest, size, split_text(text))
+            chunks = split_text(text)
+        try:
+            store(s, digest, size, chunks)
+        except IntegrityError as exc:  # a concurrent upload stored the same text first
+            raise Conflict(
+                f"the same text was stored concurrently for program {prog.id}; retry the upload"
+            ) from exc
         seq = (
             s.scalar(select(func.max(m.Revision.seq)).where(m.Revision.program_id == prog.id)) or 0
         ) + 1
