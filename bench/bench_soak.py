@@ -142,7 +142,7 @@ RECOVER_WAIT_S = 60.0
 
 def mtconnect_sequence(c: httpx.Client) -> tuple[float, int, int]:
     """(now, the agent's nextSequence, its bufferSize): how fast observations fill its
-    buffer, and how many it holds (the RSS grows until it is full: host.mtconnect_buffer_size)."""
+    buffer, and how many it holds (the host's RSS grows until it is full)."""
     text = c.get("/mtconnect/current").text
     size = int(re.search(r'bufferSize="(\d+)"', text).group(1))
     return time.monotonic(), int(re.search(r'nextSequence="(\d+)"', text).group(1)), size
