@@ -5,8 +5,9 @@ whole text to one statement, and SQLite's trigram index tokenised it as one docu
 in memory at once (some 6 bytes of host memory per byte of program). Here a text is cut
 into chunks of at most `CHUNK_CHARS` characters that end at a line end, one row each in
 `content_chunks` (migration 0010): an upload streamed from a file is stored without ever
-being whole in memory, the search index takes one chunk at a time, and a reader (the REST
-text, a dispatch) can stream it back.
+being whole in memory, the search index takes one chunk at a time, and a reader can
+stream it back (the REST text does; a dispatch, the NC check and posting read it whole,
+once: `read_text`).
 
 A chunk ends at a line end (LF) unless a single line is longer than a chunk; the text
 search looks for a substring within a chunk, so it finds every match that lies within
