@@ -628,6 +628,14 @@ class HostConfig(_Section):
     mqtt: MqttConfig | None = Field(
         None, description="The MQTT face (see `host.mqtt`); null = off (unless FMSCELL_MQTT)."
     )
+    mtconnect_buffer_size: int = Field(
+        16384,
+        ge=1024,
+        le=1 << 22,
+        description="Observations the host's MTConnect agent keeps (the history `sample` serves),"
+        " about 220 bytes each: 16384 is some 20 minutes of the default cell (13 a second)"
+        " and 3.5 MB once full; the reference agent's 131072 took 2.5 hours to fill.",
+    )
 
 
 class _CellDocument(_Section):

@@ -167,7 +167,10 @@ class Cell:
                     memory_bytes=link.memory_bytes,
                     actor="cell",
                 )
-            self.agent = Agent.from_cell(self.config)
+            # a buffer that fills for hours is memory growing for hours (host.mtconnect_buffer_size)
+            self.agent = Agent.from_cell(
+                self.config, buffer_size=self.config.host.mtconnect_buffer_size
+            )
             self.connections = AgentConnections(
                 self.agent, {n: (lk.host, lk.ports["shdr"]) for n, lk in self.links.items()}
             ).start()
