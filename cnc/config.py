@@ -629,12 +629,13 @@ class HostConfig(_Section):
         None, description="The MQTT face (see `host.mqtt`); null = off (unless FMSCELL_MQTT)."
     )
     mtconnect_buffer_size: int = Field(
-        16384,
+        131072,
         ge=1024,
         le=1 << 22,
-        description="Observations the host's MTConnect agent keeps (the history `sample` serves),"
-        " about 220 bytes each: 16384 is some 20 minutes of the default cell (13 a second)"
-        " and 3.5 MB once full; the reference agent's 131072 took 2.5 hours to fill.",
+        description="Observations the host's MTConnect agent keeps (the history `sample` serves;"
+        " the reference agent's BufferSize 17), about 220 bytes each: the host's memory grows"
+        " until the buffer is full, 28 MB at 131072, which the default cell fills in minutes"
+        " while cutting and in hours while idle (13-30 a second); 16384 is 3.5 MB.",
     )
 
 
