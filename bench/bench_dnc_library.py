@@ -68,13 +68,14 @@ def populate(engine, programs: int, revisions_per: int) -> float:
             insert(m.ProgramTag),
             [dict(program_id=n + 1, tag=TAGS[n % len(TAGS)]) for n in range(programs)],
         )
-        contents, revs, rid = [], [], 0
+        contents, chunks, revs, rid = [], [], [], 0
         for n in range(programs):
             for r in range(1, revisions_per + 1):
                 text = program_text(n, r)
                 digest = hashlib.sha256(text.encode()).hexdigest()
                 rid += 1
-                contents.append(dict(sha256=digest, size=len(text), text=text))
+                contents.append(dict(sha256=digest, size=len(text)))
+                chunks.append(dict(sha256=digest, seq=0, text=text))  # one chunk: short
                 revs.append(
                     dict(
                         id=rid,
@@ -94,10 +95,12 @@ def populate(engine, programs: int, revisions_per: int) -> float:
                 )
             if len(revs) >= batch:
                 conn.execute(insert(m.Content).prefix_with("OR IGNORE"), contents)
+                conn.execute(insert(m.ContentChunk).prefix_with("OR IGNORE"), chunks)
                 conn.execute(insert(m.Revision), revs)
-                contents, revs = [], []
+                contents, chunks, revs = [], [], []
         if revs:
             conn.execute(insert(m.Content).prefix_with("OR IGNORE"), contents)
+            conn.execute(insert(m.ContentChunk).prefix_with("OR IGNORE"), chunks)
             conn.execute(insert(m.Revision), revs)
     with engine.begin() as conn:
         conn.exec_driver_sql("ANALYZE")

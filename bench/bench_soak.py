@@ -143,10 +143,12 @@ DETECT_WAIT_S = 30.0  # give up on a detection after the bound + this
 RECOVER_WAIT_S = 60.0
 
 
-def mtconnect_sequence(c: httpx.Client) -> tuple[float, int]:
-    """(now, the agent's nextSequence): how fast observations fill its buffer."""
+def mtconnect_sequence(c: httpx.Client) -> tuple[float, int, int]:
+    """(now, the agent's nextSequence, its bufferSize): how fast observations fill its
+    buffer, and how many it holds (the host's RSS grows until it is full)."""
     text = c.get("/mtconnect/current").text
-    return time.monotonic(), int(re.search(r'nextSequence="(\d+)"', text).group(1))
+    size = int(re.search(r'bufferSize="(\d+)"', text).group(1))
+    return time.monotonic(), int(re.search(r'nextSequence="(\d+)"', text).group(1)), size
 
 
 def free_port() -> int:
@@ -651,6 +653,7 @@ def main() -> int:
         soak.stop_jobs.set()
         code = stop_cell(proc)
     warm = [(t, r) for t, r in soak.rss if t >= warmup * 60]
+    rate = (seq1[1] - seq0[1]) / (seq1[0] - seq0[0])
     growth = slope_mb_per_h(warm)
     faults = soak.faults
     failed = [
@@ -677,7 +680,11 @@ def main() -> int:
             "warmup_minutes": warmup,
             "rss_samples": len(soak.rss),
             "rss_per_minute_mb": [round(r, 1) for t, r in soak.rss if int(t) % 60 < 5],
-            "mtconnect_observations_per_s": round((seq1[1] - seq0[1]) / (seq1[0] - seq0[0]), 1),
+            "mtconnect_observations_per_s": round(rate, 1),
+            # the agent's buffer grows the RSS until it is full: full before the warm-up's
+            # end, or its growth is in the figure above
+            "mtconnect_buffer_size": seq1[2],
+            "mtconnect_buffer_full_after_min": round(seq1[2] / rate / 60, 1) if rate else None,
             "sse": soak.sse,
             "requests": soak.requests,
             "faults_injected": len(faults),

@@ -25,6 +25,7 @@ from sqlalchemy.orm import Session, sessionmaker
 
 from cnc.gcode.calls import Call, program_calls
 from dnc import models as m
+from dnc.content import read_text
 from dnc.db import transaction
 from dnc.errors import DncError
 
@@ -263,7 +264,7 @@ class LibraryPrograms(Mapping[int, str]):
             )
             if rev is None:  # only obsolete revisions: nothing to call
                 return f"O{number}\nM99\n"
-            text = s.get(m.Content, rev.sha256).text
+            text = read_text(s, rev.sha256)
         # what it calls in turn and the library lacks reads as empty too (any order of uploads)
         self.stand_in_for(program_calls(text.splitlines()).calls)
         return text

@@ -22,6 +22,7 @@ from sqlalchemy.orm import Session, sessionmaker
 
 from dnc import models as m
 from dnc.checker import machine_check
+from dnc.content import read_text
 from dnc.db import transaction
 from dnc.dependencies import LibraryPrograms, dependencies
 from dnc.errors import (
@@ -325,7 +326,7 @@ class Dispatches:
             if config is None:
                 return
             kind = s.get(m.Program, rev.program_id).machine_kind
-            text = s.get(m.Content, rev.sha256).text
+            text = read_text(s, rev.sha256)
         errors = machine_check(text, kind, config, programs=LibraryPrograms(self._sessions, kind))
         if errors:
             e = errors[0]

@@ -12,7 +12,7 @@ dispatch by program number is never ambiguous.
 
 from __future__ import annotations
 
-from collections.abc import Callable, Iterable, Sequence
+from collections.abc import Callable, Iterable, Iterator, Sequence
 from dataclasses import dataclass, field
 from datetime import UTC, datetime
 from pathlib import Path
@@ -25,6 +25,7 @@ from sqlalchemy.orm import Session, sessionmaker
 from cam.chain import APT_SUFFIXES, CL_SUFFIXES
 from cnc.gcode.calls import Call, program_calls
 from dnc import models as m
+from dnc.content import iter_text, read_text, split_text, store
 from dnc.cursor import decode_cursor, encode_cursor
 from dnc.db import transaction
 from dnc.dependencies import LibraryPrograms, called_by, calls_of, dependencies, record_calls
@@ -165,8 +166,6 @@ class Library:
             raise InvalidUpload("program name must not be empty")
         text = self._decode(text, name)
         kinds, check = self._check_kind(text, kind, machine_kind, post_kinds, name)
-        digest = text.sha256 if isinstance(text, ProgramUpload) else None
-        text = _stored(text)
         with transaction(self._sessions) as s:
             taken = s.scalar(
                 select(m.Program.id).where(
@@ -193,9 +192,7 @@ class Library:
                 raise Conflict(f"program O{number:04d} already exists") from exc
             for tag in sorted({t.strip() for t in tags if t.strip()}):
                 s.add(m.ProgramTag(program_id=prog.id, tag=tag))
-            rev = self._add_revision(
-                s, prog, text, check, author, comment, source, digest, kind, kinds
-            )
+            rev = self._add_revision(s, prog, text, check, author, comment, source, kind, kinds)
             self._record(s, author, "program.create", "program", prog.id, number=number, name=name)
             return self._program_info(s, prog), _revision_info(rev)
 
@@ -215,13 +212,9 @@ class Library:
             machine_kind, name = prog.machine_kind, prog.name
         text = self._decode(text, name)
         kinds, check = self._check_kind(text, kind, machine_kind, post_kinds, name)
-        digest = text.sha256 if isinstance(text, ProgramUpload) else None
-        text = _stored(text)
         with transaction(self._sessions) as s:
             prog = self._get_program(s, program_id)
-            rev = self._add_revision(
-                s, prog, text, check, author, comment, source, digest, kind, kinds
-            )
+            rev = self._add_revision(s, prog, text, check, author, comment, source, kind, kinds)
             return _revision_info(rev)
 
     def receive_from_machine(self, machine: str, text: str | bytes) -> RevisionInfo:
@@ -339,8 +332,13 @@ class Library:
 
     def revision_text(self, revision_id: int) -> str:
         with transaction(self._sessions) as s:
-            rev = self._get_revision(s, revision_id)
-            return s.get(m.Content, rev.sha256).text
+            return read_text(s, self._get_revision(s, revision_id).sha256)
+
+    def revision_chunks(self, revision_id: int) -> tuple[RevisionInfo, Iterator[str]]:
+        """The revision and its text chunk by chunk (whole lines, dnc.content): a reader
+        that streams it holds one chunk at a time, whatever the program's size."""
+        info = self.get_revision(revision_id)
+        return info, iter_text(self._sessions, info.sha256)
 
     def calls(self, revision_id: int) -> list[dict]:
         """The other programs the revision calls (M98 P, G65 P, G66 P), one entry per call:
@@ -381,7 +379,7 @@ class Library:
         with transaction(self._sessions) as s:
             rev, _, posted = posted_for(s, revision_id, machine, self.machine_configs)
             if posted is None:
-                return s.get(m.Content, rev.sha256).text
+                return read_text(s, rev.sha256)
             store_derived(s, rev, posted, actor=actor, now=self._now())
             return posted.text
 
@@ -401,7 +399,7 @@ class Library:
             d = s.get(m.DerivedRevision, derived_id)
             if d is None:
                 raise NotFound(f"no derived revision with id {derived_id}")
-            return s.get(m.Content, d.sha256).text
+            return read_text(s, d.sha256)
 
     def released_revision(self, number: int, machine_kind: str) -> RevisionInfo:
         """The revision a machine gets when it requests program `number` (remote request)."""
@@ -747,21 +745,30 @@ class Library:
         self,
         s: Session,
         prog: m.Program,
-        text: str,
+        text: str | ProgramUpload,
         checked: Checked,
         author: str,
         comment: str,
         source: str,
-        digest: str | None = None,
         kind: str = GCODE,
         post_kinds: list[str] | None = None,
     ) -> m.Revision:
-        # an upload hashed its stored form as it streamed in: no second pass (and copy)
-        digest = digest or sha256_of(text)
-        # stored text is ASCII (dnc.tape.normalise_text): characters are bytes, no encoding
-        size = len(text) if text.isascii() else len(text.encode("utf-8"))
-        if s.get(m.Content, digest) is None:
-            s.add(m.Content(sha256=digest, size=size, text=text))
+        if isinstance(text, ProgramUpload):
+            # hashed and counted as it streamed in; stored from its file a chunk at a time,
+            # never whole in memory (dnc.content)
+            digest, size, lines = text.sha256, text.stored_size, text.lines
+            chunks = text.chunks()
+        else:
+            # stored text is ASCII (dnc.tape.normalise_text): characters are bytes
+            digest, lines = sha256_of(text), count_lines(text)
+            size = len(text) if text.isascii() else len(text.encode("utf-8"))
+            chunks = split_text(text)
+        try:
+            store(s, digest, size, chunks)
+        except IntegrityError as exc:  # a concurrent upload stored the same text first
+            raise Conflict(
+                f"the same text was stored concurrently for program {prog.id}; retry the upload"
+            ) from exc
         seq = (
             s.scalar(select(func.max(m.Revision.seq)).where(m.Revision.program_id == prog.id)) or 0
         ) + 1
@@ -770,7 +777,7 @@ class Library:
             seq=seq,
             sha256=digest,
             size=size,
-            lines=count_lines(text),
+            lines=lines,
             author=author,
             comment=comment,
             source=source,
@@ -927,8 +934,9 @@ def _machine_dict(x: m.Machine) -> dict:
     )
 
 
-# SQLite's trigram index of every revision's text (migration 0005), contentless: its rowid
-# is program_id << 32 | revision_id, so its hits come grouped by program, in program order.
+# SQLite's trigram index of every revision's text (migrations 0005, 0011), contentless: an
+# entry per chunk of each distinct text of a program, its rowid program_id << 32 | chunk id,
+# so its hits come grouped by program, in program order.
 _REVISION_TEXT = table("revision_text", column("rowid", Integer))
 _PROGRAM_SHIFT = 32
 
@@ -936,11 +944,6 @@ _PROGRAM_SHIFT = 32
 def _match(text: str):
     """FTS5 phrase for `text`: with the trigram tokenizer, a case-folded substring match."""
     return literal_column("revision_text").op("MATCH")('"' + text.replace('"', '""') + '"')
-
-
-def _stored(text: str | ProgramUpload) -> str:
-    """The text to store: an upload is read back from its file once, after the check."""
-    return text.text() if isinstance(text, ProgramUpload) else text
 
 
 def _text_drives_from_index(
@@ -1000,7 +1003,8 @@ def _programs_with_text(s: Session, text: str):
     """
     like = f"%{_escape_like(text)}%"
     if s.get_bind().dialect.name != "sqlite":
-        matching = select(m.Content.sha256).where(m.Content.text.ilike(like, escape="\\"))
+        chunks = m.ContentChunk
+        matching = select(chunks.sha256).where(chunks.text.ilike(like, escape="\\"))
         in_any_revision = select(m.Revision.program_id)
         return m.Program.id.in_(in_any_revision.where(m.Revision.sha256.in_(matching)))
     if len(text) >= 3:
@@ -1013,8 +1017,8 @@ def _programs_with_text(s: Session, text: str):
     return exists(
         select(1)
         .select_from(m.Revision)
-        .join(m.Content, m.Content.sha256 == m.Revision.sha256)
-        .where(m.Revision.program_id == m.Program.id, m.Content.text.like(like, escape="\\"))
+        .join(m.ContentChunk, m.ContentChunk.sha256 == m.Revision.sha256)
+        .where(m.Revision.program_id == m.Program.id, m.ContentChunk.text.like(like, escape="\\"))
     )
 
 

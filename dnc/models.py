@@ -1,7 +1,8 @@
 """The DNC host's tables (SQLAlchemy 2). Alembic migrations in dnc/migrations own the schema.
 
-Content is stored once per sha256 (`contents`), and revisions point at it: a library of many
-revisions of the same program costs one copy of each distinct text.
+Content is stored once per sha256 (`contents`, its text in chunks of whole lines in
+`content_chunks`), and revisions point at it: a library of many revisions of the same
+program costs one copy of each distinct text.
 """
 
 from __future__ import annotations
@@ -101,9 +102,22 @@ class ProgramTag(Base):
 
 
 class Content(Base):
+    """A distinct program text, by its sha256; the text itself is in `content_chunks`."""
+
     __tablename__ = "contents"
     sha256: Mapped[str] = mapped_column(String(64), primary_key=True)
     size: Mapped[int] = mapped_column(Integer)
+
+
+class ContentChunk(Base):
+    """One chunk of a content's text, whole lines (dnc/content.py)."""
+
+    __tablename__ = "content_chunks"
+    __table_args__ = (UniqueConstraint("sha256", "seq", name="uq_content_chunks_sha256_seq"),)
+    # the search index on SQLite keys a chunk of a program's revisions by this id
+    id: Mapped[int] = mapped_column(Integer, primary_key=True)
+    sha256: Mapped[str] = mapped_column(ForeignKey("contents.sha256", ondelete="CASCADE"))
+    seq: Mapped[int] = mapped_column(Integer)
     text: Mapped[str] = mapped_column(Text)
 
 

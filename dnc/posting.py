@@ -37,6 +37,7 @@ from cam.post import CAM_KINDS, POSTS, Machine, PostOptions, load_machine, post
 from cnc.config import SHIPPED_MACHINES, builtin_machine
 from cnc.interp import check
 from dnc import models as m
+from dnc.content import read_text, split_text, store
 from dnc.errors import DncError, InvalidUpload, NotFound, WorkflowError
 from dnc.events import record
 from dnc.tape import TapeHeader, count_lines, sha256_of
@@ -311,7 +312,7 @@ def posted_for(
     if rev.kind not in SOURCE_KINDS:
         return rev, mach, None
     prog = s.get(m.Program, rev.program_id)
-    text = s.get(m.Content, rev.sha256).text
+    text = read_text(s, rev.sha256)
     meant = not rev.post_kinds or mach.kind in rev.post_kinds
     not_meant = (
         f"revision {rev.id} is meant for {', '.join(rev.post_kinds)} machines; "
@@ -352,8 +353,7 @@ def store_derived(
     found = s.scalar(same)
     if found is not None:
         return found
-    if s.get(m.Content, posted.sha256) is None:
-        s.add(m.Content(sha256=posted.sha256, size=len(posted.text), text=posted.text))
+    store(s, posted.sha256, len(posted.text), split_text(posted.text))
     derived = m.DerivedRevision(
         source_revision_id=rev.id,
         machine_kind=posted.machine_kind,

@@ -26,6 +26,7 @@ from sqlalchemy.orm import Session, sessionmaker
 
 from dnc import models as m
 from dnc.checker import machine_check
+from dnc.content import read_text
 from dnc.db import transaction
 from dnc.dependencies import Dependency, LibraryPrograms, MissingDependency, dependencies
 from dnc.dispatch import DONE, FAILED, PENDING, TRANSFERRING, VERIFYING, dispatch_info
@@ -354,7 +355,7 @@ class TransferWorker:
 
         def read() -> str:
             with transaction(self._sessions) as s:
-                return s.scalar(_CONTENT, dict(sha=sha))
+                return read_text(s, sha)
 
         return self._texts.get(sha, read)
 
@@ -455,9 +456,6 @@ _CLAIM = (
     .where(_D.c.id == bindparam("dispatch_id"), _D.c.state == PENDING)
     .values(state=TRANSFERRING, attempts=_D.c.attempts + 1, updated_at=bindparam("now"))
     .returning(_D.c.attempts, _D.c.bytes_sent, _D.c.verified, _D.c.error)
-)
-_CONTENT = select(m.Content.__table__.c.text).where(
-    m.Content.__table__.c.sha256 == bindparam("sha")
 )
 # The states only the worker moves a claimed dispatch through; the scheduler may call a
 # dispatch off (failed) before its start, so every step is conditional on still being in one.

@@ -5,7 +5,7 @@ text, its normalised copies, a list of its lines for the NC check, the encoded f
 hash and the size): four at once took the host to almost 1 GB. Here each chunk is checked
 against the ISO 6983 / EIA character set, normalised (DC1-DC4 stripped, CR LF and CR to LF)
 and hashed on the way to a temporary file; the NC check reads its lines from that file, and
-only the store reads the text back, once.
+the store reads it back a chunk at a time (dnc.content).
 
 The rules and messages are those of `dnc.tape.decode_program`: the first byte outside the
 character set is refused with its byte offset, line and column.
@@ -20,6 +20,7 @@ import tempfile
 from collections.abc import Iterator
 from typing import IO
 
+from dnc.content import line_chunks
 from dnc.errors import InvalidUpload
 from dnc.tape import check_size
 
@@ -178,6 +179,12 @@ class ProgramUpload:
         """The stored form, read back once (ASCII by construction)."""
         self._file.seek(0)
         return self._file.read().decode("ascii")
+
+    def chunks(self) -> Iterator[str]:
+        """The stored form read back a file block at a time, in the chunks of whole lines
+        the library stores (dnc.content): never the whole text in memory."""
+        with open(self._file.name, "rb") as f:
+            yield from line_chunks(iter(lambda: f.read(CHUNK).decode("ascii"), ""))
 
     @contextlib.contextmanager
     def line_file(self) -> Iterator[IO[str]]:

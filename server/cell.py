@@ -184,7 +184,10 @@ class Cell:
                     axes=link.axes,
                     actor="cell",
                 )
-            self.agent = Agent.from_cell(self.config)
+            # a buffer that fills for hours is memory growing for hours (host.mtconnect_buffer_size)
+            self.agent = Agent.from_cell(
+                self.config, buffer_size=self.config.host.mtconnect_buffer_size
+            )
             self.connections = AgentConnections(
                 self.agent, {n: (lk.host, lk.ports["shdr"]) for n, lk in self.links.items()}
             ).start()

@@ -98,6 +98,15 @@ class HostConfig(ApiConfig, DncConfig):
     mqtt: MqttConfig | None = Field(
         None, description="The MQTT face (see `host.mqtt`); null = off (unless FMSCELL_MQTT)."
     )
+    mtconnect_buffer_size: int = Field(
+        131072,
+        ge=1024,
+        le=1 << 22,
+        description="Observations the host's MTConnect agent keeps (the history `sample` serves;"
+        " the reference agent's BufferSize 17), about 220 bytes each: the host's memory grows"
+        " until the buffer is full: 28 MB at 131072, which the default cell's 13-30 a second"
+        " (jobs looping) take one to three hours to fill; 16384: 3.5 MB, some 10 minutes.",
+    )
 
     def problems(self) -> list[Problem]:
         return [*ApiConfig.problems(self), *DncConfig.problems(self)]

@@ -19,8 +19,8 @@ from dnc.library import Library
 DEFAULT_PG = "postgresql+psycopg://postgres@127.0.0.1:5432/test"
 TABLES = (
     "decisions, allocations, dispatches, derived_revisions, jobs, revision_calls, "
-    "outbox, audit_log, program_resources, resources, revisions, contents, program_tags, "
-    "programs, machines"
+    "outbox, audit_log, program_resources, resources, revisions, content_chunks, contents, "
+    "program_tags, programs, machines"
 )
 
 

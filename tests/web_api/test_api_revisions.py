@@ -27,6 +27,22 @@ def test_revision_and_its_text(api):
     assert t.headers["etag"] == f'"{hashlib.sha256(GOOD.encode()).hexdigest()}"'
 
 
+def test_a_large_revision_text_is_streamed_whole_with_its_length(api):
+    """A text of several stored chunks (dnc.content) comes back exactly, chunk after chunk,
+    with its Content-Length (a cut-off stream shows as one)."""
+    from dnc.content import CHUNK_CHARS
+
+    body = "".join(f"N{i} G1 X{i % 50}.5 Y{i % 7} F300\n" for i in range(40_000))
+    big = f"%\nO77 (BIG)\n{body}M30\n%\n"
+    assert len(big) > 3 * CHUNK_CHARS
+    api.library.upload_limit = 4 << 20
+    _, rev = api.library.create_program(number=77, name="big", text=big)
+    t = api.get(f"/api/revisions/{rev.id}/text")
+    assert t.status_code == 200 and t.headers["content-type"].startswith("text/plain")
+    assert t.headers["content-length"] == str(len(big)) and t.text == big
+    assert t.headers["etag"] == f'"{hashlib.sha256(big.encode()).hexdigest()}"'
+
+
 def test_release_records_the_keys_user_and_supersedes_the_previous(api):
     first = api.released()
     pid = api.get(f"/api/revisions/{first}").json()["program_id"]

@@ -166,12 +166,11 @@ async def read_upload(
 UPLOAD_CHUNK = 1 << 20
 #: a program larger than this is NC-checked and stored on one worker thread, one at a time:
 #: the check of a 15 MB program holds the CPU for seconds, and several at once would only
-#: share it (one interpreter lock). Storing one costs some 5 bytes of memory per byte of
-#: text for a moment (SQLite's row and the trigram index of the whole text, built in memory),
-#: and glibc keeps what a thread freed in that thread's own arena: stored by whichever pool
-#: thread was free, four 15 MB uploads left four arenas of ~60 MB each (the host's peak grew
-#: by 245 MB, also when they were stored one after the other). One thread reuses one arena,
-#: and the heap is trimmed after each large store.
+#: share it (one interpreter lock). A file upload is stored a chunk at a time (dnc.content,
+#: a few MB whatever its size), but a JSON body holds its whole text, and glibc keeps what a
+#: thread freed in that thread's own arena: on whichever pool thread was free, four large
+#: JSON uploads would leave four arenas at their peak. One thread reuses one arena, and the
+#: heap is trimmed after each large store.
 HEAVY_BYTES = 1 << 20
 _heavy_worker = ThreadPoolExecutor(max_workers=1, thread_name_prefix="fmscell-large-upload")
 

@@ -5,7 +5,7 @@ from __future__ import annotations
 from typing import Annotated
 
 from fastapi import APIRouter, Depends, Path, Query
-from fastapi.responses import PlainTextResponse, Response
+from fastapi.responses import PlainTextResponse, Response, StreamingResponse
 
 from dnc.tape import sha256_of
 from web_api.problems import problem_doc
@@ -47,12 +47,15 @@ def revision_calls(revision_id: RevisionId, services: Svc, _: Viewer) -> list[Pr
     responses={200: {"content": {"text/plain": {"schema": {"type": "string"}}}}},
 )
 def revision_text(revision_id: RevisionId, services: Svc, _: Viewer) -> Response:
-    lib = services.library
-    info = lib.get_revision(revision_id)
-    return PlainTextResponse(
-        lib.revision_text(revision_id),
+    # streamed a stored chunk at a time (dnc.content): a 15 MB program is never whole in
+    # the host's memory; its length is known, so a cut-off transfer shows as one
+    info, chunks = services.library.revision_chunks(revision_id)
+    return StreamingResponse(
+        (chunk.encode("utf-8") for chunk in chunks),
+        media_type="text/plain; charset=utf-8",
         headers={
             "ETag": f'"{info.sha256}"',
+            "Content-Length": str(info.size),
             "Content-Disposition": f'inline; filename="rev{revision_id}.nc"',
         },
     )
