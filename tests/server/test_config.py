@@ -18,7 +18,7 @@ ONE = {"m1": {"base": "mill3"}}
 
 def test_the_host_section_is_the_union_of_its_owners_keys():
     owned = {*DncConfig.model_fields, *ApiConfig.model_fields}
-    assert set(HostConfig.model_fields) == owned | {"faults", "mqtt"}
+    assert set(HostConfig.model_fields) == owned | {"faults", "mqtt", "mtconnect_buffer_size"}
     assert set(DncConfig.model_fields) == {"database_url", "lost_contact_s", "dispatch_rule"}
     assert set(ApiConfig.model_fields) == {"bind", "port", "auth", "tls"}
     assert HostConfig.model_fields["mqtt"].annotation == MqttConfig | None
