@@ -67,7 +67,7 @@ def test_an_operator_reset_of_a_cutting_machine_frees_it_and_the_job_completes(m
 SLOW_PROGRAM = """%
 O1003 (E2E ONE SLOW MOVE)
 N10 G21 G90 G17
-N20 G1 X0 Y-100 F60
+N20 G1 X0 Y-100 F300
 N30 M30
 %
 """
