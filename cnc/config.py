@@ -33,6 +33,8 @@ from pydantic import BaseModel, ConfigDict, Field, StringConstraints, Validation
 from yaml.nodes import MappingNode, Node, ScalarNode, SequenceNode
 
 from cnc.errors import NcError
+from cnc.kinematics import kinematics_for
+from cnc.machine_data.core import MachineData, MachineDataError
 from cnc.params import AxisParams, DecimalStyle, MachineParams
 from cnc.probe import ToolSetter
 from drives.config import CanConfig, DriveAxisConfig, DrivesConfig
@@ -275,8 +277,6 @@ class MachineDataConfig(Section):
 
     def initial(self):
         """The cnc.machine_data.MachineData this section describes."""
-        from cnc.machine_data import MachineData
-
         doc: dict[str, Any] = {
             "tools": {str(n): t.model_dump() for n, t in self.tools.items()},
             "work_offsets": {k: list(v) for k, v in self.work_offsets.items()},
@@ -827,7 +827,6 @@ def _check_machine(name: tuple[Any, ...], m: MachineConfig) -> list[Problem]:
                     f" got {_fmt(a.home_mm)}",
                 )
             )
-    from cnc.kinematics import kinematics_for  # late: kinematics is not needed to parse
 
     try:
         kinematics_for(m.params)
@@ -872,7 +871,6 @@ def _check_machine(name: tuple[Any, ...], m: MachineConfig) -> list[Problem]:
 
 
 def _check_machine_data(name: tuple[Any, ...], m: MachineConfig) -> list[Problem]:
-    from cnc.machine_data import MachineData, MachineDataError
 
     out: list[Problem] = []
     md = m.machine_data
