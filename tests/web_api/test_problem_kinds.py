@@ -186,6 +186,7 @@ def test_the_cell_errors_keep_the_bases_their_callers_catch():
 
 # ------------------------------------------------------------------ no mapping in routers
 
+
 def service_error_names() -> set[str]:
     """Names an except clause catches a service's error by: its class or a base of it
     (the roots, and the builtin bases they keep: ValueError, RuntimeError...)."""
@@ -228,9 +229,12 @@ def mappings(path: Path) -> list[str]:
         if isinstance(node, ast.Call) and _name(node.func) not in DOCUMENTATION_CALLS:
             given = node.args + [k.value for k in node.keywords if k.arg in STATUS_KEYWORDS]
             for arg in given:
-                if isinstance(arg, ast.Constant) and type(arg.value) is int:
-                    if 400 <= arg.value <= 599:
-                        found.append((line, f"HTTP status {arg.value}"))
+                if (
+                    isinstance(arg, ast.Constant)
+                    and type(arg.value) is int
+                    and 400 <= arg.value < 600
+                ):
+                    found.append((line, f"HTTP status {arg.value}"))
             if _name(node.func) in STATUS_CARRIERS:
                 found.append((line, f"{_name(node.func)}(...)"))
         elif isinstance(node, ast.ImportFrom) and {a.name for a in node.names} & STATUS_CARRIERS:

@@ -31,9 +31,9 @@ from fastapi.concurrency import run_in_threadpool
 from starlette.responses import StreamingResponse
 
 from dnc.outbox import events_after
-from web_api.event_hub import HubClosed, PollingStream, Stream
 from web_api.errors import InvalidLastEventId, ShuttingDown
-from web_api.problems import ERROR_ROOTS, problem_of, problem_doc
+from web_api.event_hub import HubClosed, PollingStream, Stream
+from web_api.problems import ERROR_ROOTS, problem_doc, problem_of
 from web_api.routers import Services, get_services
 from web_api.routers.auth import Viewer, websocket_principal
 from web_api.settings import ApiSettings, Role
