@@ -31,9 +31,6 @@ class Role(IntEnum):
     admin = 4
 
 
-RoleName = Literal["viewer", "operator", "programmer", "admin"]
-
-
 class ApiKey(Section):
     """One REST API key (`host.auth.api_keys[]`): who uses it, with which role.
 
@@ -42,7 +39,7 @@ class ApiKey(Section):
     `ApiSettings` refuses it."""
 
     user: str = Field(min_length=1, max_length=64, description="Who uses the key (audit).")
-    role: RoleName = Field(
+    role: Role = Field(
         description="`viewer` reads; `operator` dispatches, runs jobs, commands machines;"
         " `programmer` uploads and releases; `admin` injects faults."
     )
@@ -57,20 +54,16 @@ class ApiKey(Section):
     @field_validator("role", mode="before")
     @classmethod
     def _role_by_name(cls, value: Any) -> Any:
-        """A Role is taken by its name; any other role is refused in the words of a
-        Literal (the cell file says "must be one of ...")."""
+        """A role is written by its name (a Role is taken as it is); any other is refused
+        in the words of a Literal (the cell file says "must be one of ...")."""
         if isinstance(value, Role):
-            return value.name
-        if value not in Role.__members__:
+            return value
+        if not isinstance(value, str) or value not in Role.__members__:
             expected = "'viewer', 'operator', 'programmer' or 'admin'"
             raise PydanticCustomError(
                 "literal_error", "Input should be {expected}", {"expected": expected}
             )
-        return value
-
-    @property
-    def level(self) -> Role:
-        return Role[self.role]
+        return Role[value]
 
     def secret_problem(self) -> str | None:
         """Why the key's secret is not usable (None: exactly one of key, key_sha256)."""
@@ -147,7 +140,7 @@ class ApiSettings(BaseModel):
         found = None
         for k in self.api_keys:
             if hmac.compare_digest(digest, k.digest()):
-                found = Principal(user=k.user, role=k.level)
+                found = Principal(user=k.user, role=k.role)
         return found
 
     @classmethod

@@ -116,7 +116,8 @@ def test_an_api_key_is_one_model_in_the_cell_file_and_the_apps_settings():
     assert settings.api_keys == tuple(keys)
     assert ApiSettings.from_mapping({"api_keys": entries}).api_keys == settings.api_keys
     assert settings.authenticate("c" * 20).role is Role.viewer
-    assert ApiKey(user="x", role=Role.admin, key="k" * 16).level is Role.admin
+    assert ApiKey(user="x", role=Role.admin, key="k" * 16).role is Role.admin
+    assert [k.role for k in keys] == [Role.operator, Role.viewer]
 
 
 def test_a_machine_reads_its_section_of_a_cell_file_without_the_hosts(tmp_path):
