@@ -1,4 +1,9 @@
-"""Errors and warnings of the CAM chain: always file, line, column and why."""
+"""Errors and warnings of the CAM chain: always file, line, column and why.
+
+CamError is the package's one root: every error the cam package raises is a CamError, so a
+user of the CAM chain alone (APT processor, CL reader, posts) catches one class. Its
+subclasses keep the builtin base they had (ValueError for a geometry without a solution),
+so existing handlers still see them."""
 
 from __future__ import annotations
 
@@ -7,7 +12,8 @@ from dataclasses import dataclass
 
 
 class CamError(Exception):
-    """APT source, CL data or a post that cannot be processed.
+    """APT source, CL data or a post that cannot be processed; the root of the package's
+    errors.
 
     `line` and `col` are 1-based (0 when not applicable); `str(err)` is the
     `FILE:LINE:COL: message` form the command line prints, as the NC kernel's errors.

@@ -28,6 +28,7 @@ from mtconnect.buffer import (
     CircularBuffer,
     Observation,
 )
+from mtconnect.errors import AgentError
 from mtconnect.model import (
     AGENT_OWNED,
     QUALIFIERS,
@@ -53,7 +54,7 @@ DEFAULT_HEARTBEAT_MS = 10_000
 XML = "application/xml"
 
 
-class RestError(Exception):
+class RestError(AgentError):
     """An MTConnectError document: error code, message and HTTP status."""
 
     def __init__(self, code: str, message: str, status: int = 400) -> None:

@@ -19,11 +19,13 @@ from __future__ import annotations
 import re
 import xml.etree.ElementTree as ET
 
+from mtconnect.errors import AgentError
+
 _ALLOWED = re.compile(r"^[A-Za-z0-9_:@*/\[\]=\"'. \-]+$")
 
 
-class PathError(ValueError):
-    pass
+class PathError(AgentError, ValueError):
+    """An XPath filter (`path=`) the agent cannot read."""
 
 
 def split_union(path: str) -> list[str]:

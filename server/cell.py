@@ -29,7 +29,7 @@ from typing import Any
 from cnc.errors import NcError
 from cnc.faces.dnc_port import ALARM_BAD_DATA, ALARM_REFUSED
 from cnc.machine.faults import DRIVE_ALIASES, PLC_ALIASES, parse_fault_spec
-from cnc.machine_data import MachineDataError
+from dnc.cell import CommandRefused, FaultRefused, InvalidFault, InvalidMachineData
 from dnc.checker import nc_checker
 from dnc.db import make_engine, migrate, session_factory
 from dnc.dispatch import Dispatches
@@ -443,8 +443,16 @@ class Cell:
     def command(self, name: str, command: str, **args) -> str:
         """A command to a machine through its faces; returns what was done.
 
-        MachineUnavailable (refused, or no face carries it) says why not."""
+        CommandRefused (refused, or no face carries it) says why not."""
         link = self.link(name)
+        try:
+            return self._command(link, name, command, **args)
+        except CommandRefused:
+            raise
+        except MachineUnavailable as exc:  # a face refused: the refusal of this command
+            raise CommandRefused(str(exc), command=command) from None
+
+    def _command(self, link: MachineLink, name: str, command: str, **args) -> str:
         requests = getattr(self, "host_requests", None)
         if requests is not None and command == "cycle_start":
             requests.expect(name, "cycle_start", "REST machine command")
@@ -480,14 +488,14 @@ class Cell:
         if command == "mode":
             link.mode(str(args["mode"]).upper())
             return f"mode {args['mode']} taken (Modbus remote panel)"
-        raise MachineUnavailable(f"unknown command {command!r}")
+        raise CommandRefused(f"unknown command {command!r}", command=command)
 
     # ------------------------------------------------------------------ machine data
     def machine_data(self, name: str, what: str, doc: dict | None = None) -> dict:
         """The machine's tool table (`what` = "tools") or work offsets ("offsets") read
         through its DNC port; with `doc`, replaced first. Conflict: the machine refuses
-        (in cycle); cnc.machine_data.MachineDataError: a bad value (`.pointer` into doc);
-        MachineUnavailable: the DNC port cannot be reached."""
+        (in cycle); InvalidMachineData (a cnc MachineDataError): a bad value (`.pointer`
+        into doc); MachineUnavailable: the DNC port cannot be reached."""
         link = self.link(name)  # NotFound for an unknown machine
         try:
             with client_for(self.library, name, secret=link.secret) as client:
@@ -496,7 +504,9 @@ class Cell:
             text = exc.message.split(": ", 1)[-1]
             if exc.alarm == ALARM_BAD_DATA:
                 pointer, _, reason = text.partition(": ")
-                raise MachineDataError(reason or text, pointer if reason else "") from None
+                raise InvalidMachineData(
+                    reason or text, pointer if reason else "", what=what
+                ) from None
             if exc.alarm == ALARM_REFUSED:
                 raise Conflict(f"{name}: {text}") from None
             raise MachineUnavailable(f"{name}: {exc.message}") from None
@@ -506,13 +516,20 @@ class Cell:
         return fault_types()
 
     def inject(self, name: str, request: dict) -> Fault:
-        """Inject a fault through the machine's simulation face (ValueError: bad spec)."""
+        """Inject a fault through the machine's simulation face (InvalidFault: a bad spec,
+        a ValueError; FaultRefused: the machine refused)."""
         link = self.link(name)
-        spec = fault_spec(request)
         at = request.get("at")
-        full = f"{spec}@{at}s" if at is not None else spec
-        parse_fault_spec(full if at is not None else spec + "@0", link.axes)
-        answer = link.simulation(f"FAULT {full}")
+        try:
+            spec = fault_spec(request)
+            full = f"{spec}@{at}s" if at is not None else spec
+            parse_fault_spec(full if at is not None else spec + "@0", link.axes)
+        except ValueError as exc:  # the spec parser's refusal, said as the cell's
+            raise InvalidFault(str(exc)) from None
+        try:
+            answer = link.simulation(f"FAULT {full}")
+        except MachineUnavailable as exc:
+            raise FaultRefused(str(exc)) from None
         with self._fault_lock:
             fault = Fault(self._next_fault, name, dict(request), full)
             fault.machine_t = machine_time(answer)
@@ -540,7 +557,10 @@ class Cell:
             raise NotFound(f"no fault {fault_id} on machine {name!r}")
         if fault.state == "active":
             spec = fault.spec.split("@", 1)[0]
-            answer = self.link(name).simulation(f"CLEAR {spec}@0")
+            try:
+                answer = self.link(name).simulation(f"CLEAR {spec}@0")
+            except MachineUnavailable as exc:
+                raise FaultRefused(str(exc)) from None
             fault.state, fault.cleared_at = "cleared", time.time()
             fault.cleared_machine_t = machine_time(answer)
         return fault

@@ -38,7 +38,8 @@ from cnc.config import (
 from cnc.errors import NcError
 from cnc.params import MachineParams
 from dnc.config import DncConfig
-from web_api.config import ApiConfig, ApiKeyConfig, AuthConfig, TlsConfig
+from web_api.config import ApiConfig, AuthConfig, TlsConfig
+from web_api.settings import ApiKey
 
 __all__ = [
     "CellConfig",
@@ -157,7 +158,7 @@ def default_cell_config() -> CellConfig:
 HOST_SECTIONS = (
     ("host", HostConfig),
     ("host.auth", AuthConfig),
-    ("host.auth.api_keys[]", ApiKeyConfig),
+    ("host.auth.api_keys[]", ApiKey),
     ("host.tls", TlsConfig),
     ("host.mqtt", MqttConfig),
 )

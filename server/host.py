@@ -14,6 +14,7 @@ import time
 from collections.abc import Callable, Mapping
 
 from dnc.scheduler import ALARM, BUSY, IDLE, OFFLINE, MachineView
+from server.errors import ServerError
 from server.supervisor import MachineLink, MachineUnavailable, wait_for
 
 log = logging.getLogger(__name__)
@@ -240,7 +241,7 @@ class AlarmWatch:
         return len(changes)
 
 
-class StartRefused(MachineUnavailable):
+class StartRefused(ServerError, MachineUnavailable):
     """The NC (or the PLC) refused the cycle start; the text carries its reason."""
 
     refused = True  # definitive: the transfer worker records the start as never made

@@ -10,17 +10,25 @@ import pkgutil
 
 import pytest
 
+from cam.errors import CamError
 from cnc.errors import CncError
 from dnc.cell import CellError
 from dnc.errors import DncError
 from drives.errors import DrivesError
+from mtconnect.errors import AgentError
 from plc.errors import PlcError
+from server.errors import ServerError
+from web_api.errors import WebApiError
 
 ROOTS: dict[str, tuple[type[Exception], ...]] = {
     "drives": (DrivesError,),
     "plc": (PlcError,),
     "cnc": (CncError,),
+    "cam": (CamError,),
+    "mtconnect": (AgentError,),
     "dnc": (DncError, CellError),  # the host's refusals; the running cell's (dnc.cell)
+    "web_api": (WebApiError,),
+    "server": (ServerError,),
 }
 
 
@@ -57,3 +65,31 @@ def test_the_roots_are_distinct():
     roots = [r for rs in ROOTS.values() for r in rs]
     for a in roots:
         assert [b for b in roots if issubclass(a, b)] == [a]
+
+
+def test_every_package_has_a_root():
+    """Every top-level package of ours is in ROOTS (the layering's list of packages)."""
+    from tests.test_architecture import ALLOWED
+
+    assert set(ROOTS) == set(ALLOWED)
+
+
+# Re-rooting kept each error's message and the builtin base its callers catch.
+KEPT = [
+    ("cam.apt.geometry", "GeometryError", ("the lines are parallel",), ValueError,
+     "the lines are parallel"),
+    ("mtconnect.path", "PathError", ("bad path",), ValueError, "bad path"),
+    ("mtconnect.agent", "RestError", ("INVALID_REQUEST", "no such device", 404), Exception,
+     "INVALID_REQUEST: no such device"),
+    ("server.host", "StartRefused", ("m1: the PLC refused cycle start",), CellError,
+     "m1: the PLC refused cycle start"),
+    ("web_api.event_hub", "HubClosed", ("the server is shutting down",), WebApiError,
+     "the server is shutting down"),
+]  # fmt: skip
+
+
+@pytest.mark.parametrize(("module", "name", "args", "base", "text"), KEPT)
+def test_a_re_rooted_error_keeps_its_message_and_base(module, name, args, base, text):
+    cls = getattr(importlib.import_module(module), name)
+    err = cls(*args)
+    assert isinstance(err, base) and str(err) == text

@@ -9,43 +9,20 @@ web_api owns these keys: their schema (pydantic sections, strict) and their rule
 
 from __future__ import annotations
 
-import hashlib
-from typing import Literal
-
 from pydantic import Field
 
 from cnc.config import Port, Problem, Section, within
-from web_api.settings import ApiSettings
+from web_api.settings import ApiKey, ApiSettings
 
-__all__ = ["ApiConfig", "ApiKeyConfig", "AuthConfig", "TlsConfig"]
+__all__ = ["ApiConfig", "ApiKey", "AuthConfig", "TlsConfig"]
 
 _DEFAULTS = ApiSettings()
-
-
-class ApiKeyConfig(Section):
-    """One REST API key (`host.auth.api_keys[]`): who uses it, with which role."""
-
-    user: str = Field(min_length=1, max_length=64, description="Who uses the key (audit).")
-    role: Literal["viewer", "operator", "programmer", "admin"] = Field(
-        description="`viewer` reads; `operator` dispatches, runs jobs, commands machines;"
-        " `programmer` uploads and releases; `admin` injects faults."
-    )
-    key: str | None = Field(None, min_length=16, description="The key in clear (>= 16 chars).")
-    key_sha256: str | None = Field(
-        None,
-        pattern=r"^[0-9a-f]{64}$",
-        description="Or the key's sha256 in hex (`sha256sum` of the key without a newline):"
-        " no usable secret in the file.",
-    )
-
-    def digest(self) -> str:
-        return self.key_sha256 or hashlib.sha256((self.key or "").encode()).hexdigest()
 
 
 class AuthConfig(Section):
     """REST API authentication (`host.auth`)."""
 
-    api_keys: list[ApiKeyConfig] = Field(
+    api_keys: list[ApiKey] = Field(
         default_factory=list,
         description="API keys, each `{user, role, key}` or `{user, role, key_sha256}`.",
     )
@@ -71,8 +48,8 @@ class AuthConfig(Section):
         digests: dict[str, int] = {}
         for i, k in enumerate(self.api_keys):
             where = ("api_keys", i)
-            if (k.key is None) == (k.key_sha256 is None):
-                out.append((where, f"api key of {k.user!r}: give exactly one of key, key_sha256"))
+            if (problem := k.secret_problem()) is not None:
+                out.append((where, problem))
                 continue
             digest = k.digest()
             if digest in digests:
@@ -84,7 +61,7 @@ class AuthConfig(Section):
         """The REST app's settings for this section (its limits otherwise the app's own)."""
         return ApiSettings.from_mapping(
             {
-                "api_keys": [k.model_dump(exclude_none=True) for k in self.api_keys],
+                "api_keys": tuple(self.api_keys),  # the same model: taken as they are
                 "insecure_open": self.insecure_open,
                 "auth_failures_max": self.failures_max,
                 "auth_failures_window_s": self.failures_window_s,

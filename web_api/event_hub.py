@@ -42,6 +42,7 @@ from dnc import models as m
 from dnc.db import transaction
 from dnc.events import OUTBOX_WRITTEN
 from dnc.outbox import Event, events_after
+from web_api.errors import ShuttingDown
 
 log = logging.getLogger(__name__)
 
@@ -63,8 +64,8 @@ class Published:
         return cls(event.id, text, f"id: {event.id}\ndata: {text}\n\n".encode())
 
 
-class HubClosed(Exception):
-    """The app is shutting down: streams end."""
+class HubClosed(ShuttingDown):
+    """The app is shutting down: streams end (a new one is refused as `shutting-down`)."""
 
 
 class _Wakeup:
@@ -230,7 +231,7 @@ class EventHub:
         down) so the route answers 503 instead of opening a stream that stays silent."""
         with self._start_lock:
             if self._closed:
-                raise HubClosed("the app is shutting down")
+                raise HubClosed("the server is shutting down")
             with self._lock:
                 # Decided under the lock the reader decides to stop under: a reader that
                 # is seen running has also seen this subscriber before it could stop.
@@ -358,7 +359,7 @@ class Subscription:
         deadline = loop.time() + timeout
         while True:
             if hub.closed:
-                raise HubClosed("the app is shutting down")
+                raise HubClosed("the server is shutting down")
             # Taken before looking, so a fire between the look and the wait is not lost.
             wake = hub._wakeup(loop).future
             got, bound = hub.take(self.cursor, self.limit)
@@ -404,7 +405,7 @@ class PollingStream:
         deadline = loop.time() + timeout
         while True:
             if self._closed():
-                raise HubClosed("the app is shutting down")
+                raise HubClosed("the server is shutting down")
             got = list(await anyio.to_thread.run_sync(self._read_after, self.cursor, self.limit))
             if got:
                 self.cursor = got[-1].id

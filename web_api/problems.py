@@ -3,12 +3,20 @@
 Each problem has a stable `type` URI (`<problem_base><kind>`), so clients branch on the type,
 never on the wording of `detail`. Validation problems list each bad field with a JSON
 pointer into the request body (`"pointer": "#/number"`) or the name of the bad parameter.
+
+This module is the one place where an error becomes a problem. Every error a service or a
+router raises carries its problem type as `kind`: the DNC host's refusals (dnc.errors,
+DncError), the running cell's (dnc.cell, CellError) and the API's own (web_api.errors,
+WebApiError); a failed transfer (dnc.transfer.TransferError, whose `kind` names the line
+trouble) is `transfer-failed`. `PROBLEM_TYPES` gives each type its HTTP status and title;
+routers name no status (tests/web_api/test_problem_kinds.py).
 """
 
 from __future__ import annotations
 
 import json
 import logging
+from dataclasses import dataclass
 from typing import Any
 
 from fastapi import FastAPI, HTTPException, Request
@@ -19,54 +27,64 @@ from starlette.exceptions import HTTPException as StarletteHTTPException
 from starlette.routing import Match
 from starlette.types import ASGIApp, Message, Receive, Scope, Send
 
-from dnc.cell import CellError
+from dnc.cell import CellError, CommandRefused, InvalidMachineData
 from dnc.errors import DncError
 from dnc.transfer import TransferError
+from web_api.errors import WebApiError
 
 PROBLEM_JSON = "application/problem+json"
 log = logging.getLogger(__name__)
 
-# The HTTP status of each refusal kind the DNC services raise (dnc.errors: every DncError's
-# `kind` is its problem type); the one place a host refusal becomes a problem.
-STATUS_OF_KIND = {
-    "invalid-upload": 422,
-    "upload-too-large": 413,
-    "invalid-cursor": 400,
-    "not-found": 404,
-    "conflict": 409,
-    "workflow": 409,
-    "database-unavailable": 503,
-    "idempotency-key-reuse": 422,
-    "missing-dependency": 409,
-    "post-refused": 422,
-    "not-for-machine": 422,
-    "no-machine-can-run": 422,
+
+@dataclass(frozen=True, slots=True)
+class ProblemType:
+    status: int
+    title: str
+
+
+# Every problem type the API answers with: its HTTP status and title (docs/api.md lists them).
+PROBLEM_TYPES: dict[str, ProblemType] = {
+    # the DNC host's refusals (dnc.errors: each DncError's `kind`)
+    "dnc-error": ProblemType(400, "The DNC host refused the request"),
+    "invalid-upload": ProblemType(422, "The uploaded program was refused"),
+    "upload-too-large": ProblemType(413, "The upload exceeds the size limit"),
+    "invalid-cursor": ProblemType(400, "Invalid cursor"),
+    "not-found": ProblemType(404, "No such resource"),
+    "conflict": ProblemType(409, "Conflicts with the stored state"),
+    "workflow": ProblemType(409, "The release workflow forbids this step"),
+    "database-unavailable": ProblemType(503, "The database is unavailable"),
+    "idempotency-key-reuse": ProblemType(422, "Idempotency-Key reused with a different request"),
+    "missing-dependency": ProblemType(409, "A program it calls has no released revision"),
+    "post-refused": ProblemType(422, "The post-processor refused the program for this machine"),
+    "not-for-machine": ProblemType(
+        422, "The machine cannot run the program (an axis it does not have)"
+    ),
+    "no-machine-can-run": ProblemType(422, "No machine of the cell can run the job's program"),
+    # a transfer to or from a machine that failed (dnc.transfer.TransferError)
+    "transfer-failed": ProblemType(502, "The transfer to or from the machine failed"),
+    # the running cell's refusals (dnc.cell: each CellError's `kind`)
+    "machine-unavailable": ProblemType(503, "The machine cannot be reached or refused"),
+    "command-refused": ProblemType(409, "Command refused"),
+    "fault-refused": ProblemType(409, "Fault refused"),
+    "invalid-fault": ProblemType(422, "Invalid fault"),
+    # the API's own (web_api.errors: each WebApiError's `kind`), and FastAPI's and
+    # Starlette's refusals
+    "bad-request": ProblemType(400, "Bad request"),
+    "validation": ProblemType(422, "The request is invalid"),
+    "malformed-json": ProblemType(400, "The request body is not valid JSON"),
+    "unauthenticated": ProblemType(401, "An API key is required"),
+    "forbidden": ProblemType(403, "The API key's role does not allow this"),
+    "too-many-auth-failures": ProblemType(429, "Too many failed authentications from this address"),
+    "unsupported-media-type": ProblemType(415, "Unsupported media type"),
+    "invalid-last-event-id": ProblemType(400, "Invalid last event id"),
+    "no-cell": ProblemType(503, "No cell"),
+    "shutting-down": ProblemType(503, "The server is shutting down"),
+    "method-not-allowed": ProblemType(405, "Method not allowed"),
+    "internal": ProblemType(500, "Internal server error"),
 }
-TITLES = {
-    "invalid-upload": "The uploaded program was refused",
-    "upload-too-large": "The upload exceeds the size limit",
-    "invalid-cursor": "Invalid cursor",
-    "not-found": "No such resource",
-    "conflict": "Conflicts with the stored state",
-    "workflow": "The release workflow forbids this step",
-    "database-unavailable": "The database is unavailable",
-    "idempotency-key-reuse": "Idempotency-Key reused with a different request",
-    "missing-dependency": "A program it calls has no released revision",
-    "post-refused": "The post-processor refused the program for this machine",
-    "not-for-machine": "The machine cannot run the program (an axis it does not have)",
-    "no-machine-can-run": "No machine of the cell can run the job's program",
-    "validation": "The request is invalid",
-    "malformed-json": "The request body is not valid JSON",
-    "unauthenticated": "An API key is required",
-    "forbidden": "The API key's role does not allow this",
-    "method-not-allowed": "Method not allowed",
-    "unsupported-media-type": "Unsupported media type",
-    "internal": "Internal server error",
-    "shutting-down": "The server is shutting down",
-    "too-many-auth-failures": "Too many failed authentications from this address",
-    "machine-unavailable": "The machine cannot be reached or refused",
-    "transfer-failed": "The transfer to or from the machine failed",
-}
+# views of the table by field
+STATUS_OF_KIND = {kind: p.status for kind, p in PROBLEM_TYPES.items()}
+TITLES = {kind: p.title for kind, p in PROBLEM_TYPES.items()}
 _KIND_OF_STATUS = {
     400: "bad-request",
     401: "unauthenticated",
@@ -76,6 +94,60 @@ _KIND_OF_STATUS = {
     413: "upload-too-large",
     415: "unsupported-media-type",
 }
+ERROR_ROOTS = (DncError, CellError, WebApiError)
+"""The roots of every error answered as a problem of its own (not a 500)."""
+
+
+def problem_kind(error: BaseException | type[BaseException]) -> str:
+    """The problem type of an error (or error class) of ERROR_ROOTS."""
+    cls = error if isinstance(error, type) else type(error)
+    if issubclass(cls, TransferError):
+        return "transfer-failed"  # its own `kind` names the line trouble
+    return cls.kind
+
+
+def dnc_status(exc: BaseException) -> int:
+    """The HTTP status of an error of ERROR_ROOTS (400 for a kind the table does not know)."""
+    found = PROBLEM_TYPES.get(problem_kind(exc))
+    return found.status if found else 400
+
+
+@dataclass(frozen=True, slots=True)
+class ProblemOf:
+    """What an error is answered with: problem type, detail, response headers and the
+    problem document's extra members."""
+
+    kind: str
+    status: int
+    detail: str
+    headers: dict[str, str]
+    extra: dict[str, Any]
+
+
+def problem_of(exc: BaseException) -> ProblemOf:
+    """The problem an error of ERROR_ROOTS is answered with."""
+    kind = problem_kind(exc)
+    status = dnc_status(exc)
+    headers: dict[str, str] = {}
+    extra: dict[str, Any] = {}
+    if isinstance(exc, TransferError):
+        detail = exc.message
+        extra = {"transfer_kind": exc.kind, "alarm": exc.alarm}
+    elif isinstance(exc, DncError):
+        detail = exc.message
+        extra = {k: v for k, v in exc.detail.items() if k not in ("type", "title", "status")}
+    elif isinstance(exc, WebApiError):
+        detail, headers, extra = exc.detail, exc.headers, exc.extra
+    elif isinstance(exc, InvalidMachineData):
+        # the pointer into the request body: a tool table travels under `tools`
+        where = f"#{'/tools' if exc.what == 'tools' else ''}{exc.pointer}"
+        detail = f"1 invalid field(s); first body {where}: {exc.message}"
+        extra = {"errors": [{"detail": exc.message, "pointer": where, "location": "body"}]}
+    else:  # a CellError: its first line (a fault spec's refusal goes on with the valid specs)
+        detail = str(exc).split("\n", 1)[0]
+        if isinstance(exc, CommandRefused):
+            extra = {"command": exc.command}
+    return ProblemOf(kind, status, detail, headers, extra)
 
 
 class InvalidParam(BaseModel):
@@ -97,22 +169,6 @@ class Problem(BaseModel):
     instance: str
     errors: list[InvalidParam] | None = None
     model_config = {"extra": "allow"}
-
-
-class ApiProblem(Exception):
-    """A refusal raised by the API layer itself (auth, size limits, bad cursors...)."""
-
-    def __init__(
-        self, status: int, kind: str, detail: str, *, headers: dict | None = None, **extra: Any
-    ) -> None:
-        super().__init__(detail)
-        self.status, self.kind, self.detail = status, kind, detail
-        self.headers, self.extra = headers or {}, extra
-
-
-def dnc_status(exc: DncError) -> int:
-    """The HTTP status of a host refusal (400 for a kind the table does not know)."""
-    return STATUS_OF_KIND.get(exc.kind, 400)
 
 
 def problem_response(
@@ -195,41 +251,12 @@ def install_problem_handlers(app: FastAPI, base: str) -> None:
     """Turn every refusal (ours, FastAPI's, Starlette's, unexpected crashes) into a problem."""
 
     @app.exception_handler(DncError)
-    async def _dnc(request: Request, exc: DncError) -> JSONResponse:
-        extra = {k: v for k, v in exc.detail.items() if k not in ("type", "title", "status")}
-        return problem_response(
-            request.url.path, base, dnc_status(exc), exc.kind, exc.message, **extra
-        )
-
-    @app.exception_handler(TransferError)
-    async def _transfer(request: Request, exc: TransferError) -> JSONResponse:
-        # a DncError whose `kind` is the line trouble, not a problem type
-        return problem_response(
-            request.url.path,
-            base,
-            502,
-            "transfer-failed",
-            exc.message,
-            transfer_kind=exc.kind,
-            alarm=exc.alarm,
-        )
-
     @app.exception_handler(CellError)
-    async def _cell(request: Request, exc: CellError) -> JSONResponse:
-        # the cell's default answer; a router that knows better (a refused command: 409)
-        # raises its own ApiProblem
-        return problem_response(request.url.path, base, 503, "machine-unavailable", str(exc))
-
-    @app.exception_handler(ApiProblem)
-    async def _api(request: Request, exc: ApiProblem) -> JSONResponse:
+    @app.exception_handler(WebApiError)
+    async def _refused(request: Request, exc: Exception) -> JSONResponse:
+        p = problem_of(exc)
         return problem_response(
-            request.url.path,
-            base,
-            exc.status,
-            exc.kind,
-            exc.detail,
-            headers=exc.headers,
-            **exc.extra,
+            request.url.path, base, p.status, p.kind, p.detail, headers=p.headers, **p.extra
         )
 
     @app.exception_handler(RequestValidationError)

@@ -4,6 +4,10 @@ Roles are ordered: viewer < operator < programmer < admin. Viewers read; dispatc
 and machine commands need an operator; uploads and releases need a programmer; fault
 injection needs an admin. A key is configured either in clear (`key`) or as its sha256
 (`key_sha256`), so a configuration file need not hold usable secrets.
+
+`ApiKey` is declared once, here: the cell file's `host.auth.api_keys[]` entries
+(web_api/config.py, with the file, line and column of each problem) and the app's
+`ApiSettings.api_keys` are the same model.
 """
 
 from __future__ import annotations
@@ -14,7 +18,10 @@ from collections.abc import Mapping
 from enum import IntEnum
 from typing import Any, Literal
 
-from pydantic import BaseModel, ConfigDict, Field, model_validator
+from pydantic import BaseModel, ConfigDict, Field, field_validator, model_validator
+from pydantic_core import PydanticCustomError
+
+from cnc.config import Section
 
 
 class Role(IntEnum):
@@ -24,36 +31,48 @@ class Role(IntEnum):
     admin = 4
 
 
-class ApiKey(BaseModel):
-    """One configured key: who uses it and what they may do."""
+class ApiKey(Section):
+    """One REST API key (`host.auth.api_keys[]`): who uses it, with which role.
 
-    model_config = ConfigDict(extra="forbid", frozen=True)
+    Exactly one of `key` and `key_sha256` is given; the section's owner checks that
+    (`secret_problem()`): the cell file reports it at the entry with the others found,
+    `ApiSettings` refuses it."""
 
-    user: str = Field(min_length=1, max_length=64)
-    role: Role
-    key: str | None = Field(default=None, min_length=16)
-    key_sha256: str | None = Field(default=None, pattern=r"^[0-9a-f]{64}$")
+    user: str = Field(min_length=1, max_length=64, description="Who uses the key (audit).")
+    role: Role = Field(
+        description="`viewer` reads; `operator` dispatches, runs jobs, commands machines;"
+        " `programmer` uploads and releases; `admin` injects faults."
+    )
+    key: str | None = Field(None, min_length=16, description="The key in clear (>= 16 chars).")
+    key_sha256: str | None = Field(
+        None,
+        pattern=r"^[0-9a-f]{64}$",
+        description="Or the key's sha256 in hex (`sha256sum` of the key without a newline):"
+        " no usable secret in the file.",
+    )
 
-    @model_validator(mode="before")
+    @field_validator("role", mode="before")
     @classmethod
-    def _role_by_name(cls, data: Any) -> Any:
-        if isinstance(data, Mapping) and isinstance(data.get("role"), str):
-            name = data["role"].lower()
-            if name not in Role.__members__:
-                raise ValueError(
-                    f"role must be one of {', '.join(Role.__members__)}, got {data['role']!r}"
-                )
-            data = {**data, "role": Role[name]}
-        return data
+    def _role_by_name(cls, value: Any) -> Any:
+        """A role is written by its name (a Role is taken as it is); any other is refused
+        in the words of a Literal (the cell file says "must be one of ...")."""
+        if isinstance(value, Role):
+            return value
+        if not isinstance(value, str) or value not in Role.__members__:
+            expected = "'viewer', 'operator', 'programmer' or 'admin'"
+            raise PydanticCustomError(
+                "literal_error", "Input should be {expected}", {"expected": expected}
+            )
+        return Role[value]
 
-    @model_validator(mode="after")
-    def _one_secret(self) -> ApiKey:
+    def secret_problem(self) -> str | None:
+        """Why the key's secret is not usable (None: exactly one of key, key_sha256)."""
         if (self.key is None) == (self.key_sha256 is None):
-            raise ValueError(f"api key of {self.user!r}: give exactly one of key, key_sha256")
-        return self
+            return f"api key of {self.user!r}: give exactly one of key, key_sha256"
+        return None
 
     def digest(self) -> str:
-        return self.key_sha256 or hashlib.sha256(self.key.encode()).hexdigest()
+        return self.key_sha256 or hashlib.sha256((self.key or "").encode()).hexdigest()
 
 
 class Principal(BaseModel):
@@ -101,7 +120,10 @@ class ApiSettings(BaseModel):
     problem_base: str = "https://fmscell.dev/problems/"
 
     @model_validator(mode="after")
-    def _unique_keys(self) -> ApiSettings:
+    def _usable_keys(self) -> ApiSettings:
+        for k in self.api_keys:
+            if (problem := k.secret_problem()) is not None:
+                raise ValueError(problem)
         digests = [k.digest() for k in self.api_keys]
         if len(set(digests)) != len(digests):
             raise ValueError("two api_keys entries have the same key")

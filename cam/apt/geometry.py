@@ -11,11 +11,20 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
+from cam.errors import CamError
+
 EPS = 1e-9  # lengths; APT programs are in inch or mm, both far above this
 
 
-class GeometryError(ValueError):
-    """A construction without a (unique) solution: the message says why."""
+class GeometryError(CamError, ValueError):
+    """A construction without a (unique) solution: the message says why (no position: the
+    evaluator says where, as a CamError of its own)."""
+
+    def __init__(self, message: str) -> None:
+        super().__init__(message)
+
+    def __str__(self) -> str:
+        return self.message
 
 
 @dataclass(frozen=True, slots=True)

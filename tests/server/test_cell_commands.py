@@ -16,6 +16,9 @@ import time
 import pytest
 import yaml
 
+from cnc.machine_data import MachineDataError
+from dnc.cell import CommandRefused, FaultRefused, InvalidFault
+from dnc.errors import NotFound
 from server.cell import Cell, default_cell, fault_spec, run_cell
 from server.config import load_cell_config
 from server.cycle_audit import HostRequests
@@ -67,11 +70,12 @@ def test_program_select_and_mode(cell):
     assert cell.panel.requests == [("select", 17), ("mode", 2)]
 
 
-def test_refusals_come_back_as_machine_unavailable(cell):
+def test_refusals_come_back_as_command_refused(cell):
     cell.panel.in_cycle = True
-    with pytest.raises(MachineUnavailable, match="mode MDI refused: a program is active"):
+    with pytest.raises(CommandRefused, match="mode MDI refused: a program is active") as err:
         cell.command("m1", "mode", mode="MDI")
-    with pytest.raises(MachineUnavailable, match=r"^unknown command 'spin'$"):
+    assert err.value.command == "mode" and isinstance(err.value, MachineUnavailable)
+    with pytest.raises(CommandRefused, match=r"^unknown command 'spin'$"):
         cell.command("m1", "spin")
     from dnc.errors import NotFound
 
@@ -96,8 +100,8 @@ class _Client:
 @pytest.mark.parametrize(
     ("alarm", "message", "want"),
     [
-        (2012, "refused: /tools/3/length_mm: must be a number", ("MachineDataError", "/tools/3/length_mm: must be a number", "/tools/3/length_mm")),
-        (2012, "refused: value out of range", ("MachineDataError", "value out of range", "")),
+        (2012, "refused: /tools/3/length_mm: must be a number", ("InvalidMachineData", "/tools/3/length_mm: must be a number", "/tools/3/length_mm")),
+        (2012, "refused: value out of range", ("InvalidMachineData", "value out of range", "")),
         (2009, "refused: program O0001 active", ("Conflict", "m1: program O0001 active", None)),
         (None, "connect: [Errno 111] Connection refused", ("MachineUnavailable", "m1: connect: [Errno 111] Connection refused", None)),
     ],
@@ -117,6 +121,8 @@ def test_machine_data_refusals_become_the_apis_errors(cell, monkeypatch, alarm, 
     assert str(err.value) == text
     if pointer is not None:
         assert err.value.pointer == pointer
+    if kind == "InvalidMachineData":  # still the machine's own MachineDataError
+        assert isinstance(err.value, MachineDataError) and err.value.what == "tools"
 
 
 # ------------------------------------------------------------------ composition
@@ -204,6 +210,20 @@ def test_the_cell_file_rebuilds_a_mill4_and_a_mill5_from_their_own_machines(tmp_
 
 
 # ------------------------------------------------------------------ faults
+def test_fault_refusals_are_the_cells_typed_errors(cell):
+    """A bad spec is InvalidFault (a ValueError; its first line says why, the rest lists the
+    valid specs), a face that refuses is FaultRefused, an unknown fault NotFound."""
+    with pytest.raises(InvalidFault, match=r"(?s)^fault spec .*nonsense.*\n  valid specs: "):
+        cell.inject("m1", {"type": "nonsense", "target": "X"})
+    with pytest.raises(InvalidFault, match="target must be plc"):
+        cell.inject("m1", {"type": "encoder", "target": "drive:"})
+    with pytest.raises(FaultRefused, match="m1"):  # the face cuts the line: no answer
+        cell.inject("m1", {"type": "encoder", "target": "X"})
+    with pytest.raises(NotFound, match="no fault 7 on machine 'm1'"):
+        cell.clear("m1", 7)
+    assert cell.faults == {}
+
+
 @pytest.mark.parametrize(
     ("request_", "spec"),
     [

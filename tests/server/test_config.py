@@ -4,6 +4,7 @@ process reading a cell file leaves the host section to the host."""
 
 from __future__ import annotations
 
+import hashlib
 import textwrap
 
 import pytest
@@ -93,6 +94,30 @@ def test_the_auth_section_gives_the_apps_settings():
     # the defaults are the app's own
     default = load_cell_config({"machines": ONE}).host.auth.api_settings()
     assert default.auth_failures_max == 10 and default.api_keys == ()
+
+
+def test_an_api_key_is_one_model_in_the_cell_file_and_the_apps_settings():
+    """web_api.settings.ApiKey is declared once: the cell file's `host.auth.api_keys[]`
+    entries are ApiKeys, handed to the app's settings as they are, and the same entries
+    given to ApiSettings directly make equal keys."""
+    from web_api.config import AuthConfig
+    from web_api.settings import ApiKey, ApiSettings, Role
+
+    digest = hashlib.sha256(b"c" * 20).hexdigest()
+    entries = [
+        {"user": "op", "role": "operator", "key": "k" * 16},
+        {"user": "ci", "role": "viewer", "key_sha256": digest},
+    ]
+    cell = load_cell_config({"machines": ONE, "host": {"auth": {"api_keys": entries}}})
+    keys = cell.host.auth.api_keys
+    assert [type(k) for k in keys] == [ApiKey, ApiKey]
+    assert AuthConfig.model_fields["api_keys"].annotation == list[ApiKey]
+    settings = cell.host.auth.api_settings()
+    assert settings.api_keys == tuple(keys)
+    assert ApiSettings.from_mapping({"api_keys": entries}).api_keys == settings.api_keys
+    assert settings.authenticate("c" * 20).role is Role.viewer
+    assert ApiKey(user="x", role=Role.admin, key="k" * 16).role is Role.admin
+    assert [k.role for k in keys] == [Role.operator, Role.viewer]
 
 
 def test_a_machine_reads_its_section_of_a_cell_file_without_the_hosts(tmp_path):

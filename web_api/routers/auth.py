@@ -13,7 +13,8 @@ from typing import Annotated
 from fastapi import APIRouter, Depends, Request, WebSocket
 from fastapi.security import APIKeyHeader, HTTPAuthorizationCredentials, HTTPBearer
 
-from web_api.problems import ApiProblem, problem_doc
+from web_api.errors import Forbidden, TooManyAuthFailures, Unauthenticated
+from web_api.problems import problem_doc
 from web_api.ratelimit import AuthFailureLimiter
 from web_api.routers import Services, get_services
 from web_api.schemas import WhoAmI
@@ -32,22 +33,18 @@ def identify(
     limiter: AuthFailureLimiter | None = None,
     address: str | None = None,
 ) -> Principal:
-    """The caller behind `presented` (a key or None), or a 401 problem; a 429 problem while
-    `address` has too many failed authentications (web_api/ratelimit.py)."""
+    """The caller behind `presented` (a key or None), or Unauthenticated (a 401 problem);
+    TooManyAuthFailures (429) while `address` has too many failed authentications
+    (web_api/ratelimit.py)."""
     if settings.insecure_open:
         return ANONYMOUS
     if not presented:
-        raise ApiProblem(
-            401,
-            "unauthenticated",
-            "no API key: send it as X-API-Key or Authorization: Bearer",
-            headers=CHALLENGE,
+        raise Unauthenticated(
+            "no API key: send it as X-API-Key or Authorization: Bearer", headers=CHALLENGE
         )
     address = address or "unknown"
     if limiter is not None and (wait := limiter.retry_after(address)) is not None:
-        raise ApiProblem(
-            429,
-            "too-many-auth-failures",
+        raise TooManyAuthFailures(
             f"{limiter.limit} failed authentications from {address} within"
             f" {limiter.window_s:g} s: try again in {wait} s",
             headers={"Retry-After": str(wait)},
@@ -57,7 +54,7 @@ def identify(
     if principal is None:
         if limiter is not None:
             limiter.failed(address)
-        raise ApiProblem(401, "unauthenticated", "the API key is not known", headers=CHALLENGE)
+        raise Unauthenticated("the API key is not known", headers=CHALLENGE)
     return principal
 
 
@@ -67,9 +64,7 @@ def _limiter(app) -> AuthFailureLimiter | None:
 
 def authorise(principal: Principal, needed: Role, action: str) -> Principal:
     if principal.role < needed:
-        raise ApiProblem(
-            403,
-            "forbidden",
+        raise Forbidden(
             f"{action} needs the {needed.name} role; {principal.user!r} is a {principal.role.name}",
             needed_role=needed.name,
             role=principal.role.name,

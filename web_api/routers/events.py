@@ -30,10 +30,10 @@ from fastapi import (
 from fastapi.concurrency import run_in_threadpool
 from starlette.responses import StreamingResponse
 
-from dnc.errors import DncError
 from dnc.outbox import events_after
+from web_api.errors import InvalidLastEventId, ShuttingDown
 from web_api.event_hub import HubClosed, PollingStream, Stream
-from web_api.problems import ApiProblem, dnc_status, problem_doc
+from web_api.problems import ERROR_ROOTS, problem_doc, problem_of
 from web_api.routers import Services, get_services
 from web_api.routers.auth import Viewer, websocket_principal
 from web_api.settings import ApiSettings, Role
@@ -56,9 +56,7 @@ def resume_point(last_event_id: str | None, after: int | None) -> int:
     if last_event_id is not None and last_event_id.strip():
         value = last_event_id.strip()
         if not value.isdigit() or int(value) > 2**63 - 1:
-            raise ApiProblem(
-                400,
-                "invalid-last-event-id",
+            raise InvalidLastEventId(
                 f"Last-Event-ID {value[:40]!r} is not an event id this stream sent",
             )
         return int(value)
@@ -74,7 +72,7 @@ async def open_stream(app: FastAPI, cursor: int) -> Stream:
     services: Services = app.state.services
     settings = services.settings
     if app.state.event_hub.closed:
-        raise ApiProblem(503, "shutting-down", "the server is shutting down")
+        raise ShuttingDown("the server is shutting down")
     if settings.events_fanout == "poll":
         await run_in_threadpool(events_after, services.sessions, cursor, 1)
         return PollingStream(
@@ -84,10 +82,8 @@ async def open_stream(app: FastAPI, cursor: int) -> Stream:
             BATCH,
             closed=lambda: app.state.event_hub.closed,
         )
-    try:
-        return await run_in_threadpool(app.state.event_hub.subscribe, cursor)
-    except HubClosed:
-        raise ApiProblem(503, "shutting-down", "the server is shutting down") from None
+    # HubClosed, a ShuttingDown: the app closed meanwhile
+    return await run_in_threadpool(app.state.event_hub.subscribe, cursor)
 
 
 async def stream_start(
@@ -174,16 +170,15 @@ async def events_ws(websocket: WebSocket, after: int = 0) -> None:
 
     try:
         websocket_principal(websocket, services.settings, Role.viewer)
-    except ApiProblem as exc:
-        await refuse(exc.status, exc.kind, exc.detail, 1008)
+    except ERROR_ROOTS as exc:
+        p = problem_of(exc)
+        await refuse(p.status, p.kind, p.detail, 1008)
         return
     try:
         stream = await open_stream(websocket.app, max(0, min(after, 2**63 - 1)))
-    except ApiProblem as exc:
-        await refuse(503, exc.kind, str(exc), 1011)
-        return
-    except DncError as exc:
-        await refuse(dnc_status(exc), exc.kind, str(exc), 1011)
+    except ERROR_ROOTS as exc:
+        p = problem_of(exc)
+        await refuse(p.status, p.kind, p.detail, 1011)
         return
 
     async def send_events(done: anyio.CancelScope) -> None:

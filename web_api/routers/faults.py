@@ -14,8 +14,7 @@ from fastapi import APIRouter, Path, Request
 from fastapi.concurrency import run_in_threadpool
 from pydantic import BaseModel, ConfigDict, Field
 
-from dnc.cell import MachineUnavailable
-from web_api.problems import ApiProblem, problem_doc
+from web_api.problems import problem_doc
 from web_api.routers.auth import Admin, Viewer
 from web_api.routers.machine_commands import cell_of
 from web_api.schemas import MachineName
@@ -85,10 +84,6 @@ def _defaults(d: dict) -> dict:
     return {"params": {}, "at": None, "duration": None, "target": "plc", **d}
 
 
-def _refused(exc: Exception) -> ApiProblem:
-    return ApiProblem(422, "invalid-fault", str(exc).split("\n", 1)[0])
-
-
 @router.get("/api/fault-types", response_model=list[FaultType], summary="Injectable faults")
 async def fault_types(request: Request, _: Viewer) -> list[FaultType]:
     return [FaultType(**t) for t in cell_of(request).fault_types()]
@@ -105,12 +100,8 @@ async def inject_fault(
     name: Annotated[MachineName, Path()], body: FaultCreate, request: Request, principal: Admin
 ) -> Fault:
     cell = cell_of(request)
-    try:
-        fault = await run_in_threadpool(cell.inject, name, body.model_dump())
-    except MachineUnavailable as exc:
-        raise ApiProblem(409, "fault-refused", str(exc)) from None
-    except ValueError as exc:
-        raise _refused(exc) from None
+    # InvalidFault (422), FaultRefused (409), NotFound (404): problems of their own
+    fault = await run_in_threadpool(cell.inject, name, body.model_dump())
     await run_in_threadpool(
         request.app.state.services.library.note_transfer,
         name,
@@ -147,10 +138,7 @@ async def clear_fault(
     principal: Admin,
 ) -> Fault:
     cell = cell_of(request)
-    try:
-        fault = await run_in_threadpool(cell.clear, name, fault_id)
-    except MachineUnavailable as exc:
-        raise ApiProblem(409, "fault-refused", str(exc)) from None
+    fault = await run_in_threadpool(cell.clear, name, fault_id)
     await run_in_threadpool(
         request.app.state.services.library.note_transfer,
         name,

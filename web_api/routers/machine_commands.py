@@ -2,7 +2,8 @@
 
 Each travels through a face of the machine (the Modbus remote panel, the simulation face's
 E-stop button), the same way a cell controller on another computer would send it. A command
-the machine's state forbids, or that no face carries, is a 409 problem saying why.
+the machine's state forbids, or that no face carries, is the cell's CommandRefused (a 409
+`command-refused` problem, web_api/problems.py) saying why.
 """
 
 from __future__ import annotations
@@ -13,9 +14,10 @@ from fastapi import APIRouter, Path, Request
 from fastapi.concurrency import run_in_threadpool
 from pydantic import BaseModel, ConfigDict, Field, model_validator
 
-from dnc.cell import CellControl, MachineUnavailable
+from dnc.cell import CellControl, CommandRefused
 from dnc.tape import MAX_PROGRAM_NUMBER
-from web_api.problems import ApiProblem, problem_doc
+from web_api.errors import NoCell
+from web_api.problems import problem_doc
 from web_api.routers.auth import Operator
 from web_api.schemas import MachineName
 
@@ -53,7 +55,7 @@ class CommandAccepted(BaseModel):
 def cell_of(request: Request) -> CellControl:
     cell: CellControl | None = getattr(request.app.state, "cell_control", None)
     if cell is None:
-        raise ApiProblem(503, "no-cell", "this API runs without a cell: no machine is connected")
+        raise NoCell("this API runs without a cell: no machine is connected")
     return cell
 
 
@@ -81,7 +83,7 @@ async def machine_command(
     library = request.app.state.services.library
     try:
         detail = await run_in_threadpool(cell.command, name, body.command, **args)
-    except MachineUnavailable as exc:
+    except CommandRefused as exc:  # audited, then answered as the refusal it is
         await run_in_threadpool(
             library.note_transfer,
             name,
@@ -91,7 +93,7 @@ async def machine_command(
             reason=str(exc),
             **args,
         )
-        raise ApiProblem(409, "command-refused", str(exc), command=body.command) from None
+        raise
     # who did what to which machine: the audit log and the event stream
     await run_in_threadpool(
         library.note_transfer,

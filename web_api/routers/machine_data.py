@@ -13,9 +13,9 @@ from typing import Annotated, Any
 from fastapi import APIRouter, Body, Path, Request
 from fastapi.concurrency import run_in_threadpool
 
-from dnc.cell import MachineUnavailable
 from dnc.errors import Conflict
-from web_api.problems import ApiProblem, problem_doc
+from web_api.errors import InvalidBody
+from web_api.problems import problem_doc
 from web_api.routers.auth import Operator, Viewer
 from web_api.routers.machine_commands import cell_of
 from web_api.schemas import MachineName
@@ -29,6 +29,9 @@ OFFSETS_EXAMPLE = {"work_offsets": {"G54": [-300.0, -200.0, -300.0]}, "g92": [0.
 async def _at_machine(
     request: Request, name: str, what: str, doc: dict | None, actor: str = ""
 ) -> dict:
+    """The cell's answer; its refusals are problems of their own (web_api/problems.py):
+    InvalidMachineData 422 with the JSON pointer, Conflict 409 (in cycle),
+    MachineUnavailable 503."""
     cell = cell_of(request)
     try:
         return await run_in_threadpool(cell.machine_data, name, what, doc)
@@ -38,27 +41,12 @@ async def _at_machine(
             library.note_transfer, name, f"machine.{what}_refused", actor=actor, reason=str(exc)
         )
         raise
-    except MachineUnavailable as exc:
-        raise ApiProblem(503, "machine-unavailable", str(exc)) from None
-    except ValueError as exc:  # cnc.machine_data.MachineDataError: a bad value in `doc`
-        pointer = getattr(exc, "pointer", "")
-        prefix = "/tools" if what == "tools" else ""
-        where = f"#{prefix}{pointer}"
-        reason = getattr(exc, "message", str(exc))
-        raise ApiProblem(
-            422,
-            "validation",
-            f"1 invalid field(s); first body {where}: {reason}",
-            errors=[{"detail": reason, "pointer": where, "location": "body"}],
-        ) from None
 
 
 def _one_key(body: Any, key: str, allowed: tuple[str, ...]) -> None:
     if not isinstance(body, dict) or not set(body) <= set(allowed) or key not in body:
         keys = ", ".join(allowed)
-        raise ApiProblem(
-            422,
-            "validation",
+        raise InvalidBody(
             f"the body must be an object with {key!r} (keys: {keys})",
             errors=[{"detail": f"needs {key!r}; keys: {keys}", "pointer": "#", "location": "body"}],
         )

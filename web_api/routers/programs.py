@@ -19,11 +19,12 @@ from fastapi.responses import JSONResponse
 from pydantic import BaseModel, ValidationError
 from starlette.datastructures import UploadFile
 
-from dnc.errors import InvalidUpload
+from dnc.errors import InvalidUpload, UploadTooLarge
 from dnc.posting import REVISION_KINDS, kind_of_upload, partno_header
 from dnc.tape import MAX_PROGRAM_NUMBER, read_header
 from dnc.upload import ProgramUpload
-from web_api.problems import ApiProblem, problem_doc
+from web_api.errors import UnsupportedMediaType
+from web_api.problems import problem_doc
 from web_api.routers import Services, decode_cursor, get_services, next_link
 from web_api.routers.auth import Programmer, Viewer
 from web_api.schemas import (
@@ -127,14 +128,18 @@ async def read_upload(
         # whole file in memory (see dnc.upload)
         spooled = ProgramUpload(limit=limit, name=upload.filename or "upload")
         refused: InvalidUpload | None = None
+        over = 0  # bytes received when the limit was crossed (said with the API's key)
         try:
             while chunk := await upload.read(UPLOAD_CHUNK):
+                if spooled.size + len(chunk) > limit:
+                    over = spooled.size + len(chunk)
+                    break
                 spooled.feed(chunk)
         except InvalidUpload as exc:
-            if "limit" in exc.detail:
-                spooled.close()
-                raise _too_large(spooled.size, services, at_least=True) from None
             refused = exc  # said after the fields' own problems, as before
+        if over:
+            spooled.close()
+            raise _too_large(over, services, at_least=True)
         values: dict[str, Any] = {
             k: form[k] for k in FORM_FIELDS if k in model.model_fields and k in form
         }
@@ -156,9 +161,7 @@ async def read_upload(
             spooled.close()
             raise refused
         return fields, spooled, upload.filename
-    raise ApiProblem(
-        415,
-        "unsupported-media-type",
+    raise UnsupportedMediaType(
         f"send application/json or multipart/form-data, not {ctype or 'no content type'!r}",
     )
 
@@ -224,12 +227,10 @@ def _fill_from_header(values: dict, data: bytes, filename: str | None, kind: str
         values["name"] = header.title or stem or f"O{values.get('number', 0):04d}"
 
 
-def _too_large(size: int, services: Services, at_least: bool = False) -> ApiProblem:
+def _too_large(size: int, services: Services, at_least: bool = False) -> UploadTooLarge:
     limit = services.settings.upload_limit_bytes
     amount = f"at least {size}" if at_least else str(size)
-    return ApiProblem(
-        413,
-        "upload-too-large",
+    return UploadTooLarge(
         f"program of {amount} bytes exceeds the upload limit of {limit} bytes "
         "(configure upload_limit_bytes, or drip-feed the program from a file)",
         limit=limit,
