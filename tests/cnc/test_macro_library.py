@@ -92,8 +92,10 @@ def test_payne_o2001_calls_o9001_across_files() -> None:
     with open(path, encoding="latin-1") as fh:
         errs = check(fh, MILL, file=str(path), programs=programs, macro_variables=store)
     assert store[10100] == pytest.approx(math.sqrt(0.625**2 - 0.125**2))
-    # what is left is not Macro B: a ':' line with no program number (line 23)
-    assert [(e.line, e.message) for e in errs] == [(23, "program number O needs digits")]
+    # what is left is not Macro B: a ':' line with no program number (line 23), Fanuc PS0005
+    assert [(e.line, e.message) for e in errs] == [
+        (23, "PS0005 program number ':' (the ISO form of O) needs digits")
+    ]
     res = runner.invoke(app, ["nc", "check", "--no-soft-limits", str(path)])
     assert "PS0076 G65: program O9001 not found" in res.output
 
