@@ -90,11 +90,12 @@ class MarkedBlock(Block):
 def blank_comments(text: str, line: int, file: str) -> str:
     """Replace `( ... )` and `; ...` comments with spaces (columns keep their place).
 
-    `(` and `)` are the tape's control-out and control-in codes (ISO 840 / Fanuc "control
-    out (comment start)", "control in (comment end)"): the reader ignores what lies between
-    them, a `(` inside a comment is part of it (comments do not nest: the first `)` ends
-    it), and a `)` outside a comment switches on a reader that is already on, so it is
-    ignored too: `( DRILL AT (61.045, 67.745) )` is a comment, its last `)` a no-op.
+    `(` and `)` are the tape's control-out and control-in codes (the ISO code tables of the
+    Fanuc-family controls, e.g. the Yasnac LX3 manual: "( control out (comment start)",
+    ") control in (comment end)", what lies between them is ignored): a `(` inside a
+    comment is part of it (comments do not nest: the first `)` ends it), and a `)` outside
+    a comment switches on a reader that is already on, so it is ignored too:
+    `( DRILL AT (61.045, 67.745) )` is a comment, its last `)` a no-op.
     """
     out = []
     i = 0

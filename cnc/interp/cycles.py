@@ -103,10 +103,11 @@ def cycle_block(ip: Context, blk: Block, code: int | None, exact: bool) -> None:
     rr = cd.r if cd.r is not None else init
     zz = cd.z
     if cyc != G87 and rr < zz - _EPS:
-        # The hole bottom above R: a Fanuc runs it, feeding from R up to Z (Z is only the
-        # position of the hole bottom, G91 Z the signed distance from R; no P/S alarm
-        # relates the two), where RS274NGC refuses "R less than Z". Almost always a sign
-        # slip (z64-stdbc-o0010.nc taps Z+.5 over R.1, in the air), so `nc check` warns.
+        # The hole bottom above R: run as a Fanuc defines the cycle, feeding from R to Z
+        # (Z is the position of the hole bottom, G91 Z the signed distance from R; no
+        # Fanuc alarm relating the two is known to us), where RS274NGC refuses "R less
+        # than Z". Almost always a sign slip (z64-stdbc-o0010.nc taps Z+.5 over R.1, in
+        # the air), so `nc check` warns.
         ip.upward_holes[(ip._frames[-1].file if ip._frames else ip.file, blk.line)] = None
     if cyc == G87 and rr > zz + _EPS:
         raise ip._err(f"G87 back boring needs R below the bore top {wn}", blk, "R")
