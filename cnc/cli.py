@@ -125,6 +125,12 @@ def check_cmd(
         )
     for w in skip_warnings(interp, setup.params):
         typer.echo(w, err=True)
+    for f, line in interp.upward_holes:
+        typer.echo(
+            f"{f}:{line}:1: warning: canned cycle with the hole bottom above R: it feeds "
+            "upward from R (a Fanuc runs it; a sign slip?)",
+            err=True,
+        )
     if not interp.units_programmed:
         typer.echo(units_warning(str(file), setup.machine_data.power_on_units), err=True)
     raise typer.Exit(1 if errors else 0)

@@ -349,6 +349,14 @@ class MachineConfig(Section):
         description="Of those, G65/G66 macro levels (deeper is alarm PS0122): 5 on a Fanuc"
         " 0i-D/F, 4 on a 0i-C, 16i/18i/21i.",
     )
+    macro_variable_map: Literal["haas_ngc", "kitamura"] = Field(
+        "haas_ngc",
+        description="Whose Macro B system variables the control has where builders differ:"
+        " `haas_ngc` (#10000-#10999 are common variables kept across power cycles, as on a"
+        " Haas NGC; #4012 is the G66/G67 modal group, as on a Fanuc) or `kitamura` (a Kitamura"
+        " HMC: #10001-#10999 are the tool length offsets H1.. and #11001-#11999 their wear,"
+        " #4012 is the current work coordinate system, 54..59 or 54.1); docs/gcode.md.",
+    )
     home_sequence: list[list[AxisName]] | None = Field(
         None,
         description="Homing sequence: groups of axes homed together, one group after the"
@@ -413,6 +421,7 @@ class MachineConfig(Section):
             max_spindle_rpm=self.spindle.max_rpm,
             call_nesting=self.call_nesting,
             macro_nesting=self.macro_nesting,
+            macro_variable_map=self.macro_variable_map,
             plc_m_codes=self.plc.nc_m_codes,
             tool_setter=(
                 ToolSetter(ts.x, ts.y, ts.z_trigger, ts.radius)
@@ -895,6 +904,13 @@ def _check_machine_data(name: tuple[Any, ...], m: MachineConfig) -> list[Problem
             MachineData.from_dict({"macro_variables": {str(n): value}})
         except MachineDataError as e:
             out.append(((*base, "macro_variables", n), e.message))
+            continue
+        if m.macro_variable_map == "kitamura" and 10000 <= n <= 10999:
+            reason = (
+                "on a `macro_variable_map: kitamura` machine #10001-#10999 are tool length"
+                " offsets (machine_data.tools), not kept common variables"
+            )
+            out.append(((*base, "macro_variables", n), reason))
     return out
 
 

@@ -65,6 +65,10 @@ class MachineParams:
     lathe_gcode_system: str = "A"  # Fanuc T G-code system A, B or C (cnc.interp.codes)
     call_nesting: int = 10  # program levels called (M98, G65, G66): PS0077 beyond
     macro_nesting: int = 5  # of which G65/G66 macro levels: PS0122 beyond
+    # whose macro system variables: "haas_ngc" (#10000-#10999 kept common variables, #4012
+    # the G66/G67 group) or "kitamura" (#10001.. tool length offsets, #11001.. their wear,
+    # #4012 the work coordinate system): cnc.interp.macro
+    macro_variable_map: str = "haas_ngc"
     # M codes the machine's PLC handles besides the NC's own (its M-code table, plc.m_codes);
     # None: no table declared, every M code the NC does not know is handed to the PLC
     plc_m_codes: frozenset[int] | None = None

@@ -88,7 +88,15 @@ class MarkedBlock(Block):
 
 
 def blank_comments(text: str, line: int, file: str) -> str:
-    """Replace `( ... )` and `; ...` comments with spaces (columns keep their place)."""
+    """Replace `( ... )` and `; ...` comments with spaces (columns keep their place).
+
+    `(` and `)` are the tape's control-out and control-in codes (the ISO code tables of the
+    Fanuc-family controls, e.g. the Yasnac LX3 manual: "( control out (comment start)",
+    ") control in (comment end)", what lies between them is ignored): a `(` inside a
+    comment is part of it (comments do not nest: the first `)` ends it), and a `)` outside
+    a comment switches on a reader that is already on, so it is ignored too:
+    `( DRILL AT (61.045, 67.745) )` is a comment, its last `)` a no-op.
+    """
     out = []
     i = 0
     n = len(text)
@@ -103,8 +111,8 @@ def blank_comments(text: str, line: int, file: str) -> str:
             continue
         if c == ";":
             break
-        if c == ")":
-            raise NcError("')' without a matching '('", line, i + 1, file)
+        if c == ")":  # control-in with no control-out before it: nothing to end
+            c = " "
         out.append(c)
         i += 1
     return "".join(out)
@@ -230,7 +238,15 @@ def _parse_marked(
     if squeezed[:1] in ("O", ":"):
         m = re.match(r"[O:](\d+)", squeezed)
         if not m:
-            raise NcError("program number O needs digits", line, find_col(text, squeezed[0]), file)
+            # Fanuc alarm PS0005 (no data after address): ':' is the ISO form of the program
+            # number address O, and an address needs its number before the next one or EOB.
+            what = "O" if squeezed[0] == "O" else "':' (the ISO form of O)"
+            raise NcError(
+                f"PS0005 program number {what} needs digits",
+                line,
+                find_col(text, squeezed[0]),
+                file,
+            )
         blk.program = int(m.group(1))
         if blk.program > MAX_PROGRAM_NUMBER:  # 8 digits at most (Fanuc 8-digit O option)
             raise NcError(

@@ -195,6 +195,7 @@ class Context(Protocol):
     _out: list[CanonCommand]
     _tools: dict[int, ToolOffset]
     skip_misses: list[tuple[str, int]]
+    upward_holes: dict[tuple[str, int], None]
     _comp: object
     _frames: list  # the program levels (cnc.interp.interpreter._Frame), innermost last
     vars: MacroVariables

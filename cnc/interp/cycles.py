@@ -103,7 +103,12 @@ def cycle_block(ip: Context, blk: Block, code: int | None, exact: bool) -> None:
     rr = cd.r if cd.r is not None else init
     zz = cd.z
     if cyc != G87 and rr < zz - _EPS:
-        raise ip._err(f"R level below the hole bottom {wn}", blk, "R")
+        # The hole bottom above R: run as a Fanuc defines the cycle, feeding from R to Z
+        # (Z is the position of the hole bottom, G91 Z the signed distance from R; no
+        # Fanuc alarm relating the two is known to us), where RS274NGC refuses "R less
+        # than Z". Almost always a sign slip (z64-stdbc-o0010.nc taps Z+.5 over R.1, in
+        # the air), so `nc check` warns.
+        ip.upward_holes[(ip._frames[-1].file if ip._frames else ip.file, blk.line)] = None
     if cyc == G87 and rr > zz + _EPS:
         raise ip._err(f"G87 back boring needs R below the bore top {wn}", blk, "R")
     if init < rr:
@@ -144,7 +149,9 @@ def _drill(ip: Context, blk: Block, cyc: int, init: float, r: float, z: float) -
     feed = ip._feed(blk)
     back = init if ip._retract == G98 or cyc == G87 else r
     rapid, lin = ip._line_to, ip._line_to
-    d = 1.0 if cyc == G87 else -1.0  # direction into the hole (tool axis points up)
+    # direction into the hole from R (tool axis points up): down, up for back boring and
+    # for a hole bottom programmed above R (pecks then go up too)
+    d = 1.0 if cyc == G87 or z > r else -1.0
     if cyc == G87:  # back boring: orient, shift, go below the part, cut upwards
         q = cd.q
         _orient_shift(ip, blk, q)

@@ -357,6 +357,9 @@ class Interpreter:
         self._skip_pos: tuple[float, float, float] | None = None
         # (file, line) of the G31 moves that ran to their end without a skip signal
         self.skip_misses: list[tuple[str, int]] = []
+        # (file, line) of the canned cycles whose hole bottom was above R (they feed upward),
+        # in order, once each
+        self.upward_holes: dict[tuple[str, int], None] = {}
 
     # --- modal state ------------------------------------------------------------------
 

@@ -9,16 +9,27 @@ extension #10000-#10999):
 | #0 | always vacant, read only | |
 | #1-#33 | local: one set per G65/G66 macro level (the arguments) | until the macro returns |
 | #100-#499, #100000-#199999 | common (the 6-digit ones: the Fanuc 30i-B added common variables) | the injected `common` mapping (the controller clears it at reset / power off), else cleared with each interpreter |
-| #500-#999, #500000-#999999, #10000-#10999 | common, kept across power cycles (Fanuc 30i-B added ones; Haas NGC) | in the injected `persistent` mapping |
+| #500-#999, #500000-#999999, #10000-#10999 | common, kept across power cycles (Fanuc 30i-B added ones; Haas NGC; not on a `kitamura` map) | in the injected `persistent` mapping |
 | #1000-#1035, #1100-#1135 | interface signals in / out | inputs read 0 (no PLC here) |
 | #2001... | tool offsets (`_tools`) | tool memory |
+| #10001-#10999, #11001-#11999 | `macro_variable_map: kitamura` only: tool length offset H1.. and its wear | tool memory |
 | #3000, #3006 | alarm / stop with message (write) | |
 | #3001, #3002 | timers ms / hours | from the injected clock |
 | #3003, #3004, #3901, #3902 | single block / feed hold control, parts counters | this run |
-| #4001-#4130 | modal information of the block before (read only) | |
+| #4001-#4130 | modal information of the block before (read only); #4012 the G66/G67 group, on a `kitamura` map the work coordinate system | |
 | #5001-#5105 | positions (read only): 1st digit group = end point, machine, current, skip (the G31 skip position, work coordinates; the current position before any G31), tool length offset, servo deviation; #50x4/#50x5 the rotary 4th/5th axis (degrees) | |
 | #5201-#5325, #7001-#7945 | work offsets (`_wofs`; #52x4/#52x5 the rotary axes', degrees) | work offset memory |
 | #5401-#5600 | Haas tool feed timers / total tool timers, seconds (read only) | read 0: no tool usage is recorded here |
+
+Wear offsets: the tool memory keeps one value per offset (geometry and wear together), so a
+wear variable reads 0 and takes 0 (a macro that measures a length and clears its wear,
+O919100); any other wear value is refused (PS0116).
+
+`macro_variable_map` (MachineParams) picks the builder's variables where controls differ:
+`haas_ngc` (default) or `kitamura`, the Kitamura HMC of the mojimould programs, whose shop
+notes #4012 as the current work coordinate system and #10000+n as the length of tool offset
+n (Mould_Analytical_Calculation_Note/appendix_MACN/MACN_common_variables.tex, system
+variables of the Kitamura), #11000+n as its wear (O919100's own variable list).
 
 The persistent store is any `MutableMapping[int, float]` (a plain dict by default): the
 controller passes its machine data so #500-#999 survive a power cycle; a vacant variable
@@ -48,6 +59,9 @@ COMMON_ADDED = range(100000, 200000)  # Fanuc 30i-B added common variables (clea
 PERSISTENT = range(500, 1000)
 PERSISTENT_ADDED = range(500000, 1000000)  # Fanuc 30i-B added common variables (kept)
 PERSISTENT_EXT = range(10000, 11000)  # Haas NGC extended common variables
+KITAMURA_NO_EXT = range(0)  # a Kitamura has tool offsets there
+KITAMURA_TOOL_LENGTH = range(10001, 11000)  # H1..H999 tool length (geometry)
+KITAMURA_TOOL_WEAR = range(11001, 12000)  # H1..H999 tool length wear
 HAAS_TOOL_TIMERS = range(5401, 5601)  # Haas: feed time #5400+T, total time #5500+T (s)
 MAX_ALARM = 200  # #3000 = 0..200: alarm 3000..3200 (Fanuc)
 
@@ -63,7 +77,7 @@ class MacroVariables:
     """The variables of one interpreter (`env` of the compiled expressions)."""
 
     __slots__ = ("ip", "loc", "levels", "common", "persistent", "signals", "misc", "clock",
-                 "timer_base")  # fmt: skip
+                 "timer_base", "ext", "kitamura")  # fmt: skip
 
     def __init__(
         self,
@@ -81,6 +95,9 @@ class MacroVariables:
         self.misc: dict[int, float] = {}
         self.clock = clock
         self.timer_base = {3001: 0.0, 3002: 0.0}
+        # the builder's variable map: on a Kitamura #10000.. are tool offsets, not common
+        self.kitamura = ip.params.macro_variable_map == "kitamura"
+        self.ext = KITAMURA_NO_EXT if self.kitamura else PERSISTENT_EXT
 
     # --- local levels (G65/G66) --------------------------------------------------------------
 
@@ -107,7 +124,7 @@ class MacroVariables:
             return None
         if n in COMMON or n in COMMON_ADDED:
             return self.common.get(n)
-        if n in PERSISTENT or n in PERSISTENT_EXT or n in PERSISTENT_ADDED:
+        if n in PERSISTENT or n in self.ext or n in PERSISTENT_ADDED:
             v = self.persistent.get(n)
             return None if v is None else float(v)
         return _read_system(self, n, col)
@@ -122,7 +139,7 @@ class MacroVariables:
         if n in COMMON or n in COMMON_ADDED:
             _store(self.common, n, v)
             return
-        if n in PERSISTENT or n in PERSISTENT_EXT or n in PERSISTENT_ADDED:
+        if n in PERSISTENT or n in self.ext or n in PERSISTENT_ADDED:
             _store(self.persistent, n, v)
             return
         if n == 0:
@@ -206,6 +223,8 @@ def _modal(ip: Interpreter, n: int) -> float | None:
     if n == 4011:
         return 51.0 if ip._xf.scale is not None else 50.0
     if n == 4012:
+        if ip.vars.kitamura:  # the Kitamura's #4012: the work coordinate system (the shop's note)
+            return (G54 / 10.0 + ip._wcs - 1) if ip._wcs <= 6 else 54.1
         return 66.0 if ip._g66 is not None else 67.0
     if n == 4013:
         return 96.0 if ip._css else 97.0
@@ -271,6 +290,11 @@ def _read_system(env: MacroVariables, n: int, col: int) -> float | None:
         return _position(ip, n, col)
     if n in HAAS_TOOL_TIMERS:
         return 0.0  # a tool-life check (IF [#5405 GE 6000] ...) sees fresh tools
+    if env.kitamura:
+        if n in KITAMURA_TOOL_LENGTH:
+            return ip._tools.get(n - 10000, ToolOffset()).length / _unit(ip)
+        if n in KITAMURA_TOOL_WEAR:
+            return 0.0  # wear: the tool memory keeps one value per offset
     hit = _work_offset_index(n)
     if hit is not None:
         k, ax = hit
@@ -347,15 +371,17 @@ def _write_system(env: MacroVariables, n: int, v: float | None, col: int) -> Non
             raise _out_of_range(n, col)
         number, name = hit
         if not name:
-            raise MacroAlarm(PS_WRITE_PROTECTED, f"#{n}: wear offsets are not kept", 0, col)
-        val = (0.0 if v is None else v) * _unit(ip)
-        if name == "x" and ip._diam:
-            val *= 0.5
-        cur = ip._tools.get(number, ToolOffset())
-        fields = {"length": cur.length, "radius": cur.radius, "x": cur.x, "z": cur.z}
-        fields[name] = val
-        ip._tools[number] = ToolOffset(**fields)
+            _clear_wear(n, v, col)
+            return
+        _set_tool(ip, number, name, v)
         return
+    if env.kitamura:
+        if n in KITAMURA_TOOL_LENGTH:
+            _set_tool(ip, n - 10000, "length", v)
+            return
+        if n in KITAMURA_TOOL_WEAR:
+            _clear_wear(n, v, col)
+            return
     hit = _work_offset_index(n)
     if hit is not None:
         k, ax = hit
@@ -375,6 +401,22 @@ def _write_system(env: MacroVariables, n: int, v: float | None, col: int) -> Non
     if 4001 <= n <= 4130 or 5001 <= n <= 5105 or 1000 <= n <= 1035 or n in HAAS_TOOL_TIMERS:
         raise _protected(n, col)
     raise _out_of_range(n, col)
+
+
+def _clear_wear(n: int, v: float | None, col: int) -> None:
+    """A wear variable takes 0 (or vacant): the one value kept per offset is unchanged."""
+    if v:
+        raise MacroAlarm(PS_WRITE_PROTECTED, f"#{n}: wear offsets are not kept", 0, col)
+
+
+def _set_tool(ip: Interpreter, number: int, name: str, v: float | None) -> None:
+    val = (0.0 if v is None else v) * _unit(ip)
+    if name == "x" and ip._diam:
+        val *= 0.5
+    cur = ip._tools.get(number, ToolOffset())
+    fields = {"length": cur.length, "radius": cur.radius, "x": cur.x, "z": cur.z}
+    fields[name] = val
+    ip._tools[number] = ToolOffset(**fields)
 
 
 def alarm_number(v: float | None, col: int) -> int:

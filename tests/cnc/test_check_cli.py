@@ -134,3 +134,18 @@ def test_subprogram_option_and_preset_macro_variables(tmp_path) -> None:
     res = runner.invoke(app, ["nc", "check", "--config", str(cfg), str(p)])
     assert res.exit_code == 2
     assert "machine_data.macro_variables.100: a kept macro variable is #500-#999" in res.output
+
+
+def test_a_cycle_with_the_hole_bottom_above_r_passes_with_a_warning(tmp_path: Path) -> None:
+    # a Fanuc runs it, feeding upward from R (z64-stdbc-o0010.nc: G84 Z.5 R.1): a warning
+    # per line, however often the cycle repeats, with the file and line of the subprogram
+    path = tmp_path / "up.nc"
+    path.write_text(
+        "G21 G90 G0 X0 Y0 Z10\nS500 M3\nM98 P11 L3\nM30\nO11\nG99 G81 Z2 R-2 F100\nG80\nM99\n"
+    )
+    res = runner.invoke(app, ["nc", "check", "--no-soft-limits", str(path)])
+    assert res.exit_code == 0, res.output
+    assert res.stderr.splitlines() == [
+        f"{path}:6:1: warning: canned cycle with the hole bottom above R: it feeds upward "
+        "from R (a Fanuc runs it; a sign slip?)"
+    ]

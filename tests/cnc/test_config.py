@@ -295,6 +295,10 @@ ERRORS = [
     ("plc: {m_codes: {3: {ms: 10}}}",
      "machines.m1.plc.m_codes.3: M3 is handled by the NC or the standard PLC program"),
     ("plc: {m_codes: {31: {ms: 40000}}}", "machines.m1.plc.m_codes.31.ms: must be <= 29000"),
+    ("macro_variable_map: fanuc", "machines.m1.macro_variable_map: must be one of 'haas_ngc' or"),
+    ("macro_variable_map: kitamura\n    machine_data: {macro_variables: {10002: 1}}",
+     "machines.m1.machine_data.macro_variables.10002: on a `macro_variable_map: kitamura`"
+     " machine #10001-#10999 are tool length offsets"),
 ]  # fmt: skip
 
 

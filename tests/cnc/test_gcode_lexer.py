@@ -31,6 +31,23 @@ def test_comments_paren_and_semicolon() -> None:
     assert b.words == {"X": 2.0}
 
 
+@pytest.mark.parametrize(
+    ("text", "words"),
+    [
+        # '(' control out, ')' control in: the first ')' ends the comment (no nesting) and a
+        # ')' outside a comment is a control-in with nothing to end, ignored as on the tape
+        # reader (norn93-peck-pockets.nc line 12: a comment-only line)
+        ("( Drilling hole at (61.045, 67.745) )", None),
+        ("G1 X10 )", {"X": 10.0}),
+        ("G1 (a (b) X2 ) Y3", {"X": 2.0, "Y": 3.0}),
+        (")", None),
+    ],
+)
+def test_a_control_in_outside_a_comment_is_ignored(text: str, words: dict | None) -> None:
+    b = parse_line(text, 12)
+    assert (b.words if b is not None else None) == words
+
+
 def test_comment_only_and_blank_lines_are_none() -> None:
     assert parse_line("   ", 1) is None
     assert parse_line("(just a comment)", 1) is None
@@ -65,7 +82,8 @@ def test_text_after_a_leading_percent_is_skipped_as_fanuc_reads_a_tape() -> None
     ("text", "col", "fragment"),
     [
         ("G1 X10 (open", 8, "unterminated comment"),
-        ("G1 X10 )", 8, "without a matching"),
+        ("O (MAIN)", 1, "PS0005 program number O needs digits"),
+        (":(SOLVE FOR B)", 1, "PS0005 program number ':' (the ISO form of O) needs digits"),
         ("G1 X1.2.3", 4, "malformed number"),
         ("G1 X", 4, "without a value"),
         ("G01 X1/8", 7, "fractions not allowed"),

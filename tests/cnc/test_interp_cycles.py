@@ -121,8 +121,6 @@ def test_cycle_errors() -> None:
         run("G81 X1 R2 F100\n")
     with pytest.raises(NcError, match="G87 back boring needs R below"):
         run("G0 Z10\nG87 X1 Z-2 Q1 F100\n")  # R omitted: the initial level, above the bore
-    with pytest.raises(NcError, match="R level below"):
-        run("G0 Z10\nG81 X1 Z2 R-2 F100\n")
     with pytest.raises(NcError, match="Q > 0"):
         run("G0 Z10\nG83 X1 Z-2 R2 F100\n")
     with pytest.raises(NcError, match="pecks"):
@@ -184,3 +182,36 @@ def test_g88_manual_stop_is_a_program_stop() -> None:
 )
 def test_r_omitted_is_the_initial_level(prog: str, expected: list) -> None:
     assert path(run(START + prog))[2:] == expected
+
+
+@pytest.mark.parametrize(
+    ("prog", "expected"),
+    [
+        # the hole bottom above R: a Fanuc feeds from R up to Z (no P/S alarm relates them);
+        # z64-stdbc-o0010.nc's tap sub: G0 Z.1 / G98 G84 Z.5 R.1 (Z#5 for the tap depth J)
+        (
+            "G0 X0 Y0 Z.1\nS100 M3\nG98 G84 Z.5 R.1 F10\n",
+            [("S", "M3"), ("S", "M3"), ("F", 0, 0, 0.5), ("S", "M4"), ("F", 0, 0, 0.1),
+             ("S", "M3")],
+        ),
+        ("G0 X0 Y0 Z10\nG99 G81 X1 Z2 R-2 F100\n", [("T", 1, 0, 10), ("T", 1, 0, -2),
+                                                   ("F", 1, 0, 2), ("T", 1, 0, -2)]),
+        # pecks go from R towards Z: up (G83 Q1 from R0 to Z2.5: 1, 2, 2.5)
+        (
+            "G0 X0 Y0 Z0\nG99 G83 Z2.5 R0 Q1 F100\n",
+            [("F", 0, 0, 1), ("T", 0, 0, 0), ("T", 0, 0, 0.5), ("F", 0, 0, 2), ("T", 0, 0, 0),
+             ("T", 0, 0, 1.5), ("F", 0, 0, 2.5), ("T", 0, 0, 0)],
+        ),
+    ],
+)  # fmt: skip
+def test_a_hole_bottom_above_r_feeds_upward_and_is_noted(prog: str, expected: list) -> None:
+    ip = Interpreter(MILL, file="up.nc")
+    cmds = list(ip.run(prog))
+    assert path(cmds[1:]) == expected  # after the G0 to the start point
+    assert list(ip.upward_holes) == [("up.nc", prog.count("\n"))]
+
+
+def test_a_hole_bottom_below_r_is_not_noted() -> None:
+    ip = Interpreter(MILL)
+    list(ip.run("G0 X0 Y0 Z10\nG81 X1 Z-2 R2 F100\nX2\n"))
+    assert ip.upward_holes == {}

@@ -599,3 +599,51 @@ def test_lathe_positions_in_diameter_and_tool_geometry() -> None:
     list(ip.run("G0 X40 Z5\n#100=#5001\n#101=#5003\n#102=#2701\n#103=#2801\n#104=#2901\n"))
     c = ip.vars.common
     assert (c[100], c[101], c[102], c[103], c[104]) == (40.0, 5.0, 4.0, -3.0, 0.4)
+
+
+# --- the builder's variable map (macro_variable_map) ------------------------------------------
+
+KITAMURA = MachineParams(axes=BIG, macro_variable_map="kitamura")
+
+
+@pytest.mark.parametrize(
+    ("params", "prog", "common"),
+    [
+        # Haas NGC map (default): #10002 is a kept common variable, #4012 the G66/G67 group
+        (MILL, "#10002=7\n#100=#10002\n#101=#4012\n", {100: 7.0, 101: 67.0}),
+        # Kitamura (the shop's note): #4012 the work coordinate system, #10000+n the length
+        # of tool offset n, #11000+n its wear (reads 0)
+        (KITAMURA, "G55\n#100=#4012\n#101=#10002\n#102=#11002\n", {100: 55.0, 101: 120.0,
+                                                               102: 0.0}),
+        (KITAMURA, "G54.1 P3\n#100=#4012\n", {100: 54.1}),
+        (KITAMURA, "#10002=98.5\n#11002=0\n#100=#10002\n#101=#2002\n", {100: 98.5,
+                                                                      101: 98.5}),
+        # a wear variable takes 0 on either map (the offset keeps one value)
+        (MILL, "#2202=0\n#100=#2002\n", {100: 120.0}),
+    ],
+)  # fmt: skip
+def test_builder_variable_maps(params: MachineParams, prog: str, common: dict) -> None:
+    tools = {2: ToolOffset(length=120.0, radius=40.0)}
+    store: dict[int, float] = {}
+    ip = Interpreter(params, tools=tools, macro_variables=store)
+    list(ip.run(prog))
+    assert dict(ip.vars.common) == common
+    assert ip._tools[2].radius == 40.0  # a length write leaves the radius
+    if params is MILL and "#10002" in prog:
+        assert store == {10002: 7.0}  # kept across power cycles (Haas NGC)
+    if params is KITAMURA:
+        assert store == {}  # tool memory, not common variables
+
+
+@pytest.mark.parametrize(
+    ("params", "prog", "alarm"),
+    [
+        (KITAMURA, "#11002=0.1\n", "PS0116 #11002: wear offsets are not kept"),
+        (MILL, "#2202=0.1\n", "PS0116 #2202: wear offsets are not kept"),
+        (MILL, "#11002=0\n", "PS0115 variable #11002 does not exist"),
+        (KITAMURA, "#4012=54\n", "PS0116 #4012 is read only"),
+    ],
+)
+def test_builder_variable_map_refusals(params: MachineParams, prog: str, alarm: str) -> None:
+    with pytest.raises(NcError, match=alarm):
+        list(Interpreter(params).run(prog))

@@ -11,7 +11,7 @@ import pytest
 from typer.testing import CliRunner
 
 from cnc.gcode.source import library_programs
-from cnc.interp import check
+from cnc.interp import Interpreter, check
 from cnc.params import AxisParams, MachineParams
 from server.cli import app
 from tests.reference import GCODE_CORPUS, MISSING
@@ -92,8 +92,10 @@ def test_payne_o2001_calls_o9001_across_files() -> None:
     with open(path, encoding="latin-1") as fh:
         errs = check(fh, MILL, file=str(path), programs=programs, macro_variables=store)
     assert store[10100] == pytest.approx(math.sqrt(0.625**2 - 0.125**2))
-    # what is left is not Macro B: a ':' line with no program number (line 23)
-    assert [(e.line, e.message) for e in errs] == [(23, "program number O needs digits")]
+    # what is left is not Macro B: a ':' line with no program number (line 23), Fanuc PS0005
+    assert [(e.line, e.message) for e in errs] == [
+        (23, "PS0005 program number ':' (the ISO form of O) needs digits")
+    ]
     res = runner.invoke(app, ["nc", "check", "--no-soft-limits", str(path)])
     assert "PS0076 G65: program O9001 not found" in res.output
 
@@ -120,6 +122,41 @@ def test_moji_tool_measuring_calls_o919100_across_files() -> None:
     # its shop presets is vacant
     callee = GCODE_CORPUS / "moji-o919100-macro.nc"
     assert lines[0] == f"{callee}:11:1: feed move without F"
+
+
+class _Writes(dict):
+    """A tool memory that notes the offset numbers written."""
+
+    written: list[int]
+
+    def __setitem__(self, key, value) -> None:
+        self.written.append(key)
+        super().__setitem__(key, value)
+
+
+@corpus
+def test_moji_tool_measuring_on_the_kitamura_stores_the_length_in_its_tool_memory() -> None:
+    """On the shop's Kitamura (corpus_setups/moji-kitamura-toolsetter.yaml, its variable map
+    `kitamura`) O917100 measures T02 through O919100: #4012 is G54, so #[5223+[#4012-54]*20]
+    is the G54 Z (-300 on mill3) and the length written to #10002 (the tool memory, not a
+    common variable) is the tool's own 120 mm; #11002=0 clears the wear."""
+    from cnc.cli_setup import machine_setup  # deferred: the configuration is heavy to load
+
+    setup = machine_setup(
+        config=Path(__file__).with_name("corpus_setups") / "moji-kitamura-toolsetter.yaml"
+    )
+    programs, _ = library_programs(str(GCODE_CORPUS))
+    md = setup.machine_data
+    ip = Interpreter(setup.params, machine_data=md, macro_variables=md.macro_variables,
+                     programs=programs)  # fmt: skip
+    tools = _Writes(ip._tools)
+    tools.written = []
+    ip._tools = tools
+    path = GCODE_CORPUS / "moji-o917100-toolmeas.nc"
+    with open(path, encoding="latin-1") as fh:
+        assert ip.check_all(fh) == []
+    assert tools.written == [2] and tools[2].length == pytest.approx(120.0)
+    assert 10002 not in md.macro_variables
 
 
 @corpus
