@@ -163,9 +163,10 @@ def _users(doc: object) -> tuple[FaceUser, ...]:
         where = f"/users/{i}"
         if not isinstance(entry, dict):
             raise HostDataError(where, "a user object")
+        if "key" in entry:  # a key in clear is never taken (nor kept, nor echoed)
+            raise HostDataError(f"{where}/key", "the key's sha256 only (key_sha256), never the key")
         if set(entry) != names:
             odd = sorted(names - set(entry)) or sorted(set(entry) - names)
-            # a key in clear is refused by name: the host sends digests only
             raise HostDataError(f"{where}/{odd[0]}", f"a user has exactly {sorted(names)}")
         user = _text(entry["user"], f"{where}/user", 64)
         if not user or not user.isprintable():
