@@ -91,12 +91,15 @@ def client_main(urls_and_keys, seconds: float, out) -> None:
             await sub.subscribe_data_change([c.get_node(ua.NodeId(k, ns)) for _, k in keys])
             clients.append(c)
         out.put(("ready", None))
+        cpu[0], cpu[1] = time.process_time(), time.perf_counter()
         await asyncio.sleep(seconds + 1.0)
+        cpu[0], cpu[1] = time.process_time() - cpu[0], time.perf_counter() - cpu[1]
         for c in clients:
             await c.disconnect()
 
+    cpu = [0.0, 1.0]
     asyncio.run(run())
-    out.put(("done", (latencies, counts["notifications"])))
+    out.put(("done", (latencies, counts["notifications"], 100.0 * cpu[0] / cpu[1])))
 
 
 def main() -> None:
@@ -197,6 +200,9 @@ def main() -> None:
                 "target_p95_ms": TARGET_P95_MS,
                 "server_cpu_per_machine_pct": round(cpu_pct, 2),
                 "target_cpu_per_machine_pct": TARGET_CPU_PCT,
+                # each client process's CPU (percent of a core): a client decoding 8 x 50
+                # items' notifications is the other half of the latency on a busy box
+                "client_cpu_pct": [round(r[2], 1) for r in results],
                 "server_samples_per_machine": round(statistics.mean(f.samples for f in faces), 1),
                 # the box's 1-minute load average at the window's start and end (this bench
                 # adds about 4: its clients and server); latency depends on it
