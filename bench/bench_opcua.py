@@ -4,6 +4,8 @@ publishing interval to 4 clients.
 - `latency_p95_ms` (and p50, max): from a state change (the snapshot's source timestamp,
   the wall clock at publish, as a realtime machine stamps it) to the client's data-change
   notification, over every axis-position notification every client received.
+- `load_average_1m`: the box's load at the window's start and end; the latency measured is
+  mostly waiting for a CPU and for the interpreter lock on a busy box.
 - `server_cpu_per_machine_pct`: CPU time of the server process (the 8 OPC UA faces, each
   on its own loop thread, plus a feeder publishing each machine's snapshot every 10 ms,
   as a machine does from its cycle) over the measurement window, per machine, percent of
@@ -25,6 +27,7 @@ import asyncio
 import json
 import logging
 import multiprocessing as mp
+import os
 import statistics
 import sys
 import threading
@@ -88,12 +91,15 @@ def client_main(urls_and_keys, seconds: float, out) -> None:
             await sub.subscribe_data_change([c.get_node(ua.NodeId(k, ns)) for _, k in keys])
             clients.append(c)
         out.put(("ready", None))
+        cpu[0], cpu[1] = time.process_time(), time.perf_counter()
         await asyncio.sleep(seconds + 1.0)
+        cpu[0], cpu[1] = time.process_time() - cpu[0], time.perf_counter() - cpu[1]
         for c in clients:
             await c.disconnect()
 
+    cpu = [0.0, 1.0]
     asyncio.run(run())
-    out.put(("done", (latencies, counts["notifications"])))
+    out.put(("done", (latencies, counts["notifications"], 100.0 * cpu[0] / cpu[1])))
 
 
 def main() -> None:
@@ -157,8 +163,10 @@ def main() -> None:
     for _ in procs:
         kind, _ = out.get(timeout=600)
         assert kind == "ready"
+    load_before = os.getloadavg()[0]
     cpu0, wall0 = time.process_time(), time.perf_counter()
     time.sleep(args.seconds)
+    load_after = os.getloadavg()[0]
     cpu = time.process_time() - cpu0
     wall = time.perf_counter() - wall0
     results = [out.get(timeout=120)[1] for _ in procs]
@@ -192,7 +200,13 @@ def main() -> None:
                 "target_p95_ms": TARGET_P95_MS,
                 "server_cpu_per_machine_pct": round(cpu_pct, 2),
                 "target_cpu_per_machine_pct": TARGET_CPU_PCT,
+                # each client process's CPU (percent of a core): a client decoding 8 x 50
+                # items' notifications is the other half of the latency on a busy box
+                "client_cpu_pct": [round(r[2], 1) for r in results],
                 "server_samples_per_machine": round(statistics.mean(f.samples for f in faces), 1),
+                # the box's 1-minute load average at the window's start and end (this bench
+                # adds about 4: its clients and server); latency depends on it
+                "load_average_1m": [round(load_before, 2), round(load_after, 2)],
                 "peer": None,
             }
         )

@@ -373,7 +373,10 @@ class Cell:
         def client(name: str):
             return client_for(self.library, name, secret=self.links[name].secret)
 
-        self.opcua_feed = OpcUaFeed(self.library, self.dispatches, self.jobs, self.links, client)
+        users = getattr(self.opcua_users, "records", None)
+        self.opcua_feed = OpcUaFeed(
+            self.library, self.dispatches, self.jobs, self.links, client, users=users
+        )
         self.loops.append(Loop("opcua-feed", self.opcua_feed.tick, 1.0).start())
 
     def _start_remote_requests(self) -> None:
@@ -779,17 +782,32 @@ def _tls_files(tls, config: Path | None) -> tuple[str, str] | str | None:
     return paths[0], paths[1]
 
 
-def opcua_users(settings):
-    """The OPC UA user check from the API keys: user name = the key's `user`, password =
-    the key; the session gets the key's role (docs/opcua.md)."""
+class OpcUaUsers:
+    """The OPC UA users of the cell, from the API keys: user name = the key's `user`,
+    password = the key; the session gets the key's role (docs/opcua.md). A machine in this
+    process asks by call; one in its own process gets `records()` (digests, never keys)
+    with the host's data over its DNC port."""
 
-    def check(user: str, password: str) -> int | None:
-        principal = settings.authenticate(password)
+    def __init__(self, settings) -> None:
+        self.settings = settings
+
+    def __call__(self, user: str, password: str) -> int | None:
+        principal = self.settings.authenticate(password)
         if principal is None or principal.user != user:
             return None
         return int(principal.role)
 
-    return check
+    def records(self) -> tuple:
+        # deferred: the OPC UA face's records (asyncua) only for a cell that has one
+        from cnc.faces.opcua import FaceUser
+
+        return tuple(
+            FaceUser(k.user, k.role.name, k.digest()) for k in self.settings.api_keys
+        )
+
+
+def opcua_users(settings) -> OpcUaUsers:
+    return OpcUaUsers(settings)
 
 
 def machine_time(answer: str) -> float | None:

@@ -1,6 +1,7 @@
 """What only the DNC host knows, fed into each machine's OPC UA face: the library revision
-(id and sha256) of each program it dispatched to the machine, and the cell's open jobs with
-an allocation on it (docs/opcua.md, "Where it runs"). Back come the method calls the face's
+(id and sha256) of each program it dispatched to the machine, the cell's open jobs with
+an allocation on it, and the cell's users (API keys as sha256 digests, with their roles)
+for a secured face (docs/opcua.md, "Where it runs", "Security"). Back come the method calls the face's
 clients made (Start, Stop, Acknowledge, refused writes), for the host's audit log.
 
 A machine in this process gets them by a direct call; a machine in its own process (or on
@@ -12,7 +13,7 @@ from __future__ import annotations
 import logging
 from collections.abc import Callable, Mapping
 
-from cnc.faces.opcua import HostData, ProductionJob
+from cnc.faces.opcua import FaceUser, HostData, ProductionJob
 from cnc.faces.opcua.host_data import to_doc
 from dnc.jobs import OPEN_STATES
 
@@ -64,18 +65,28 @@ class OpcUaFeed:
     user, as the REST commands are recorded."""
 
     def __init__(
-        self, library, dispatches, jobs, links: Mapping, client: Callable[[str], object]
+        self,
+        library,
+        dispatches,
+        jobs,
+        links: Mapping,
+        client: Callable[[str], object],
+        users: Callable[[], tuple[FaceUser, ...]] | None = None,
     ) -> None:
-        """`client(name)`: a DncClient for the machine's DNC port (with its secret)."""
+        """`client(name)`: a DncClient for the machine's DNC port (with its secret);
+        `users()`: the cell's OPC UA users (server.cell.OpcUaUsers.records)."""
         self.library, self.dispatches, self.jobs = library, dispatches, jobs
         self.links, self.client = links, client
+        self.users = users
         self.unreachable: dict[str, str] = {}  # machine -> why the last exchange failed
 
     def tick(self) -> None:
+        users = self.users() if self.users is not None else ()
         for name, link in self.links.items():
             if not link.ports.get("opcua"):
                 continue
             data = host_data(self.library, self.dispatches, self.jobs, name)
+            data.users = users
             try:
                 commands = self._exchange(name, link, data)
             except Exception as exc:  # noqa: BLE001 - one machine down must not stop the rest

@@ -119,7 +119,7 @@ class MachineFaces:
                 software_revision=_version(),
                 location=ports.host,
             ),
-            tools=(lambda: (md.revision, md.tools_dict())) if md is not None else None,
+            tools=(lambda: (md.revision, md.tools_dict)) if md is not None else None,
             program_sha256=self._program_sha256,
             switches=lambda: {
                 "BlockSkip": getattr(ctl, "block_skip", False),

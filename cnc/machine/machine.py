@@ -119,6 +119,8 @@ class Machine:
             self.controller = factory(config, self.memory, machine_data=machine_data)
         else:
             self.controller = factory(config, self.memory)
+        #: kept for the faces: the OPC UA face's certificate and trust list live under it
+        self.state_dir = state_dir
         self.machine_data_file = None
         self._md_saved = -1
         md = getattr(self.controller, "machine_data", None)

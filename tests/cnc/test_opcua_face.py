@@ -416,6 +416,95 @@ def test_the_hosts_data_over_the_dnc_port_and_bad_documents_refused_with_the_poi
     face.set_host_data(HostData())
 
 
+def test_tool_life_is_served_as_the_specifications_tool_life_entries(machine, client_loop):
+    """Each tool's ToolLife holds ToolLifeType counters (OPC 40501-1 §11.1): usages in
+    "one" and cutting time in hours, counting up, with the tool's limit as LimitValue when
+    it has one; a limit set later, or a tool removed, shows at the next sample."""
+    face = machine.faces.opcua
+    ctl = machine.controller
+    assert machine.run_until(lambda mm: not mm.controller.in_cycle, 60.0)
+    ctl.put_machine_data(
+        "tools",
+        {
+            "1": {"comment": "D10 end mill", "uses": 3, "life_uses": 10, "cut_time_s": 1800.0},
+            "2": {"comment": "drill", "uses": 1},
+        },
+    )
+    client = connect(client_loop, face.address)
+    try:
+
+        async def tool_life(number: int) -> dict:
+            """{entry: (type definition, {property: value})} of a tool's ToolLife."""
+            ns = await client.get_namespace_index("urn:fmscell:machine:mill1")
+            uris = await client.get_namespace_array()
+            life = client.get_node(ua.NodeId(key(f"Equipment.Tools.T{number}.ToolLife"), ns))
+            out = {}
+            for entry in await life.get_children():
+                td = await entry.read_type_definition()
+                props = {"value": await entry.read_value()}
+                for prop in await entry.get_properties():
+                    bn = await prop.read_browse_name()
+                    props[(uris[bn.NamespaceIndex], bn.Name)] = await prop.read_value()
+                name = (await entry.read_browse_name()).Name
+                out[name] = ((uris[td.NamespaceIndex], td.Identifier), props)
+            return out
+
+        def seen(number: int, check) -> dict:
+            got: dict = {}
+
+            def ok() -> bool:
+                try:
+                    got.update(client_loop.run(lambda: tool_life(number)))
+                except ua.uaerrors.BadNodeIdUnknown:
+                    return False
+                return check(got)
+
+            wait_for(ok, f"T{number}'s tool life", step=lambda: machine.step(5))
+            return got
+
+        mt = m.MACHINE_TOOL
+        limit = (mt, "LimitValue")
+        life = seen(1, lambda g: "Uses" in g and "CutTime" in g)
+        official = nodes()[m.TOOL_LIFE.node]
+        mandatory = [
+            nodes()[t].name
+            for r, fwd, t in official.refs
+            if fwd and r == m.HAS_PROPERTY and (m.UA, m.MANDATORY) in nodes()[t].targets(37)
+        ]
+        assert len(mandatory) == 3  # EngineeringUnits, Indication, IsCountingUp
+        for typedef, props in life.values():
+            assert typedef == m.TOOL_LIFE.node
+            assert all(name in props for name in mandatory), props
+            assert props[(mt, "IsCountingUp")] is True
+        fields = m.TOOL_LIFE_INDICATION.fields
+        uses, cut = life["Uses"][1], life["CutTime"][1]
+        assert (uses["value"], uses[limit]) == (3, 10)
+        assert uses[(mt, "Indication")] == fields.index("NumberOfUsages")
+        assert uses[(mt, "EngineeringUnits")].UnitId == 4404786  # UNECE C62, "one"
+        assert cut["value"] == pytest.approx(0.5)  # 1800 s in hours
+        assert cut[(mt, "Indication")] == fields.index("Time")
+        assert cut[(mt, "EngineeringUnits")].UnitId == 4740434  # UNECE HUR
+        assert limit not in cut  # no time limit on T1
+
+        tools = ctl.machine_data.tools_dict()
+        tools["1"]["life_time_s"] = 3600.0
+        del tools["2"]
+        ctl.put_machine_data("tools", tools)
+        life = seen(1, lambda g: limit in g["CutTime"][1])
+        assert life["CutTime"][1][limit] == pytest.approx(1.0)
+        assert life["Uses"][1][limit] == 10
+
+        async def t2():
+            ns = await client.get_namespace_index("urn:fmscell:machine:mill1")
+            node = ua.NodeId(key("Equipment.Tools.T2.ToolLife.Uses"), ns)
+            return await client.get_node(node).read_value()
+
+        with pytest.raises(ua.uaerrors.BadNodeIdUnknown):
+            wait_for(lambda: client_loop.run(t2) is None, "T2 removed", lambda: machine.step(5))
+    finally:
+        client_loop.run(client.disconnect)
+
+
 def test_bad_input_unknown_nodes_refused_writes_and_a_client_that_never_reads(machine, client_loop):
     url = machine.faces.opcua.address
     client = connect(client_loop, url)

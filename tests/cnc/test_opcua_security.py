@@ -241,3 +241,30 @@ def test_no_unencrypted_endpoint_is_offered_when_security_is_on(secured):
         }
 
     loop.run_until_complete(run())
+
+
+def test_with_no_trusted_certificate_the_face_serves_and_refuses_every_session(tmp_path):
+    """An empty trust list (a machine just installed): the server starts (asyncua cannot
+    load an empty trust store) and refuses each client as unknown."""
+    mine = client_cert(tmp_path, "client")
+    face = OpcUaFace(
+        "mill1",
+        ("X",),
+        security=Security(
+            tmp_path / "server", tmp_path / "trusted", authenticate=lambda u, p: USERS.get((u, p))
+        ),
+    )
+    loop = asyncio.new_event_loop()
+    try:
+        loop.run_until_complete(face.start())
+
+        async def run():
+            with pytest.raises((ua.UaError, ConnectionError, asyncio.TimeoutError, OSError)):
+                client = await session(face, mine, "ops", "operator-password-1234")
+                await client.disconnect()
+
+        loop.run_until_complete(run())
+        assert (tmp_path / "trusted").is_dir()  # made, for the integrator to fill
+    finally:
+        loop.run_until_complete(face.stop())
+        loop.close()

@@ -4,6 +4,7 @@ with an allocation on it."""
 
 from __future__ import annotations
 
+import hashlib
 from types import SimpleNamespace as NS
 
 from server.opcua_feed import host_data
@@ -79,6 +80,14 @@ def test_opcua_users_are_the_api_keys_with_their_roles():
     assert check("vic", "vic-key-0123456789") == 1  # viewer
     assert check("vic", "ann-key-0123456789") is None  # another user's key
     assert check("ann", "wrong-key-000000000") is None
+    # what a machine in its own process gets over the DNC port: digests, never the keys
+    records = check.records()
+    assert [(u.user, u.role, u.role_level) for u in records] == [
+        ("ann", "operator", 2),
+        ("vic", "viewer", 1),
+    ]
+    assert records[0].key_sha256 == hashlib.sha256(b"ann-key-0123456789").hexdigest()
+    assert "ann-key-0123456789" not in repr(records)
 
 
 class AuditingLibrary(Library):
@@ -121,11 +130,17 @@ def test_the_feed_sends_each_machine_its_data_and_audits_what_its_clients_did():
         "lathe1": NS(ports={"opcua": None}, local=None)
     }  # no OPC UA face: nothing sent
     library = AuditingLibrary()
-    feed = OpcUaFeed(library, Dispatches(), Jobs(), links, client=lambda name: ports[name])
+    from cnc.faces.opcua import FaceUser
+
+    users = (FaceUser("ann", "operator", "d" * 64),)
+    feed = OpcUaFeed(
+        library, Dispatches(), Jobs(), links, client=lambda name: ports[name], users=lambda: users
+    )
     feed.tick()
     sent = ports["mill1"].docs[0]
     assert sent["programs"] == {"O0100": {"revision": "7", "sha256": "a" * 64}}
     assert [j["identifier"] for j in sent["jobs"]] == ["job3"]
+    assert sent["users"] == [{"user": "ann", "role": "operator", "key_sha256": "d" * 64}]
     assert library.notes == [
         (
             "mill1",

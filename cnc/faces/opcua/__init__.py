@@ -2,11 +2,18 @@
 OPC 10000-100 DI) served with asyncua; see docs/opcua.md."""
 
 from cnc.faces.opcua.face import Identification, OpcUaFace
-from cnc.faces.opcua.host_data import FaceCommand, HostData, HostDataError, ProductionJob
+from cnc.faces.opcua.host_data import (
+    FaceCommand,
+    FaceUser,
+    HostData,
+    HostDataError,
+    ProductionJob,
+)
 from cnc.faces.opcua.security import Security
 
 __all__ = [
     "FaceCommand",
+    "FaceUser",
     "HostData",
     "HostDataError",
     "Identification",

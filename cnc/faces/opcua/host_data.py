@@ -1,5 +1,5 @@
 """What only the DNC host knows about a machine (the library revision it dispatched, the
-cell's jobs on the machine), and what the OPC UA face did for its clients that the host
+cell's jobs on the machine, the cell's users for a secured face), and what the OPC UA face did for its clients that the host
 audits (method calls). Pure: the records and their JSON form on the DNC port's `HOST PUT`
 (docs/dnc_port.md), checked field by field with the JSON pointer of what is wrong."""
 
@@ -12,6 +12,9 @@ from cnc.errors import CncError
 #: ProductionJobStateMachine states a host may give a job (OPC 40501-1)
 JOB_STATES = ("Initializing", "Running", "Interrupted", "Ended", "Aborted")
 MAX_JOBS = 500  # one machine's plan; more is a host bug, not a plan
+#: the cell's roles, lowest first (web_api.settings.Role: viewer 1 .. admin 4)
+ROLES = ("viewer", "operator", "programmer", "admin")
+MAX_USERS = 1000  # API keys of one cell; more is a host bug
 
 
 @dataclass(frozen=True)
@@ -26,14 +29,30 @@ class ProductionJob:
     state: str  # one of JOB_STATES
 
 
+@dataclass(frozen=True)
+class FaceUser:
+    """One of the cell's API keys as an OPC UA user: user name, cell role (one of ROLES)
+    and the sha256 of the key (the password), never the key itself."""
+
+    user: str
+    role: str
+    key_sha256: str
+
+    @property
+    def role_level(self) -> int:
+        return ROLES.index(self.role) + 1
+
+
 @dataclass
 class HostData:
-    """What only the DNC host knows: the dispatched revision of each program and the
-    cell's jobs on this machine. Replaced as a whole (`OpcUaFace.set_host_data`)."""
+    """What only the DNC host knows: the dispatched revision of each program, the cell's
+    jobs on this machine and the cell's users (for a secured face that has no user source
+    of its own). Replaced as a whole (`OpcUaFace.set_host_data`)."""
 
     revision_by_program: dict[str, str] = field(default_factory=dict)
     jobs: tuple[ProductionJob, ...] = ()
     sha256_by_program: dict[str, str] = field(default_factory=dict)
+    users: tuple[FaceUser, ...] = ()
 
 
 @dataclass(frozen=True)
@@ -63,16 +82,20 @@ def to_doc(data: HostData) -> dict:
         }
         for name in sorted(set(data.revision_by_program) | set(data.sha256_by_program))
     }
-    return {"programs": programs, "jobs": [asdict(j) for j in data.jobs]}
+    return {
+        "programs": programs,
+        "jobs": [asdict(j) for j in data.jobs],
+        "users": [asdict(u) for u in data.users],
+    }
 
 
 def from_doc(doc: object) -> HostData:
     """The JSON form back into HostData; HostDataError names the first bad field."""
     if not isinstance(doc, dict):
         raise HostDataError("/", "an object with programs and jobs")
-    unknown = set(doc) - {"programs", "jobs"}
+    unknown = set(doc) - {"programs", "jobs", "users"}
     if unknown:
-        raise HostDataError(f"/{sorted(unknown)[0]}", "unknown key (programs, jobs)")
+        raise HostDataError(f"/{sorted(unknown)[0]}", "unknown key (programs, jobs, users)")
     programs = doc.get("programs", {})
     if not isinstance(programs, dict):
         raise HostDataError("/programs", "an object: program name -> revision, sha256")
@@ -121,7 +144,43 @@ def from_doc(doc: object) -> HostData:
                 **counts,
             )
         )
-    return HostData(revision_by_program=revisions, jobs=tuple(jobs), sha256_by_program=digests)
+    return HostData(
+        revision_by_program=revisions,
+        jobs=tuple(jobs),
+        sha256_by_program=digests,
+        users=_users(doc.get("users", [])),
+    )
+
+
+def _users(doc: object) -> tuple[FaceUser, ...]:
+    if not isinstance(doc, list):
+        raise HostDataError("/users", "a list of users")
+    if len(doc) > MAX_USERS:
+        raise HostDataError("/users", f"{len(doc)} users, at most {MAX_USERS}")
+    users, keys = [], set()
+    names = {"user", "role", "key_sha256"}
+    for i, entry in enumerate(doc):
+        where = f"/users/{i}"
+        if not isinstance(entry, dict):
+            raise HostDataError(where, "a user object")
+        if "key" in entry:  # a key in clear is never taken (nor kept, nor echoed)
+            raise HostDataError(f"{where}/key", "the key's sha256 only (key_sha256), never the key")
+        if set(entry) != names:
+            odd = sorted(names - set(entry)) or sorted(set(entry) - names)
+            raise HostDataError(f"{where}/{odd[0]}", f"a user has exactly {sorted(names)}")
+        user = _text(entry["user"], f"{where}/user", 64)
+        if not user or not user.isprintable():
+            raise HostDataError(f"{where}/user", "1 to 64 printable characters")
+        if entry["role"] not in ROLES:
+            raise HostDataError(f"{where}/role", f"one of {', '.join(ROLES)}")
+        key = _text(entry["key_sha256"], f"{where}/key_sha256", 64)
+        if len(key) != 64 or any(c not in "0123456789abcdef" for c in key):
+            raise HostDataError(f"{where}/key_sha256", "64 lower-case hex digits")
+        if key in keys:
+            raise HostDataError(f"{where}/key_sha256", "the same key twice")
+        keys.add(key)
+        users.append(FaceUser(user, entry["role"], key))
+    return tuple(users)
 
 
 def _text(value: object, where: str, limit: int, *, name: bool = False) -> str:

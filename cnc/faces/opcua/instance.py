@@ -15,7 +15,7 @@ from asyncua import ua
 
 from cnc.faces.opcua import model as m
 from cnc.faces.opcua.host_data import ProductionJob
-from cnc.faces.opcua.space import Builder
+from cnc.faces.opcua.space import HOUR, ONE, Builder
 from cnc.faces.opcua.values import STACK_LAMPS, color
 
 MT, FMS = m.MACHINE_TOOL, m.FMSCELL
@@ -253,17 +253,20 @@ def tool(b: Builder, tools: ua.NodeId, p: str, number: str, data: dict) -> ua.No
         ),
     )
     life = b.child_object(node, f"{p}.ToolLife", (MT, "ToolLife"), m.BASE_OBJECT)
-    b.values(
-        life,
-        f"{p}.ToolLife",
-        (
-            ((FMS, "Uses"), m.UINT32, None),
-            ((FMS, "UsesLimit"), m.UINT32, None),
-            ((FMS, "CutTime"), m.DOUBLE, None),
-            ((FMS, "CutTimeLimit"), m.DOUBLE, None),
-        ),
-    )
+    uses, hours = tool_limits(data)
+    q = f"{p}.ToolLife"
+    b.tool_life(life, f"{q}.Uses", (FMS, "Uses"), m.UINT32, "NumberOfUsages", ONE, uses)
+    b.tool_life(life, f"{q}.CutTime", (FMS, "CutTime"), m.DOUBLE, "Time", HOUR, hours)
     return node
+
+
+def tool_limits(data: dict) -> tuple[int | None, float | None]:
+    """The tool's life limits as ToolLife LimitValues: usages, and cutting time in hours
+    (OPC 40501-1 counts time in hours); None where the tool has no limit (0 in the tool
+    table), so the entry has no LimitValue."""
+    uses = int(data["life_uses"]) if data["life_uses"] > 0 else None
+    hours = float(data["life_time_s"]) / 3600.0 if data["life_time_s"] > 0 else None
+    return uses, hours
 
 
 def tool_values(data: dict) -> dict[str, object]:
@@ -271,13 +274,17 @@ def tool_values(data: dict) -> dict[str, object]:
     expired = (data["life_uses"] > 0 and data["uses"] >= data["life_uses"]) or (
         data["life_time_s"] > 0 and data["cut_time_s"] >= data["life_time_s"]
     )
-    return {
+    uses, hours = tool_limits(data)
+    out: dict[str, object] = {
         "Locked": expired,
         "ToolLife.Uses": int(data["uses"]),
-        "ToolLife.UsesLimit": int(data["life_uses"]),
-        "ToolLife.CutTime": float(data["cut_time_s"]),
-        "ToolLife.CutTimeLimit": float(data["life_time_s"]),
+        "ToolLife.CutTime": float(data["cut_time_s"]) / 3600.0,
     }
+    if uses is not None:
+        out["ToolLife.Uses.LimitValue"] = uses
+    if hours is not None:
+        out["ToolLife.CutTime.LimitValue"] = hours
+    return out
 
 
 def job_values(job: ProductionJob, i: int) -> dict[str, object]:

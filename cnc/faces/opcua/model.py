@@ -51,9 +51,11 @@ BOOLEAN, BYTE, UINT16, UINT32, DOUBLE, STRING = (
 LOCALIZED_TEXT = (UA, 21)
 NODE_ID = (UA, 17)
 UINTEGER = (UA, 28)  # abstract: any unsigned integer
+NUMBER = (UA, 26)  # abstract: any number
+EU_INFORMATION = (UA, 887)
 
 HAS_COMPONENT, HAS_PROPERTY, HAS_ADD_IN, HAS_ORDERED_COMPONENT = 47, 46, 17604, 49
-MANDATORY, OPTIONAL = 78, 80
+MANDATORY, OPTIONAL, OPTIONAL_PLACEHOLDER = 78, 80, 11510
 
 
 @dataclass(frozen=True, slots=True)
@@ -76,6 +78,15 @@ class ObjectTypeDecl:
     supertype: NodeRef
     members: tuple[Member, ...] = ()
     abstract: bool = False
+
+
+@dataclass(frozen=True, slots=True)
+class VariableTypeDecl:
+    node: NodeRef
+    name: str  # browse name, in the node's namespace
+    supertype: NodeRef
+    data_type: NodeRef
+    members: tuple[Member, ...] = ()
 
 
 @dataclass(frozen=True, slots=True)
@@ -138,6 +149,20 @@ CHANNEL_MODE = EnumDecl(
 TOOL_MANAGEMENT = EnumDecl(
     (MACHINE_TOOL, 69), "ToolManagement", ("NumberBased", "GroupBased", "Other")
 )
+TOOL_LIFE_INDICATION = EnumDecl(
+    (MACHINE_TOOL, 68),
+    "ToolLifeIndication",
+    (
+        "Time",
+        "NumberOfParts",
+        "NumberOfUsages",
+        "Feed_Distance",
+        "Cutting_Distance",
+        "Length",
+        "Diameter",
+        "Other",
+    ),
+)
 STACKLIGHT_OPERATION_MODE = EnumDecl(
     (IA, 3002), "StacklightOperationMode", ("Segmented", "Levelmeter", "Running_Light", "Other")
 )
@@ -151,6 +176,7 @@ ENUMS = (
     MACHINE_OPERATION_MODE,
     CHANNEL_MODE,
     TOOL_MANAGEMENT,
+    TOOL_LIFE_INDICATION,
     STACKLIGHT_OPERATION_MODE,
     SIGNAL_COLOR,
 )
@@ -362,6 +388,29 @@ BASE_TOOL = ObjectTypeDecl(
     ),
     abstract=True,
 )
+#: OPC 40501-1 §11.1: one tool life counter (a Number) with how it counts and its unit;
+#: a tool's ToolLife object holds any number of them (<ToolLifeEntry>)
+TOOL_LIFE = VariableTypeDecl(
+    (MT, 61),
+    "ToolLifeType",
+    BASE_DATA_VARIABLE,
+    NUMBER,
+    (
+        _v(MT, "EngineeringUnits", 285, EU_INFORMATION, True, prop=True),
+        _v(MT, "Indication", 286, TOOL_LIFE_INDICATION.node, True, prop=True),
+        _v(MT, "IsCountingUp", 411, BOOLEAN, True, prop=True),
+        _v(MT, "LimitValue", 305, NUMBER, False, prop=True),
+        _v(MT, "StartValue", 304, NUMBER, False, prop=True),
+        _v(MT, "WarningValue", 306, NUMBER, False, prop=True),
+    ),
+)
+#: the placeholder under ToolType's ToolLife (ns=MT;i=88) that the tool life entries of an
+#: instance stand for
+TOOL_LIFE_ENTRY = Member(
+    (MT, "<ToolLifeEntry>"), 283, "Variable", TOOL_LIFE.node, False, HAS_COMPONENT, NUMBER
+)
+TOOL_LIFE_OBJECT = 88  # ToolType's ToolLife, in MT
+
 TOOL = ObjectTypeDecl(
     (MT, 50),
     "ToolType",
@@ -426,6 +475,9 @@ OBJECT_TYPES = (
     EQUIPMENT,
     MACHINE_TOOL_TYPE,
 )
+
+#: every variable type the server declares
+VARIABLE_TYPES = (TOOL_LIFE,)
 
 #: Objects/Machines, the Machinery entry point every machine registers under
 MACHINES_FOLDER: NodeRef = (MA, 1001)

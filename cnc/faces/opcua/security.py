@@ -9,6 +9,7 @@ certificates are accepted.
 
 from __future__ import annotations
 
+import logging
 from collections.abc import Callable
 from contextvars import ContextVar
 from dataclasses import dataclass
@@ -16,6 +17,8 @@ from pathlib import Path
 
 from asyncua import Server, ua
 from asyncua.crypto.permission_rules import PermissionRuleset, User, UserRole
+
+log = logging.getLogger(__name__)
 
 # roles of the cell (web_api.settings.Role): viewer < operator < programmer < admin
 VIEWER, OPERATOR = 1, 2
@@ -162,6 +165,17 @@ async def secure_endpoint(
         tokens.append(ua.AnonymousIdentityToken)
     server.set_identity_tokens(tokens)
     sec.trusted_dir.mkdir(parents=True, exist_ok=True)
+    if not any(p.is_file() for p in sec.trusted_dir.iterdir()):
+        # asyncua cannot build an empty trust store; no trusted certificate means every
+        # client is unknown, so the face serves and refuses each secured session
+        log.warning(
+            "OPC UA %s: no trusted client certificates in %s: every session is refused"
+            " until one is copied there and the machine restarted",
+            machine,
+            sec.trusted_dir,
+        )
+        server.set_certificate_validator(_refuse_all)
+        return
     store = TrustStore([sec.trusted_dir], [])
     await store.load()
     validator = CertificateValidator(
@@ -171,6 +185,12 @@ async def secure_endpoint(
         store,
     )
     server.set_certificate_validator(validator)
+
+
+async def _refuse_all(certificate, app_description) -> None:
+    from asyncua.common.utils import ServiceError
+
+    raise ServiceError(ua.StatusCodes.BadCertificateUntrusted)
 
 
 def _san(uri: str):

@@ -21,6 +21,19 @@ PERCENT = ua.EUInformation(
     DisplayName=ua.LocalizedText("%"),
     Description=ua.LocalizedText("percent"),
 )
+#: tool life units (OPC 40501-1 §12.8: usages count in "one", time in hours)
+ONE = ua.EUInformation(
+    NamespaceUri="http://www.opcfoundation.org/UA/units/un/cefact",
+    UnitId=4404786,  # UNECE C62
+    DisplayName=ua.LocalizedText(""),
+    Description=ua.LocalizedText("one"),
+)
+HOUR = ua.EUInformation(
+    NamespaceUri="http://www.opcfoundation.org/UA/units/un/cefact",
+    UnitId=4740434,  # UNECE HUR
+    DisplayName=ua.LocalizedText("h"),
+    Description=ua.LocalizedText("hour"),
+)
 
 VARIANT_OF = {
     m.BOOLEAN: ua.VariantType.Boolean,
@@ -32,6 +45,7 @@ VARIANT_OF = {
     m.STRING: ua.VariantType.String,
     m.LOCALIZED_TEXT: ua.VariantType.LocalizedText,
     m.NODE_ID: ua.VariantType.NodeId,
+    m.EU_INFORMATION: ua.VariantType.ExtensionObject,
 }
 
 
@@ -168,30 +182,61 @@ class Builder:
                 attrs,
                 ua.ObjectIds.HasSubtype,
             )
-            ns = sp.ns[decl.node[0]]
-            for member in decl.members:
-                rule = m.MANDATORY if member.mandatory else m.OPTIONAL
-                mid = ua.NodeId(member.node_id, ns)
-                if member.node_class == "Object":
-                    self.object(
-                        nodeid,
-                        mid,
-                        sp.qname(member.name),
-                        sp.node(member.type_definition),
-                        member.reference,
-                        rule=rule,
-                    )
-                else:
-                    self.variable(
-                        nodeid,
-                        mid,
-                        sp.qname(member.name),
-                        sp.node(member.type_definition),
-                        sp.node(member.data_type),
-                        _default(member.data_type),
-                        member.reference,
-                        rule=rule,
-                    )
+            self._members(nodeid, decl)
+        for vdecl in m.VARIABLE_TYPES:
+            vattrs = ua.VariableTypeAttributes()
+            vattrs.DataType = sp.node(vdecl.data_type)
+            vattrs.ValueRank = -1
+            nodeid = self._node(
+                ua.NodeClass.VariableType,
+                sp.node(vdecl.supertype),
+                sp.node(vdecl.node),
+                ua.QualifiedName(vdecl.name, sp.ns[vdecl.node[0]]),
+                vattrs,
+                ua.ObjectIds.HasSubtype,
+            )
+            self._members(nodeid, vdecl)
+        # ToolType's ToolLife holds its entries as a placeholder (each instance names its own)
+        entry = m.TOOL_LIFE_ENTRY
+        mt = sp.ns[m.MACHINE_TOOL]
+        self.variable(
+            ua.NodeId(m.TOOL_LIFE_OBJECT, mt),
+            ua.NodeId(entry.node_id, mt),
+            sp.qname(entry.name),
+            sp.node(entry.type_definition),
+            sp.node(entry.data_type),
+            _default(entry.data_type),
+            entry.reference,
+            rule=m.OPTIONAL_PLACEHOLDER,
+        )
+
+    def _members(self, nodeid: ua.NodeId, decl) -> None:
+        """The instance declarations of a declared type, each with its modelling rule."""
+        sp = self.space
+        ns = sp.ns[decl.node[0]]
+        for member in decl.members:
+            rule = m.MANDATORY if member.mandatory else m.OPTIONAL
+            mid = ua.NodeId(member.node_id, ns)
+            if member.node_class == "Object":
+                self.object(
+                    nodeid,
+                    mid,
+                    sp.qname(member.name),
+                    sp.node(member.type_definition),
+                    member.reference,
+                    rule=rule,
+                )
+            else:
+                self.variable(
+                    nodeid,
+                    mid,
+                    sp.qname(member.name),
+                    sp.node(member.type_definition),
+                    sp.node(member.data_type),
+                    _default(member.data_type),
+                    member.reference,
+                    rule=rule,
+                )
 
     # ------------------------------------------------------------------ instance groups
     # The instance's nodes have string ids in the machine's namespace: the path under the
@@ -258,6 +303,44 @@ class Builder:
         keyed `<prefix>.<name>`."""
         for name, data_type, value in items:
             self.value(parent, f"{prefix}.{name[1]}", name, data_type, value, prop=prop)
+
+    def tool_life(
+        self,
+        parent: ua.NodeId,
+        key: str,
+        name: m.Name,
+        data_type: m.NodeRef,
+        indication: str,
+        unit: ua.EUInformation,
+        limit: float | None,
+    ) -> ua.NodeId:
+        """A tool life counter (OPC 40501 ToolLifeType) counting up from zero, with its
+        mandatory properties and, when the tool has one, its LimitValue."""
+        sp = self.space
+        node = self.value(parent, key, name, data_type, None, typedef=m.TOOL_LIFE.node)
+        mt = m.MACHINE_TOOL
+        self.variable(
+            node,
+            ua.NodeId(f"{key}.EngineeringUnits", sp.machine_ns),
+            sp.qname((mt, "EngineeringUnits")),
+            ua.NodeId(ua.ObjectIds.PropertyType),
+            ua.NodeId(ua.ObjectIds.EUInformation),
+            ua.Variant(unit),
+            m.HAS_PROPERTY,
+        )
+        fields = m.TOOL_LIFE_INDICATION.fields
+        self.value(
+            node,
+            f"{key}.Indication",
+            (mt, "Indication"),
+            m.TOOL_LIFE_INDICATION.node,
+            fields.index(indication),
+            prop=True,
+        )
+        self.value(node, f"{key}.IsCountingUp", (mt, "IsCountingUp"), m.BOOLEAN, True, prop=True)
+        if limit is not None:
+            self.value(node, f"{key}.LimitValue", (mt, "LimitValue"), data_type, limit, prop=True)
+        return node
 
     def override(self, parent: ua.NodeId, key: str, name: m.Name) -> ua.NodeId:
         """An override in percent (AnalogUnitRange, 0..200 %), as 40501 declares them."""
@@ -333,4 +416,5 @@ def _coerce(value, vtype: ua.VariantType):
         ua.VariantType.LocalizedText: ua.LocalizedText(""),
         ua.VariantType.Double: 0.0,
         ua.VariantType.NodeId: ua.NodeId(),
+        ua.VariantType.ExtensionObject: ua.EUInformation(),  # the one extension object used
     }.get(vtype, 0 if vtype != ua.VariantType.Null else None)
