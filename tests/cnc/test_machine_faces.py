@@ -221,13 +221,18 @@ def test_drip_feed_of_a_program_larger_than_memory_executes_on_the_machine():
 
 def test_shdr_stream_of_a_running_machine(machine):
     with socket.create_connection(("127.0.0.1", port(machine, "shdr")), timeout=5) as s:
+        # an agent reads all the time: drain the stream in a thread while the machine runs
+        box = in_thread(lambda: _read_until(s, b"|exec|PROGRAM_COMPLETED", 60.0))
         machine.step(10)
         machine.load_program(PROG)
         machine.command("select_program", number=10)
         machine.command("cycle_start")
         machine.run_until(lambda m: m.status.execution == "PROGRAM_COMPLETED", 30.0)
         machine.step(10)
-        text = _read_until(s, b"PROGRAM_COMPLETED").decode()
+        box["thread"].join(60.0)
+        if "error" in box:
+            raise AssertionError(f"{box['error']} (face: {machine.shdr.stats})") from box["error"]
+        text = box["value"].decode()
     assert text.startswith("* shdrVersion: 2\n")
     assert "|avail|AVAILABLE|" in text
     assert "|exec|ACTIVE" in text and "|exec|PROGRAM_COMPLETED" in text
@@ -426,13 +431,17 @@ def _read_all(s: socket.socket) -> bytes:
     return out
 
 
-def _read_until(s: socket.socket, marker: bytes) -> bytes:
+def _read_until(s: socket.socket, marker: bytes, within_s: float = 5.0) -> bytes:
+    """The stream up to `marker`; the server closing first is a failure that says so."""
     out = b""
-    s.settimeout(5)
+    s.settimeout(within_s)
     while marker not in out:
         chunk = s.recv(65536)
         if not chunk:
-            break
+            raise AssertionError(
+                f"the face closed the stream after {len(out)} bytes, before {marker!r}:"
+                f" {out[-400:]!r}"
+            )
         out += chunk
     return out
 
