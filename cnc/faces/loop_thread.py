@@ -47,8 +47,16 @@ class LoopThread:
         return self
 
     def run(self, factory: Callable[[], Awaitable[T]], timeout: float = 10.0) -> T:
-        """Run a coroutine on the loop from another thread and return its result."""
-        return asyncio.run_coroutine_threadsafe(_call(factory), self.loop).result(timeout)
+        """Run a coroutine on the loop from another thread and return its result.
+
+        Past `timeout` the coroutine is cancelled (not left to run later, or never, on a
+        loop that stops) and TimeoutError raised."""
+        future = asyncio.run_coroutine_threadsafe(_call(factory), self.loop)
+        try:
+            return future.result(timeout)
+        except TimeoutError:
+            future.cancel()
+            raise
 
     def stop(self, timeout: float = 5.0) -> None:
         thread, self._thread = self._thread, None

@@ -217,7 +217,8 @@ class MachineFaces:
         self.machine.opcua = None
         if self.opcua is not None and self.opcua_loop is not None:
             with contextlib.suppress(Exception):
-                self.opcua_loop.run(self.opcua.stop)
+                # its sessions close first: with many clients on a loaded box, seconds
+                self.opcua_loop.run(self.opcua.stop, timeout=30.0)
             self.opcua_loop.stop()
         self.loop.stop()
 
