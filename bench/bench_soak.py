@@ -24,8 +24,8 @@ binds fixed ones, which a second cell on the box would collide with). Then, for
   observations, about 215 bytes each) but fills for tens of minutes, so two figures:
   `rss_growth_mb_per_h`, the raw least-squares slope after warm-up (`--warmup-minutes`,
   default a quarter of the run, at most 10), and `rss_growth_steady_mb_per_h`, the slope
-  after the warm-up AND the buffer's filling (none if fewer than `STEADY_MIN_S` of samples
-  are left). The verdict takes the steady slope when there is one, else the raw one
+  after the warm-up AND the buffer's filling (none if fewer than `STEADY_MIN_S`, or half
+  a shorter run, of samples are left). The verdict takes the steady slope when there is one, else the raw one
   (`rss_judged_on` says which), and only on a run of 30 minutes or more.
 
 At the end new jobs stop, open jobs are cancelled, the parts on the machines finish, and the
@@ -167,20 +167,24 @@ def buffer_fill(seq: tuple[float, int, int, int]) -> float:
     return min(1.0, (next_seq - first) / size)
 
 
-STEADY_MIN_S = 15 * 60  # a steady slope from fewer minutes of samples is noise
+STEADY_MIN_S = 15 * 60  # a steady slope from fewer minutes of samples is noise (a short
+# run: half of it)
 
 
 def steady_slope(
-    rss: list[tuple[float, float]], warmup_s: float, buffer_full_at: float | None
+    rss: list[tuple[float, float]],
+    warmup_s: float,
+    buffer_full_at: float | None,
+    min_s: float = STEADY_MIN_S,
 ) -> tuple[float | None, float | None]:
     """(from, MB/h): the RSS slope after the warm-up AND the MTConnect buffer's filling,
     what is left growing once the bounded buffer holds all it will; (None, None) if it did
-    not fill, (from, None) if fewer than STEADY_MIN_S of samples are left after it."""
+    not fill, (from, None) if fewer than `min_s` of samples are left after it."""
     if buffer_full_at is None:
         return None, None
     start = max(warmup_s, buffer_full_at)
     steady = [(t, r) for t, r in rss if t >= start]
-    if not steady or steady[-1][0] - steady[0][0] < STEADY_MIN_S:
+    if not steady or steady[-1][0] - steady[0][0] < min_s:
         return start, None
     return start, slope_mb_per_h(steady)
 
@@ -710,7 +714,9 @@ def main() -> int:
     rate = (seq1[1] - seq0[1]) / (seq1[0] - seq0[0])
     growth = slope_mb_per_h(warm)
     full_at = soak.buffer_full_at()
-    steady_from, steady_growth = steady_slope(soak.rss, warmup * 60, full_at)
+    steady_from, steady_growth = steady_slope(
+        soak.rss, warmup * 60, full_at, min(STEADY_MIN_S, args.minutes * 30)
+    )
     judged = steady_growth if steady_growth is not None else growth
     full_at_min = None if full_at is None else round(full_at / 60, 1)
     faults = soak.faults
