@@ -158,7 +158,13 @@ def mtconnect_sequence(c: httpx.Client) -> tuple[float, int, int, int]:
     def header(name: str) -> int:
         return int(re.search(rf'{name}="(\d+)"', text).group(1))
 
-    return time.monotonic(), header("nextSequence"), header("bufferSize"), header("firstSequence")
+    # a sample's nextSequence is where that document ends (first + 1 here), not the agent's
+    return (
+        time.monotonic(),
+        header("lastSequence") + 1,
+        header("bufferSize"),
+        header("firstSequence"),
+    )
 
 
 def buffer_fill(seq: tuple[float, int, int, int]) -> float:
