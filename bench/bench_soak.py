@@ -761,9 +761,10 @@ def main() -> int:
             "mtconnect_buffer_size": seq1[2],
             "mtconnect_buffer_full_after_min": round(seq1[2] / rate / 60, 1) if rate else None,
             "mtconnect_buffer_seen_full_at_min": full_at_min,
-            "mtconnect_buffer_fill_at_warmup": next(
-                (round(f, 3) for t, f in soak.buffer if t >= warmup * 60), None
-            ),
+            # (no longer polled once full)
+            "mtconnect_buffer_fill_at_warmup": 1.0
+            if full_at is not None and full_at <= warmup * 60
+            else next((round(f, 3) for t, f in soak.buffer if t >= warmup * 60), None),
             "mtconnect_buffer_fill_at_end": round(buffer_fill(seq1), 3),
             "sse": soak.sse,
             "requests": soak.requests,
