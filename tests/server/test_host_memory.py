@@ -4,7 +4,7 @@ The soak's host grew about 10 MB an hour after its warm-up. tracemalloc snapshot
 cell in realtime (jobs looping, SSE clients churning, status polled; in-process and in
 `bench/bench_soak.py --trace`), minutes apart after warm-up, named one growing structure:
 the MTConnect agent's buffer, 131072 observations (the reference agent's default) of some
-220 bytes each, filling for tens of minutes to hours. The buffer is
+220 bytes each, filling for minutes to hours. The buffer is
 `host.mtconnect_buffer_size`: bounded, and its cost per observation known. A later look
 (3-frame tracebacks, and the code) found three more structures that grew for an hour or
 more, each now flat or bounded where it is tested: the PLC's scan statistics
