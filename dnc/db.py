@@ -87,11 +87,21 @@ def postgresql_timeouts(connect_timeout_s: float, statement_timeout_s: float) ->
     }
 
 
+#: Each SQLite connection's page cache, KiB. SQLite's default, 2000 KiB, fills with every page
+#: the connection writes or reads until it holds 2 MB: in a running cell the database grows
+#: a couple of MB an hour, so each pooled connection (up to 40) grew the host's memory for
+#: an hour or more. 512 KiB holds the hot pages (the b-tree interiors, the newest outbox
+#: rows); the rest comes from the operating system's file cache, which is shared and not
+#: the process's own.
+SQLITE_CACHE_KIB = 512
+
+
 def _sqlite_pragmas(dbapi_conn, _record) -> None:  # noqa: ANN001 - DB-API connection
     cur = dbapi_conn.cursor()
     cur.execute("PRAGMA journal_mode=WAL")
     cur.execute("PRAGMA foreign_keys=ON")
     cur.execute("PRAGMA synchronous=NORMAL")
+    cur.execute(f"PRAGMA cache_size=-{SQLITE_CACHE_KIB}")  # negative: KiB, not pages
     cur.close()
 
 

@@ -100,17 +100,38 @@ class HostRequests:
 
     def expect(self, machine: str, what: str, by: str) -> None:
         with self._lock:
-            self._pending.setdefault((machine, what), []).append((self.clock(), by))
+            now = self.clock()
+            # Stale ones go here too, not only in `take`: a request whose change never
+            # shows (selecting the program already selected, every part of a job) is never
+            # taken, and kept it grew the host's memory with every dispatch.
+            self._forget_stale(now)
+            self._pending.setdefault((machine, what), []).append((now, by))
 
     def take(self, machine: str, what: str) -> str | None:
         """Who asked for `what` on `machine` (the oldest pending request), or None."""
         with self._lock:
-            queue = self._pending.get((machine, what), [])
-            now = self.clock()
-            queue[:] = [(t, by) for t, by in queue if now - t <= self.ttl_s]
+            self._forget_stale(self.clock())
+            queue = self._pending.get((machine, what))
             if not queue:
                 return None
-            return queue.pop(0)[1]
+            by = queue.pop(0)[1]
+            if not queue:
+                del self._pending[(machine, what)]
+            return by
+
+    def _forget_stale(self, now: float) -> None:
+        for key in list(self._pending):
+            queue = [(t, by) for t, by in self._pending[key] if now - t <= self.ttl_s]
+            if queue:
+                self._pending[key] = queue
+            else:
+                del self._pending[key]
+
+    @property
+    def pending(self) -> int:
+        """Requests held (not yet seen done, not yet stale)."""
+        with self._lock:
+            return sum(len(q) for q in self._pending.values())
 
 
 class CycleAudit:

@@ -72,7 +72,12 @@ def create_app(
     under `/mtconnect`. `faults_enabled` is reported by `/api/health`; the fault routes
     arrive with the machine endpoints.
     """
-    hub = outbox_hub(sessions, poll_s=settings.events_poll_s, capacity=settings.events_ring_size)
+    hub = outbox_hub(
+        sessions,
+        poll_s=settings.events_poll_s,
+        capacity=settings.events_ring_size,
+        max_age_s=settings.events_ring_age_s,
+    )
 
     @asynccontextmanager
     async def lifespan(_app: FastAPI) -> AsyncIterator[None]:

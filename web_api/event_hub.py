@@ -16,6 +16,12 @@ a rolled-back one leaves a hole for good. The reader therefore stops at a hole a
 to `gap_grace_s` for it to fill before it steps over it; a transaction holding an outbox id
 uncommitted for longer than that is the one case that can still be missed.
 
+The ring is bounded twice: at most `capacity` events (up to twice that between trims), and
+none older than `max_age_s` (accepted that long ago). A quiet cell writes an event every
+few seconds: by count alone the ring took hours to fill, the process's memory growing all
+that while; by age it is full within `max_age_s` and stays flat. A client that reconnects
+later than that, or lags that far, reads the gap from the database as any client behind.
+
 The reader runs while someone listens: the first subscriber starts it (anchored at the
 newest event), and it stops after `idle_stop_s` without subscribers or when the app shuts
 down (`close`). The core (`poll`, `take`) is plain calls that tests drive one by one.
@@ -104,10 +110,14 @@ class EventHub:
         gap_grace_s: float = 2.0,
         idle_stop_s: float = 10.0,
         coalesce_s: float = 0.02,
+        max_age_s: float | None = None,
         clock: Callable[[], float] = time.monotonic,
     ) -> None:
         if capacity < batch:
             raise ValueError(f"ring capacity {capacity} is smaller than one read ({batch})")
+        if max_age_s is not None and max_age_s <= 0:
+            raise ValueError(f"ring max_age_s must be > 0 s (or None), got {max_age_s}")
+        self.max_age_s = max_age_s
         self._read_after = read_after
         self._latest_id = latest_id
         self.capacity, self.batch, self.poll_s = capacity, batch, poll_s
@@ -118,6 +128,7 @@ class EventHub:
         # The ring holds every accepted event with floor < id <= horizon, ascending.
         self._ring: list[Published] = []
         self._ids: list[int] = []
+        self._accepted_at: list[float] = []  # the clock when each was accepted (ascending)
         self._floor = 0
         self._horizon = 0
         self._anchored = False
@@ -150,7 +161,7 @@ class EventHub:
         """Start following at the newest event: older ones are read from the database."""
         latest = self._latest_id()
         with self._lock:
-            self._ring, self._ids = [], []
+            self._ring, self._ids, self._accepted_at = [], [], []
             self._floor = self._horizon = latest
             self._gap_since = None
             self._anchored = True
@@ -176,14 +187,28 @@ class EventHub:
             with self._lock:
                 self._ring.extend(accepted)
                 self._ids.extend(e.id for e in accepted)
+                self._accepted_at.extend([now] * len(accepted))
                 self._horizon = accepted[-1].id
                 # Trim in chunks so appending stays amortised O(1).
-                if len(self._ring) >= 2 * self.capacity:
-                    cut = len(self._ring) - self.capacity
-                    self._floor = self._ids[cut - 1]
-                    del self._ring[:cut], self._ids[:cut]
+                cut = len(self._ring) - self.capacity if len(self._ring) >= 2 * self.capacity else 0
+                self._trim(max(cut, self._aged_out(now)))
             self._wake_all()
+        elif self.max_age_s is not None and self._ring:
+            with self._lock:
+                self._trim(self._aged_out(now))
         return len(accepted)
+
+    def _aged_out(self, now: float) -> int:
+        """How many of the oldest events were accepted more than `max_age_s` ago."""
+        if self.max_age_s is None:
+            return 0
+        return bisect.bisect_left(self._accepted_at, now - self.max_age_s)
+
+    def _trim(self, cut: int) -> None:
+        """Drop the `cut` oldest events (under the lock); the floor follows them."""
+        if cut > 0:
+            self._floor = self._ids[cut - 1]
+            del self._ring[:cut], self._ids[:cut], self._accepted_at[:cut]
 
     def take(self, cursor: int, limit: int) -> tuple[list[Published] | None, int]:
         """Events after `cursor` from the ring, and the horizon they are bounded by.
@@ -427,7 +452,13 @@ def latest_event_id(sessions: sessionmaker[Session]) -> int:
         return s.scalar(select(func.max(m.OutboxEvent.id))) or 0
 
 
-def outbox_hub(sessions: sessionmaker[Session], *, poll_s: float, capacity: int) -> EventHub:
+def outbox_hub(
+    sessions: sessionmaker[Session],
+    *,
+    poll_s: float,
+    capacity: int,
+    max_age_s: float | None = None,
+) -> EventHub:
     """The hub over the outbox of `sessions`, nudged whenever a session of that factory
     commits outbox rows (in-process writers are seen at once, others at the next poll)."""
     hub = EventHub(
@@ -435,6 +466,7 @@ def outbox_hub(sessions: sessionmaker[Session], *, poll_s: float, capacity: int)
         lambda: latest_event_id(sessions),
         capacity=capacity,
         poll_s=poll_s,
+        max_age_s=max_age_s,
     )
     hub_ref = weakref.ref(hub)
 

@@ -111,6 +111,14 @@ class ApiSettings(BaseModel):
         description="newest events the event hub keeps in memory; clients further behind "
         "read the gap from the database",
     )
+    events_ring_age_s: float = Field(
+        default=300.0,
+        gt=0,
+        le=86_400,
+        description="the event hub keeps no event in memory longer than this (seconds): a "
+        "quiet cell's ring is full, and the memory flat, after this long instead of hours; "
+        "a client reconnecting later reads the gap from the database",
+    )
     events_fanout: Literal["hub", "poll"] = Field(
         default="hub",
         description="hub: one outbox reader per process feeds every stream client; poll: "

@@ -68,6 +68,21 @@ def test_host_requests_are_taken_once_and_forgotten_after_their_ttl():
     assert req.take("mill1", "cycle_start") is None  # stale: a panel gets the credit
 
 
+def test_host_requests_never_taken_are_forgotten_too():
+    # every dispatch of a job expects the select of the program already selected: that
+    # change never shows, so it is never taken; the requests held stay bounded by the ttl
+    t = [0.0]
+    req = HostRequests(ttl_s=30, clock=lambda: t[0])
+    held = []
+    for part in range(1000):
+        t[0] = part * 20.0
+        req.expect("mill1", "program_select O1101", "transfer worker")
+        req.expect("mill1", "cycle_start", "transfer worker")
+        assert req.take("mill1", "cycle_start") == "transfer worker"
+        held.append(req.pending)
+    assert max(held) <= 2 and held[-1] == 2
+
+
 def audit(cell, action: str) -> list[tuple[str, dict]]:
     with cell.sessions() as s:
         rows = s.scalars(select(m.AuditEntry).where(m.AuditEntry.action == action)).all()

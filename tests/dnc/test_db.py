@@ -48,6 +48,15 @@ def test_sqlite_runs_in_wal_mode(tmp_path):
         assert conn.exec_driver_sql("PRAGMA journal_mode").scalar() == "wal"
 
 
+def test_every_sqlite_connection_takes_the_small_page_cache(tmp_path):
+    # SQLite's default (2000 KiB a connection) filled with the growing database for an hour
+    # or more in a running cell, the host's RSS growing with it (issue 14's soak)
+    eng = make_engine(f"sqlite:///{tmp_path / 'c.db'}")
+    with eng.connect() as one, eng.connect() as two:
+        for conn in (one, two):
+            assert conn.exec_driver_sql("PRAGMA cache_size").scalar() == -512
+
+
 def test_postgres_url_uses_psycopg3():
     assert normalise_url("postgresql://u@h/db") == "postgresql+psycopg://u@h/db"
 

@@ -4,9 +4,12 @@ The soak's host grew about 10 MB an hour after its warm-up. tracemalloc snapshot
 cell in realtime (jobs looping, SSE clients churning, status polled; in-process and in
 `bench/bench_soak.py --trace`), minutes apart after warm-up, named one growing structure:
 the MTConnect agent's buffer, 131072 observations (the reference agent's default) of some
-220 bytes each, filled at 13-30 observations a second, so for hours. Nothing else grew.
-The buffer is `host.mtconnect_buffer_size`: bounded, and its cost per observation known.
-"""
+220 bytes each, filling for minutes to hours. The buffer is
+`host.mtconnect_buffer_size`: bounded, and its cost per observation known. A later look
+(3-frame tracebacks, and the code) found three more structures that grew for an hour or
+more, each now flat or bounded where it is tested: the PLC's scan statistics
+(tests/plc/test_scan_stats.py), the event hub's ring (tests/web_api/test_event_hub.py) and
+the host's pending requests (tests/cell/test_cycle_audit.py)."""
 
 from __future__ import annotations
 

@@ -121,6 +121,57 @@ def test_memory_stays_bounded_while_the_outbox_grows():
     assert hub.floor > 0 and hub.horizon == 200
 
 
+# A quiet cell: one event every `every` s into a ring of 4096 aged out after 300 s. By count
+# alone the ring held all of them (8192 before a trim: hours of a soak's memory growth).
+@pytest.mark.parametrize(
+    ("every", "events", "max_age_s", "held_at_most"),
+    [
+        (2.0, 2000, 300.0, 151),  # steady after 5 minutes, then flat
+        (2.0, 2000, None, 2000),  # count only: still growing at the end
+        (0.01, 3000, 300.0, 1000),  # a burst: the count bound rules (2 x capacity)
+    ],
+)
+def test_the_ring_ages_out_so_a_quiet_cell_is_flat_within_max_age(
+    every, events, max_age_s, held_at_most
+):
+    outbox, clock = Outbox(), Clock()
+    hub = make_hub(outbox, clock, capacity=500, batch=500, max_age_s=max_age_s)
+    hub.subscribe(0, start_reader=False)
+    held = []
+    for _ in range(events):
+        clock.t += every
+        outbox.append(1)
+        hub.poll()
+        held.append(len(hub._ring))
+    assert max(held) <= held_at_most
+    if max_age_s is not None:
+        # every event younger than max_age_s is still served from memory
+        assert held[-1] == min(int(max_age_s / every) + 1, len(hub._ring))
+        assert hub.floor == hub.horizon - held[-1]
+
+
+def test_an_aged_out_ring_sends_a_reconnecting_client_to_the_database():
+    outbox, clock = Outbox(), Clock()
+    hub = make_hub(outbox, clock, max_age_s=10.0)
+    hub.subscribe(0, start_reader=False)
+    outbox.append(3)
+    hub.poll()
+    clock.t = 11.0
+    hub.poll()  # nothing new: the old ones still age out
+    assert hub._ring == [] and hub.floor == hub.horizon == 3
+    got, bound = hub.take(1, 10)
+    assert got is None and bound == 3  # behind the ring: read (1, 3] from the database
+    assert [e.id for e in hub.read_behind(1, bound, 10)[0]] == [2, 3]
+    outbox.append(1)
+    hub.poll()
+    assert [e.id for e in hub.take(3, 10)[0]] == [4]
+
+
+def test_a_max_age_of_zero_is_refused():
+    with pytest.raises(ValueError, match="max_age_s must be > 0 s"):
+        make_hub(Outbox(), max_age_s=0.0)
+
+
 # ------------------------------------------------------------------------------ live
 
 
