@@ -125,11 +125,96 @@ def key(name: str) -> str:
     return f"mill1.{name}"
 
 
+MEMBER_REFS = (m.HAS_COMPONENT, m.HAS_PROPERTY, m.HAS_ADD_IN, m.HAS_ORDERED_COMPONENT)
+PLACEHOLDER_RULES = ((m.UA, 11508), (m.UA, m.OPTIONAL_PLACEHOLDER))
+
+
+def type_chain(typedef: tuple[str, int]) -> list[tuple[str, int]]:
+    """A companion type and its supertypes, as far as the companion nodesets declare them
+    (a namespace-0 type ends the chain: its standard members are asyncua's, not checked)."""
+    chain = [typedef]
+    while chain[-1] in nodes() and nodes()[chain[-1]].targets(45, forward=False):
+        chain.append(nodes()[chain[-1]].targets(45, forward=False)[0])
+    return chain
+
+
+def declared_members(decls: list[tuple[str, int]]) -> list:
+    """The members the nodesets give these declarations (types and instance declarations)."""
+    out = []
+    for decl in [d for d in decls if d in nodes()]:
+        for ref, forward, target in nodes()[decl].refs:
+            if forward and ref in MEMBER_REFS and target in nodes():
+                out.append(nodes()[target])
+    return out
+
+
+async def check_mandatory_at_every_depth(client, node, decls, path: str, seen: list) -> None:
+    """Every mandatory member the nodesets declare for `node` (by its type definition, its
+    supertypes and the instance declaration it fills) is there with a matching type, and
+    the same for each of its children, objects and variables, all the way down."""
+    uris = await client.get_namespace_array()
+    refs = await node.get_references(
+        refs=ua.ObjectIds.HierarchicalReferences,
+        direction=ua.BrowseDirection.Forward,
+        includesubtypes=True,
+    )
+    kids = {}
+    for rd in refs:
+        if rd.ReferenceTypeId.Identifier == ua.ObjectIds.HasCondition:
+            continue  # alarm conditions: events' sources, not members of the model
+        kids[(uris[rd.BrowseName.NamespaceIndex], rd.BrowseName.Name)] = rd
+    members = declared_members(decls)
+    for member in members:
+        if (m.UA, m.MANDATORY) in member.targets(37):
+            assert member.name in kids, f"{path}: mandatory {member.name[1]} missing"
+    seen.append(path)
+    for name, rd in kids.items():
+        if rd.NodeClass not in (ua.NodeClass.Object, ua.NodeClass.Variable):
+            continue
+        td = (uris[rd.TypeDefinition.NamespaceIndex], rd.TypeDefinition.Identifier)
+        chain = type_chain(td)
+        matching = [x for x in members if x.name == name]
+        if not matching:  # an entry of a placeholder (<OrderedObject>, <ToolLifeEntry>)
+            matching = [
+                x
+                for x in members
+                if set(x.targets(37)) & set(PLACEHOLDER_RULES) and x.targets(40)[0] in chain
+            ]
+        for x in matching:
+            assert x.targets(40)[0] in chain, (f"{path}/{name[1]}", td, x.targets(40))
+        child_decls = [x.node for x in matching] + [t for t in chain if t in nodes()]
+        await check_mandatory_at_every_depth(
+            client, client.get_node(rd.NodeId), child_decls, f"{path}/{name[1]}", seen
+        )
+
+
 def test_the_instance_browses_as_a_machine_tool_with_every_mandatory_component(
     machine, client_loop
 ):
-    client = connect(client_loop, machine.faces.opcua.address)
+    """The whole instance, with a job in the plan and tools in the tool list, browsed by a
+    client and held against the companion nodesets at every depth."""
+    face = machine.faces.opcua
+    machine.controller.put_machine_data(
+        "tools", {"9": {"comment": "D10 end mill", "uses": 3, "life_uses": 10}}
+    )
+    face.set_host_data(HostData(jobs=(ProductionJob("job1", "O0040", 4, 1, 1, "Running"),)))
+    client = connect(client_loop, face.address)
     try:
+
+        async def read(k: str):
+            ns = await client.get_namespace_index("urn:fmscell:machine:mill1")
+            try:
+                return await client.get_node(ua.NodeId(key(k), ns)).read_value()
+            except ua.uaerrors.BadNodeIdUnknown:
+                return None
+
+        wait_for(
+            lambda: client_loop.run(lambda: read("Production.ProductionPlan.job1.RunsPlanned"))
+            == 4
+            and client_loop.run(lambda: read("Equipment.Tools.T9.Locked")) is not None,
+            "the job and the tool built",
+            step=lambda: machine.step(5),
+        )
 
         async def browse():
             ns_mt = await client.get_namespace_index(m.MACHINE_TOOL)
@@ -141,37 +226,20 @@ def test_the_instance_browses_as_a_machine_tool_with_every_mandatory_component(
                 found[(await child.read_browse_name()).Name] = (child, typedef)
             node, typedef = found["mill1"]
             assert typedef == ua.NodeId(13, ns_mt)
-
-            # every mandatory component of each type is there, with the official type
-            async def check(obj, type_ref):
-                official = nodes()[type_ref]
-                chain = [official]
-                while chain[-1].targets(45, forward=False)[0] in nodes():
-                    chain.append(nodes()[chain[-1].targets(45, forward=False)[0]])
-                names = {}
-                for ref in (ua.ObjectIds.HierarchicalReferences,):
-                    for c in await obj.get_children(refs=ref):
-                        bn = await c.read_browse_name()
-                        uri = (await client.get_namespace_array())[bn.NamespaceIndex]
-                        names[(uri, bn.Name)] = c
-                for t in chain:
-                    for _r, fwd, target in t.refs:
-                        member = nodes().get(target)
-                        if not fwd or member is None or (m.UA, 78) not in member.targets(37):
-                            continue
-                        assert member.name in names, (t.name, member.name)
-                        child = names[member.name]
-                        if member.node_class == "UAObject":
-                            td = member.targets(40)[0]
-                            got = await child.read_type_definition()
-                            uri = (await client.get_namespace_array())[got.NamespaceIndex]
-                            assert (uri, got.Identifier) == td, member.name
-                            if td in nodes() and td[0] != m.UA:
-                                await check(child, td)
-                return names
-
-            top = await check(node, (m.MACHINE_TOOL, 13))
-            ident = top[(m.DI, "Identification")]
+            seen: list[str] = []
+            await check_mandatory_at_every_depth(
+                client, node, type_chain((m.MACHINE_TOOL, 13)), "mill1", seen
+            )
+            # the check went through a job, a tool and the state machines' CurrentState
+            for path in (
+                "mill1/Production/ProductionPlan/job1/State/CurrentState",
+                "mill1/Production/ActiveProgram/State/CurrentState",
+                "mill1/Equipment/Tools/T9/Locked",
+                "mill1/Equipment/Tools/T9/ToolLife/Uses",
+                "mill1/Monitoring/Stacklight/Red",
+            ):
+                assert path in seen, path
+            ident = client.get_node(ua.NodeId(key("Identification"), node.nodeid.NamespaceIndex))
             props = {
                 (await p.read_browse_name()).Name: (await p.read_value())
                 for p in await ident.get_properties()
@@ -181,8 +249,9 @@ def test_the_instance_browses_as_a_machine_tool_with_every_mandatory_component(
             assert props["Manufacturer"].Text == "fmscell"
             assert set(props) >= {"SoftwareRevision", "Location", "ProductInstanceUri"}
 
-        client_loop.run(browse, timeout=120)
+        client_loop.run(browse, timeout=300)
     finally:
+        face.set_host_data(HostData())
         client_loop.run(client.disconnect)
 
 
@@ -348,6 +417,14 @@ def test_the_hosts_revision_and_jobs_appear_under_production(machine, client_loo
         assert client_loop.run(lambda: read(f"{job}.RunsPlanned")) == 4
         assert client_loop.run(lambda: read(f"{job}.RunsCompleted")) == 1
         assert client_loop.run(lambda: read(f"{job}.State.CurrentState")).Text == "Running"
+        # CurrentState's Id is the Running state of ProductionJobStateMachineType, Number 1
+        ns_mt = client_loop.run(lambda: client.get_namespace_index(m.MACHINE_TOOL))
+        running, number = m.JOB_STATES["Running"]
+        assert client_loop.run(lambda: read(f"{job}.State.CurrentState.Id")) == ua.NodeId(
+            running[1], ns_mt
+        )
+        assert client_loop.run(lambda: read(f"{job}.State.CurrentState.Number")) == number == 1
+        assert client_loop.run(lambda: read(f"{job}.RunsPlanned.IsValid")) is True
         assert client_loop.run(lambda: read("Production.ActiveProgram.JobIdentifier")) == "job5"
         face.set_host_data(HostData())  # the job ends: it leaves the plan
         with pytest.raises(ua.uaerrors.BadNodeIdUnknown):
