@@ -328,6 +328,111 @@ def test_subscribed_values_follow_a_running_program(machine, client_loop):
         client_loop.run(client.disconnect)
 
 
+LIVE_PROGRAM = """%
+O0041 (OPC UA LIVE VALUES)
+N10 G21 G90 G17 G94
+N20 S1200 M03
+N30 G1 X-60 Y-40 F3000
+N40 X-20 Y-20
+N50 X-60 Y-40
+N60 M05
+N70 M30
+%
+"""
+
+
+def read_values(client_loop, client, keys) -> dict:
+    async def read():
+        ns = await client.get_namespace_index("urn:fmscell:machine:mill1")
+        nodes_ = [client.get_node(ua.NodeId(key(k), ns)) for k in keys]
+        return dict(zip(keys, await client.read_values(nodes_), strict=True))
+
+    return client_loop.run(read)
+
+
+def to_snapshot(machine: Machine) -> None:
+    """Steps up to the cycle the machine hands its faces a snapshot (every shdr_every
+    cycles), so what the face serves is the machine's status as it now stands."""
+    machine.step(1)
+    while machine.cycle % machine.shdr_every:
+        machine.step(1)
+
+
+def test_live_values_read_from_a_running_machine(machine, client_loop):
+    """The operator's overrides and a program turning the spindle, read over OPC UA from a
+    machine held still (lockstep) mid-cut: the spindle's speed and override, both feed
+    overrides, the modes, the program's number and the axes' positions are the machine's;
+    a feed hold lights the yellow lamp; the finished part counts."""
+    if not all(machine.controller.referenced.values()):
+        home(machine)
+    assert machine.run_until(lambda mm: not mm.controller.in_cycle, 60.0)
+    n = machine.load_program(LIVE_PROGRAM)
+    machine.command("mode", mode="AUTO")
+    machine.command("select_program", number=n)
+    machine.command("feed_override", pct=70)
+    machine.command("spindle_override", pct=110)
+    parts_before = machine.status.part_count
+    machine.command("cycle_start")
+    assert machine.run_until(
+        lambda mm: mm.status.execution == "ACTIVE"
+        and abs(mm.status.spindle_speed) > 1000
+        and mm.status.axes["X"].actual < -10.0,  # cutting, on the way to X-60
+        60.0,
+    ), (machine.alarms, machine.status.execution, machine.status.spindle_speed)
+    to_snapshot(machine)
+    st = machine.status  # the machine stands still until stepped: these are the values
+    want = {
+        "Monitoring.Spindle.Speed": pytest.approx(st.spindle_speed),
+        "Monitoring.Spindle.IsRotating": True,
+        "Monitoring.Spindle.Override": 110.0,
+        "Monitoring.Channel1.FeedOverride": 70.0,
+        "Monitoring.MachineTool.FeedOverride": 70.0,
+        "Monitoring.Channel1.ChannelMode": 0,  # Automatic
+        "Monitoring.MachineTool.OperationMode": 1,  # Automatic
+        "Production.ActiveProgram.Number": 41,
+        "Production.ActiveProgram.PartCount": parts_before,
+        "Monitoring.Stacklight.Red.SignalOn": False,
+        "Monitoring.Stacklight.Yellow.SignalOn": False,
+        "Monitoring.Stacklight.Green.SignalOn": True,
+        **{
+            f"Monitoring.Channel1.{axis}.ActualPosition": pytest.approx(ax.actual)
+            for axis, ax in st.axes.items()
+        },
+    }
+    assert st.spindle_speed > 1000 and st.axes["X"].actual != 0.0
+    client = connect(client_loop, machine.faces.opcua.address)
+    try:
+        got: dict = {}
+
+        def shows() -> bool:
+            got.update(read_values(client_loop, client, list(want)))
+            return got == want
+
+        try:
+            wait_for(shows, "the running machine's values")
+        except AssertionError:
+            assert got == want  # says which value differs
+        machine.command("feed_hold")
+        assert machine.run_until(lambda mm: mm.status.execution == "FEED_HOLD", 10.0)
+        to_snapshot(machine)
+        lamp = "Monitoring.Stacklight.Yellow.SignalOn"
+        wait_for(lambda: read_values(client_loop, client, [lamp])[lamp] is True, "yellow lamp")
+        machine.command("cycle_start")
+        assert machine.run_until(lambda mm: mm.status.execution == "PROGRAM_COMPLETED", 120.0)
+        to_snapshot(machine)
+        assert machine.status.part_count == parts_before + 1
+        done = {
+            "Production.ActiveProgram.PartCount": parts_before + 1,
+            "Monitoring.Spindle.IsRotating": False,
+            lamp: False,
+        }
+        wait_for(lambda: read_values(client_loop, client, list(done)) == done, "part counted")
+    finally:
+        machine.command("feed_override", pct=100)
+        machine.command("spindle_override", pct=100)
+        client_loop.run(client.disconnect)
+
+
 def test_a_drive_fault_is_an_alarm_event_with_the_mtconnect_code_cleared_by_reset(
     machine, client_loop
 ):
@@ -354,6 +459,8 @@ def test_a_drive_fault_is_an_alarm_event_with_the_mtconnect_code_cleared_by_rese
         wait_for(lambda: active_event(), "the alarm event", step=lambda: machine.step(5))
         ev = active_event()[0]
         assert ev.Message.Text == alarm.text
+        red = "Monitoring.Stacklight.Red.SignalOn"
+        assert read_values(client_loop, client, [red])[red] is True  # a FAULT lights it
         assert ev.Severity == 800
         # anonymous may not acknowledge (a method call): BadUserAccessDenied
         with pytest.raises(ua.uaerrors.BadUserAccessDenied):
