@@ -82,7 +82,11 @@ def nodes() -> dict[tuple[str, int], Node]:
             fields = tuple((f.get("Name"), int(f.get("Value", "0"))) for f in (definition or []))
             value_el = el.find("u:Value", NS)
             value = None
-            if value_el is not None and len(value_el) and value_el[0].tag.split("}")[-1] in ("Int32", "UInt32"):
+            if (
+                value_el is not None
+                and len(value_el)
+                and value_el[0].tag.split("}")[-1] in ("Int32", "UInt32")
+            ):
                 value = int(value_el[0].text)
             dt = el.get("DataType")
             out[ref(el.get("NodeId"))] = Node(

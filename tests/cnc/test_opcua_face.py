@@ -209,9 +209,10 @@ def test_the_instance_browses_as_a_machine_tool_with_every_mandatory_component(
                 return None
 
         wait_for(
-            lambda: client_loop.run(lambda: read("Production.ProductionPlan.job1.RunsPlanned"))
-            == 4
-            and client_loop.run(lambda: read("Equipment.Tools.T9.Locked")) is not None,
+            lambda: (
+                client_loop.run(lambda: read("Production.ProductionPlan.job1.RunsPlanned")) == 4
+                and client_loop.run(lambda: read("Equipment.Tools.T9.Locked")) is not None
+            ),
             "the job and the tool built",
             step=lambda: machine.step(5),
         )
@@ -374,9 +375,11 @@ def test_live_values_read_from_a_running_machine(machine, client_loop):
     parts_before = machine.status.part_count
     machine.command("cycle_start")
     assert machine.run_until(
-        lambda mm: mm.status.execution == "ACTIVE"
-        and abs(mm.status.spindle_speed) > 1000
-        and mm.status.axes["X"].actual < -10.0,  # cutting, on the way to X-60
+        lambda mm: (
+            mm.status.execution == "ACTIVE"
+            and abs(mm.status.spindle_speed) > 1000
+            and mm.status.axes["X"].actual < -10.0
+        ),  # cutting, on the way to X-60
         60.0,
     ), (machine.alarms, machine.status.execution, machine.status.spindle_speed)
     to_snapshot(machine)

@@ -91,7 +91,9 @@ def test_the_machines_folder_is_the_machinery_entry_point():
     assert folder.targets(HAS_TYPEDEF) == [m.FOLDER]
 
 
-@pytest.mark.parametrize("typedef", list(m.STATES_OF), ids=lambda t: f"{t[0].split('/')[-2]}-{t[1]}")
+@pytest.mark.parametrize(
+    "typedef", list(m.STATES_OF), ids=lambda t: f"{t[0].split('/')[-2]}-{t[1]}"
+)
 def test_the_state_tables_are_the_state_machines_states(typedef):
     """Each state's node is a state of that state machine type (or of its supertype),
     with that StateNumber: what CurrentState's Id and Number show."""

@@ -407,7 +407,12 @@ MONITORING = ObjectTypeDecl(
             False,
             children=(
                 _v(
-                    MT, "StacklightMode", 415, STACKLIGHT_OPERATION_MODE.node, True, prop=True,
+                    MT,
+                    "StacklightMode",
+                    415,
+                    STACKLIGHT_OPERATION_MODE.node,
+                    True,
+                    prop=True,
                     name_ns=IA,
                 ),
             ),
