@@ -218,3 +218,21 @@ def test_a_machine_in_this_process_gets_its_data_by_a_direct_call():
             {"command": "acknowledge", "face": "opcua", "detail": "alarm 3040 (DRIVE)"},
         )
     ]
+
+
+def test_the_run_banner_names_each_machines_opcua_endpoint():
+    """`fmscell run` prints where each machine's OPC UA server is (server/cell.py)."""
+    from server.cell import banner  # deferred: server.cell pulls in the whole host
+
+    lines = banner(
+        ("mill1", "lathe1", "mill2"),
+        "realtime",
+        "http://127.0.0.1:8000",
+        {"mill1": "opc.tcp://127.0.0.1:4841", "mill2": "opc.tcp://127.0.0.1:4843"},
+    )
+    assert lines[0] == "fmscell cell: mill1, lathe1, mill2 (realtime clock)"
+    assert "MTConnect:      http://127.0.0.1:8000/mtconnect/probe" in lines
+    assert lines[-2:] == [
+        "OPC UA mill1:   opc.tcp://127.0.0.1:4841",
+        "OPC UA mill2:   opc.tcp://127.0.0.1:4843",
+    ]  # lathe1's OPC UA face is off: no line
