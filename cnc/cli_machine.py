@@ -117,6 +117,9 @@ def machine(
             " programs (and inject faults); set ports.secret (docs/dnc_port.md)",
             err=True,
         )
+    warning = opcua_exposure(name, cfg.ports)
+    if warning:
+        typer.echo(warning, err=True)
     if not 0.01 <= speed <= 100.0:
         typer.echo(f"--speed {speed}: must be 0.01..100", err=True)
         raise typer.Exit(2)
@@ -184,6 +187,18 @@ def _write_atomically(path: Path, data: dict) -> None:
     tmp = path.with_name(path.name + ".tmp")
     tmp.write_text(json.dumps(data))
     tmp.replace(path)
+
+
+def opcua_exposure(name: str, ports) -> str | None:
+    """The warning for an OPC UA server reachable from other hosts without security, as
+    the DNC port's without a secret; None when it is off, secured or on loopback."""
+    if ports.opcua is None or ports.opcua_security != "none" or _loopback(ports.host):
+        return None
+    return (
+        f"{name}: WARNING: the OPC UA server listens on {ports.host} with opcua_security:"
+        " none: anyone who reaches it reads and subscribes to the machine anonymously,"
+        " unencrypted; set opcua_security: Basic256Sha256 (docs/opcua.md, Security)"
+    )
 
 
 def _loopback(host: str) -> bool:

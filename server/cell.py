@@ -705,10 +705,8 @@ def run_cell(
             )
         )
         url = f"{'https' if tls else 'http'}://{bind}:{port}"
-        echo(f"fmscell cell: {', '.join(cell.links)} ({clock} clock)")
-        echo(f"dashboard:      {url}/")
-        echo(f"API reference:  {url}/docs  (OpenAPI: {url}/openapi.json)")
-        echo(f"MTConnect:      {url}/mtconnect/probe")
+        for line in banner(tuple(cell.links), clock, url, cell.opcua_addresses()):
+            echo(line)
         if settings.insecure_open:
             echo("WARNING: --insecure-open: no API key needed, every caller is an admin")
         if demo_key is not None:
@@ -719,6 +717,19 @@ def run_cell(
         cell.stop()
         echo("fmscell cell stopped")
     return 0
+
+
+def banner(machines: tuple[str, ...], clock: str, url: str, opcua: dict[str, str]) -> list[str]:
+    """What `fmscell run` prints once the cell is up: where to reach it, the API's and
+    each machine's OPC UA endpoint (machines whose OPC UA face is off have none)."""
+    lines = [
+        f"fmscell cell: {', '.join(machines)} ({clock} clock)",
+        f"dashboard:      {url}/",
+        f"API reference:  {url}/docs  (OpenAPI: {url}/openapi.json)",
+        f"MTConnect:      {url}/mtconnect/probe",
+    ]
+    lines += [f"OPC UA {name}:".ljust(16) + opcua[name] for name in machines if name in opcua]
+    return lines
 
 
 def exposure(bind: str, port: int, settings, *, tls: bool) -> tuple[str | None, list[str]]:
@@ -801,9 +812,7 @@ class OpcUaUsers:
         # deferred: the OPC UA face's records (asyncua) only for a cell that has one
         from cnc.faces.opcua import FaceUser
 
-        return tuple(
-            FaceUser(k.user, k.role.name, k.digest()) for k in self.settings.api_keys
-        )
+        return tuple(FaceUser(k.user, k.role.name, k.digest()) for k in self.settings.api_keys)
 
 
 def opcua_users(settings) -> OpcUaUsers:

@@ -39,8 +39,12 @@ def host_data(library, dispatches, jobs, machine: str) -> HostData:
     found = []
     for status in OPEN_STATES:
         for job in jobs.list(status=status, limit=500):
-            if not any(a["machine"] == machine for a in jobs.allocations(job.id)):
+            mine = [a for a in jobs.allocations(job.id) if a["machine"] == machine]
+            if not mine:
                 continue
+            # an allocation is one run of the program making one part (dnc/allocation.py):
+            # the machine's job counts its own, the job's quantity is the plan's
+            completed = sum(1 for a in mine if a["status"] == "completed")
             if job.revision_id not in programs:
                 rev = library.get_revision(job.revision_id)
                 programs[job.revision_id] = f"O{library.get_program(rev.program_id).number:04d}"
@@ -49,8 +53,8 @@ def host_data(library, dispatches, jobs, machine: str) -> HostData:
                     identifier=f"job{job.id}",
                     program=programs[job.revision_id],
                     runs_planned=job.quantity,
-                    runs_completed=job.done,
-                    parts_completed=job.done,
+                    runs_completed=completed,
+                    parts_completed=completed,
                     state=JOB_STATE[job.status],
                 )
             )

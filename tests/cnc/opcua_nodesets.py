@@ -40,6 +40,7 @@ class Node:
     refs: tuple[tuple[int, bool, tuple[str, int]], ...]
     data_type: tuple[str, int] | None
     fields: tuple[tuple[str, int], ...]
+    value: int | None = None  # an integer Value (a state's StateNumber), else None
 
     def targets(self, ref: int, forward: bool = True) -> list[tuple[str, int]]:
         return [t for r, f, t in self.refs if r == ref and f == forward]
@@ -79,6 +80,14 @@ def nodes() -> dict[tuple[str, int], Node]:
             )
             definition = el.find("u:Definition", NS)
             fields = tuple((f.get("Name"), int(f.get("Value", "0"))) for f in (definition or []))
+            value_el = el.find("u:Value", NS)
+            value = None
+            if (
+                value_el is not None
+                and len(value_el)
+                and value_el[0].tag.split("}")[-1] in ("Int32", "UInt32")
+            ):
+                value = int(value_el[0].text)
             dt = el.get("DataType")
             out[ref(el.get("NodeId"))] = Node(
                 ref(el.get("NodeId")),
@@ -87,5 +96,6 @@ def nodes() -> dict[tuple[str, int], Node]:
                 refs,
                 ref(dt) if dt and dt.startswith(("ns=", "i=")) or dt in aliases else None,
                 fields,
+                value,
             )
     return out

@@ -12,6 +12,9 @@ import textwrap
 
 import pytest
 
+from cnc.cli_machine import opcua_exposure
+from cnc.config import PortsConfig
+
 RUNNER = textwrap.dedent(
     """
     import typer
@@ -189,3 +192,26 @@ def test_a_bind_address_off_loopback_needs_the_shared_secret(tmp_path):
     assert run.returncode == 2, run.stderr
     assert "--bind 10.77.0.2 is reachable from other hosts" in run.stderr
     assert "need a shared secret" in run.stderr and run.stdout == ""
+
+
+@pytest.mark.parametrize(
+    ("host", "opcua", "security", "warns"),
+    [
+        ("127.0.0.1", 4841, "none", False),  # loopback: the default cell
+        ("::1", 4841, "none", False),
+        ("10.77.0.2", 4841, "none", True),  # reachable, anonymous and unencrypted
+        ("0.0.0.0", 4841, "none", True),
+        ("mill9.plant", 4841, "none", True),  # a host name: assumed reachable
+        ("10.77.0.2", 4841, "Basic256Sha256", False),
+        ("10.77.0.2", None, "none", False),  # no OPC UA server
+    ],
+)
+def test_an_opcua_server_off_loopback_without_security_warns(host, opcua, security, warns):
+    """As the DNC port without a secret does (cnc/cli_machine.py): `fmscell machine` says
+    so on stderr when the OPC UA server is reachable from other hosts unsecured."""
+    ports = PortsConfig(host=host, opcua=opcua, opcua_security=security)
+    warning = opcua_exposure("mill9", ports)
+    assert (warning is not None) == warns, warning
+    if warns:
+        assert f"listens on {host} with opcua_security: none" in warning
+        assert "Basic256Sha256" in warning

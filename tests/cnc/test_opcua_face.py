@@ -14,6 +14,7 @@ import time
 
 import pytest
 from asyncua import Client, ua
+from asyncua.ua.ua_binary import struct_from_binary
 
 from cnc.faces.loop_thread import LoopThread
 from cnc.faces.opcua import HostData, ProductionJob
@@ -125,11 +126,97 @@ def key(name: str) -> str:
     return f"mill1.{name}"
 
 
+MEMBER_REFS = (m.HAS_COMPONENT, m.HAS_PROPERTY, m.HAS_ADD_IN, m.HAS_ORDERED_COMPONENT)
+PLACEHOLDER_RULES = ((m.UA, 11508), (m.UA, m.OPTIONAL_PLACEHOLDER))
+
+
+def type_chain(typedef: tuple[str, int]) -> list[tuple[str, int]]:
+    """A companion type and its supertypes, as far as the companion nodesets declare them
+    (a namespace-0 type ends the chain: its standard members are asyncua's, not checked)."""
+    chain = [typedef]
+    while chain[-1] in nodes() and nodes()[chain[-1]].targets(45, forward=False):
+        chain.append(nodes()[chain[-1]].targets(45, forward=False)[0])
+    return chain
+
+
+def declared_members(decls: list[tuple[str, int]]) -> list:
+    """The members the nodesets give these declarations (types and instance declarations)."""
+    out = []
+    for decl in [d for d in decls if d in nodes()]:
+        for ref, forward, target in nodes()[decl].refs:
+            if forward and ref in MEMBER_REFS and target in nodes():
+                out.append(nodes()[target])
+    return out
+
+
+async def check_mandatory_at_every_depth(client, node, decls, path: str, seen: list) -> None:
+    """Every mandatory member the nodesets declare for `node` (by its type definition, its
+    supertypes and the instance declaration it fills) is there with a matching type, and
+    the same for each of its children, objects and variables, all the way down."""
+    uris = await client.get_namespace_array()
+    refs = await node.get_references(
+        refs=ua.ObjectIds.HierarchicalReferences,
+        direction=ua.BrowseDirection.Forward,
+        includesubtypes=True,
+    )
+    kids = {}
+    for rd in refs:
+        if rd.ReferenceTypeId.Identifier == ua.ObjectIds.HasCondition:
+            continue  # alarm conditions: events' sources, not members of the model
+        kids[(uris[rd.BrowseName.NamespaceIndex], rd.BrowseName.Name)] = rd
+    members = declared_members(decls)
+    for member in members:
+        if (m.UA, m.MANDATORY) in member.targets(37):
+            assert member.name in kids, f"{path}: mandatory {member.name[1]} missing"
+    seen.append(path)
+    for name, rd in kids.items():
+        if rd.NodeClass not in (ua.NodeClass.Object, ua.NodeClass.Variable):
+            continue
+        td = (uris[rd.TypeDefinition.NamespaceIndex], rd.TypeDefinition.Identifier)
+        chain = type_chain(td)
+        matching = [x for x in members if x.name == name]
+        if not matching:  # an entry of a placeholder (<OrderedObject>, <ToolLifeEntry>)
+            matching = [
+                x
+                for x in members
+                if set(x.targets(37)) & set(PLACEHOLDER_RULES) and x.targets(40)[0] in chain
+            ]
+        for x in matching:
+            assert x.targets(40)[0] in chain, (f"{path}/{name[1]}", td, x.targets(40))
+        child_decls = [x.node for x in matching] + [t for t in chain if t in nodes()]
+        await check_mandatory_at_every_depth(
+            client, client.get_node(rd.NodeId), child_decls, f"{path}/{name[1]}", seen
+        )
+
+
 def test_the_instance_browses_as_a_machine_tool_with_every_mandatory_component(
     machine, client_loop
 ):
-    client = connect(client_loop, machine.faces.opcua.address)
+    """The whole instance, with a job in the plan and tools in the tool list, browsed by a
+    client and held against the companion nodesets at every depth."""
+    face = machine.faces.opcua
+    machine.controller.put_machine_data(
+        "tools", {"9": {"comment": "D10 end mill", "uses": 3, "life_uses": 10}}
+    )
+    face.set_host_data(HostData(jobs=(ProductionJob("job1", "O0040", 4, 1, 1, "Running"),)))
+    client = connect(client_loop, face.address)
     try:
+
+        async def read(k: str):
+            ns = await client.get_namespace_index("urn:fmscell:machine:mill1")
+            try:
+                return await client.get_node(ua.NodeId(key(k), ns)).read_value()
+            except ua.uaerrors.BadNodeIdUnknown:
+                return None
+
+        wait_for(
+            lambda: (
+                client_loop.run(lambda: read("Production.ProductionPlan.job1.RunsPlanned")) == 4
+                and client_loop.run(lambda: read("Equipment.Tools.T9.Locked")) is not None
+            ),
+            "the job and the tool built",
+            step=lambda: machine.step(5),
+        )
 
         async def browse():
             ns_mt = await client.get_namespace_index(m.MACHINE_TOOL)
@@ -141,37 +228,20 @@ def test_the_instance_browses_as_a_machine_tool_with_every_mandatory_component(
                 found[(await child.read_browse_name()).Name] = (child, typedef)
             node, typedef = found["mill1"]
             assert typedef == ua.NodeId(13, ns_mt)
-
-            # every mandatory component of each type is there, with the official type
-            async def check(obj, type_ref):
-                official = nodes()[type_ref]
-                chain = [official]
-                while chain[-1].targets(45, forward=False)[0] in nodes():
-                    chain.append(nodes()[chain[-1].targets(45, forward=False)[0]])
-                names = {}
-                for ref in (ua.ObjectIds.HierarchicalReferences,):
-                    for c in await obj.get_children(refs=ref):
-                        bn = await c.read_browse_name()
-                        uri = (await client.get_namespace_array())[bn.NamespaceIndex]
-                        names[(uri, bn.Name)] = c
-                for t in chain:
-                    for _r, fwd, target in t.refs:
-                        member = nodes().get(target)
-                        if not fwd or member is None or (m.UA, 78) not in member.targets(37):
-                            continue
-                        assert member.name in names, (t.name, member.name)
-                        child = names[member.name]
-                        if member.node_class == "UAObject":
-                            td = member.targets(40)[0]
-                            got = await child.read_type_definition()
-                            uri = (await client.get_namespace_array())[got.NamespaceIndex]
-                            assert (uri, got.Identifier) == td, member.name
-                            if td in nodes() and td[0] != m.UA:
-                                await check(child, td)
-                return names
-
-            top = await check(node, (m.MACHINE_TOOL, 13))
-            ident = top[(m.DI, "Identification")]
+            seen: list[str] = []
+            await check_mandatory_at_every_depth(
+                client, node, type_chain((m.MACHINE_TOOL, 13)), "mill1", seen
+            )
+            # the check went through a job, a tool and the state machines' CurrentState
+            for path in (
+                "mill1/Production/ProductionPlan/job1/State/CurrentState",
+                "mill1/Production/ActiveProgram/State/CurrentState",
+                "mill1/Equipment/Tools/T9/Locked",
+                "mill1/Equipment/Tools/T9/ToolLife/Uses",
+                "mill1/Monitoring/Stacklight/Red",
+            ):
+                assert path in seen, path
+            ident = client.get_node(ua.NodeId(key("Identification"), node.nodeid.NamespaceIndex))
             props = {
                 (await p.read_browse_name()).Name: (await p.read_value())
                 for p in await ident.get_properties()
@@ -181,8 +251,9 @@ def test_the_instance_browses_as_a_machine_tool_with_every_mandatory_component(
             assert props["Manufacturer"].Text == "fmscell"
             assert set(props) >= {"SoftwareRevision", "Location", "ProductInstanceUri"}
 
-        client_loop.run(browse, timeout=120)
+        client_loop.run(browse, timeout=300)
     finally:
+        face.set_host_data(HostData())
         client_loop.run(client.disconnect)
 
 
@@ -259,6 +330,117 @@ def test_subscribed_values_follow_a_running_program(machine, client_loop):
         client_loop.run(client.disconnect)
 
 
+LIVE_PROGRAM = """%
+O0041 (OPC UA LIVE VALUES)
+N10 G21 G90 G17 G94
+N20 S1200 M03
+N30 G1 X-60 Y-40 F3000
+N40 X-20 Y-20
+N50 X-60 Y-40
+N60 M05
+N70 M30
+%
+"""
+
+
+def read_values(client_loop, client, keys) -> dict:
+    async def read():
+        ns = await client.get_namespace_index("urn:fmscell:machine:mill1")
+        nodes_ = [client.get_node(ua.NodeId(key(k), ns)) for k in keys]
+        return dict(zip(keys, await client.read_values(nodes_), strict=True))
+
+    return client_loop.run(read)
+
+
+def to_snapshot(machine: Machine) -> None:
+    """Steps up to the cycle the machine hands its faces a snapshot (every shdr_every
+    cycles), so what the face serves is the machine's status as it now stands."""
+    machine.step(1)
+    while machine.cycle % machine.shdr_every:
+        machine.step(1)
+
+
+def test_live_values_read_from_a_running_machine(machine, client_loop):
+    """The operator's overrides and a program turning the spindle, read over OPC UA from a
+    machine held still (lockstep) mid-cut: the spindle's speed and override, both feed
+    overrides, the modes, the program's number and the axes' positions are the machine's;
+    a feed hold lights the yellow lamp; the finished part counts."""
+    if not all(machine.controller.referenced.values()):
+        home(machine)
+    assert machine.run_until(lambda mm: not mm.controller.in_cycle, 60.0)
+    # a feed hold an earlier test pressed stays latched in the PLC until a start or a
+    # reset: the operator's reset clears it
+    machine.command("reset")
+    machine.step(2 * machine.plc_every)
+    n = machine.load_program(LIVE_PROGRAM)
+    machine.command("mode", mode="AUTO")
+    machine.command("select_program", number=n)
+    machine.command("feed_override", pct=70)
+    machine.command("spindle_override", pct=110)
+    parts_before = machine.status.part_count
+    machine.command("cycle_start")
+    assert machine.run_until(
+        lambda mm: (
+            mm.status.execution == "ACTIVE"
+            and abs(mm.status.spindle_speed) > 1000
+            and mm.status.axes["X"].actual < -30.0
+        ),  # cutting: past X-20, where the previous program ended
+        60.0,
+    ), (machine.alarms, machine.status.execution, machine.status.spindle_speed)
+    to_snapshot(machine)
+    st = machine.status  # the machine stands still until stepped: these are the values
+    want = {
+        "Monitoring.Spindle.Speed": pytest.approx(st.spindle_speed),
+        "Monitoring.Spindle.IsRotating": True,
+        "Monitoring.Spindle.Override": 110.0,
+        "Monitoring.Channel1.FeedOverride": 70.0,
+        "Monitoring.MachineTool.FeedOverride": 70.0,
+        "Monitoring.Channel1.ChannelMode": 0,  # Automatic
+        "Monitoring.MachineTool.OperationMode": 1,  # Automatic
+        "Production.ActiveProgram.Number": 41,
+        "Production.ActiveProgram.PartCount": parts_before,
+        "Monitoring.Stacklight.Red.SignalOn": False,
+        "Monitoring.Stacklight.Yellow.SignalOn": False,
+        "Monitoring.Stacklight.Green.SignalOn": True,
+        **{
+            f"Monitoring.Channel1.{axis}.ActualPosition": pytest.approx(ax.actual)
+            for axis, ax in st.axes.items()
+        },
+    }
+    assert st.spindle_speed > 1000 and st.axes["X"].actual != 0.0
+    client = connect(client_loop, machine.faces.opcua.address)
+    try:
+        got: dict = {}
+
+        def shows() -> bool:
+            got.update(read_values(client_loop, client, list(want)))
+            return got == want
+
+        try:
+            wait_for(shows, "the running machine's values")
+        except AssertionError:
+            assert got == want  # says which value differs
+        machine.command("feed_hold")
+        assert machine.run_until(lambda mm: mm.status.execution == "FEED_HOLD", 10.0)
+        to_snapshot(machine)
+        lamp = "Monitoring.Stacklight.Yellow.SignalOn"
+        wait_for(lambda: read_values(client_loop, client, [lamp])[lamp] is True, "yellow lamp")
+        machine.command("cycle_start")
+        assert machine.run_until(lambda mm: mm.status.execution == "PROGRAM_COMPLETED", 120.0)
+        to_snapshot(machine)
+        assert machine.status.part_count == parts_before + 1
+        done = {
+            "Production.ActiveProgram.PartCount": parts_before + 1,
+            "Monitoring.Spindle.IsRotating": False,
+            lamp: False,
+        }
+        wait_for(lambda: read_values(client_loop, client, list(done)) == done, "part counted")
+    finally:
+        machine.command("feed_override", pct=100)
+        machine.command("spindle_override", pct=100)
+        client_loop.run(client.disconnect)
+
+
 def test_a_drive_fault_is_an_alarm_event_with_the_mtconnect_code_cleared_by_reset(
     machine, client_loop
 ):
@@ -285,6 +467,8 @@ def test_a_drive_fault_is_an_alarm_event_with_the_mtconnect_code_cleared_by_rese
         wait_for(lambda: active_event(), "the alarm event", step=lambda: machine.step(5))
         ev = active_event()[0]
         assert ev.Message.Text == alarm.text
+        red = "Monitoring.Stacklight.Red.SignalOn"
+        assert read_values(client_loop, client, [red])[red] is True  # a FAULT lights it
         assert ev.Severity == 800
         # anonymous may not acknowledge (a method call): BadUserAccessDenied
         with pytest.raises(ua.uaerrors.BadUserAccessDenied):
@@ -348,6 +532,14 @@ def test_the_hosts_revision_and_jobs_appear_under_production(machine, client_loo
         assert client_loop.run(lambda: read(f"{job}.RunsPlanned")) == 4
         assert client_loop.run(lambda: read(f"{job}.RunsCompleted")) == 1
         assert client_loop.run(lambda: read(f"{job}.State.CurrentState")).Text == "Running"
+        # CurrentState's Id is the Running state of ProductionJobStateMachineType, Number 1
+        ns_mt = client_loop.run(lambda: client.get_namespace_index(m.MACHINE_TOOL))
+        running, number = m.JOB_STATES["Running"]
+        assert client_loop.run(lambda: read(f"{job}.State.CurrentState.Id")) == ua.NodeId(
+            running[1], ns_mt
+        )
+        assert client_loop.run(lambda: read(f"{job}.State.CurrentState.Number")) == number == 1
+        assert client_loop.run(lambda: read(f"{job}.RunsPlanned.IsValid")) is True
         assert client_loop.run(lambda: read("Production.ActiveProgram.JobIdentifier")) == "job5"
         face.set_host_data(HostData())  # the job ends: it leaves the plan
         with pytest.raises(ua.uaerrors.BadNodeIdUnknown):
@@ -668,11 +860,119 @@ def test_anonymous_start_is_refused_and_kept_for_the_host_not_the_machines_cycle
     assert machine.events.of_kind("command")[-1].text == "OPC UA feed_hold by ops: done"
 
 
-def test_many_clients_at_once_and_a_silent_subscriber_do_not_make_the_machine_late(
-    machine, client_loop
-):
-    """100 sessions connecting at once and a subscriber that never sends a Publish: the
-    server keeps serving, and the machine's step (its cycle) does not wait for either."""
+def late_step_s(machine: Machine) -> float:
+    """The worst step (one IPO cycle's work, lockstep) a test accepts before calling the
+    machine late because of a client: the cycle's deadline is one IPO period (2 ms); a step
+    that waited on the server would wait for a client (a Publish that never comes, the
+    silent subscriber's lifetime of minutes, a connect storm of seconds), while one that
+    does not is its own work plus what a box at load 20 takes from it (the OS's
+    descheduling, the GIL shared with the server's and the clients' threads in this
+    process): 500 periods, 1 s, is that margin."""
+    return 500 * machine.ipo_s
+
+
+async def silent_subscriber(url: str, keys: list[str]) -> tuple[Client, int]:
+    """A client that creates a subscription with monitored items and never sends a Publish
+    request: the requests are sent raw, so asyncua's publish loop (which create_subscription
+    would start) never runs. The server queues notifications it can never deliver."""
+    c = Client(url, timeout=10, watchdog_intervall=WATCHDOG_S)
+    await c.connect()
+    ns = await c.get_namespace_index("urn:fmscell:machine:mill1")
+    request = ua.CreateSubscriptionRequest()
+    request.Parameters.RequestedPublishingInterval = 100
+    request.Parameters.RequestedLifetimeCount = 3000  # 5 min: alive for the whole test
+    request.Parameters.RequestedMaxKeepAliveCount = 10
+    request.Parameters.PublishingEnabled = True
+    data = await c.uaclient.session._send_request(request)  # raw: no publish loop
+    response = struct_from_binary(ua.CreateSubscriptionResponse, data)
+    response.ResponseHeader.ServiceResult.check()
+    sub_id = response.Parameters.SubscriptionId
+    params = ua.CreateMonitoredItemsParameters()
+    params.SubscriptionId = sub_id
+    params.TimestampsToReturn = ua.TimestampsToReturn.Both
+    for handle, k in enumerate(keys):
+        item = ua.MonitoredItemCreateRequest()
+        item.ItemToMonitor = ua.ReadValueId()
+        item.ItemToMonitor.NodeId = ua.NodeId(k, ns)
+        item.ItemToMonitor.AttributeId = ua.AttributeIds.Value
+        item.MonitoringMode = ua.MonitoringMode.Reporting
+        item.RequestedParameters = ua.MonitoringParameters()
+        item.RequestedParameters.ClientHandle = handle
+        item.RequestedParameters.SamplingInterval = 100
+        item.RequestedParameters.QueueSize = 10
+        item.RequestedParameters.DiscardOldest = True
+        params.ItemsToCreate.append(item)
+    results = await c.uaclient.create_monitored_items(params)
+    assert all(r.StatusCode.is_good() for r in results), [r.StatusCode for r in results]
+    assert c.uaclient.session._publish_task is None  # silent: not one Publish sent
+    return c, sub_id
+
+
+def test_a_subscriber_that_never_publishes_does_not_make_the_machine_late(machine, client_loop):
+    """A client subscribes to 50 live values and never sends a Publish while the machine
+    runs a program: each lockstep step stays within late_step_s, the server keeps serving
+    another subscriber (its data changes arrive) and the silent client itself (a read)."""
+    url = machine.faces.opcua.address
+    live = [
+        k[len("mill1.") :]
+        for k in machine.faces.opcua.space.variables
+        if k.startswith(("mill1.Monitoring.", "mill1.Production.ActiveProgram."))
+    ][:50]
+    assert len(live) == 50, len(live)
+    quiet, _ = client_loop.run(lambda: silent_subscriber(url, [key(k) for k in live]), 60)
+    other = connect(client_loop, url)
+    seen = Seen()
+    try:
+
+        async def subscribe():
+            ns = await other.get_namespace_index("urn:fmscell:machine:mill1")
+            sub = await other.create_subscription(100, seen)
+            await sub.subscribe_data_change(
+                [other.get_node(ua.NodeId(key("Monitoring.Channel1.X.ActualPosition"), ns))]
+            )
+
+        client_loop.run(subscribe)
+        if not all(machine.controller.referenced.values()):
+            home(machine)
+        assert machine.run_until(lambda mm: not mm.controller.in_cycle, 60.0)
+        # a feed hold an earlier test pressed stays latched in the PLC until a start or a
+        # reset: the operator's reset clears it
+        machine.command("reset")
+        machine.step(2 * machine.plc_every)
+        machine.command("mode", mode="AUTO")
+        machine.command("select_program", number=machine.load_program(PROGRAM))
+        machine.command("cycle_start")
+        worst, steps = 0.0, 0
+        while machine.status.execution != "PROGRAM_COMPLETED" and steps < 60_000:
+            t0 = time.perf_counter()
+            machine.step(1)
+            worst = max(worst, time.perf_counter() - t0)
+            steps += 1
+        assert machine.status.execution == "PROGRAM_COMPLETED", machine.status.execution
+        assert worst < late_step_s(machine), (worst, steps)
+        # the other subscriber was served all along: it saw X move (the program's moves)
+        x = key("Monitoring.Channel1.X.ActualPosition")
+        wait_for(lambda: len(set(seen.history(x))) >= 3, "X moving, for the other subscriber")
+        to_snapshot(machine)
+
+        async def quiet_reads_line():
+            ns = await quiet.get_namespace_index("urn:fmscell:machine:mill1")
+            node = quiet.get_node(ua.NodeId(key("Monitoring.Channel1.X.ActualPosition"), ns))
+            return await node.read_value()
+
+        want = machine.status.axes["X"].actual
+        wait_for(
+            lambda: client_loop.run(quiet_reads_line) == pytest.approx(want),
+            "the silent client served a read",
+        )
+    finally:
+        client_loop.run(other.disconnect)
+        client_loop.run(quiet.disconnect)
+
+
+def test_many_clients_at_once_do_not_make_the_machine_late(machine, client_loop):
+    """100 sessions connecting at once: the server keeps serving, and the machine's step
+    (its cycle) does not wait for them."""
     url = machine.faces.opcua.address
 
     async def crowd():
@@ -682,32 +982,19 @@ def test_many_clients_at_once_and_a_silent_subscriber_do_not_make_the_machine_la
         await asyncio.gather(*(c.disconnect() for c in connected), return_exceptions=True)
         return len(connected), [r for r in results if r is not None]
 
-    # a silent subscriber: creates a subscription, then never publishes (stalled reader)
-    async def silent():
-        c = Client(url, timeout=10, watchdog_intervall=WATCHDOG_S)
-        await c.connect()
-        params = ua.CreateSubscriptionParameters()
-        params.RequestedPublishingInterval = 100
-        params.RequestedLifetimeCount = 30
-        params.RequestedMaxKeepAliveCount = 10
-        params.PublishingEnabled = True
-        await c.uaclient.create_subscription(params, lambda *_: None)
-        return c
-
-    quiet = client_loop.run(silent, timeout=60)
     worst = 0.0
+    started = time.perf_counter()
     future = asyncio.run_coroutine_threadsafe(crowd(), client_loop.loop)
     while not future.done():
         t0 = time.perf_counter()
         machine.step(1)
         worst = max(worst, time.perf_counter() - t0)
+    storm_s = time.perf_counter() - started
     ok, errors = future.result()
     assert ok >= 90, errors[:3]  # asyncua's default session limit is far above 100
-    # the machine's step never waited for the crowd (that would be the whole connect
-    # storm, tens of seconds); one step may still lose the interpreter to the server's
-    # thread for a while on a loaded box (2.6 s seen at load 10): the stalled-server test
-    # below proves that no step waits for the server at all
-    assert worst < DEADLINE_S / 3, worst
+    # a step that waited for the crowd would take a good part of the storm; the 100
+    # clients run in this process, so their connects share the GIL with the machine's
+    # steps: the bound is the larger of late_step_s and a third of the storm
+    assert worst < max(late_step_s(machine), storm_s / 3), (worst, storm_s)
     after = connect(client_loop, url)  # still serving
     client_loop.run(after.disconnect)
-    client_loop.run(quiet.disconnect)

@@ -41,7 +41,16 @@ class Jobs:
         "running": [NS(id=3, revision_id=11, quantity=5, done=2, status="running")],
         "queued": [NS(id=4, revision_id=7, quantity=1, done=0, status="queued")],
     }
-    allocs = {3: [{"machine": "mill1"}], 4: [{"machine": "mill2"}]}
+    allocs = {
+        3: [  # job 3's five parts: two done on mill1, one on lathe1, one running on mill1
+            {"machine": "mill1", "status": "completed"},
+            {"machine": "lathe1", "status": "completed"},
+            {"machine": "mill1", "status": "completed"},
+            {"machine": "lathe1", "status": "rerouted"},
+            {"machine": "mill1", "status": "running"},
+        ],
+        4: [{"machine": "mill2", "status": "dispatched"}],
+    }
 
     def list(self, status=None, limit=100):
         return self.jobs.get(status, [])
@@ -62,6 +71,25 @@ def test_open_jobs_allocated_to_the_machine_become_production_jobs():
         (j.identifier, j.program, j.runs_planned, j.runs_completed, j.state) for j in data.jobs
     ] == [("job3", "O2001", 5, 2, "Running")]
     assert host_data(Library(), Dispatches(), Jobs(), "mill2").jobs[0].state == "Initializing"
+
+
+def test_each_machine_counts_its_own_runs_of_a_job_and_shows_the_plans_quantity():
+    """A job spread over machines: each machine's ProductionJob counts the runs (parts) it
+    completed, not the job's total (3 here); RunsPlanned is the job's quantity on both."""
+    Jobs.jobs["running"][0].done = 3  # the cell's count: 2 on mill1 + 1 on lathe1
+    try:
+        by_machine = {
+            name: host_data(Library(), Dispatches(), Jobs(), name).jobs[0]
+            for name in ("mill1", "lathe1")
+        }
+    finally:
+        Jobs.jobs["running"][0].done = 2
+    assert {
+        n: (j.runs_planned, j.runs_completed, j.parts_completed) for n, j in by_machine.items()
+    } == {
+        "mill1": (5, 2, 2),
+        "lathe1": (5, 1, 1),
+    }
 
 
 def test_opcua_users_are_the_api_keys_with_their_roles():
@@ -190,3 +218,21 @@ def test_a_machine_in_this_process_gets_its_data_by_a_direct_call():
             {"command": "acknowledge", "face": "opcua", "detail": "alarm 3040 (DRIVE)"},
         )
     ]
+
+
+def test_the_run_banner_names_each_machines_opcua_endpoint():
+    """`fmscell run` prints where each machine's OPC UA server is (server/cell.py)."""
+    from server.cell import banner  # deferred: server.cell pulls in the whole host
+
+    lines = banner(
+        ("mill1", "lathe1", "mill2"),
+        "realtime",
+        "http://127.0.0.1:8000",
+        {"mill1": "opc.tcp://127.0.0.1:4841", "mill2": "opc.tcp://127.0.0.1:4843"},
+    )
+    assert lines[0] == "fmscell cell: mill1, lathe1, mill2 (realtime clock)"
+    assert "MTConnect:      http://127.0.0.1:8000/mtconnect/probe" in lines
+    assert lines[-2:] == [
+        "OPC UA mill1:   opc.tcp://127.0.0.1:4841",
+        "OPC UA mill2:   opc.tcp://127.0.0.1:4843",
+    ]  # lathe1's OPC UA face is off: no line

@@ -275,6 +275,8 @@ class OpcUaFace:
         nodeid, vtype = entry
         if vtype == ua.VariantType.LocalizedText:
             value = ua.LocalizedText(value)
+        elif vtype == ua.VariantType.NodeId and isinstance(value, tuple):
+            value = self.space.node(value)  # a state's node in a companion namespace
         dv = Written(ua.Variant(value, vtype), SourceTimestamp=source, ServerTimestamp=now)
         await self.server.write_attribute_value(nodeid, dv)
 

@@ -16,7 +16,7 @@ from asyncua import ua
 from cnc.faces.opcua import model as m
 from cnc.faces.opcua.host_data import ProductionJob
 from cnc.faces.opcua.space import HOUR, ONE, Builder
-from cnc.faces.opcua.values import STACK_LAMPS, color
+from cnc.faces.opcua.values import STACK_LAMPS, color, current_state
 
 MT, FMS = m.MACHINE_TOOL, m.FMSCELL
 
@@ -190,6 +190,8 @@ def _stacklight(b: Builder, mon: ua.NodeId, p: str) -> None:
             m.SIGNAL_COLOR.node,
             color(lamp_color),
         )
+        # the lamps are steady: the simulated machines do not blink them
+        b.value(el, f"{p}.{lamp}.SignalMode", (m.IA, "SignalMode"), m.SIGNAL_MODE_LIGHT.node, 0)
 
 
 def _active_program(b: Builder, prod: ua.NodeId, p: str) -> None:
@@ -220,6 +222,15 @@ def production_job(b: Builder, plan: ua.NodeId, p: str, job: ProductionJob, i: i
         node,
         p,
         tuple(((MT, k), m.UINT32, 0) for k in ("RunsPlanned", "RunsCompleted", "PartsCompleted")),
+    )
+    # the host always plans a quantity, so RunsPlanned is always valid
+    b.value(
+        ua.NodeId(f"{p}.RunsPlanned", b.space.machine_ns),
+        f"{p}.RunsPlanned.IsValid",
+        (MT, "IsValid"),
+        m.BOOLEAN,
+        True,
+        prop=True,
     )
     b.state(node, p, m.PRODUCTION_JOB_STATE_MACHINE.node, "")
     progs = b.child_object(
@@ -252,12 +263,24 @@ def tool(b: Builder, tools: ua.NodeId, p: str, number: str, data: dict) -> ua.No
             ((MT, "Locked"), m.BOOLEAN, False),
         ),
     )
+    b.value(
+        ua.NodeId(f"{p}.Locked", b.space.machine_ns),
+        f"{p}.Locked.ReasonForLocking",
+        (MT, "ReasonForLocking"),
+        m.TOOL_LOCKED.node,
+        LOCKED_BY_TOOL_LIFE,
+        prop=True,
+    )
     life = b.child_object(node, f"{p}.ToolLife", (MT, "ToolLife"), m.BASE_OBJECT)
     uses, hours = tool_limits(data)
     q = f"{p}.ToolLife"
     b.tool_life(life, f"{q}.Uses", (FMS, "Uses"), m.UINT32, "NumberOfUsages", ONE, uses)
     b.tool_life(life, f"{q}.CutTime", (FMS, "CutTime"), m.DOUBLE, "Time", HOUR, hours)
     return node
+
+
+#: the only reason the machine locks a tool (ReasonForLocking: meaningful while Locked)
+LOCKED_BY_TOOL_LIFE = m.TOOL_LOCKED.fields.index("ToolLife")
 
 
 def tool_limits(data: dict) -> tuple[int | None, float | None]:
@@ -293,5 +316,5 @@ def job_values(job: ProductionJob, i: int) -> dict[str, object]:
         "RunsPlanned": job.runs_planned,
         "RunsCompleted": job.runs_completed,
         "PartsCompleted": job.parts_completed,
-        "State.CurrentState": job.state,
+        **current_state("State", m.JOB_STATES, job.state),
     }

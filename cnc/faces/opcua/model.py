@@ -6,7 +6,7 @@ These are facts of the specifications (namespace URIs, numeric node ids, browse 
 supertypes, modelling rules, data types), written out for the subset the server fills, so
 the server builds its type nodes itself at start instead of importing the NodeSet2 files
 at run time. Tests parse the official NodeSet2 files and check every declaration here
-against them (tests/cnc/faces/test_opcua_model.py).
+against them (tests/cnc/test_opcua_model.py).
 
 A node is named `(namespace URI, numeric id)`; a browse name `(namespace URI, name)`.
 """
@@ -53,6 +53,7 @@ NODE_ID = (UA, 17)
 UINTEGER = (UA, 28)  # abstract: any unsigned integer
 NUMBER = (UA, 26)  # abstract: any number
 EU_INFORMATION = (UA, 887)
+RANGE = (UA, 884)
 
 HAS_COMPONENT, HAS_PROPERTY, HAS_ADD_IN, HAS_ORDERED_COMPONENT = 47, 46, 17604, 49
 MANDATORY, OPTIONAL, OPTIONAL_PLACEHOLDER = 78, 80, 11510
@@ -69,6 +70,9 @@ class Member:
     mandatory: bool
     reference: int = HAS_COMPONENT
     data_type: NodeRef | None = None
+    #: the declaration's own members (an instance declaration may add to or refine what
+    #: its type definition declares: a state machine's CurrentState with Id and Number)
+    children: tuple[Member, ...] = ()
 
 
 @dataclass(frozen=True, slots=True)
@@ -106,6 +110,7 @@ def _v(
     prop: bool = False,
     name_ns: str | None = None,
     typedef: NodeRef | None = None,
+    children: tuple[Member, ...] = (),
 ) -> Member:
     return Member(
         (name_ns or ns, name),
@@ -115,13 +120,55 @@ def _v(
         mandatory,
         HAS_PROPERTY if prop else HAS_COMPONENT,
         data_type,
+        children,
     )
 
 
 def _o(
-    ns: str, name: str, node_id: int, typedef: NodeRef, mandatory: bool, *, ref: int = HAS_COMPONENT
+    ns: str,
+    name: str,
+    node_id: int,
+    typedef: NodeRef,
+    mandatory: bool,
+    *,
+    ref: int = HAS_COMPONENT,
+    children: tuple[Member, ...] = (),
 ) -> Member:
-    return Member((ns, name), node_id, "Object", typedef, mandatory, ref)
+    return Member((ns, name), node_id, "Object", typedef, mandatory, ref, children=children)
+
+
+def _override(ns: str, name: str, node_id: int, mandatory: bool, units: int, eu_range: int):
+    """An AnalogUnitRange override with its two mandatory properties (OPC 10000-8)."""
+    return _v(
+        ns,
+        name,
+        node_id,
+        DOUBLE,
+        mandatory,
+        typedef=ANALOG_UNIT_RANGE,
+        children=(
+            _v(ns, "EngineeringUnits", units, EU_INFORMATION, True, prop=True, name_ns=UA),
+            _v(ns, "EURange", eu_range, RANGE, True, prop=True, name_ns=UA),
+        ),
+    )
+
+
+def _current_state(ns: str, node_id: int, id_id: int, number_id: int | None = None) -> Member:
+    """A state machine's CurrentState (FiniteStateVariable) with its Id (the NodeId of the
+    current state) and, where the declaration makes it mandatory, its Number."""
+    children = [_v(ns, "Id", id_id, NODE_ID, True, prop=True, name_ns=UA)]
+    if number_id is not None:
+        children.append(_v(ns, "Number", number_id, UINT32, True, prop=True, name_ns=UA))
+    return _v(
+        ns,
+        "CurrentState",
+        node_id,
+        LOCALIZED_TEXT,
+        True,
+        name_ns=UA,
+        typedef=FINITE_STATE_VARIABLE,
+        children=tuple(children),
+    )
 
 
 # --- data types --------------------------------------------------------------------------
@@ -163,6 +210,14 @@ TOOL_LIFE_INDICATION = EnumDecl(
         "Other",
     ),
 )
+TOOL_LOCKED = EnumDecl(
+    (MACHINE_TOOL, 66),
+    "ToolLocked",
+    ("CapabilityUnavailable", "ByOperator", "ToolBreak", "ToolLife", "MeasurementError", "Other"),
+)
+SIGNAL_MODE_LIGHT = EnumDecl(
+    (IA, 3005), "SignalModeLight", ("Continuous", "Blinking", "Flashing", "Other")
+)
 STACKLIGHT_OPERATION_MODE = EnumDecl(
     (IA, 3002), "StacklightOperationMode", ("Segmented", "Levelmeter", "Running_Light", "Other")
 )
@@ -177,8 +232,10 @@ ENUMS = (
     CHANNEL_MODE,
     TOOL_MANAGEMENT,
     TOOL_LIFE_INDICATION,
+    TOOL_LOCKED,
     STACKLIGHT_OPERATION_MODE,
     SIGNAL_COLOR,
+    SIGNAL_MODE_LIGHT,
 )
 
 # --- object types, supertypes first ------------------------------------------------------
@@ -237,14 +294,22 @@ MACHINE_OPERATION_MONITORING = ObjectTypeDecl(
     (
         _v(MT, "OperationMode", 225, MACHINE_OPERATION_MODE.node, True),
         _v(MT, "PowerOnDuration", 261, UINT32, False),
-        _v(MT, "FeedOverride", 233, DOUBLE, False, typedef=ANALOG_UNIT_RANGE),
-        Member((MA, "MachineryItemState"), 5006, "Object", MACHINERY_ITEM_STATE.node, False),
-        Member(
-            (MA, "MachineryOperationMode"),
+        _override(MT, "FeedOverride", 233, False, 237, 252),
+        _o(
+            MA,
+            "MachineryItemState",
+            5006,
+            MACHINERY_ITEM_STATE.node,
+            False,
+            children=(_current_state(MT, 6007, 6008),),
+        ),
+        _o(
+            MA,
+            "MachineryOperationMode",
             5007,
-            "Object",
             MACHINE_OPERATION_MODE_STATE_MACHINE.node,
             False,
+            children=(_current_state(MT, 6009, 6010),),
         ),
     ),
 )
@@ -266,9 +331,21 @@ CHANNEL_MONITORING = ObjectTypeDecl(
     (
         _v(MT, "ChannelState", 332, CHANNEL_STATE.node, True),
         _v(MT, "ChannelMode", 249, CHANNEL_MODE.node, True),
-        _v(MT, "FeedOverride", 276, DOUBLE, True, typedef=ANALOG_UNIT_RANGE),
-        _v(MT, "RapidOverride", 287, DOUBLE, False, typedef=ANALOG_UNIT_RANGE),
-        _o(MT, "ChannelModifiers", 113, CHANNEL_MODIFIER.node, False),
+        _override(MT, "FeedOverride", 276, True, 335, 336),
+        _override(MT, "RapidOverride", 287, False, 342, 343),
+        _o(
+            MT,
+            "ChannelModifiers",
+            113,
+            CHANNEL_MODIFIER.node,
+            False,
+            children=(
+                _v(MT, "BlockSkip", 383, BOOLEAN, False),
+                _v(MT, "DryRun", 361, BOOLEAN, True),
+                _v(MT, "OptionalStop", 364, BOOLEAN, True),
+                _v(MT, "SingleStep", 367, BOOLEAN, True),
+            ),
+        ),
     ),
 )
 WORKING_UNIT_MONITORING = ObjectTypeDecl(
@@ -280,7 +357,7 @@ SPINDLE_MONITORING = ObjectTypeDecl(
     WORKING_UNIT_MONITORING.node,
     (
         _v(MT, "IsRotating", 247, BOOLEAN, True),
-        _v(MT, "Override", 241, DOUBLE, False, typedef=ANALOG_UNIT_RANGE),
+        _override(MT, "Override", 241, False, 246, 275),
         _v(MT, "IsUsedAsAxis", 371, BOOLEAN, False),
     ),
 )
@@ -298,7 +375,10 @@ STACK_ELEMENT_LIGHT = ObjectTypeDecl(
     (IA, 1006),
     "StackElementLightType",
     STACK_ELEMENT.node,
-    (_v(IA, "SignalColor", 6016, SIGNAL_COLOR.node, False),),
+    (
+        _v(IA, "SignalColor", 6016, SIGNAL_COLOR.node, False),
+        _v(IA, "SignalMode", 6017, SIGNAL_MODE_LIGHT.node, False),
+    ),
 )
 BASIC_STACKLIGHT = ObjectTypeDecl(
     (IA, 1002),
@@ -311,8 +391,32 @@ MONITORING = ObjectTypeDecl(
     "MonitoringType",
     BASE_OBJECT,
     (
-        _o(MT, "MachineTool", 119, MACHINE_OPERATION_MONITORING.node, True),
-        _o(MT, "Stacklight", 121, BASIC_STACKLIGHT.node, False),
+        _o(
+            MT,
+            "MachineTool",
+            119,
+            MACHINE_OPERATION_MONITORING.node,
+            True,
+            children=(_v(MT, "OperationMode", 254, MACHINE_OPERATION_MODE.node, True),),
+        ),
+        _o(
+            MT,
+            "Stacklight",
+            121,
+            BASIC_STACKLIGHT.node,
+            False,
+            children=(
+                _v(
+                    MT,
+                    "StacklightMode",
+                    415,
+                    STACKLIGHT_OPERATION_MODE.node,
+                    True,
+                    prop=True,
+                    name_ns=IA,
+                ),
+            ),
+        ),
     ),
 )
 
@@ -320,7 +424,7 @@ PRODUCTION_STATE_MACHINE = ObjectTypeDecl(
     (MT, 24),
     "ProductionStateMachineType",
     FINITE_STATE_MACHINE,
-    (_v(MT, "CurrentState", 270, LOCALIZED_TEXT, True, name_ns=UA, typedef=FINITE_STATE_VARIABLE),),
+    (_current_state(MT, 270, 271, 274),),
 )
 PRODUCTION_PROGRAM_STATE_MACHINE = ObjectTypeDecl(
     (MT, 15), "ProductionProgramStateMachineType", PRODUCTION_STATE_MACHINE.node
@@ -335,7 +439,14 @@ PRODUCTION_PROGRAM = ObjectTypeDecl(
     (
         _v(MT, "Name", 193, STRING, True, prop=True),
         _v(MT, "NumberInList", 230, UINT16, True, prop=True, name_ns=UA),
-        _o(MT, "State", 5032, PRODUCTION_PROGRAM_STATE_MACHINE.node, False),
+        _o(
+            MT,
+            "State",
+            5032,
+            PRODUCTION_PROGRAM_STATE_MACHINE.node,
+            False,
+            children=(_current_state(MT, 6031, 6035, 6039),),
+        ),
     ),
 )
 PRODUCTION_ACTIVE_PROGRAM = ObjectTypeDecl(
@@ -343,7 +454,14 @@ PRODUCTION_ACTIVE_PROGRAM = ObjectTypeDecl(
     "ProductionActiveProgramType",
     PRODUCTION_PROGRAM.node,
     (
-        _o(MT, "State", 5033, PRODUCTION_PROGRAM_STATE_MACHINE.node, True),
+        _o(
+            MT,
+            "State",
+            5033,
+            PRODUCTION_PROGRAM_STATE_MACHINE.node,
+            True,
+            children=(_current_state(MT, 6032, 6033, 6034),),
+        ),
         _v(MT, "JobIdentifier", 384, STRING, False),
         _v(MT, "JobNodeId", 382, NODE_ID, False),
     ),
@@ -355,9 +473,23 @@ PRODUCTION_JOB = ObjectTypeDecl(
     (
         _v(MT, "Identifier", 189, STRING, True, prop=True),
         _v(MT, "NumberInList", 196, UINT16, True, prop=True, name_ns=UA),
-        _v(MT, "RunsPlanned", 192, UINT32, True),
+        _v(
+            MT,
+            "RunsPlanned",
+            192,
+            UINT32,
+            True,
+            children=(_v(MT, "IsValid", 188, BOOLEAN, True, prop=True),),
+        ),
         _v(MT, "RunsCompleted", 191, UINT32, True),
-        _o(MT, "State", 5002, PRODUCTION_JOB_STATE_MACHINE.node, True),
+        _o(
+            MT,
+            "State",
+            5002,
+            PRODUCTION_JOB_STATE_MACHINE.node,
+            True,
+            children=(_current_state(MT, 6001, 6002, 6003),),
+        ),
         _o(MT, "ProductionPrograms", 75, ORDERED_LIST, True),
         _v(MT, "PartsCompleted", 6015, UINT32, False),
     ),
@@ -368,7 +500,25 @@ PRODUCTION = ObjectTypeDecl(
     "ProductionType",
     BASE_OBJECT,
     (
-        _o(MT, "ActiveProgram", 87, PRODUCTION_ACTIVE_PROGRAM.node, True),
+        _o(
+            MT,
+            "ActiveProgram",
+            87,
+            PRODUCTION_ACTIVE_PROGRAM.node,
+            True,
+            children=(
+                _v(MT, "Name", 326, STRING, True, prop=True),
+                _v(MT, "NumberInList", 250, UINT16, True, prop=True, name_ns=UA),
+                _o(
+                    MT,
+                    "State",
+                    5035,
+                    PRODUCTION_PROGRAM_STATE_MACHINE.node,
+                    True,
+                    children=(_current_state(MT, 6040, 6041, 6042),),
+                ),
+            ),
+        ),
         _o(MT, "ProductionPlan", 81, PRODUCTION_JOB_LIST.node, False),
     ),
 )
@@ -418,7 +568,14 @@ TOOL = ObjectTypeDecl(
     (
         _v(MT, "ControlIdentifier1", 178, UINT32, True),
         _v(MT, "ControlIdentifierInterpretation", 296, TOOL_MANAGEMENT.node, True),
-        _v(MT, "Locked", 321, BOOLEAN, True),
+        _v(
+            MT,
+            "Locked",
+            321,
+            BOOLEAN,
+            True,
+            children=(_v(MT, "ReasonForLocking", 269, TOOL_LOCKED.node, True, prop=True),),
+        ),
         _o(MT, "ToolLife", 88, BASE_OBJECT, False),
     ),
 )
@@ -432,9 +589,64 @@ MACHINE_TOOL_TYPE = ObjectTypeDecl(
     "MachineToolType",
     BASE_OBJECT,
     (
-        _o(DI, "Identification", 83, MACHINE_TOOL_IDENTIFICATION.node, True, ref=HAS_ADD_IN),
-        _o(MT, "Monitoring", 123, MONITORING.node, True),
-        _o(MT, "Production", 82, PRODUCTION.node, True),
+        _o(
+            DI,
+            "Identification",
+            83,
+            MACHINE_TOOL_IDENTIFICATION.node,
+            True,
+            ref=HAS_ADD_IN,
+            children=(
+                _v(MT, "Manufacturer", 182, LOCALIZED_TEXT, True, prop=True, name_ns=DI),
+                _v(MT, "ProductInstanceUri", 258, STRING, True, prop=True, name_ns=DI),
+                _v(MT, "SerialNumber", 259, STRING, True, prop=True, name_ns=DI),
+            ),
+        ),
+        _o(
+            MT,
+            "Monitoring",
+            123,
+            MONITORING.node,
+            True,
+            children=(
+                _o(
+                    MT,
+                    "MachineTool",
+                    122,
+                    MACHINE_OPERATION_MONITORING.node,
+                    True,
+                    children=(_v(MT, "OperationMode", 263, MACHINE_OPERATION_MODE.node, True),),
+                ),
+            ),
+        ),
+        _o(
+            MT,
+            "Production",
+            82,
+            PRODUCTION.node,
+            True,
+            children=(
+                _o(
+                    MT,
+                    "ActiveProgram",
+                    84,
+                    PRODUCTION_ACTIVE_PROGRAM.node,
+                    True,
+                    children=(
+                        _v(MT, "Name", 174, STRING, True, prop=True),
+                        _v(MT, "NumberInList", 175, UINT16, True, prop=True, name_ns=UA),
+                        _o(
+                            MT,
+                            "State",
+                            5034,
+                            PRODUCTION_PROGRAM_STATE_MACHINE.node,
+                            True,
+                            children=(_current_state(MT, 6036, 6037, 6038),),
+                        ),
+                    ),
+                ),
+            ),
+        ),
         _o(MT, "Notification", 128, NOTIFICATION.node, True),
         _o(MT, "Equipment", 131, EQUIPMENT.node, True),
     ),
@@ -482,12 +694,38 @@ VARIABLE_TYPES = (TOOL_LIFE,)
 #: Objects/Machines, the Machinery entry point every machine registers under
 MACHINES_FOLDER: NodeRef = (MA, 1001)
 
-#: the states of ProductionProgramStateMachineType (OPC 40501-1 §11.7), with their state
-#: numbers (the Id of CurrentState is the state node)
-PROGRAM_STATES = {
-    "Initializing": 5039,
-    "Running": 5041,
-    "Ended": 5038,
-    "Interrupted": 5040,
-    "Aborted": 5037,
+#: the states of each state machine the instance holds: the state's node (what the Id of
+#: CurrentState names) and its StateNumber (what Number shows), from the nodesets
+PROGRAM_STATES: dict[str, tuple[NodeRef, int]] = {  # ProductionProgramStateMachineType
+    "Initializing": ((MT, 5039), 0),
+    "Running": ((MT, 5041), 1),
+    "Ended": ((MT, 5038), 2),
+    "Interrupted": ((MT, 5040), 3),
+    "Aborted": ((MT, 5037), 4),
+}
+JOB_STATES: dict[str, tuple[NodeRef, int]] = {  # ProductionJobStateMachineType
+    "Initializing": ((MT, 5015), 0),
+    "Running": ((MT, 5017), 1),
+    "Ended": ((MT, 5014), 2),
+    "Interrupted": ((MT, 5016), 3),
+    "Aborted": ((MT, 5013), 4),
+}
+MACHINERY_ITEM_STATES: dict[str, tuple[NodeRef, int]] = {  # MachineryItemState_StateMachine
+    "NotAvailable": ((MA, 5005), 0),
+    "OutOfService": ((MA, 5004), 1),
+    "NotExecuting": ((MA, 5007), 2),
+    "Executing": ((MA, 5006), 3),
+}
+MACHINE_OPERATION_MODES: dict[str, tuple[NodeRef, int]] = {  # MachineOperationModeSM
+    "None": ((MT, 5059), 0),
+    "Maintenance": ((MT, 5058), 1),
+    "Setup": ((MT, 5061), 2),
+    "Processing": ((MT, 5060), 3),
+}
+#: each state machine type the instance uses -> its states
+STATES_OF: dict[NodeRef, dict[str, tuple[NodeRef, int]]] = {
+    PRODUCTION_PROGRAM_STATE_MACHINE.node: PROGRAM_STATES,
+    PRODUCTION_JOB_STATE_MACHINE.node: JOB_STATES,
+    MACHINERY_ITEM_STATE.node: MACHINERY_ITEM_STATES,
+    MACHINE_OPERATION_MODE_STATE_MACHINE.node: MACHINE_OPERATION_MODES,
 }

@@ -46,6 +46,7 @@ VARIANT_OF = {
     m.LOCALIZED_TEXT: ua.VariantType.LocalizedText,
     m.NODE_ID: ua.VariantType.NodeId,
     m.EU_INFORMATION: ua.VariantType.ExtensionObject,
+    m.RANGE: ua.VariantType.ExtensionObject,
 }
 
 
@@ -210,11 +211,12 @@ class Builder:
             rule=m.OPTIONAL_PLACEHOLDER,
         )
 
-    def _members(self, nodeid: ua.NodeId, decl) -> None:
-        """The instance declarations of a declared type, each with its modelling rule."""
+    def _members(self, nodeid: ua.NodeId, decl, members=None) -> None:
+        """The instance declarations of a declared type, each with its modelling rule and
+        its own members at every depth (a CurrentState's Id and Number...)."""
         sp = self.space
         ns = sp.ns[decl.node[0]]
-        for member in decl.members:
+        for member in decl.members if members is None else members:
             rule = m.MANDATORY if member.mandatory else m.OPTIONAL
             mid = ua.NodeId(member.node_id, ns)
             if member.node_class == "Object":
@@ -237,6 +239,8 @@ class Builder:
                     member.reference,
                     rule=rule,
                 )
+            if member.children:
+                self._members(mid, decl, member.children)
 
     # ------------------------------------------------------------------ instance groups
     # The instance's nodes have string ids in the machine's namespace: the path under the
@@ -355,10 +359,12 @@ class Builder:
         name: m.Name = (m.MACHINE_TOOL, "State"),
     ) -> None:
         """A state machine (40501's `State`, 40001's MachineryItemState...) with its
-        CurrentState (the state's display name)."""
+        CurrentState (the state's display name) and CurrentState's Id (the node of the
+        state in the state machine's type) and Number (its StateNumber); `initial` "" for
+        none yet (a null Id, Number 0)."""
         key = f"{prefix}.{name[1]}"
         st = self.child_object(parent, key, name, typedef)
-        self.value(
+        current = self.value(
             st,
             f"{key}.CurrentState",
             (m.UA, "CurrentState"),
@@ -366,6 +372,11 @@ class Builder:
             initial,
             typedef=m.FINITE_STATE_VARIABLE,
         )
+        state_node, number = m.STATES_OF[typedef].get(initial, (None, 0))
+        ident = self.space.node(state_node) if state_node is not None else ua.NodeId()
+        q = f"{key}.CurrentState"
+        self.value(current, f"{q}.Id", (m.UA, "Id"), m.NODE_ID, ident, prop=True)
+        self.value(current, f"{q}.Number", (m.UA, "Number"), m.UINT32, number, prop=True)
 
     def ordered(
         self,
@@ -401,6 +412,8 @@ class Builder:
 
 
 def _default(data_type: m.NodeRef | None) -> ua.Variant:
+    if data_type == m.RANGE:
+        return ua.Variant(ua.Range(), ua.VariantType.ExtensionObject)
     vtype = VARIANT_OF.get(data_type, ua.VariantType.Int32) if data_type else ua.VariantType.Null
     return ua.Variant(_coerce(None, vtype), vtype)
 

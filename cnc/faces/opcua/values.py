@@ -68,6 +68,19 @@ def program_number(name: str) -> int:
     return int(digits) if digits.isdigit() else 0
 
 
+def current_state(
+    prefix: str, states: dict[str, tuple[m.NodeRef, int]], state: str
+) -> dict[str, object]:
+    """A state machine's CurrentState with its Id (the state's node, as a NodeRef the face
+    resolves to a NodeId) and Number (the StateNumber)."""
+    node, number = states[state]
+    return {
+        f"{prefix}.CurrentState": state,
+        f"{prefix}.CurrentState.Id": node,
+        f"{prefix}.CurrentState.Number": number,
+    }
+
+
 def status_values(status: MachineStatus, power_on_s: float) -> dict[str, object]:
     faults = any(a.severity == "FAULT" for a in status.alarms)
     warnings = any(a.severity == "WARNING" for a in status.alarms)
@@ -86,9 +99,13 @@ def status_values(status: MachineStatus, power_on_s: float) -> dict[str, object]
     else:
         item_state = "Executing" if status.execution == "ACTIVE" else "NotExecuting"
     out: dict[str, object] = {
-        "Monitoring.MachineTool.MachineryItemState.CurrentState": item_state,
-        "Monitoring.MachineTool.MachineryOperationMode.CurrentState": (
-            MACHINERY_OPERATION_MODE_OF[status.controller_mode]
+        **current_state(
+            "Monitoring.MachineTool.MachineryItemState", m.MACHINERY_ITEM_STATES, item_state
+        ),
+        **current_state(
+            "Monitoring.MachineTool.MachineryOperationMode",
+            m.MACHINE_OPERATION_MODES,
+            MACHINERY_OPERATION_MODE_OF[status.controller_mode],
         ),
         "Monitoring.MachineTool.OperationMode": _OPERATION[
             OPERATION_MODE_OF[status.controller_mode]
@@ -107,7 +124,7 @@ def status_values(status: MachineStatus, power_on_s: float) -> dict[str, object]
         "Production.ActiveProgram.Name": status.program,
         "Production.ActiveProgram.Number": program_number(status.program),
         "Production.ActiveProgram.Line": int(status.line),
-        "Production.ActiveProgram.State.CurrentState": program_state,
+        **current_state("Production.ActiveProgram.State", m.PROGRAM_STATES, program_state),
         "Production.ActiveProgram.PartCount": int(status.part_count),
     }
     for name, _color in STACK_LAMPS:
