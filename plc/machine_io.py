@@ -96,6 +96,80 @@ DETECTION: dict[str, tuple[float, str, str]] = {
     ),
 }
 
+# What brings the machine back from each field fault (docs/recovery.md, /api/fault-types
+# `recovery`): what a real machine's operator does, in order. Every alarm of the program is
+# latched and cleared by RESET (an alarm whose cause persists comes back in the same scan),
+# except 1030, which goes with the closed door; a RESET aborts the program. Homing only where
+# the axes stopped on a fault and lost their reference (the E-stop, or a reset in a motion).
+# tests/plc/test_machine_io.py holds docs/recovery.md to this table, tests/cnc/test_recovery.py
+# runs it.
+RECOVERY: dict[str, str] = {
+    "door_open": (
+        "close the door (1030 goes with it); CYCLE START resumes the program where it "
+        "stopped (RESET instead aborts it); no homing: the axes were held, not faulted"
+    ),
+    "air_pressure_loss": (
+        "restore the shop air (compressor, main valve, the air service unit's filter and "
+        "regulator); RESET (1040 is latched: the held program is aborted); no homing: the axes "
+        "were held, not faulted; run the program again"
+    ),
+    "estop_button": (
+        "release the E-stop button; RESET (clears the PLC's 1001 and the NC's 3001); home "
+        "(the reference is lost)"
+    ),
+    "estop_chain": (
+        "find and close the open chain (a guard switch of the chain, a broken wire, the "
+        "safety relay and its feedback); RESET (1001 clears only with the chain closed); home "
+        "(the reference is lost)"
+    ),
+    "coolant_pump_fail": "repair the coolant pump; RESET; home",
+    "carousel_jam": "free the carousel; RESET; no homing: the axes did not stop on a fault",
+    "arm_jam": "free the changer arm; RESET; no homing: the axes did not stop on a fault",
+    "changer_jam": (
+        "free the carousel and the changer arm; RESET; no homing: the axes did not stop on a fault"
+    ),
+    "spindle_drive_fault": (
+        "repair the spindle drive; RESET once (it drops the spindle enable for a scan: the "
+        "drive restarts); home"
+    ),
+    "spindle_stall": "free the spindle; RESET once; home",
+    "orient_fail": (
+        "repair the spindle orientation (its sensor or drive); RESET; no homing: the axes did "
+        "not stop on a fault"
+    ),
+    "lube_level_low": (
+        "refill the lubricant tank; the program in progress cuts on (1041 refuses only the "
+        "next cycle start); RESET once it has ended (1041 is latched); no homing"
+    ),
+    "lube_pump_fail": (
+        "repair the lubrication pump (its line, the pressure switch); RESET (1042 is "
+        "latched); no homing; the next pulse (every 32 s) checks the pressure again"
+    ),
+    "door_lock_fail": (
+        "repair the door lock (bolt, solenoid, the locked switch); RESET (1031 is latched: "
+        "the program is aborted); no homing: the axes did not stop on a fault; run the "
+        "program again"
+    ),
+}
+
+# The row of docs/recovery.md's fault class table each field fault belongs to.
+RECOVERY_CLASS: dict[str, str] = {
+    "door_open": "door",
+    "air_pressure_loss": "air",
+    "estop_button": "E-stop",
+    "estop_chain": "E-stop",
+    "coolant_pump_fail": "coolant",
+    "carousel_jam": "tool changer",
+    "arm_jam": "tool changer",
+    "changer_jam": "tool changer",
+    "spindle_drive_fault": "spindle",
+    "spindle_stall": "spindle",
+    "orient_fail": "tool changer",
+    "lube_level_low": "lubrication",
+    "lube_pump_fail": "lubrication",
+    "door_lock_fail": "door lock",
+}
+
 PANEL_BUTTONS = ("PanelCycleStart", "PanelFeedHold", "PanelReset")
 
 

@@ -42,7 +42,7 @@ from dnc.transfer import TransferError
 from dnc.transfer_worker import RetryPolicy, TransferWorker, _default_client
 from mtconnect import Agent
 from mtconnect.client import AgentConnections
-from plc.machine_io import DETECTION, FAULTS
+from plc.machine_io import DETECTION, FAULTS, RECOVERY, RECOVERY_CLASS
 from server.config import load_cell_config
 from server.cycle_audit import CycleAudit, HostRequests
 from server.host import AlarmWatch, Loop, MonitoringModel, make_starter
@@ -832,7 +832,8 @@ def machine_time(answer: str) -> float | None:
 
 def fault_types() -> list[dict]:
     """The `/api/fault-types` rows: the drive, bus and node kinds of drives.fault_registry,
-    their aliases, the PLC field faults with plc.machine_io.DETECTION, the PLC aliases."""
+    their aliases, the PLC field faults with plc.machine_io.DETECTION, RECOVERY_CLASS and
+    RECOVERY, the PLC aliases."""
     # deferred: drives.faults loads python-can and canopen, which a host whose machines
     # run in their own processes does not otherwise need
     from drives.faults import fault_types as drive_fault_types
@@ -853,6 +854,8 @@ def fault_types() -> list[dict]:
                 "detection": how,
                 "bound_s": bound,
                 "detect_from": since,
+                "recovery_class": RECOVERY_CLASS[name],
+                "recovery": RECOVERY[name],
             }
         )
     for alias, kind in PLC_ALIASES.items():

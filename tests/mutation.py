@@ -162,6 +162,17 @@ EQUIVALENT: dict[str, str] = {
     "cnc.interp.compensation.x_h_word__mutmut_1": "length_comp already applied this H",
     "cnc.interp.compensation.x_h_word__mutmut_2": "length_comp already applied this H",
     "cnc.interp.compensation.x_apply_length__mutmut_33": "resync=None is as falsy as False",
+    # dnc/rules.py: getattr(rule, "setup_aware", False) is only tested for truth; a rule
+    # without the attribute gives None instead of False, as falsy
+    **{
+        f"dnc.rules.{name}": "getattr's default None is as falsy as False"
+        for name in (
+            "x__plain__mutmut_6",
+            "x_rule_named__mutmut_14",
+            "x_rule_named__mutmut_24",
+            "x_rule_named__mutmut_41",
+        )
+    },
 }
 
 # mutmut's result names (its `exit_code_to_status`) grouped for the score

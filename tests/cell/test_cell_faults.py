@@ -39,6 +39,9 @@ def test_fault_in_one_mill_reroutes_its_part_and_the_alarm_is_visible_everywhere
     noise = next(t for t in types if t["type"] == "encoder_noise")
     assert noise["target"] == "drive:<AXIS>" and noise["emcy"] == ["0x7305"]
     assert noise["recovery_class"] == "encoder" and noise["params"][0]["max"] == 2**20
+    # a PLC field fault says how to come back too (plc.machine_io.RECOVERY)
+    air = next(t for t in types if t["type"] == "air_pressure_loss")
+    assert air["recovery_class"] == "air" and air["recovery"].startswith("restore the shop air")
     rev = upload_released(api, STOPPING_PROGRAM, number=1002)
     job = api("operator").post("/api/jobs", json={"revision_id": rev, "quantity": 2}).json()["id"]
     poll(lambda: status(api, "mill1")["execution"] == "PROGRAM_STOPPED", 60, "mill1 at M0")

@@ -14,6 +14,7 @@ import pytest
 from cnc.config import builtin_machine
 from cnc.controller import alarms as al
 from cnc.machine import Machine
+from plc.machine_io import DETECTION, RECOVERY
 
 PROGRAM = """%
 O0100 (RECOVERY CHECK: ALL THREE AXES MOVE)
@@ -461,5 +462,67 @@ def test_spindle_and_coolant_faults_in_a_cut_hold_the_feed_and_one_reset_recover
         m.command("mode", mode="AUTO")
         m.step(m.plc_every)
         _run_program(m, n)
+    finally:
+        m.close()
+
+
+@pytest.mark.parametrize(
+    ("fault", "number", "held", "homing"),
+    [
+        # shop air gone: feed hold with 1040 in one scan; air back, RESET (1040 is latched,
+        # cycle start is refused until it), no homing: the axes were held, not faulted
+        ("air_pressure_loss", 1040, True, False),
+        # the safety chain opens: the E-stop (1001, NC 3001), the reference is lost; chain
+        # closed, RESET, home
+        ("estop_chain", 1001, True, True),
+        # the tank below minimum: 1041, the cut goes on to its end; refilled, RESET, no homing
+        ("lube_level_low", 1041, False, False),
+    ],
+)
+def test_plc_field_faults_recover_by_their_documented_procedure(fault, number, held, homing):
+    """plc.machine_io.RECOVERY's procedure (docs/recovery.md, PLC field faults), run: the
+    alarm within its bound, a cycle start refused while it stands, the cause gone, one RESET,
+    homing only where the procedure says, and the program again to its end."""
+    m, _ = _power_on()
+    try:
+        n = m.load_program(SPINDLE_CUT)
+        m.command("select_program", number=n)
+        m.command("cycle_start")
+        assert m.run_until(lambda m: m.status.execution == "ACTIVE", 5.0)
+        m.step(round(1.5 / m.ipo_s))
+        t0 = m.t
+        m.inject(f"plc:{fault}")
+        assert m.run_until(lambda m: any(a.number == number for a in m.alarms), 1.0)
+        assert m.t - t0 <= DETECTION[fault][0] + 1e-9
+        if held:
+            assert m.run_until(_standstill(), 5.0), "the feed must stop"
+            assert m.status.execution != "ACTIVE"
+        else:  # the cut goes on to its end with the alarm
+            assert m.run_until(lambda m: m.status.execution == "PROGRAM_COMPLETED", 60.0), (
+                m.status.execution,
+                m.alarms,
+            )
+        m.clear_fault(f"plc:{fault}")  # the cause taken away
+        m.step(3 * m.plc_every)
+        assert any(a.number == number for a in m.alarms), "latched until the RESET"
+        m.press("PanelCycleStart")
+        m.step(3 * m.plc_every)
+        assert m.status.execution != "ACTIVE", "no cycle start with the alarm standing"
+        assert "RESET" in RECOVERY[fault]
+        m.press("PanelReset")
+        m.step(3 * m.plc_every)
+        assert not [a for a in m.alarms if a.severity == "FAULT"], m.alarms
+        assert all(m.controller.referenced.values()) is not homing
+        assert ("no homing" in RECOVERY[fault]) is not homing
+        if homing:
+            m.command("mode", mode="REF")
+            m.command("home")
+            assert m.run_until(lambda m: not m.controller.homing, 60.0)
+            m.step(m.plc_every)
+            assert all(m.controller.referenced.values()), m.alarms
+            m.command("mode", mode="AUTO")
+            m.step(m.plc_every)
+        _run_program(m, n)
+        assert not m.alarms, m.alarms
     finally:
         m.close()

@@ -10,7 +10,7 @@ import pytest
 
 from cnc.config import ConfigError
 from dnc.jobs import Jobs, Scheduler
-from dnc.rules import SameProgramFirst, edd, fifo, rule_named, spt
+from dnc.rules import RULES, SameProgramFirst, critical_ratio, edd, fifo, rule_named, spt
 from dnc.scheduler import Allocate, JobState, MachineView, decide
 from server.config import load_cell_config
 from tests.dnc.test_jobs import worker_started
@@ -119,6 +119,42 @@ def test_rule_named_with_a_fallback(name, then):
 def test_bad_rule_names_are_refused_saying_what_is_known(name, says):
     with pytest.raises(ValueError, match=says.replace("(", r"\(").replace(")", r"\)")):
         rule_named(name)
+
+
+def test_the_rules_a_setup_aware_rule_may_fall_back_to_are_exactly_the_plain_ones():
+    # the whole message: a list that also named same_program_first would still match a prefix
+    with pytest.raises(ValueError) as refused:
+        rule_named("same_program_first then same_program_first")
+    assert str(refused.value) == (
+        "dispatch rule 'same_program_first then same_program_first': the rule after 'then' "
+        "must be one of fifo, spt, edd, cr"
+    )
+
+
+def test_a_refused_fallback_names_every_setup_aware_rule(monkeypatch):
+    """With two setup-aware rules, the refusal lists both, comma-separated."""
+    monkeypatch.setitem(RULES, "same_fixture_first", SameProgramFirst(spt))
+    with pytest.raises(ValueError) as refused:
+        rule_named("edd then fifo")
+    assert str(refused.value) == (
+        "dispatch rule 'edd then fifo': only a setup-aware rule (same_program_first, "
+        "same_fixture_first) falls back to another with 'then'"
+    )
+
+
+def test_the_base_rules_key_and_reason_pass_through_with_the_setup_case():
+    """The base rule's key (SPT's processing time) is kept on each ranked job and written in
+    its reason; the base rule is asked at the same `now` (CR's slack is counted from it)."""
+    ranked = SameProgramFirst(spt)(JOBS, T0, "O1000")
+    assert [(r.job.id, r.key) for r in ranked] == [(1, 600.0), (3, 1800.0), (4, 10.0), (2, 30.0)]
+    assert ranked[0].reason == (
+        "same program O1000 already on the machine: no setup change; "
+        "SPT: remaining processing time 600.0 s (10 x 60.0 s)"
+    )
+    cr = SameProgramFirst(critical_ratio)(JOBS, T0, "O2000")
+    # job 2: due in 3600 s, 30 s of work left: CR 120; job 3: 1200 s / 1800 s: 0.667, late
+    assert [(r.job.id, r.key) for r in cr][:3] == [(2, 120.0), (3, 1200.0 / 1800.0), (1, 30.0)]
+    assert cr[1].reason == "not the program on the machine (O2000); CR: critical ratio 0.667 (late)"
 
 
 # ------------------------------------------------------------------ the scheduler's core

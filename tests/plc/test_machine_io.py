@@ -199,14 +199,33 @@ def test_every_field_fault_has_a_detection_bound_counted_from_a_known_event():
         assert bound > 0 and since in DETECT_FROM and how, name
 
 
-def test_docs_recovery_lists_every_field_fault_with_its_bound():
-    """docs/recovery.md's PLC field fault table says what DETECTION says, row for row."""
+def test_every_field_fault_has_a_recovery_procedure_and_class():
+    """Detected is half of it: the operator must also be told how to bring the machine back
+    (/api/fault-types `recovery`, docs/recovery.md)."""
+    from plc.machine_io import RECOVERY, RECOVERY_CLASS
+
+    assert set(RECOVERY) == set(FAULTS) == set(RECOVERY_CLASS)
+    for name, procedure in RECOVERY.items():
+        assert "RESET" in procedure or "CYCLE START" in procedure, name
+        assert "hom" in procedure, f"{name}: say whether homing is needed"
+
+
+def test_docs_recovery_lists_every_field_fault_with_its_bound_and_recovery():
+    """docs/recovery.md's PLC field fault table says what DETECTION and RECOVERY say, row for
+    row, and its class table names each fault in the row of its RECOVERY_CLASS."""
     from pathlib import Path
 
     from drives.fault_registry import number
-    from plc.machine_io import DETECTION
+    from plc.machine_io import DETECTION, RECOVERY, RECOVERY_CLASS
 
     doc = (Path(__file__).resolve().parents[2] / "docs" / "recovery.md").read_text()
     for name, (bound, since, how) in DETECTION.items():
         frm = "" if since == "injection" else f" from {since}"
-        assert f"| `{name}` | {number(bound)} s{frm} | {how} |" in doc, name
+        assert f"| `{name}` | {number(bound)} s{frm} | {how} | {RECOVERY[name]} |" in doc, name
+    classes = {
+        line.split("|")[1].strip(): line.split("|")[2]
+        for line in doc.splitlines()
+        if line.startswith("| ") and line.count("|") == 7
+    }
+    for name, cls in RECOVERY_CLASS.items():
+        assert f"`{name}`" in classes.get(cls, ""), f"{name} not in the class row {cls!r}"

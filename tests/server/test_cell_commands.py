@@ -267,6 +267,17 @@ def test_fault_types_list_drive_bus_and_plc_faults_with_their_aliases():
     assert types["estop"]["description"] == "= estop_button"
 
 
+def test_every_fault_type_says_how_to_bring_the_machine_back():
+    """Every kind /api/fault-types lists, drive, bus or PLC, carries its recovery procedure
+    and class (docs/recovery.md); an alias names its kind, which does."""
+    rows = Cell(default_cell(free_ports=True)).fault_types()
+    kinds = {t["type"]: t for t in rows if not t["description"].startswith("= ")}
+    missing = [k for k, t in kinds.items() if not t.get("recovery") or not t.get("recovery_class")]
+    assert not missing, f"no recovery procedure for {missing}"
+    for alias in (t for t in rows if t["description"].startswith("= ")):
+        assert alias["description"].removeprefix("= ") in kinds, alias
+
+
 @pytest.fixture
 def fault_cell(cell):
     """The cell whose m1 simulation face takes these fault and clear commands."""

@@ -127,3 +127,64 @@ def test_a_reconnected_machine_is_not_judged_before_it_reports_its_part_counter(
     cell.publish()
     (view,) = cell.monitor.views()
     assert view.connected and view.part_count == 0
+
+
+def test_after_a_jam_and_reset_the_machine_says_not_referenced_and_refuses_cycle_start(
+    cell, monkeypatch
+):
+    """The `blocked` fault (a jammed slide) in a move: following error 3010, every axis
+    quick-stopped. After the cause is gone and RESET, no FAULT alarm is left, but the machine
+    is not READY for the cell: it says it is not referenced (3031 per axis, `referenced`
+    false), the scheduler does not take it, and a cycle start is refused at once with the
+    NC's reason instead of READY with no alarm and a silent 30 s "running not seen"."""
+    m = cell.m
+    m.power_on()
+    number = m.load_program("%\nO0100\nG90 G1 X-200 Y-200 Z-50 F6000\nM30\n%\n")
+    m.command("select_program", number=number)
+    m.command("cycle_start")
+    cell.step(250)  # 0.5 s into the move: every axis moving
+    assert m.status.execution == "ACTIVE"
+    m.inject("drive:Y:blocked")
+    assert m.run_until(lambda m: any(a.number == 3010 for a in m.alarms), 1.0), m.alarms
+    assert m.run_until(lambda m: m.status.execution != "ACTIVE", 5.0)
+    cell.step(round(0.5 / m.ipo_s))  # the quick stop to a standstill
+    m.clear_fault("drive:Y:blocked")  # the slide freed
+    m.press("PanelReset")
+    cell.step(5 * m.plc_every)
+
+    s = cell.monitor.status("m1")
+    assert not [a for a in s["alarms"] if a["level"] == "FAULT"], s["alarms"]
+    assert s["referenced"] is False and s["unreferenced_axes"] == ["X", "Y", "Z"]
+    # the NC raises 3031 per axis; through SHDR/MTConnect the conditions of one data item
+    # are keyed by native code, so the host keeps one 3031 (the last axis's) beside
+    # `unreferenced_axes`, which names them all
+    nc = {(a.number, a.severity, a.text) for a in m.alarms}
+    assert nc == {
+        (3031, "WARNING", f"axis {axis} not referenced: home the machine (REF mode, home)")
+        for axis in "XYZ"
+    }
+    warnings = [(a["code"], a["text"]) for a in s["alarms"] if a["level"] == "WARNING"]
+    assert warnings and all(code == "3031" for code, _ in warnings), warnings
+    assert all("not referenced: home the machine" in text for _, text in warnings)
+    assert cell.monitor.state("m1") == ALARM  # not dispatched to
+
+    def select_program(n: int, timeout_s: float = 20.0) -> None:
+        m.command("select_program", number=n)
+        cell.step(5)
+
+    def panel(action: str, value=None) -> None:
+        assert action == "cycle_start"
+        m.press("PanelCycleStart")
+        cell.step(3 * m.plc_every)
+
+    monkeypatch.setattr(cell.link, "select_program", select_program)
+    monkeypatch.setattr(cell.link, "panel", panel)
+    start = make_starter({"m1": cell.link}, cell.monitor, timeout_s=30.0)
+    t0 = m.t
+    with pytest.raises(StartRefused) as err:
+        start("m1", number)
+    assert str(err.value).startswith("m1: cycle start of O0100 refused by the NC: ")
+    assert str(err.value).endswith("machine not homed (X, Y, Z)")
+    assert m.t - t0 < 1.0, "refused at once, not after the start's time-out"
+    assert "machine not homed (X, Y, Z)" in cell.monitor.status("m1")["cycle_start_refused"]
+    assert m.status.execution != "ACTIVE"
