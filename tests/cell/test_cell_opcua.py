@@ -24,14 +24,17 @@ from web_api.settings import ApiKey, ApiSettings
 pytestmark = pytest.mark.timeout(300)
 
 
-def test_a_machine_process_serves_the_hosts_revision_and_jobs_and_is_audited(tmp_path):
+# in-process is what `fmscell run` (the README's default cell) does; machine processes are
+# `fmscell run --processes` and a host attached to `fmscell machine`s
+@pytest.mark.parametrize("processes", [True, False], ids=["machine-process", "in-process"])
+def test_a_machine_serves_the_hosts_revision_and_jobs_and_the_host_audits_it(tmp_path, processes):
     ports = {"host": "127.0.0.1", "dnc": 0, "modbus": 0, "shdr": 0, "opcua": 0}
     config = load_cell_config({"machines": {"mill1": {"base": "mill3", "ports": ports}}})
     cell = Cell(
         config,
         clock="fast",
         database_url=f"sqlite:///{tmp_path}/cell.db",
-        processes=True,
+        processes=processes,
         ideal_axes=True,
         state_dir=tmp_path,
     ).start()
@@ -41,8 +44,14 @@ def test_a_machine_process_serves_the_hosts_revision_and_jobs_and_is_audited(tmp
     client = None
     try:
         link = cell.links["mill1"]
-        assert link.local is None and link.ports["opcua"]  # a process of its own
-        url = f"opc.tcp://127.0.0.1:{link.ports['opcua']}"
+        if processes:
+            assert link.local is None and link.ports["opcua"]  # a process of its own
+        else:
+            assert link.local is not None  # the machine runs in the host's process
+        # port 0 asked for any free port: the API names the one bound
+        url = api("viewer").get("/api/machines/mill1").json()["opcua_address"]
+        assert url == cell.opcua_addresses()["mill1"]
+        assert url.startswith("opc.tcp://127.0.0.1:") and not url.endswith(":0")
         # asyncua's default probe calls a session lost after one answer slower than 1 s
         client = Client(url, timeout=30, watchdog_intervall=30.0)
         loop.run(client.connect, timeout=60)
