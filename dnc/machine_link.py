@@ -5,12 +5,17 @@ from __future__ import annotations
 
 import re
 import threading
+from collections import deque
 from collections.abc import Callable, Iterable, Iterator
 
 from dnc.errors import DncError, NotFound, WorkflowError
 from dnc.library import Library, RevisionInfo
 from dnc.posting import PostRefused
 from dnc.transfer import CHUNK, DncClient, TransferError
+
+#: Remote requests remembered per listener (the last ones served and refused, for a look at
+#: what the machine asked lately); the audit log keeps them all, so memory stays flat.
+REMOTE_REQUESTS_KEPT = 100
 
 _SEQUENCE = re.compile(r"^\s*/?\s*N(\d+)", re.I)
 
@@ -90,8 +95,10 @@ class RemoteRequests:
         self._client = client or (lambda: client_for(library, machine))
         self._stop = threading.Event()
         self._thread: threading.Thread | None = None
-        self.served: list[int] = []
-        self.refused: list[tuple[int, str]] = []
+        # the last REMOTE_REQUESTS_KEPT of each, and how many there were since the start
+        self.served: deque[int] = deque(maxlen=REMOTE_REQUESTS_KEPT)
+        self.refused: deque[tuple[int, str]] = deque(maxlen=REMOTE_REQUESTS_KEPT)
+        self.served_count = self.refused_count = 0
         self.error: Exception | None = None
 
     def answer(self, number: int) -> str | None:
@@ -102,11 +109,13 @@ class RemoteRequests:
             text = self.library.text_for_machine(rev.id, self.machine, actor="remote-request")
         except (NotFound, PostRefused, WorkflowError) as exc:
             self.refused.append((number, exc.message))
+            self.refused_count += 1
             self.library.note_transfer(
                 self.machine, "remote_request.refused", number=number, reason=exc.message
             )
             return None
         self.served.append(number)
+        self.served_count += 1
         self.library.note_transfer(
             self.machine, "remote_request.served", number=number, revision_id=rev.id
         )

@@ -88,6 +88,11 @@ def default_cell(*, free_ports: bool = False, opcua: bool | None = None):
     return load_cell_config({"machines": machines})
 
 
+#: Cleared faults kept per machine for the API's fault history (`GET .../faults`); older
+#: ones are forgotten so a host injecting faults for weeks does not grow without bound.
+CLEARED_FAULTS_KEPT = 100
+
+
 class Fault:
     """One fault injected through the API: its spec on the simulation face and its life."""
 
@@ -155,7 +160,8 @@ class Cell:
         self.faults: dict[int, Fault] = {}
         self._fault_lock = threading.Lock()
         self._next_fault = 1
-        self._timers: list[threading.Timer] = []
+        # a duration's timer per active fault id; dropped (cancelled) once the fault clears
+        self._timers: dict[int, threading.Timer] = {}
         self.started = False
 
     # ------------------------------------------------------------------ lifetime
@@ -392,7 +398,9 @@ class Cell:
 
     def stop(self) -> None:
         """Finish the host loops' current writes, then stop machines and connections."""
-        for timer in self._timers:
+        with self._fault_lock:
+            timers, self._timers = list(self._timers.values()), {}
+        for timer in timers:
             timer.cancel()
         for loop in self.loops:
             loop.stop()
@@ -542,17 +550,19 @@ class Cell:
         if duration:
             timer = threading.Timer(float(duration), self._expire, args=(fault.id,))
             timer.daemon = True
+            with self._fault_lock:
+                self._timers[fault.id] = timer
             timer.start()
-            self._timers.append(timer)
         return fault
 
     def _expire(self, fault_id: int) -> None:
-        with contextlib.suppress(Exception):
+        with contextlib.suppress(Exception):  # KeyError: cleared and forgotten meanwhile
             self.clear(self.faults[fault_id].machine, fault_id)
 
     def machine_faults(self, name: str) -> list[Fault]:
         self.link(name)
-        return [f for f in self.faults.values() if f.machine == name]
+        with self._fault_lock:  # a clear may forget old faults from a timer's thread
+            return [f for f in self.faults.values() if f.machine == name]
 
     def clear(self, name: str, fault_id: int) -> Fault:
         fault = self.faults.get(fault_id)
@@ -566,7 +576,23 @@ class Cell:
                 raise FaultRefused(str(exc)) from None
             fault.state, fault.cleared_at = "cleared", time.time()
             fault.cleared_machine_t = machine_time(answer)
+            self._forget_cleared(fault)
         return fault
+
+    def _forget_cleared(self, fault: Fault) -> None:
+        """Drop a cleared fault's timer, and the machine's oldest cleared faults beyond
+        CLEARED_FAULTS_KEPT (the active ones stay, whatever their age)."""
+        with self._fault_lock:
+            timer = self._timers.pop(fault.id, None)
+            cleared = sorted(
+                f.id
+                for f in self.faults.values()
+                if f.machine == fault.machine and f.state == "cleared"
+            )
+            for fault_id in cleared[: max(0, len(cleared) - CLEARED_FAULTS_KEPT)]:
+                del self.faults[fault_id]
+        if timer is not None:
+            timer.cancel()  # from the timer's own thread (a duration ran out) a no-op
 
 
 def fault_spec(request: dict) -> str:

@@ -247,6 +247,13 @@ class StartRefused(ServerError, MachineUnavailable):
     refused = True  # definitive: the transfer worker records the start as never made
 
 
+def start_refused_text(machine: str, program: str, reason: str) -> str:
+    """The dispatch's failure for a cycle start the NC refused. The NC's reason starts with
+    its own "cycle start refused: " (cnc.controller.contract); said once here, not twice."""
+    why = reason.removeprefix("cycle start refused: ")
+    return f"{machine}: cycle start of {program} refused by the NC: {why}"
+
+
 def make_starter(
     links: Mapping[str, MachineLink],
     monitor: MonitoringModel,
@@ -283,10 +290,7 @@ def make_starter(
             if s["cycle_start_refused"] and s["program"] == name:
                 # the NC said no (not homed, an alarm, the door...): say why now, not after
                 # the timeout
-                raise StartRefused(
-                    f"{machine}: cycle start of {name} refused by the NC: "
-                    f"{s['cycle_start_refused']}"
-                )
+                raise StartRefused(start_refused_text(machine, name, s["cycle_start_refused"]))
             # a very short program may have run and ended between two looks
             if (s["counters"]["part_count"] or 0) > (before or 0):
                 return True

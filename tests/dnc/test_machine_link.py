@@ -49,9 +49,24 @@ def test_remote_request_is_answered_with_the_released_revision(library, machine)
     finally:
         listener.stop()
     assert machine.memory.get(1234) == canonical_text(PROG)
-    assert listener.refused == [(777, "no released revision of O0777 for mill")]
+    assert list(listener.refused) == [(777, "no released revision of O0777 for mill")]
     actions = [a["action"] for a in library.audit(entity="machine")]
     assert "remote_request.served" in actions and "remote_request.refused" in actions
+
+
+def test_a_long_running_listener_keeps_only_the_last_requests(library, monkeypatch):
+    """One entry per remote request for weeks would grow without bound: the listener keeps
+    the last REMOTE_REQUESTS_KEPT served and refused (the audit log has them all) and counts."""
+    monkeypatch.setattr("dnc.machine_link.REMOTE_REQUESTS_KEPT", 3, raising=False)
+    _, r1 = library.create_program(number=1234, name="plate", text=PROG)
+    library.release(r1.id, approver="ann", comment="ok")
+    library.register_machine("mill2", "mill")
+    listener = RemoteRequests(library, "mill2")  # answered directly: no thread, no port
+    for number in (1234, 700, 1234, 701, 1234, 702, 1234, 703, 1234):
+        listener.answer(number)
+    assert list(listener.served) == [1234, 1234, 1234]
+    assert [n for n, _ in listener.refused] == [701, 702, 703]
+    assert (listener.served_count, listener.refused_count) == (5, 4)
 
 
 def test_machine_without_address_is_refused(library):

@@ -364,8 +364,24 @@ def test_a_fault_with_a_duration_clears_itself(fault_cell):
 def test_stopping_the_cell_cancels_pending_fault_timers(fault_cell):
     fault = fault_cell.inject("m1", {"type": "encoder_break", "target": "X", "duration": 3600})
     fault_cell.stop()
-    assert all(not t.is_alive() or t.finished.is_set() for t in fault_cell._timers)
+    assert fault_cell._timers == {}
     assert fault.state == "active" and fault_cell.started is False
+
+
+def test_cleared_faults_and_their_timers_are_not_kept_for_ever(fault_cell, monkeypatch):
+    """A long-running host injecting and clearing faults keeps the active ones, the last
+    CLEARED_FAULTS_KEPT cleared per machine (the API's history) and no timer of a cleared one."""
+    monkeypatch.setattr("server.cell.CLEARED_FAULTS_KEPT", 3, raising=False)
+    ids = []
+    for _ in range(8):
+        fault = fault_cell.inject("m1", {"type": "encoder_break", "target": "X", "duration": 3600})
+        fault_cell.clear("m1", fault.id)
+        ids.append(fault.id)
+    still = fault_cell.inject("m1", {"type": "encoder_break", "target": "X", "duration": 3600})
+    assert [f.id for f in fault_cell.machine_faults("m1")] == [*ids[-3:], still.id]
+    assert list(fault_cell._timers) == [still.id]  # the cleared ones' timers are gone
+    with pytest.raises(NotFound, match=f"no fault {ids[0]} on machine 'm1'"):
+        fault_cell.clear("m1", ids[0])  # forgotten: as if it had never been
 
 
 class _Monitor:

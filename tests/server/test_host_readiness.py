@@ -13,7 +13,7 @@ from cnc.machine import Machine
 from dnc.scheduler import ALARM, IDLE
 from mtconnect.agent import Agent
 from mtconnect.model import build_device
-from server.host import MonitoringModel, StartRefused, make_starter
+from server.host import MonitoringModel, StartRefused, make_starter, start_refused_text
 from server.supervisor import MachineLink
 
 PROGRAM = "%\nO0100\nG90 G0 X-100 Y-100 Z-20\nM30\n%\n"
@@ -183,8 +183,25 @@ def test_after_a_jam_and_reset_the_machine_says_not_referenced_and_refuses_cycle
     t0 = m.t
     with pytest.raises(StartRefused) as err:
         start("m1", number)
-    assert str(err.value).startswith("m1: cycle start of O0100 refused by the NC: ")
-    assert str(err.value).endswith("machine not homed (X, Y, Z)")
+    # the NC's reason once, not "refused by the NC: cycle start refused: ..." (docs/recovery.md)
+    assert str(err.value) == (
+        "m1: cycle start of O0100 refused by the NC: machine not homed (X, Y, Z)"
+    )
     assert m.t - t0 < 1.0, "refused at once, not after the start's time-out"
     assert "machine not homed (X, Y, Z)" in cell.monitor.status("m1")["cycle_start_refused"]
     assert m.status.execution != "ACTIVE"
+
+
+@pytest.mark.parametrize(
+    ("reason", "said"),
+    [
+        ("cycle start refused: machine not homed (X)", "machine not homed (X)"),
+        ("cycle start refused: alarm 1041 active (lubricant level low: refill (cycle start refused))",
+         "alarm 1041 active (lubricant level low: refill (cycle start refused))"),
+        ("door open", "door open"),  # a reason in other words is passed on as it is
+    ],
+)  # fmt: skip
+def test_the_hosts_refusal_says_cycle_start_refused_once(reason, said):
+    assert start_refused_text("m2", "O0007", reason) == (
+        f"m2: cycle start of O0007 refused by the NC: {said}"
+    )
