@@ -2,7 +2,7 @@
 cell's birth and death, for a factory of cells sharing one broker (docs/mqtt.md).
 
     <prefix>/<cell>/status                 retained: ONLINE at connect, OFFLINE (last will)
-    <prefix>/<cell>/<machine>/<item>       retained: the item's last value (`_items` below)
+    <prefix>/<cell>/<machine>/<item>       retained, QoS 0: the item's last value (`_items`)
     <prefix>/<cell>/events/<entity>/<verb> the outbox's events, QoS 1, not retained
 
 The state comes from the monitoring model (SHDR -> MTConnect agent), as the REST API and
@@ -27,6 +27,13 @@ from datetime import UTC, datetime
 from server.host import CONDITIONS, MonitoringModel
 
 log = logging.getLogger(__name__)
+
+# A machine item is a last value, republished whole at every connect. At QoS 1, a copy the
+# broker had not acknowledged when the connection dropped is sent again by paho after the
+# connect's newer values and, retained, overwrites them with the stale one (seen: a program
+# O0001 back on the broker after O0005). At QoS 0 nothing is sent again; the republish at
+# connect is what makes the last value arrive.
+ITEM_QOS = 0
 
 RECONNECT_MIN_S, RECONNECT_MAX_S = 1, 30
 # topic levels under the cell that are not machines
@@ -177,7 +184,7 @@ class CellFace:
         # older copy of it from here
         with self._lock:
             for topic, payload in self._retained.items():
-                client.publish(topic, payload, 1, True)
+                client.publish(topic, payload, ITEM_QOS, True)
             self.published += len(self._retained)
             self.connected.set()
 
@@ -225,7 +232,7 @@ class CellFace:
                 with self._lock:
                     self._retained[topic] = payload
                     if self.connected.is_set():
-                        self.client.publish(topic, payload, 1, True)
+                        self.client.publish(topic, payload, ITEM_QOS, True)
                         self.published += 1
                         sent += 1
         return sent

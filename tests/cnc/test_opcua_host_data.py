@@ -61,7 +61,11 @@ def test_the_round_trip_keeps_everything():
         ({"users": [USER] * (MAX_USERS + 1)}, "/users", f"at most {MAX_USERS}"),
         ({"users": ["ann"]}, "/users/0", "a user object"),
         # a key in clear is never taken: the host sends the digest only
-        ({"users": [{"user": "ann", "role": "operator", "key": "k" * 20}]}, "/users/0/key", "never the key"),
+        (
+            {"users": [{"user": "ann", "role": "operator", "key": "k" * 20}]},
+            "/users/0/key",
+            "never the key",
+        ),
         ({"users": [{**USER, "key": "k" * 20}]}, "/users/0/key", "never the key"),
         ({"users": [{**USER, "admin": True}]}, "/users/0/admin", "exactly"),
         ({"users": [{**USER, "user": ""}]}, "/users/0/user", "printable"),
