@@ -50,6 +50,25 @@ def cell():
     c.m.close()
 
 
+def lockstep_starter(cell, monkeypatch):
+    """The host's starter for m1, its link's program select and panel press stepping the
+    lockstep machine instead of going over Modbus."""
+    m = cell.m
+
+    def select_program(n: int, timeout_s: float = 20.0) -> None:
+        m.command("select_program", number=n)
+        cell.step(5)
+
+    def panel(action: str, value=None) -> None:
+        assert action == "cycle_start"
+        m.press("PanelCycleStart")
+        cell.step(3 * m.plc_every)
+
+    monkeypatch.setattr(cell.link, "select_program", select_program)
+    monkeypatch.setattr(cell.link, "panel", panel)
+    return make_starter({"m1": cell.link}, cell.monitor, timeout_s=30.0)
+
+
 def test_unreferenced_machine_is_not_idle_and_says_which_axes(cell):
     m = cell.m
     m.command("mode", mode="AUTO")
@@ -90,18 +109,7 @@ def test_a_refused_cycle_start_reports_the_ncs_reason_at_once(cell, monkeypatch)
     number = m.load_program(PROGRAM)
     cell.step(10)
 
-    def select_program(n: int, timeout_s: float = 20.0) -> None:
-        m.command("select_program", number=n)
-        cell.step(5)
-
-    def panel(action: str, value=None) -> None:
-        assert action == "cycle_start"
-        m.press("PanelCycleStart")
-        cell.step(3 * m.plc_every)
-
-    monkeypatch.setattr(cell.link, "select_program", select_program)
-    monkeypatch.setattr(cell.link, "panel", panel)
-    start = make_starter({"m1": cell.link}, cell.monitor, timeout_s=30.0)
+    start = lockstep_starter(cell, monkeypatch)
     with pytest.raises(StartRefused) as err:
         start("m1", number)
     assert "refused by the NC" in str(err.value)
@@ -168,18 +176,7 @@ def test_after_a_jam_and_reset_the_machine_says_not_referenced_and_refuses_cycle
     assert all("not referenced: home the machine" in text for _, text in warnings)
     assert cell.monitor.state("m1") == ALARM  # not dispatched to
 
-    def select_program(n: int, timeout_s: float = 20.0) -> None:
-        m.command("select_program", number=n)
-        cell.step(5)
-
-    def panel(action: str, value=None) -> None:
-        assert action == "cycle_start"
-        m.press("PanelCycleStart")
-        cell.step(3 * m.plc_every)
-
-    monkeypatch.setattr(cell.link, "select_program", select_program)
-    monkeypatch.setattr(cell.link, "panel", panel)
-    start = make_starter({"m1": cell.link}, cell.monitor, timeout_s=30.0)
+    start = lockstep_starter(cell, monkeypatch)
     t0 = m.t
     with pytest.raises(StartRefused) as err:
         start("m1", number)
