@@ -21,6 +21,7 @@ import contextlib
 import logging
 import os
 import secrets
+import sys
 import threading
 import time
 from pathlib import Path
@@ -719,6 +720,15 @@ def run_cell(
                 # which may be inside the hub's (non-reentrant) lock just then.
                 threading.Thread(target=hub.close, kwargs={"wait": False}, daemon=True).start()
 
+            async def startup(self, sockets=None) -> None:
+                await super().startup(sockets)
+                # The banner (and the run's key) only once the API answers: a script that
+                # reads the key and connects at once must not meet a refused connection.
+                if self.started:
+                    for line in announcement:
+                        echo(line)
+                    sys.stdout.flush()  # a log file or a pipe reads it now, not at exit
+
         server = CellServer(
             uvicorn.Config(
                 app,
@@ -731,13 +741,16 @@ def run_cell(
             )
         )
         url = f"{'https' if tls else 'http'}://{bind}:{port}"
-        for line in banner(tuple(cell.links), clock, url, cell.opcua_addresses()):
-            echo(line)
+        announcement = banner(tuple(cell.links), clock, url, cell.opcua_addresses())
         if settings.insecure_open:
-            echo("WARNING: --insecure-open: no API key needed, every caller is an admin")
+            announcement.append(
+                "WARNING: --insecure-open: no API key needed, every caller is an admin"
+            )
         if demo_key is not None:
-            echo("no API keys configured (host.auth.api_keys): this run's admin key is")
-            echo(f"export KEY={demo_key}")
+            announcement += [
+                "no API keys configured (host.auth.api_keys): this run's admin key is",
+                f"export KEY={demo_key}",
+            ]
         server.run()
     finally:
         cell.stop()
